@@ -8,3 +8,9 @@ pub mod volume;
 
 pub use error::{Error, Result};
 pub use volume::{Volume, VoxelData, VoxelType};
+pub mod classify;
+pub mod depth;
+pub mod mask;
+pub mod shear;
+pub mod slices;
+pub mod view;

@@ -1,0 +1,169 @@
+//! Stage 1b — the volume seen along one principal axis.
+//!
+//! Owns [`SliceStack`]: the densities re-laid out as f32 in permuted `(i, j, k)`
+//! order (i fastest) so that every slice a shear-warp path walks is contiguous,
+//! plus the per-sample primitives every path shares: the bilinear density sample
+//! inside one slice, its cell corners' range, and the central-difference gradient.
+//! A stack for an axis is built only when a view first needs it.
+
+use rayon::prelude::*;
+
+use crate::view::permutation;
+use crate::volume::Volume;
+
+/// Densities permuted for principal axis `axis`.
+#[derive(Clone, Debug)]
+pub struct SliceStack {
+    /// Principal axis (0 = x, 1 = y, 2 = z).
+    pub axis: usize,
+    /// Sizes along `(i, j, k)`.
+    pub n: [usize; 3],
+    data: Vec<f32>,
+}
+
+/// One bilinear sample inside a slice: the interpolated density and the
+/// location it came from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Interpolated density, clamped to the cell's corner range.
+    pub density: f32,
+    /// Cell index `(ci, cj)` and slice `k`.
+    pub cell: [usize; 3],
+    /// In-cell weights `(wi, wj)` in [0, 1).
+    pub w: [f32; 2],
+}
+
+impl SliceStack {
+    /// Permutes `vol` for principal axis `axis`.
+    pub fn new(vol: &Volume, axis: usize) -> Self {
+        let perm = permutation(axis);
+        let d = vol.dims();
+        let n = [d[perm[0]], d[perm[1]], d[perm[2]]];
+        let mut data = vec![0f32; n[0] * n[1] * n[2]];
+        let stride = [1usize, d[0], d[0] * d[1]];
+        let (si, sj, sk) = (stride[perm[0]], stride[perm[1]], stride[perm[2]]);
+        let src = vol.data();
+        data.par_chunks_mut(n[0] * n[1].max(1)).enumerate().for_each(|(k, slice)| {
+            for j in 0..n[1] {
+                let row = &mut slice[j * n[0]..(j + 1) * n[0]];
+                let base = k * sk + j * sj;
+                for (i, out) in row.iter_mut().enumerate() {
+                    *out = src.get(base + i * si);
+                }
+            }
+        });
+        SliceStack { axis, n, data }
+    }
+
+    /// Density at voxel `(i, j, k)`.
+    #[inline(always)]
+    pub fn at(&self, i: usize, j: usize, k: usize) -> f32 {
+        self.data[i + self.n[0] * (j + self.n[1] * k)]
+    }
+
+    /// The raw permuted densities.
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+
+    /// Number of cells along i and j (`n − 1`, 0 for a flat axis).
+    pub fn cells(&self) -> [usize; 2] {
+        [self.n[0].saturating_sub(1), self.n[1].saturating_sub(1)]
+    }
+
+    /// Smallest and largest corner density of cell `(ci, cj)` in slice `k`.
+    #[inline(always)]
+    pub fn cell_range(&self, ci: usize, cj: usize, k: usize) -> (f32, f32) {
+        let b = ci + self.n[0] * (cj + self.n[1] * k);
+        let n0 = self.n[0];
+        let (a, c, d, e) = (self.data[b], self.data[b + 1], self.data[b + n0], self.data[b + n0 + 1]);
+        (a.min(c).min(d.min(e)), a.max(c).max(d.max(e)))
+    }
+
+    /// Bilinear density in cell `(ci, cj)` of slice `k` at in-cell weights `(wi, wj)`.
+    ///
+    /// The result is clamped to the range of the four corners, so a cell whose
+    /// corners are all transparent can never produce a visible sample through
+    /// floating-point rounding: this is what makes the masks exactly conservative.
+    #[inline(always)]
+    pub fn bilinear(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> f32 {
+        let n0 = self.n[0];
+        let b = ci + n0 * (cj + self.n[1] * k);
+        let (v00, v10, v01, v11) = (self.data[b], self.data[b + 1], self.data[b + n0], self.data[b + n0 + 1]);
+        let top = v00 + (v10 - v00) * wi;
+        let bot = v01 + (v11 - v01) * wi;
+        let d = top + (bot - top) * wj;
+        let lo = v00.min(v10).min(v01.min(v11));
+        let hi = v00.max(v10).max(v01.max(v11));
+        d.clamp(lo, hi)
+    }
+
+    /// Central-difference gradient at voxel `(i, j, k)` in voxel units of
+    /// `(i, j, k)` (one-sided at the borders, zero along a flat axis).
+    #[inline(always)]
+    pub fn gradient_at(&self, i: usize, j: usize, k: usize) -> [f32; 3] {
+        let n = self.n;
+        let d = |lo: f32, hi: f32, span: f32| if span > 0.0 { (hi - lo) / span } else { 0.0 };
+        let (i0, i1) = (i.saturating_sub(1), (i + 1).min(n[0] - 1));
+        let (j0, j1) = (j.saturating_sub(1), (j + 1).min(n[1] - 1));
+        let (k0, k1) = (k.saturating_sub(1), (k + 1).min(n[2] - 1));
+        [
+            d(self.at(i0, j, k), self.at(i1, j, k), (i1 - i0) as f32),
+            d(self.at(i, j0, k), self.at(i, j1, k), (j1 - j0) as f32),
+            d(self.at(i, j, k0), self.at(i, j, k1), (k1 - k0) as f32),
+        ]
+    }
+
+    /// Gradient at an in-slice sample: the bilinear blend of the corners' gradients.
+    #[inline]
+    pub fn gradient(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
+        let g00 = self.gradient_at(ci, cj, k);
+        let g10 = self.gradient_at(ci + 1, cj, k);
+        let g01 = self.gradient_at(ci, cj + 1, k);
+        let g11 = self.gradient_at(ci + 1, cj + 1, k);
+        let mut g = [0f32; 3];
+        for c in 0..3 {
+            let top = g00[c] + (g10[c] - g00[c]) * wi;
+            let bot = g01[c] + (g11[c] - g01[c]) * wi;
+            g[c] = top + (bot - top) * wj;
+        }
+        g
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn permutation_matches_volume() {
+        let v = Volume::from_fn([3, 4, 5], [1.0; 3], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
+        for axis in 0..3 {
+            let s = SliceStack::new(&v, axis);
+            let p = permutation(axis);
+            for k in 0..s.n[2] {
+                for j in 0..s.n[1] {
+                    for i in 0..s.n[0] {
+                        let mut xyz = [0; 3];
+                        xyz[p[0]] = i;
+                        xyz[p[1]] = j;
+                        xyz[p[2]] = k;
+                        assert_eq!(s.at(i, j, k), v.get(xyz[0], xyz[1], xyz[2]));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bilinear_stays_in_the_corner_range_and_gradient_is_exact_for_linear() {
+        let v = Volume::from_fn([5, 5, 5], [1.0; 3], |x, y, z| 0.1 * x as f32 + 3.0 * y as f32 - 2.0 * z as f32).unwrap();
+        let s = SliceStack::new(&v, 2);
+        let d = s.bilinear(1, 2, 3, 0.25, 0.5);
+        assert!((d - (0.125 + 7.5 - 6.0)).abs() < 1e-5);
+        let g = s.gradient(1, 1, 2, 0.3, 0.7);
+        assert!((g[0] - 0.1).abs() < 1e-5 && (g[1] - 3.0).abs() < 1e-5 && (g[2] + 2.0).abs() < 1e-5);
+        let (lo, hi) = s.cell_range(1, 2, 3);
+        assert!(lo <= d && d <= hi);
+    }
+}

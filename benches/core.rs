@@ -1,1 +1,107 @@
-fn main(){}
+//! Criterion benches of the binary fast rotator's stages on the head phantom:
+//! mask build, one incremental shear step, and one rendered frame (iso and
+//! blend), at 128³ and 256³, comparing u32 with u64 words and the byte-LUT search
+//! with the hardware bit scan. Run: `cargo bench --bench core`.
+
+use std::time::Duration;
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use glam::DMat3;
+use shearwarp::depth::Search;
+use shearwarp::mask::BinaryMask;
+use shearwarp::phantom;
+use shearwarp::presets::ct_tissue;
+use shearwarp::raycast::Mode;
+use shearwarp::render::{Method, Renderer, Settings, WordSize};
+use shearwarp::shear::ShearState;
+use shearwarp::slices::SliceStack;
+use shearwarp::view::{Camera, rotate_eye};
+use shearwarp::warp::Image;
+
+fn cam(deg: f64) -> Camera {
+    let anterior = DMat3::from_cols_array(&[-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
+    Camera::new(rotate_eye(anterior, 1, deg), [512, 512])
+}
+
+fn benches(c: &mut Criterion) {
+    for n in [128usize, 256] {
+        let vol = phantom::head([n, n, n]).expect("phantom");
+        let skin = ct_tissue("skin").expect("preset");
+        let stack = SliceStack::new(&vol, 2);
+
+        let mut g = c.benchmark_group(format!("mask_build_{n}"));
+        g.bench_function("u32", |b| {
+            b.iter(|| BinaryMask::<u32>::build(&stack, |_, hi| hi >= skin.threshold))
+        });
+        g.bench_function("u64", |b| {
+            b.iter(|| BinaryMask::<u64>::build(&stack, |_, hi| hi >= skin.threshold))
+        });
+        g.finish();
+
+        let mut g = c.benchmark_group(format!("shear_step_{n}"));
+        macro_rules! step {
+            ($w:ty, $name:expr) => {{
+                let mut m = BinaryMask::<$w>::build(&stack, |_, hi| hi >= skin.threshold);
+                let mut s = ShearState::identity(n);
+                let mut dir = 1;
+                let mut pos = 0i32;
+                g.bench_function($name, |b| {
+                    b.iter(|| {
+                        // oscillate within ±20 bits so the state stays valid
+                        if pos.abs() >= 20 {
+                            dir = -dir;
+                        }
+                        pos += dir;
+                        s = m.rotate_step(&s, 0, dir);
+                    })
+                });
+            }};
+        }
+        step!(u32, "u32");
+        step!(u64, "u64");
+        g.finish();
+
+        for mode in [Mode::Iso, Mode::Blend] {
+            let mut g = c.benchmark_group(format!("frame_{}_{n}", mode.name()));
+            g.sample_size(20);
+            for (word, search) in [
+                (WordSize::U32, Search::Lut),
+                (WordSize::U32, Search::Bitscan),
+                (WordSize::U64, Search::Lut),
+                (WordSize::U64, Search::Bitscan),
+            ] {
+                let s = Settings {
+                    method: Method::Binary,
+                    mode,
+                    word,
+                    search,
+                    threads: 1,
+                    ..Settings::default()
+                };
+                let tf = if mode == Mode::Iso {
+                    skin.iso_tf()
+                } else {
+                    ct_tissue("bone").expect("preset").tf
+                };
+                let mut r = Renderer::new(vol.clone(), &tf, s).expect("renderer");
+                r.prepare_all_axes();
+                let mut img = Image::new(512, 512);
+                let mut deg = 0.0;
+                g.bench_function(BenchmarkId::new(word.name(), search.name()), |b| {
+                    b.iter(|| {
+                        deg += 1.0;
+                        r.render(&cam(deg % 360.0), &mut img).expect("render")
+                    })
+                });
+            }
+            g.finish();
+        }
+    }
+}
+
+criterion_group! {
+    name = core;
+    config = Criterion::default().measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_millis(500)).sample_size(20);
+    targets = benches
+}
+criterion_main!(core);

@@ -236,7 +236,13 @@ impl<'a, W: Word> SetBits<'a, W> {
         } else {
             (row.len() - 1, row[row.len() - 1])
         };
-        SetBits { row, w, cur, ascending, search }
+        SetBits {
+            row,
+            w,
+            cur,
+            ascending,
+            search,
+        }
     }
 
     /// Drops every bit at or before slice `k` in walking order, so the next call
@@ -259,7 +265,11 @@ impl<'a, W: Word> SetBits<'a, W> {
             }
             if wk == self.w {
                 // keep bits strictly after pos (towards the LSB)
-                let keep = if pos + 1 >= W::BITS { W::ZERO } else { !W::ZERO >> (pos + 1) };
+                let keep = if pos + 1 >= W::BITS {
+                    W::ZERO
+                } else {
+                    !W::ZERO >> (pos + 1)
+                };
                 self.cur &= keep;
             }
         } else {
@@ -269,7 +279,11 @@ impl<'a, W: Word> SetBits<'a, W> {
             }
             if wk == self.w {
                 // keep bits strictly before pos from the MSB (towards the MSB)
-                let keep = if pos == 0 { W::ZERO } else { !(!W::ZERO >> pos) };
+                let keep = if pos == 0 {
+                    W::ZERO
+                } else {
+                    !(!W::ZERO >> pos)
+                };
                 self.cur &= keep;
             }
         }
@@ -324,7 +338,11 @@ mod tests {
     fn naive_first<W: Word>(row: &[W], ascending: bool) -> Option<usize> {
         let n = row.len() * W::BITS as usize;
         let set = |k: usize| row[k / W::BITS as usize] & bit_of::<W>(k) != W::ZERO;
-        if ascending { (0..n).find(|&k| set(k)) } else { (0..n).rev().find(|&k| set(k)) }
+        if ascending {
+            (0..n).find(|&k| set(k))
+        } else {
+            (0..n).rev().find(|&k| set(k))
+        }
     }
 
     #[test]
@@ -385,10 +403,16 @@ mod tests {
                 }
                 assert_eq!(all, want);
                 // skip_through: the next after k is the first set strictly after k
-                for k in [0, 1, 7, 31, 32, 33, 63, 64, 100].into_iter().filter(|&k| k < n) {
+                for k in [0, 1, 7, 31, 32, 33, 63, 64, 100]
+                    .into_iter()
+                    .filter(|&k| k < n)
+                {
                     let mut it = SetBits::new(row, asc, s);
                     it.skip_through(k);
-                    let exp = want.iter().copied().find(|&x| if asc { x > k } else { x < k });
+                    let exp = want
+                        .iter()
+                        .copied()
+                        .find(|&x| if asc { x > k } else { x < k });
                     assert_eq!(it.next(), exp, "k={k} asc={asc}");
                 }
             }

@@ -29,6 +29,15 @@ use crate::slices::SliceStack;
 /// Steps above this count are done as one direct shear instead.
 pub const MAX_INCREMENTAL_STEPS: u32 = 6;
 
+/// Padding and grid size of the sheared mask (and intermediate image) for a
+/// volume of `cells` cells per slice and `nk` slices: `pad = ceil((nk − 1)/2) + 2`
+/// covers every translation `|trans| ≤ (nk − 1)/2` of a view whose shear is at most
+/// one (plus rounding), so no bit is ever shifted out.
+pub fn geometry(cells: [usize; 2], nk: usize) -> (usize, [usize; 2]) {
+    let pad = nk.saturating_sub(1).div_ceil(2) + 2;
+    (pad, [cells[0] + 2 * pad, cells[1] + 2 * pad])
+}
+
 /// Inclusive rectangle `[p0, p1] × [q0, q1]` of mask columns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Rect {
@@ -41,7 +50,12 @@ pub struct Rect {
 impl Rect {
     fn union(a: Option<Rect>, b: Option<Rect>) -> Option<Rect> {
         match (a, b) {
-            (Some(a), Some(b)) => Some(Rect { p0: a.p0.min(b.p0), p1: a.p1.max(b.p1), q0: a.q0.min(b.q0), q1: a.q1.max(b.q1) }),
+            (Some(a), Some(b)) => Some(Rect {
+                p0: a.p0.min(b.p0),
+                p1: a.p1.max(b.p1),
+                q0: a.q0.min(b.q0),
+                q1: a.q1.max(b.q1),
+            }),
             (a, None) => a,
             (None, b) => b,
         }
@@ -134,9 +148,13 @@ impl<W: Word> BinaryMask<W> {
     }
 
     /// Builds from unsheared cell bits directly (used by super-cell and code masks).
-    pub fn from_cells(cells: [usize; 2], nk: usize, base: BitVec<u64, Lsb0>, bbox: Vec<Option<[usize; 4]>>) -> Self {
-        let pad = (nk.saturating_sub(1)).div_ceil(2) + 2;
-        let grid = [cells[0] + 2 * pad, cells[1] + 2 * pad];
+    pub fn from_cells(
+        cells: [usize; 2],
+        nk: usize,
+        base: BitVec<u64, Lsb0>,
+        bbox: Vec<Option<[usize; 4]>>,
+    ) -> Self {
+        let (pad, grid) = geometry(cells, nk);
         let nw = nk.div_ceil(W::BITS as usize).max(1);
         let mut m = BinaryMask {
             cells,
@@ -226,12 +244,19 @@ impl<W: Word> BinaryMask<W> {
 
     /// Checks that a state fits this mask (slice count and ≤ 45° shear).
     fn offsets_for(&self, state: &ShearState, out: &mut [Vec<i32>; 2]) {
-        assert_eq!(state.slices(), self.nk, "shear state for a different slice count");
+        assert_eq!(
+            state.slices(),
+            self.nk,
+            "shear state for a different slice count"
+        );
         for a in 0..2 {
             for (o, &f) in out[a].iter_mut().zip(&state.floor[a]) {
                 let v = self.pad as i32 - f;
                 // pad covers |floor| ≤ ceil((nk-1)/2)+1: a principal-axis view never exceeds it
-                assert!(v >= 0 && v as usize + self.cells[a] <= self.grid[a], "shear beyond 45° for this mask");
+                assert!(
+                    v >= 0 && v as usize + self.cells[a] <= self.grid[a],
+                    "shear beyond 45° for this mask"
+                );
                 *o = v;
             }
         }
@@ -243,7 +268,12 @@ impl<W: Word> BinaryMask<W> {
         let mut target = std::mem::take(&mut self.target);
         self.offsets_for(state, &mut target);
         let dist = (0..2)
-            .flat_map(|a| self.off[a].iter().zip(&target[a]).map(|(x, y)| (x - y).unsigned_abs()))
+            .flat_map(|a| {
+                self.off[a]
+                    .iter()
+                    .zip(&target[a])
+                    .map(|(x, y)| (x - y).unsigned_abs())
+            })
             .max()
             .unwrap_or(0);
         let work = if dist == 0 {
@@ -287,7 +317,11 @@ impl<W: Word> BinaryMask<W> {
             self.off[a].copy_from_slice(&target[a]);
         }
         self.scatter();
-        ShearWork { steps: 0, direct: 1, words }
+        ShearWork {
+            steps: 0,
+            direct: 1,
+            words,
+        }
     }
 
     /// Writes every base cell bit at its current offset (the grid must be clear there).
@@ -296,24 +330,29 @@ impl<W: Word> BinaryMask<W> {
         let (gw, nw, nk) = (self.grid[0], self.nw, self.nk);
         let (base, off, bbox) = (&self.base, &self.off, &self.bbox);
         // parallel over grid rows q: each row's words are written by one task
-        self.words.par_chunks_mut(gw * nw).enumerate().for_each(|(q, row)| {
-            for k in 0..nk {
-                let Some([_, _, cj0, cj1]) = bbox[k] else { continue };
-                let cj = q as i32 - off[1][k];
-                if cj < cj0 as i32 || cj > cj1 as i32 {
-                    continue;
+        self.words
+            .par_chunks_mut(gw * nw)
+            .enumerate()
+            .for_each(|(q, row)| {
+                for k in 0..nk {
+                    let Some([_, _, cj0, cj1]) = bbox[k] else {
+                        continue;
+                    };
+                    let cj = q as i32 - off[1][k];
+                    if cj < cj0 as i32 || cj > cj1 as i32 {
+                        continue;
+                    }
+                    let cj = cj as usize;
+                    debug_assert!(cj < cj_n);
+                    let bit = bit_of::<W>(k);
+                    let w = k / W::BITS as usize;
+                    let start = (k * cj_n + cj) * ci_n;
+                    for ci in base[start..start + ci_n].iter_ones() {
+                        let p = (ci as i32 + off[0][k]) as usize;
+                        row[p * nw + w] |= bit;
+                    }
                 }
-                let cj = cj as usize;
-                debug_assert!(cj < cj_n);
-                let bit = bit_of::<W>(k);
-                let w = k / W::BITS as usize;
-                let start = (k * cj_n + cj) * ci_n;
-                for ci in base[start..start + ci_n].iter_ones() {
-                    let p = (ci as i32 + off[0][k]) as usize;
-                    row[p * nw + w] |= bit;
-                }
-            }
-        });
+            });
     }
 
     /// One incremental step: every slice moves at most one column along i and one
@@ -360,19 +399,31 @@ impl<W: Word> BinaryMask<W> {
         let gw = self.grid[0];
         let (up, down, keep) = (&self.up, &self.down, &self.keep);
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
-        self.words.par_chunks_mut(gw * nw).skip(r.q0).take(r.q1 - r.q0 + 1).for_each(|row| {
-            for w in 0..nw {
-                let (u, d, kp) = (up[w], down[w], keep[w]);
-                // the column before the rect is empty (outside the occupied region)
-                let mut prev = if ps > 0 { row[(ps - 1) * nw + w] } else { W::ZERO };
-                for p in ps..=pe {
-                    let cur = row[p * nw + w];
-                    let next = if p + 1 < gw { row[(p + 1) * nw + w] } else { W::ZERO };
-                    row[p * nw + w] = (cur & kp) | (prev & u) | (next & d);
-                    prev = cur;
+        self.words
+            .par_chunks_mut(gw * nw)
+            .skip(r.q0)
+            .take(r.q1 - r.q0 + 1)
+            .for_each(|row| {
+                for w in 0..nw {
+                    let (u, d, kp) = (up[w], down[w], keep[w]);
+                    // the column before the rect is empty (outside the occupied region)
+                    let mut prev = if ps > 0 {
+                        row[(ps - 1) * nw + w]
+                    } else {
+                        W::ZERO
+                    };
+                    for p in ps..=pe {
+                        let cur = row[p * nw + w];
+                        let next = if p + 1 < gw {
+                            row[(p + 1) * nw + w]
+                        } else {
+                            W::ZERO
+                        };
+                        row[p * nw + w] = (cur & kp) | (prev & u) | (next & d);
+                        prev = cur;
+                    }
                 }
-            }
-        });
+            });
         ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
     }
 
@@ -419,7 +470,8 @@ mod tests {
 
     fn blob(n: [usize; 3], seed: u64) -> Volume {
         Volume::from_fn(n, [1.0; 3], |x, y, z| {
-            let mut s = seed ^ (x as u64 * 0x9E37_79B9 + y as u64 * 0x85EB_CA6B + z as u64 * 0xC2B2_AE35);
+            let mut s =
+                seed ^ (x as u64 * 0x9E37_79B9 + y as u64 * 0x85EB_CA6B + z as u64 * 0xC2B2_AE35);
             s ^= s << 13;
             s ^= s >> 7;
             s ^= s << 17;
@@ -458,7 +510,9 @@ mod tests {
         let lim = (n[2] as i64 - 1) / 2;
         let mut net = [0i64; 2];
         for step in 0..400 {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             let along = (seed >> 35) as usize & 1;
             let dir = if (seed >> 45) & 1 == 0 { 1 } else { -1 };
             if (net[along] + dir as i64).abs() > lim {
@@ -493,7 +547,9 @@ mod tests {
         for k in 0..7 {
             for cj in 0..7 {
                 for ci in 0..8 {
-                    let any = [(0, 0), (1, 0), (0, 1), (1, 1)].iter().any(|&(a, b)| st.at(ci + a, cj + b, k) > 50.0);
+                    let any = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                        .iter()
+                        .any(|&(a, b)| st.at(ci + a, cj + b, k) > 50.0);
                     assert_eq!(m.cell(ci, cj, k), any);
                 }
             }

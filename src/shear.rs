@@ -97,7 +97,12 @@ fn line(ends: [f64; 2], nk: usize, k: usize) -> f64 {
 ///
 /// Returns the largest `|to − from|` seen; the vectors are only meaningful when
 /// that is at most 1.
-pub fn shift_vectors<W: crate::depth::Word>(from: &[i32], to: &[i32], up: &mut [W], down: &mut [W]) -> u32 {
+pub fn shift_vectors<W: crate::depth::Word>(
+    from: &[i32],
+    to: &[i32],
+    up: &mut [W],
+    down: &mut [W],
+) -> u32 {
     up.fill(W::ZERO);
     down.fill(W::ZERO);
     let mut worst = 0u32;
@@ -136,7 +141,10 @@ mod tests {
             let next = s.rotated(along, dir);
             for a in 0..2 {
                 for k in 0..nk {
-                    assert!((next.floor[a][k] - s.floor[a][k]).abs() <= 1, "a slice moved more than one bit");
+                    assert!(
+                        (next.floor[a][k] - s.floor[a][k]).abs() <= 1,
+                        "a slice moved more than one bit"
+                    );
                 }
             }
             s = next;

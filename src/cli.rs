@@ -1,0 +1,728 @@
+//! Stage 8 — the command-line interface (`shearwarp render | rotate`).
+//!
+//! Owns argument parsing (clap), turning arguments into a volume, a transfer
+//! function, a camera and render settings, the frame loop of `rotate`, the
+//! reports (readable or `--json`), and writing PNG / GIF / APNG output. Every
+//! error reaches the user as one line naming the problem, with exit code 2 for
+//! bad usage or input and 1 for failures while running.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use glam::DMat3;
+
+use crate::classify::TransferFunction;
+use crate::depth::Search;
+use crate::phantom::Phantom;
+use crate::presets::{self, Tissue};
+use crate::raycast::Mode;
+use crate::render::{FrameStats, Method, Renderer, Settings, WordSize};
+use crate::view::{Camera, rotate_eye};
+use crate::volume::{Volume, VoxelData, VoxelType};
+use crate::warp::Image;
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+const EXAMPLES: &str = "\
+Examples:
+  shearwarp render -o head.png                         # built-in CT head, skin iso-surface
+  shearwarp render --tissue bone --rotate 0,30,0 -o bone.png
+  shearwarp render --mode blend --tissue soft -o soft.png
+  shearwarp rotate --degrees 360 --json                # benchmark a full turn
+  shearwarp rotate --degrees 90 --gif turn.gif
+  shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
+
+/// Fast CPU volume rendering with the binary shear-warp fast rotator.
+#[derive(Parser, Debug)]
+#[command(name = "shearwarp", version, about, after_help = EXAMPLES)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render one view to a PNG.
+    #[command(after_help = EXAMPLES)]
+    Render(RenderCmd),
+    /// Rotate about an axis with the incremental shear, timing every frame.
+    #[command(after_help = EXAMPLES)]
+    Rotate(RotateCmd),
+}
+
+/// Where the volume comes from.
+#[derive(Args, Debug, Clone)]
+pub struct VolumeArgs {
+    /// Built-in phantom (used when no file is given).
+    #[arg(long, value_enum, default_value = "head")]
+    pub phantom: PhantomArg,
+    /// Phantom size X,Y,Z (default: head 128,128,113; sphere 128³; marschner-lobb 41³).
+    #[arg(long, value_parser = parse_dims)]
+    pub phantom_dims: Option<[usize; 3]>,
+    /// Raw voxel file (needs --dims and --type).
+    #[arg(long)]
+    pub raw: Option<PathBuf>,
+    /// Raw file dimensions X,Y,Z.
+    #[arg(long, value_parser = parse_dims)]
+    pub dims: Option<[usize; 3]>,
+    /// Raw voxel type.
+    #[arg(long = "type", value_enum)]
+    pub voxel_type: Option<TypeArg>,
+    /// Raw data is big-endian.
+    #[arg(long)]
+    pub big_endian: bool,
+    /// Voxel spacing X,Y,Z (overrides the file's).
+    #[arg(long, value_parser = parse_spacing)]
+    pub spacing: Option<[f32; 3]>,
+}
+
+/// Built-in phantoms.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum PhantomArg {
+    Head,
+    Sphere,
+    MarschnerLobb,
+}
+
+/// Raw voxel types.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum TypeArg {
+    U8,
+    U16,
+    I16,
+    F32,
+}
+
+/// Render settings shared by every command.
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    /// Output image size N (N×N pixels).
+    #[arg(long, default_value_t = 512)]
+    pub size: usize,
+    /// Render path.
+    #[arg(long, value_enum, default_value = "binary")]
+    pub method: MethodArg,
+    /// Iso-surface preview or full alpha blending.
+    #[arg(long, value_enum, default_value = "iso")]
+    pub mode: ModeArg,
+    /// Mask word width.
+    #[arg(long, value_enum, default_value = "u64")]
+    pub word: WordArg,
+    /// First-bit search.
+    #[arg(long, value_enum, default_value = "bitscan")]
+    pub search: SearchArg,
+    /// Worker threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Tissue preset: skin, fat, soft, bone (CT), or auto (histogram threshold).
+    #[arg(long)]
+    pub tissue: Option<String>,
+    /// Iso value (overrides the preset's threshold).
+    #[arg(long, allow_negative_numbers = true)]
+    pub iso: Option<f32>,
+    /// Early ray termination threshold in blend mode (1 disables it).
+    #[arg(long, default_value_t = 0.99)]
+    pub ert: f32,
+    /// Pixels per world unit (default: fit the bounding diagonal).
+    #[arg(long)]
+    pub zoom: Option<f64>,
+    /// Starting view: anterior (face), posterior, left, right, superior, inferior.
+    #[arg(long, value_enum, default_value = "anterior")]
+    pub view: ViewArg,
+    /// Extra rotation RX,RY,RZ in degrees about the eye's x, y, z axes (after --view).
+    #[arg(long, value_parser = parse_rotation, allow_hyphen_values = true)]
+    pub rotate: Option<[f64; 3]>,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Render paths on the command line.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum MethodArg {
+    Binary,
+    Brute,
+}
+/// Modes on the command line.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum ModeArg {
+    Iso,
+    Blend,
+}
+/// Word widths on the command line.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum WordArg {
+    U32,
+    U64,
+}
+/// Searches on the command line.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum SearchArg {
+    Lut,
+    Bitscan,
+}
+/// Named starting views (RAS: +x right, +y anterior, +z superior).
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum ViewArg {
+    Anterior,
+    Posterior,
+    Left,
+    Right,
+    Superior,
+    Inferior,
+}
+
+/// `shearwarp render`.
+#[derive(Args, Debug)]
+pub struct RenderCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    #[command(flatten)]
+    pub render: RenderArgs,
+    /// Output PNG.
+    #[arg(long, short, default_value = "shearwarp.png")]
+    pub output: PathBuf,
+    /// Print the frame's statistics as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Eye axes to rotate about.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum AxisArg {
+    /// Horizontal screen axis.
+    X,
+    /// Vertical screen axis.
+    Y,
+    /// Viewing axis.
+    Z,
+}
+
+/// `shearwarp rotate`.
+#[derive(Args, Debug)]
+pub struct RotateCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    #[command(flatten)]
+    pub render: RenderArgs,
+    /// Eye axis to rotate about.
+    #[arg(long, value_enum, default_value = "y")]
+    pub axis: AxisArg,
+    /// Total rotation in degrees.
+    #[arg(long, default_value_t = 360.0)]
+    pub degrees: f64,
+    /// Degrees per frame, or "auto": the angle that moves the outermost slice by
+    /// one voxel (one bit of the mask) per frame.
+    #[arg(long, default_value = "auto")]
+    pub step_deg: String,
+    /// Write every frame as PNG into this directory.
+    #[arg(long)]
+    pub frames_dir: Option<PathBuf>,
+    /// Write an animated GIF.
+    #[arg(long)]
+    pub gif: Option<PathBuf>,
+    /// Write an animated PNG.
+    #[arg(long)]
+    pub apng: Option<PathBuf>,
+    /// Print one JSON object with the timing summary.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_triple<T: std::str::FromStr>(s: &str, what: &str) -> std::result::Result<[T; 3], String> {
+    let parts: Vec<&str> = s.split([',', 'x', 'X']).map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!(
+            "expected three {what} separated by commas, got '{s}'"
+        ));
+    }
+    let mut out = Vec::with_capacity(3);
+    for p in parts {
+        out.push(
+            p.parse::<T>()
+                .map_err(|_| format!("'{p}' is not a valid {what}"))?,
+        );
+    }
+    out.try_into().map_err(|_| "three values".to_string())
+}
+
+fn parse_dims(s: &str) -> std::result::Result<[usize; 3], String> {
+    let d: [usize; 3] = parse_triple(s, "whole numbers")?;
+    crate::volume::check_dims(d.map(|x| x as u64)).map_err(|e| e.to_string())
+}
+
+fn parse_spacing(s: &str) -> std::result::Result<[f32; 3], String> {
+    let d: [f32; 3] = parse_triple(s, "numbers")?;
+    if d.iter().any(|x| !x.is_finite() || *x <= 0.0) {
+        return Err(format!("spacing must be finite and > 0, got {s}"));
+    }
+    Ok(d)
+}
+
+fn parse_rotation(s: &str) -> std::result::Result<[f64; 3], String> {
+    let r: [f64; 3] = parse_triple(s, "angles")?;
+    if r.iter().any(|x| !x.is_finite()) {
+        return Err(format!("angles must be finite, got {s}"));
+    }
+    Ok(r)
+}
+
+impl VolumeArgs {
+    /// Loads or builds the volume and names it for reports.
+    pub fn load(&self) -> Result<(Volume, String)> {
+        let mut vol = if let Some(path) = &self.raw {
+            let dims = self.dims.context("--raw needs --dims X,Y,Z")?;
+            let t = self
+                .voxel_type
+                .context("--raw needs --type u8|u16|i16|f32")?;
+            let t = match t {
+                TypeArg::U8 => VoxelType::U8,
+                TypeArg::U16 => VoxelType::U16,
+                TypeArg::I16 => VoxelType::I16,
+                TypeArg::F32 => VoxelType::F32,
+            };
+            load_raw(path, dims, t, self.big_endian)?
+        } else {
+            let p = self.phantom();
+            let dims = self.phantom_dims.unwrap_or_else(|| p.default_dims());
+            p.build(dims)?
+        };
+        if let Some(sp) = self.spacing {
+            vol.set_spacing(sp)?;
+        }
+        let name = match &self.raw {
+            Some(p) => p.display().to_string(),
+            None => format!("{} phantom", self.phantom().name()),
+        };
+        Ok((vol, name))
+    }
+
+    fn phantom(&self) -> Phantom {
+        match self.phantom {
+            PhantomArg::Head => Phantom::Head,
+            PhantomArg::Sphere => Phantom::Sphere,
+            PhantomArg::MarschnerLobb => Phantom::MarschnerLobb,
+        }
+    }
+}
+
+/// Reads a headerless voxel file of exactly `dims` voxels of type `t`.
+pub fn load_raw(path: &Path, dims: [usize; 3], t: VoxelType, big_endian: bool) -> Result<Volume> {
+    let d = crate::volume::check_dims(dims.map(|x| x as u64))?;
+    let n = d[0] * d[1] * d[2];
+    let want = n as u64 * t.size() as u64;
+    let meta =
+        std::fs::metadata(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    if meta.len() != want {
+        bail!(
+            "{}: holds {} bytes but {}×{}×{} {} voxels need {} bytes (check --dims and --type)",
+            path.display(),
+            meta.len(),
+            d[0],
+            d[1],
+            d[2],
+            t.name(),
+            want
+        );
+    }
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let data = match t {
+        VoxelType::U8 => VoxelData::U8(bytes),
+        VoxelType::U16 => VoxelData::U16(
+            bytes
+                .chunks_exact(2)
+                .map(|c| {
+                    if big_endian {
+                        u16::from_be_bytes([c[0], c[1]])
+                    } else {
+                        u16::from_le_bytes([c[0], c[1]])
+                    }
+                })
+                .collect(),
+        ),
+        VoxelType::I16 => VoxelData::I16(
+            bytes
+                .chunks_exact(2)
+                .map(|c| {
+                    if big_endian {
+                        i16::from_be_bytes([c[0], c[1]])
+                    } else {
+                        i16::from_le_bytes([c[0], c[1]])
+                    }
+                })
+                .collect(),
+        ),
+        VoxelType::F32 => VoxelData::F32(
+            bytes
+                .chunks_exact(4)
+                .map(|c| {
+                    let b = [c[0], c[1], c[2], c[3]];
+                    if big_endian {
+                        f32::from_be_bytes(b)
+                    } else {
+                        f32::from_le_bytes(b)
+                    }
+                })
+                .collect(),
+        ),
+    };
+    Volume::new(d, [1.0; 3], data).with_context(|| format!("{}", path.display()))
+}
+
+impl RenderArgs {
+    /// The tissue preset for `vol`.
+    pub fn tissue(&self, vol: &Volume) -> Result<Tissue> {
+        let ct = presets::looks_like_ct(vol);
+        let mut t = match self.tissue.as_deref() {
+            None if ct => presets::ct_tissue("skin").context("skin preset")?,
+            None | Some("auto") => {
+                presets::generic(presets::otsu_threshold(vol), vol.value_range().1)
+            }
+            Some(name) => match presets::ct_tissue(name) {
+                Some(t) if ct => t,
+                Some(_) => bail!(
+                    "--tissue {name} is a CT preset (Hounsfield units) but this volume is not CT; use --tissue auto or --iso VALUE"
+                ),
+                None => bail!("unknown tissue '{name}' (expected skin, fat, soft, bone or auto)"),
+            },
+        };
+        if let Some(iso) = self.iso {
+            if !iso.is_finite() {
+                bail!("--iso must be a finite number");
+            }
+            t.threshold = iso;
+            if self.tissue.is_none() || !ct {
+                t.tf = TransferFunction::ramp(
+                    iso,
+                    iso + (vol.value_range().1 - iso).max(1.0),
+                    0.6,
+                    t.rgb,
+                );
+            }
+        }
+        Ok(t)
+    }
+
+    /// Render settings.
+    pub fn settings(&self) -> Result<Settings> {
+        if !(self.ert > 0.0 && self.ert <= 1.0) {
+            bail!("--ert must be in (0, 1], got {}", self.ert);
+        }
+        if self.size == 0 || self.size > 16384 {
+            bail!("--size must be 1..=16384, got {}", self.size);
+        }
+        Ok(Settings {
+            method: match self.method {
+                MethodArg::Binary => Method::Binary,
+                MethodArg::Brute => Method::Brute,
+            },
+            mode: match self.mode {
+                ModeArg::Iso => Mode::Iso,
+                ModeArg::Blend => Mode::Blend,
+            },
+            word: match self.word {
+                WordArg::U32 => WordSize::U32,
+                WordArg::U64 => WordSize::U64,
+            },
+            search: match self.search {
+                SearchArg::Lut => Search::Lut,
+                SearchArg::Bitscan => Search::Bitscan,
+            },
+            ert: self.ert,
+            threads: self.threads,
+            ..Settings::default()
+        })
+    }
+
+    /// The starting camera.
+    pub fn camera(&self) -> Result<Camera> {
+        let mut r = base_view(self.view);
+        if let Some([rx, ry, rz]) = self.rotate {
+            r = rotate_eye(rotate_eye(rotate_eye(r, 0, rx), 1, ry), 2, rz);
+        }
+        if let Some(z) = self.zoom {
+            if !(z.is_finite() && z > 0.0) {
+                bail!("--zoom must be finite and > 0, got {z}");
+            }
+        }
+        Ok(Camera {
+            rotation: r,
+            zoom: self.zoom,
+            size: [self.size, self.size],
+        })
+    }
+
+    /// A renderer for `vol` set up from these arguments.
+    pub fn renderer(&self, vol: Volume) -> Result<(Renderer, Tissue)> {
+        let tissue = self.tissue(&vol)?;
+        let settings = self.settings()?;
+        let tf = match settings.mode {
+            Mode::Iso => tissue.iso_tf(),
+            Mode::Blend => tissue.tf.clone(),
+        };
+        let mut r = Renderer::new(vol, &tf, settings)?;
+        r.set_iso(tissue.threshold)?;
+        Ok((r, tissue))
+    }
+}
+
+/// Object-to-eye rotation of a named view (RAS volume: +y anterior, +z superior).
+pub fn base_view(v: ViewArg) -> DMat3 {
+    // anterior: eye x = −object x (patient's right on the image left), eye y = object z, eye z = object y
+    let anterior = DMat3::from_cols_array(&[-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
+    match v {
+        ViewArg::Anterior => anterior,
+        ViewArg::Posterior => rotate_eye(anterior, 1, 180.0),
+        ViewArg::Left => rotate_eye(anterior, 1, -90.0),
+        ViewArg::Right => rotate_eye(anterior, 1, 90.0),
+        ViewArg::Superior => rotate_eye(anterior, 0, 90.0),
+        ViewArg::Inferior => rotate_eye(anterior, 0, -90.0),
+    }
+}
+
+fn progress(len: u64, quiet: bool, msg: &str) -> indicatif::ProgressBar {
+    if quiet || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new(len);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {per_sec} eta {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    pb.set_message(msg.to_string());
+    pb
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Runs `shearwarp render`.
+pub fn run_render(cmd: &RenderCmd) -> Result<()> {
+    let (vol, name) = cmd.volume.load()?;
+    let dims = vol.dims();
+    let (mut r, tissue) = cmd.render.renderer(vol)?;
+    let cam = cmd.render.camera()?;
+    let mut img = Image::new(cam.size[0], cam.size[1]);
+    let stats = r.render(&cam, &mut img)?;
+    img.save_png(&cmd.output)?;
+    if cmd.json {
+        let s = r.settings();
+        let j = serde_json::json!({
+            "volume": name, "dims": dims, "tissue": tissue.name, "iso": r.iso(),
+            "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(),
+            "size": cam.size[0], "output": cmd.output, "build_ms": stats.build_ms, "shear_ms": stats.shear_ms,
+            "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
+            "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(),
+        });
+        println!("{j}");
+    } else {
+        eprintln!(
+            "{name} {}×{}×{} → {} ({}×{}, {} {}, tissue {}): build {:.1} ms, shear {:.2} ms, render {:.2} ms, warp {:.2} ms",
+            dims[0],
+            dims[1],
+            dims[2],
+            cmd.output.display(),
+            cam.size[0],
+            cam.size[1],
+            r.settings().method.name(),
+            r.settings().mode.name(),
+            tissue.name,
+            stats.build_ms,
+            stats.shear_ms,
+            stats.render_ms,
+            stats.warp_ms
+        );
+    }
+    Ok(())
+}
+
+/// Degrees per frame that move the outermost slice of the deepest axis by one voxel.
+pub fn one_bit_step_deg(vol: &Volume) -> f64 {
+    let h = vol
+        .dims()
+        .iter()
+        .map(|&n| (n as f64 - 1.0) / 2.0)
+        .fold(1.0, f64::max);
+    (1.0 / h).to_degrees()
+}
+
+/// Runs `shearwarp rotate`.
+pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
+    let (vol, name) = cmd.volume.load()?;
+    let dims = vol.dims();
+    let step = match cmd.step_deg.as_str() {
+        "auto" => one_bit_step_deg(&vol),
+        s => s
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite() && *x > 0.0)
+            .with_context(|| {
+                format!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'")
+            })?,
+    };
+    if !(cmd.degrees.is_finite() && cmd.degrees > 0.0) {
+        bail!("--degrees must be a positive number, got {}", cmd.degrees);
+    }
+    let frames = ((cmd.degrees / step).round() as usize).max(1);
+    if frames > 1_000_000 {
+        bail!("{frames} frames is too many (raise --step-deg)");
+    }
+    let (mut r, tissue) = cmd.render.renderer(vol)?;
+    let cam0 = cmd.render.camera()?;
+    let build_ms = r.prepare_all_axes();
+    if let Some(d) = &cmd.frames_dir {
+        std::fs::create_dir_all(d)
+            .with_context(|| format!("{}: cannot create directory", d.display()))?;
+    }
+    let keep_frames = cmd.gif.is_some() || cmd.apng.is_some();
+    let mut kept: Vec<image::RgbImage> = Vec::new();
+    let axis = match cmd.axis {
+        AxisArg::X => 0,
+        AxisArg::Y => 1,
+        AxisArg::Z => 2,
+    };
+    let pb = progress(frames as u64, cmd.render.quiet || cmd.json, "rotating");
+    let mut img = Image::new(cam0.size[0], cam0.size[1]);
+    let mut all: Vec<FrameStats> = Vec::with_capacity(frames);
+    for f in 0..frames {
+        let mut cam = cam0;
+        cam.rotation = rotate_eye(cam0.rotation, axis, f as f64 * step);
+        let st = r.render(&cam, &mut img)?;
+        all.push(st);
+        if let Some(d) = &cmd.frames_dir {
+            img.save_png(&d.join(format!("frame_{f:05}.png")))?;
+        }
+        if keep_frames {
+            kept.push(img.to_rgb8());
+        }
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let col = |g: fn(&FrameStats) -> f64| median(&mut all.iter().map(g).collect::<Vec<_>>());
+    let (shear, render, warp, frame) = (
+        col(|s| s.shear_ms),
+        col(|s| s.render_ms),
+        col(|s| s.warp_ms),
+        col(|s| s.frame_ms()),
+    );
+    let fps = if frame > 0.0 {
+        1000.0 / frame
+    } else {
+        f64::INFINITY
+    };
+    if let Some(p) = &cmd.gif {
+        write_gif(p, &kept)?;
+    }
+    if let Some(p) = &cmd.apng {
+        write_apng(p, &kept)?;
+    }
+    let s = r.settings();
+    if cmd.json {
+        let j = serde_json::json!({
+            "volume": name, "dims": dims, "tissue": tissue.name, "iso": r.iso(),
+            "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(),
+            "threads": if s.threads == 0 { rayon::current_num_threads() } else { s.threads },
+            "size": cam0.size[0], "axis": AXES[axis],
+            "frames": frames, "degrees": frames as f64 * step, "step_deg": step, "build_ms": build_ms,
+            "shear_ms_median": shear, "render_ms_median": render, "warp_ms_median": warp, "frame_ms_median": frame,
+            "fps": fps, "degrees_per_second": fps * step, "mask_bytes": r.mask_bytes(),
+        });
+        println!("{j}");
+    } else {
+        println!(
+            "{name} {}×{}×{}, {}×{}, {} {} ({} words, {} search), tissue {} (iso {}):",
+            dims[0],
+            dims[1],
+            dims[2],
+            cam0.size[0],
+            cam0.size[1],
+            s.method.name(),
+            s.mode.name(),
+            s.word.name(),
+            s.search.name(),
+            tissue.name,
+            r.iso()
+        );
+        println!(
+            "  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms",
+            frames as f64 * step
+        );
+        println!(
+            "  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms"
+        );
+        println!("  {fps:.1} frames/s, {:.1} degrees/s", fps * step);
+    }
+    Ok(())
+}
+
+fn write_gif(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
+    use image::codecs::gif::{GifEncoder, Repeat};
+    let f = std::fs::File::create(path)
+        .with_context(|| format!("{}: cannot create", path.display()))?;
+    let mut enc = GifEncoder::new_with_speed(std::io::BufWriter::new(f), 10);
+    enc.set_repeat(Repeat::Infinite)?;
+    for fr in frames {
+        let rgba = image::DynamicImage::ImageRgb8(fr.clone()).to_rgba8();
+        enc.encode_frame(image::Frame::from_parts(
+            rgba,
+            0,
+            0,
+            image::Delay::from_numer_denom_ms(40, 1),
+        ))
+        .with_context(|| format!("{}: cannot write GIF frame", path.display()))?;
+    }
+    Ok(())
+}
+
+fn write_apng(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
+    let Some(first) = frames.first() else {
+        bail!("no frames to write")
+    };
+    let f = std::fs::File::create(path)
+        .with_context(|| format!("{}: cannot create", path.display()))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(f), first.width(), first.height());
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_animated(frames.len() as u32, 0)?;
+    enc.set_frame_delay(1, 25)?;
+    let mut w = enc.write_header()?;
+    for fr in frames {
+        w.write_image_data(fr.as_raw())?;
+    }
+    w.finish()?;
+    Ok(())
+}
+
+/// Entry point of the binary: parses arguments, runs, maps errors to exit codes.
+pub fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let res = match &cli.command {
+        Command::Render(c) => run_render(c),
+        Command::Rotate(c) => run_rotate(c),
+    };
+    match res {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            // input problems (files, values) are usage errors; everything else is a failure
+            let input = e.chain().any(|c| {
+                c.downcast_ref::<crate::Error>().is_some()
+                    || c.downcast_ref::<std::io::Error>().is_some()
+            });
+            std::process::ExitCode::from(if input { 2 } else { 1 })
+        }
+    }
+}

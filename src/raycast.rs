@@ -1,0 +1,332 @@
+//! Stage 5c — the bilinear resampling raycaster over the intermediate image.
+//!
+//! Owns the per-ray loop shared by the binary path and its brute-force reference:
+//! each ray of the intermediate image visits candidate slices in front-to-back
+//! order; at each it computes the exact in-slice sample position from the real
+//! (not floored) slice translation, interpolates the density bilinearly from the
+//! four voxels, classifies it, shades it (central-difference gradient, Blinn-Phong
+//! headlight) and composites it. The *only* difference between the paths is the
+//! candidate list: the binary path jumps from set bit to set bit of its sheared
+//! mask ([`crate::depth::SetBits`]), brute force visits every slice. Because the
+//! mask is conservative, both produce the same image sample for sample.
+//!
+//! Modes: [`Mode::Iso`] stops at the first sample whose density reaches the iso
+//! value, refines the hit linearly between it and the previous slice's sample, and
+//! shades it opaque; [`Mode::Blend`] alpha-blends every visible sample with
+//! opacity corrected for the view's sample spacing, until the accumulated opacity
+//! reaches the early-termination threshold.
+
+use rayon::prelude::*;
+
+use crate::classify::Classifier;
+use crate::composite::{Intermediate, Shading, composite, headlight_ndl};
+use crate::depth::{Search, SetBits, Word};
+use crate::mask::{BinaryMask, Rect};
+use crate::shear::ShearState;
+use crate::slices::SliceStack;
+use crate::view::Factorization;
+
+/// Rendering mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Iso-surface preview: the first sample at or above the iso value, shaded, opaque.
+    Iso,
+    /// Full alpha blending through the transfer function.
+    Blend,
+}
+
+impl Mode {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Iso => "iso",
+            Mode::Blend => "blend",
+        }
+    }
+}
+
+/// Per-slice sample parameters of one view: integer offset and in-cell weight of
+/// every slice along i and j (`trans = floor + weight`). Reused across frames.
+#[derive(Clone, Debug, Default)]
+pub struct SliceParams {
+    pub floor: [Vec<i32>; 2],
+    pub weight: [Vec<f32>; 2],
+}
+
+impl SliceParams {
+    /// Fills from a shear state (the mask and the rays use the very same numbers).
+    pub fn fill(&mut self, st: &ShearState) {
+        for a in 0..2 {
+            self.floor[a].clear();
+            self.floor[a].extend_from_slice(&st.floor[a]);
+            self.weight[a].clear();
+            self.weight[a].extend(
+                st.trans[a]
+                    .iter()
+                    .zip(&st.floor[a])
+                    .map(|(t, &f)| (t - f as f64) as f32),
+            );
+        }
+    }
+}
+
+/// Everything a ray needs, borrowed for one frame.
+pub struct RayContext<'a> {
+    pub stack: &'a SliceStack,
+    pub classifier: &'a Classifier,
+    pub params: &'a SliceParams,
+    pub shading: Shading,
+    pub mode: Mode,
+    /// Iso value (iso mode).
+    pub iso: f32,
+    /// Unshaded colour of the iso surface.
+    pub iso_rgb: [f32; 3],
+    /// Early ray termination threshold on accumulated opacity (blend mode).
+    pub ert: f32,
+    pub ascending: bool,
+    /// Padding of the intermediate grid (mask column p ↔ sheared a = p − pad).
+    pub pad: i32,
+    cells: [u32; 2],
+    grad_m: [f32; 3],
+    grad_s: [f32; 3],
+}
+
+/// What one ray produced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayResult {
+    pub rgba: [f32; 4],
+    /// Fractional slice index of the iso hit (NaN if none).
+    pub depth: f32,
+}
+
+const MISS: RayResult = RayResult {
+    rgba: [0.0; 4],
+    depth: f32::NAN,
+};
+
+impl<'a> RayContext<'a> {
+    /// Sets up the rays of one frame.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        stack: &'a SliceStack,
+        classifier: &'a Classifier,
+        params: &'a SliceParams,
+        f: &Factorization,
+        pad: usize,
+        mode: Mode,
+        iso: f32,
+        shading: Shading,
+        ert: f32,
+    ) -> Self {
+        let c = stack.cells();
+        let iso_c = classifier.classify(iso);
+        RayContext {
+            stack,
+            classifier,
+            params,
+            shading,
+            mode,
+            iso,
+            iso_rgb: [iso_c.r, iso_c.g, iso_c.b],
+            ert,
+            ascending: f.ascending,
+            pad: pad as i32,
+            cells: [c[0] as u32, c[1] as u32],
+            grad_m: f.grad_to_eye_z.map(|x| x as f32),
+            grad_s: f.grad_scale.map(|x| x as f32),
+        }
+    }
+
+    /// The cell and weights of ray `(p, q)` at slice `k`, or `None` outside the volume.
+    #[inline(always)]
+    fn locate(&self, p: i32, q: i32, k: usize) -> Option<(usize, usize, f32, f32)> {
+        let ci = p - self.pad + self.params.floor[0][k];
+        let cj = q - self.pad + self.params.floor[1][k];
+        if (ci as u32) < self.cells[0] && (cj as u32) < self.cells[1] {
+            Some((
+                ci as usize,
+                cj as usize,
+                self.params.weight[0][k],
+                self.params.weight[1][k],
+            ))
+        } else {
+            None
+        }
+    }
+
+    /// Traces ray `(p, q)` over the candidate slices `ks` (front to back).
+    #[inline(always)]
+    pub fn trace(&self, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
+        match self.mode {
+            Mode::Blend => self.trace_blend(p, q, ks),
+            Mode::Iso => self.trace_iso(p, q, ks),
+        }
+    }
+
+    #[inline(always)]
+    fn trace_blend(&self, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
+        let mut acc = [0f32; 4];
+        for k in ks {
+            let Some((ci, cj, wi, wj)) = self.locate(p, q, k) else {
+                continue;
+            };
+            let d = self.stack.bilinear(ci, cj, k, wi, wj);
+            let alpha = self.classifier.alpha(d);
+            if alpha <= 0.0 {
+                continue;
+            }
+            let c = self.classifier.classify(d);
+            let g = self.stack.gradient(ci, cj, k, wi, wj);
+            let ndl = headlight_ndl(g, self.grad_m, self.grad_s);
+            composite(&mut acc, self.shading.shade([c.r, c.g, c.b], ndl), alpha);
+            if acc[3] >= self.ert {
+                break;
+            }
+        }
+        RayResult {
+            rgba: acc,
+            depth: f32::NAN,
+        }
+    }
+
+    #[inline(always)]
+    fn trace_iso(&self, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
+        for k in ks {
+            let Some((ci, cj, wi, wj)) = self.locate(p, q, k) else {
+                continue;
+            };
+            let d = self.stack.bilinear(ci, cj, k, wi, wj);
+            if d >= self.iso {
+                return self.iso_hit(p, q, k, ci, cj, wi, wj, d);
+            }
+        }
+        MISS
+    }
+
+    /// Refines a hit at slice `k` against the previous slice in walking order and
+    /// shades it.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn iso_hit(
+        &self,
+        p: i32,
+        q: i32,
+        k: usize,
+        ci: usize,
+        cj: usize,
+        wi: f32,
+        wj: f32,
+        d: f32,
+    ) -> RayResult {
+        let g = self.stack.gradient(ci, cj, k, wi, wj);
+        let prev = if self.ascending {
+            k.checked_sub(1)
+        } else {
+            Some(k + 1).filter(|&x| x < self.stack.n[2])
+        };
+        let refined = prev.and_then(|kp| {
+            let (pi, pj, pwi, pwj) = self.locate(p, q, kp)?;
+            let dp = self.stack.bilinear(pi, pj, kp, pwi, pwj);
+            (dp < self.iso).then(|| (kp, dp, self.stack.gradient(pi, pj, kp, pwi, pwj)))
+        });
+        let (depth, grad) = match refined {
+            Some((kp, dp, gp)) => {
+                let t = ((self.iso - dp) / (d - dp)).clamp(0.0, 1.0);
+                let gr = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
+                (kp as f32 + (k as f32 - kp as f32) * t, gr)
+            }
+            None => (k as f32, g),
+        };
+        let ndl = headlight_ndl(grad, self.grad_m, self.grad_s);
+        let [r, gg, b] = self.shading.shade(self.iso_rgb, ndl);
+        RayResult {
+            rgba: [r, gg, b, 1.0],
+            depth,
+        }
+    }
+}
+
+/// Rays of `rect` of the intermediate image through the binary mask (jumping from
+/// set bit to set bit), in parallel over rows; marks `rect` valid.
+pub fn render_binary<W: Word>(
+    ctx: &RayContext,
+    mask: &BinaryMask<W>,
+    search: Search,
+    rect: Option<Rect>,
+    out: &mut Intermediate,
+) {
+    render_rows(ctx, rect, out, |p, q| {
+        ctx.trace(
+            p as i32,
+            q as i32,
+            SetBits::new(mask.row(p, q), ctx.ascending, search),
+        )
+    });
+}
+
+/// The brute-force reference: every slice of every ray of `rect`, no mask.
+pub fn render_brute(ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate) {
+    let nk = ctx.stack.n[2];
+    render_rows(ctx, rect, out, |p, q| {
+        if ctx.ascending {
+            ctx.trace(p as i32, q as i32, 0..nk)
+        } else {
+            ctx.trace(p as i32, q as i32, (0..nk).rev())
+        }
+    });
+}
+
+fn render_rows(
+    _ctx: &RayContext,
+    rect: Option<Rect>,
+    out: &mut Intermediate,
+    ray: impl Fn(usize, usize) -> RayResult + Sync,
+) {
+    out.valid = rect;
+    let Some(r) = rect else { return };
+    let w = out.size[0];
+    let (rgba, depth) = (&mut out.rgba, &mut out.depth);
+    rgba.par_chunks_mut(w)
+        .zip(depth.par_chunks_mut(w))
+        .enumerate()
+        .skip(r.q0)
+        .take(r.q1 - r.q0 + 1)
+        .for_each(|(q, (crow, drow))| {
+            for p in r.p0..=r.p1 {
+                let res = ray(p, q);
+                crow[p] = res.rgba;
+                drow[p] = res.depth;
+            }
+        });
+}
+
+/// The rectangle of the intermediate grid that rays through the volume can reach
+/// under these slice offsets (geometry only, no mask): used by brute force.
+pub fn volume_rect(
+    params: &SliceParams,
+    cells: [usize; 2],
+    pad: usize,
+    grid: [usize; 2],
+) -> Option<Rect> {
+    if cells[0] == 0 || cells[1] == 0 || params.floor[0].is_empty() {
+        return None;
+    }
+    let span = |a: usize| {
+        let lo = params.floor[a]
+            .iter()
+            .map(|f| pad as i32 - f)
+            .min()
+            .unwrap_or(0)
+            .max(0) as usize;
+        let hi = params.floor[a]
+            .iter()
+            .map(|f| pad as i32 - f + cells[a] as i32 - 1)
+            .max()
+            .unwrap_or(0) as usize;
+        (lo, hi.min(grid[a] - 1))
+    };
+    let (p0, p1) = span(0);
+    let (q0, q1) = span(1);
+    Some(Rect { p0, p1, q0, q1 })
+}

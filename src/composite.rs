@@ -93,6 +93,29 @@ impl Intermediate {
         self.valid = None;
     }
 
+    /// Marks `rect` as this frame's valid rectangle and clears the one-pixel ring
+    /// around it, so a bilinear tap anywhere in `[p0 − 1, p1 + 1] × [q0 − 1, q1 + 1]`
+    /// reads either a rendered pixel or transparent black (never a stale one).
+    pub fn seal(&mut self, rect: Option<Rect>) {
+        self.valid = rect;
+        let Some(r) = rect else { return };
+        let [w, h] = self.size;
+        let (x0, x1) = (r.p0.saturating_sub(1), (r.p1 + 1).min(w - 1));
+        for q in [r.q0.wrapping_sub(1), r.q1 + 1] {
+            if q < h {
+                self.rgba[q * w + x0..=q * w + x1].fill([0.0; 4]);
+            }
+        }
+        for q in r.q0..=r.q1 {
+            if r.p0 > 0 {
+                self.rgba[q * w + r.p0 - 1] = [0.0; 4];
+            }
+            if r.p1 + 1 < w {
+                self.rgba[q * w + r.p1 + 1] = [0.0; 4];
+            }
+        }
+    }
+
     /// Pixel `(p, q)`, transparent outside the valid rectangle.
     #[inline(always)]
     pub fn get(&self, p: isize, q: isize) -> [f32; 4] {

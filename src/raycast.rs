@@ -283,7 +283,7 @@ fn render_rows(
     out: &mut Intermediate,
     ray: impl Fn(usize, usize) -> RayResult + Sync,
 ) {
-    out.valid = rect;
+    out.seal(rect);
     let Some(r) = rect else { return };
     let w = out.size[0];
     let (rgba, depth) = (&mut out.rgba, &mut out.depth);

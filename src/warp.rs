@@ -121,16 +121,19 @@ pub fn warp(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut
         }
         row[..u0].fill([0.0; 4]);
         row[u1 + 1..].fill([0.0; 4]);
+        // every tap of this span lies in the valid rectangle or its cleared ring
+        let iw = inter.size[0];
+        let (ih, rgba) = (inter.size[1], &inter.rgba);
         for (u, px) in row.iter_mut().enumerate().take(u1 + 1).skip(u0) {
             let p = pa * u as f64 + pb;
             let q = qa * u as f64 + qb;
             let (x0, y0) = (p.floor(), q.floor());
             let (fx, fy) = ((p - x0) as f32, (q - y0) as f32);
-            let (x0, y0) = (x0 as isize, y0 as isize);
-            let c00 = inter.get(x0, y0);
-            let c10 = inter.get(x0 + 1, y0);
-            let c01 = inter.get(x0, y0 + 1);
-            let c11 = inter.get(x0 + 1, y0 + 1);
+            // clamp only guards against rounding at the span ends
+            let x0 = (x0 as usize).min(iw - 2);
+            let y0 = (y0 as usize).min(ih - 2);
+            let i = y0 * iw + x0;
+            let (c00, c10, c01, c11) = (rgba[i], rgba[i + 1], rgba[i + iw], rgba[i + iw + 1]);
             for c in 0..4 {
                 let top = c00[c] + (c10[c] - c00[c]) * fx;
                 let bot = c01[c] + (c11[c] - c01[c]) * fx;

@@ -8,9 +8,9 @@ use std::time::Duration;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use glam::DMat3;
 use shearwarp::depth::Search;
-use shearwarp::mask::BinaryMask;
+use shearwarp::mask::{BinaryMask, CellCodes};
 use shearwarp::phantom;
-use shearwarp::presets::ct_tissue;
+use shearwarp::presets::{ct_tissue, ct_tissues};
 use shearwarp::raycast::Mode;
 use shearwarp::render::{Method, Renderer, Settings, WordSize};
 use shearwarp::shear::ShearState;
@@ -30,12 +30,48 @@ fn benches(c: &mut Criterion) {
         let stack = SliceStack::new(&vol, 2);
 
         let mut g = c.benchmark_group(format!("mask_build_{n}"));
-        g.bench_function("u32", |b| {
-            b.iter(|| BinaryMask::<u32>::build(&stack, |_, hi| hi >= skin.threshold))
+        g.bench_function("u32", |b| b.iter(|| BinaryMask::<u32>::build(&stack, |_, hi| hi >= skin.threshold)));
+        g.bench_function("u64", |b| b.iter(|| BinaryMask::<u64>::build(&stack, |_, hi| hi >= skin.threshold)));
+        g.finish();
+
+        // tissue switch (a table change) against rebuilding the mask for the new tissue
+        let mut g = c.benchmark_group(format!("tissue_switch_{n}"));
+        let tissues = ct_tissues();
+        let mut r = Renderer::with_tissues(vol.clone(), &tissues, Settings::default()).expect("renderer");
+        r.prepare_all_axes();
+        let mut i = 0;
+        g.bench_function("switch", |b| {
+            b.iter(|| {
+                i = (i + 1) % tissues.len();
+                r.select_tissue(i).expect("tissue")
+            })
         });
-        g.bench_function("u64", |b| {
-            b.iter(|| BinaryMask::<u64>::build(&stack, |_, hi| hi >= skin.threshold))
+        g.bench_function("rebuild_mask", |b| {
+            b.iter(|| {
+                i = (i + 1) % tissues.len();
+                let t = tissues[i].threshold;
+                BinaryMask::<u64>::from_codes(&CellCodes::binary(&stack, |_, hi| hi >= t), 1)
+            })
         });
+        g.finish();
+
+        // one shear step per super-cell size (the step moves s voxels)
+        let mut g = c.benchmark_group(format!("shear_step_cell_{n}"));
+        let codes = CellCodes::thresholds(&stack, &tissues.iter().map(|t| t.threshold).collect::<Vec<_>>()).expect("codes");
+        for s in 1..=4usize {
+            let mut m = BinaryMask::<u64>::from_codes(&codes, s);
+            let mut st = ShearState::identity(n);
+            let (mut dir, mut pos) = (1, 0i32);
+            g.bench_function(BenchmarkId::from_parameter(s), |b| {
+                b.iter(|| {
+                    if pos.abs() >= 20 {
+                        dir = -dir;
+                    }
+                    pos += dir;
+                    st = m.rotate_step(&st, 0, dir);
+                })
+            });
+        }
         g.finish();
 
         let mut g = c.benchmark_group(format!("shear_step_{n}"));
@@ -70,19 +106,8 @@ fn benches(c: &mut Criterion) {
                 (WordSize::U64, Search::Lut),
                 (WordSize::U64, Search::Bitscan),
             ] {
-                let s = Settings {
-                    method: Method::Binary,
-                    mode,
-                    word,
-                    search,
-                    threads: 1,
-                    ..Settings::default()
-                };
-                let tf = if mode == Mode::Iso {
-                    skin.iso_tf()
-                } else {
-                    ct_tissue("bone").expect("preset").tf
-                };
+                let s = Settings { method: Method::Binary, mode, word, search, threads: 1, ..Settings::default() };
+                let tf = if mode == Mode::Iso { skin.iso_tf() } else { ct_tissue("bone").expect("preset").tf };
                 let mut r = Renderer::new(vol.clone(), &tf, s).expect("renderer");
                 r.prepare_all_axes();
                 let mut img = Image::new(512, 512);

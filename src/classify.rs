@@ -30,34 +30,20 @@ impl TransferFunction {
     /// Builds and validates a transfer function.
     pub fn new(opacity: Vec<(f32, f32)>, color: Vec<(f32, [f32; 3])>) -> Result<Self> {
         if opacity.is_empty() || color.is_empty() {
-            return Err(Error::value(
-                "transfer function",
-                "needs at least one opacity and one colour point",
-            ));
+            return Err(Error::value("transfer function", "needs at least one opacity and one colour point"));
         }
         let sorted = |d: &[f32]| d.windows(2).all(|w| w[0] <= w[1]);
         let od: Vec<f32> = opacity.iter().map(|p| p.0).collect();
         let cd: Vec<f32> = color.iter().map(|p| p.0).collect();
         if !sorted(&od) || !sorted(&cd) {
-            return Err(Error::value(
-                "transfer function",
-                "control points must be sorted by density",
-            ));
+            return Err(Error::value("transfer function", "control points must be sorted by density"));
         }
         let finite01 = |x: f32| x.is_finite() && (0.0..=1.0).contains(&x);
         if od.iter().chain(&cd).any(|d| !d.is_finite()) {
-            return Err(Error::value(
-                "transfer function",
-                "densities must be finite",
-            ));
+            return Err(Error::value("transfer function", "densities must be finite"));
         }
-        if !opacity.iter().all(|p| finite01(p.1))
-            || !color.iter().all(|p| p.1.iter().all(|&c| finite01(c)))
-        {
-            return Err(Error::value(
-                "transfer function",
-                "opacities and colours must lie in [0, 1]",
-            ));
+        if !opacity.iter().all(|p| finite01(p.1)) || !color.iter().all(|p| p.1.iter().all(|&c| finite01(c))) {
+            return Err(Error::value("transfer function", "opacities and colours must lie in [0, 1]"));
         }
         Ok(TransferFunction { opacity, color })
     }
@@ -65,18 +51,12 @@ impl TransferFunction {
     /// A threshold (iso) transfer function: transparent below `t`, opacity 1 and
     /// colour `rgb` from `t` on (a one-table-node ramp at `t`).
     pub fn threshold(t: f32, rgb: [f32; 3]) -> Self {
-        TransferFunction {
-            opacity: vec![(t, 0.0), (t, 1.0)],
-            color: vec![(t, rgb)],
-        }
+        TransferFunction { opacity: vec![(t, 0.0), (t, 1.0)], color: vec![(t, rgb)] }
     }
 
     /// A linear opacity ramp from 0 at `lo` to `max_alpha` at `hi`, with colour `rgb`.
     pub fn ramp(lo: f32, hi: f32, max_alpha: f32, rgb: [f32; 3]) -> Self {
-        TransferFunction {
-            opacity: vec![(lo, 0.0), (hi, max_alpha)],
-            color: vec![(lo, rgb)],
-        }
+        TransferFunction { opacity: vec![(lo, 0.0), (hi, max_alpha)], color: vec![(lo, rgb)] }
     }
 
     /// Opacity at density `d` (exact piecewise-linear evaluation).
@@ -86,40 +66,22 @@ impl TransferFunction {
 
     /// Colour at density `d` (exact piecewise-linear evaluation).
     pub fn color_at(&self, d: f32) -> [f32; 3] {
-        eval_pl(
-            &self.color,
-            d,
-            |p| p.1,
-            |a, b, t| [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * t),
-        )
+        eval_pl(&self.color, d, |p| p.1, |a, b, t| [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * t))
     }
 
     /// The lowest density with non-zero opacity (`None` if all transparent).
     pub fn lower_threshold(&self) -> Option<f32> {
         let first = self.opacity.iter().position(|p| p.1 > 0.0)?;
-        Some(if first == 0 {
-            f32::NEG_INFINITY
-        } else {
-            self.opacity[first - 1].0
-        })
+        Some(if first == 0 { f32::NEG_INFINITY } else { self.opacity[first - 1].0 })
     }
 }
 
-fn eval_pl<P: Copy, V: Copy>(
-    pts: &[(f32, P)],
-    d: f32,
-    val: impl Fn(&(f32, P)) -> V,
-    lerp: impl Fn(V, V, f32) -> V,
-) -> V {
+fn eval_pl<P: Copy, V: Copy>(pts: &[(f32, P)], d: f32, val: impl Fn(&(f32, P)) -> V, lerp: impl Fn(V, V, f32) -> V) -> V {
     let n = pts.len();
     if d <= pts[0].0 {
         // at a step (two points at the same density) the upper value wins from the step on
         let last_at = pts.iter().rposition(|p| p.0 == pts[0].0).unwrap_or(0);
-        return if d == pts[0].0 {
-            val(&pts[last_at])
-        } else {
-            val(&pts[0])
-        };
+        return if d == pts[0].0 { val(&pts[last_at]) } else { val(&pts[0]) };
     }
     if d >= pts[n - 1].0 {
         return val(&pts[n - 1]);
@@ -159,43 +121,21 @@ pub struct Classifier {
 impl Classifier {
     /// Tabulates `tf` over the density range `[lo, hi]` (normally the volume's).
     pub fn new(tf: &TransferFunction, lo: f32, hi: f32) -> Self {
-        let (lo, hi) = if hi > lo && (hi - lo).is_finite() {
-            (lo, hi)
-        } else {
-            (lo, lo + 1.0)
-        };
+        let (lo, hi) = if hi > lo && (hi - lo).is_finite() { (lo, hi) } else { (lo, lo + 1.0) };
         let step = (hi - lo) / (TABLE_NODES - 1) as f32;
         let table: Vec<Rgba> = (0..TABLE_NODES)
             .map(|i| {
                 let d = lo + step * i as f32;
                 let [r, g, b] = tf.color_at(d);
-                Rgba {
-                    r,
-                    g,
-                    b,
-                    a: tf.opacity_at(d),
-                }
+                Rgba { r, g, b, a: tf.opacity_at(d) }
             })
             .collect();
         let mut next_nz = vec![TABLE_NODES as u32; TABLE_NODES + 1];
         for i in (0..TABLE_NODES).rev() {
-            next_nz[i] = if table[i].a > 0.0 {
-                i as u32
-            } else {
-                next_nz[i + 1]
-            };
+            next_nz[i] = if table[i].a > 0.0 { i as u32 } else { next_nz[i + 1] };
         }
         let raw_alpha = table.iter().map(|t| t.a).collect();
-        Classifier {
-            d0: lo,
-            inv_step: 1.0 / step,
-            step,
-            table,
-            next_nz,
-            raw_alpha,
-            ratio: 1.0,
-            tf: tf.clone(),
-        }
+        Classifier { d0: lo, inv_step: 1.0 / step, step, table, next_nz, raw_alpha, ratio: 1.0, tf: tf.clone() }
     }
 
     /// Corrects the table's opacities for samples `ratio` times the reference
@@ -208,11 +148,7 @@ impl Classifier {
         }
         self.ratio = ratio;
         for (t, &a) in self.table.iter_mut().zip(&self.raw_alpha) {
-            t.a = if a >= 1.0 {
-                1.0
-            } else {
-                1.0 - (1.0 - a).powf(ratio)
-            };
+            t.a = if a >= 1.0 { 1.0 } else { 1.0 - (1.0 - a).powf(ratio) };
         }
     }
 
@@ -239,12 +175,7 @@ impl Classifier {
         let i = (p as usize).min(TABLE_NODES - 2);
         let t = p - i as f32;
         let (a, b) = (self.table[i], self.table[i + 1]);
-        Rgba {
-            r: a.r + (b.r - a.r) * t,
-            g: a.g + (b.g - a.g) * t,
-            b: a.b + (b.b - a.b) * t,
-            a: a.a + (b.a - a.a) * t,
-        }
+        Rgba { r: a.r + (b.r - a.r) * t, g: a.g + (b.g - a.g) * t, b: a.b + (b.b - a.b) * t, a: a.a + (b.a - a.a) * t }
     }
 
     /// Opacity only (cheaper than [`Classifier::classify`]).
@@ -283,11 +214,8 @@ mod tests {
 
     #[test]
     fn piecewise_linear_evaluation() {
-        let tf = TransferFunction::new(
-            vec![(0.0, 0.0), (10.0, 1.0), (20.0, 0.0)],
-            vec![(0.0, [1.0, 0.0, 0.0]), (20.0, [0.0, 0.0, 1.0])],
-        )
-        .unwrap();
+        let tf = TransferFunction::new(vec![(0.0, 0.0), (10.0, 1.0), (20.0, 0.0)], vec![(0.0, [1.0, 0.0, 0.0]), (20.0, [0.0, 0.0, 1.0])])
+            .unwrap();
         assert_eq!(tf.opacity_at(-5.0), 0.0);
         assert_eq!(tf.opacity_at(5.0), 0.5);
         assert_eq!(tf.opacity_at(10.0), 1.0);
@@ -301,9 +229,7 @@ mod tests {
 
     #[test]
     fn rejects_bad_transfer_functions() {
-        assert!(
-            TransferFunction::new(vec![(1.0, 0.0), (0.0, 1.0)], vec![(0.0, [1.0; 3])]).is_err()
-        );
+        assert!(TransferFunction::new(vec![(1.0, 0.0), (0.0, 1.0)], vec![(0.0, [1.0; 3])]).is_err());
         assert!(TransferFunction::new(vec![(0.0, 1.5)], vec![(0.0, [1.0; 3])]).is_err());
         assert!(TransferFunction::new(vec![(f32::NAN, 0.5)], vec![(0.0, [1.0; 3])]).is_err());
         assert!(TransferFunction::new(vec![], vec![(0.0, [1.0; 3])]).is_err());
@@ -312,11 +238,7 @@ mod tests {
     #[test]
     fn may_be_visible_is_conservative_for_a_band() {
         // opacity only in a narrow band strictly between two corner values
-        let tf = TransferFunction::new(
-            vec![(100.0, 0.0), (101.0, 0.7), (102.0, 0.0)],
-            vec![(0.0, [1.0; 3])],
-        )
-        .unwrap();
+        let tf = TransferFunction::new(vec![(100.0, 0.0), (101.0, 0.7), (102.0, 0.0)], vec![(0.0, [1.0; 3])]).unwrap();
         let c = Classifier::new(&tf, 0.0, 1000.0);
         assert!(c.may_be_visible(50.0, 300.0));
         assert!(!c.may_be_visible(0.0, 90.0));

@@ -9,14 +9,13 @@
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use glam::DMat3;
 
-use crate::classify::TransferFunction;
 use crate::depth::Search;
 use crate::phantom::Phantom;
-use crate::presets::{self, Tissue};
+use crate::presets;
 use crate::raycast::Mode;
 use crate::render::{FrameStats, Method, Renderer, Settings, WordSize};
 use crate::view::{Camera, rotate_eye};
@@ -25,6 +24,26 @@ use crate::warp::Image;
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 
+/// A problem with the arguments or the input (exit code 2), as opposed to a
+/// failure while running (exit code 1).
+#[derive(Debug)]
+pub struct Usage(pub String);
+
+impl std::fmt::Display for Usage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Usage {}
+
+/// Returns a [`Usage`] error from the current function.
+macro_rules! usage {
+    ($($t:tt)*) => {
+        return Err(anyhow::Error::new(Usage(format!($($t)*))))
+    };
+}
+
 const EXAMPLES: &str = "\
 Examples:
   shearwarp render -o head.png                         # built-in CT head, skin iso-surface
@@ -32,6 +51,8 @@ Examples:
   shearwarp render --mode blend --tissue soft -o soft.png
   shearwarp rotate --degrees 360 --json                # benchmark a full turn
   shearwarp rotate --degrees 90 --gif turn.gif
+  shearwarp rotate --cell 2 --cycle-tissues 30 --json  # super cells, switch tissues every 30 frames
+  shearwarp info --phantom head                        # size, range, histogram, thresholds
   shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
 
 /// Fast CPU volume rendering with the binary shear-warp fast rotator.
@@ -51,6 +72,9 @@ pub enum Command {
     /// Rotate about an axis with the incremental shear, timing every frame.
     #[command(after_help = EXAMPLES)]
     Rotate(RotateCmd),
+    /// Describe a volume: size, type, spacing, value range, histogram, suggested thresholds.
+    #[command(after_help = EXAMPLES)]
+    Info(InfoCmd),
 }
 
 /// Where the volume comes from.
@@ -117,9 +141,13 @@ pub struct RenderArgs {
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// Tissue preset: skin, fat, soft, bone (CT), or auto (histogram threshold).
+    /// Tissue preset: skin, fat, soft, bone (CT in Hounsfield units); low, mid,
+    /// high (other volumes, from the histogram); or auto (the first).
     #[arg(long)]
     pub tissue: Option<String>,
+    /// Super-cell size S (1..=8): the mask shrinks by S², a shear step moves S voxels.
+    #[arg(long, default_value_t = 1)]
+    pub cell: usize,
     /// Iso value (overrides the preset's threshold).
     #[arg(long, allow_negative_numbers = true)]
     pub iso: Option<f32>,
@@ -230,21 +258,32 @@ pub struct RotateCmd {
     /// Print one JSON object with the timing summary.
     #[arg(long)]
     pub json: bool,
+    /// Switch to the next tissue preset every N frames (0 = never).
+    #[arg(long, default_value_t = 0)]
+    pub cycle_tissues: usize,
+}
+
+/// `shearwarp info`.
+#[derive(Args, Debug)]
+pub struct InfoCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    /// Histogram bins to print.
+    #[arg(long, default_value_t = 16)]
+    pub bins: usize,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 fn parse_triple<T: std::str::FromStr>(s: &str, what: &str) -> std::result::Result<[T; 3], String> {
     let parts: Vec<&str> = s.split([',', 'x', 'X']).map(str::trim).collect();
     if parts.len() != 3 {
-        return Err(format!(
-            "expected three {what} separated by commas, got '{s}'"
-        ));
+        return Err(format!("expected three {what} separated by commas, got '{s}'"));
     }
     let mut out = Vec::with_capacity(3);
     for p in parts {
-        out.push(
-            p.parse::<T>()
-                .map_err(|_| format!("'{p}' is not a valid {what}"))?,
-        );
+        out.push(p.parse::<T>().map_err(|_| format!("'{p}' is not a valid {what}"))?);
     }
     out.try_into().map_err(|_| "three values".to_string())
 }
@@ -271,13 +310,16 @@ fn parse_rotation(s: &str) -> std::result::Result<[f64; 3], String> {
 }
 
 impl VolumeArgs {
-    /// Loads or builds the volume and names it for reports.
+    /// Loads or builds the volume and names it for reports. Any failure is a
+    /// [`Usage`] error: the input is what is wrong.
     pub fn load(&self) -> Result<(Volume, String)> {
+        self.load_inner().map_err(|e| anyhow::Error::new(Usage(format!("{e:#}"))))
+    }
+
+    fn load_inner(&self) -> Result<(Volume, String)> {
         let mut vol = if let Some(path) = &self.raw {
             let dims = self.dims.context("--raw needs --dims X,Y,Z")?;
-            let t = self
-                .voxel_type
-                .context("--raw needs --type u8|u16|i16|f32")?;
+            let t = self.voxel_type.context("--raw needs --type u8|u16|i16|f32")?;
             let t = match t {
                 TypeArg::U8 => VoxelType::U8,
                 TypeArg::U16 => VoxelType::U16,
@@ -314,10 +356,9 @@ pub fn load_raw(path: &Path, dims: [usize; 3], t: VoxelType, big_endian: bool) -
     let d = crate::volume::check_dims(dims.map(|x| x as u64))?;
     let n = d[0] * d[1] * d[2];
     let want = n as u64 * t.size() as u64;
-    let meta =
-        std::fs::metadata(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let meta = std::fs::metadata(path).with_context(|| format!("{}: cannot open", path.display()))?;
     if meta.len() != want {
-        bail!(
+        usage!(
             "{}: holds {} bytes but {}×{}×{} {} voxels need {} bytes (check --dims and --type)",
             path.display(),
             meta.len(),
@@ -334,25 +375,13 @@ pub fn load_raw(path: &Path, dims: [usize; 3], t: VoxelType, big_endian: bool) -
         VoxelType::U16 => VoxelData::U16(
             bytes
                 .chunks_exact(2)
-                .map(|c| {
-                    if big_endian {
-                        u16::from_be_bytes([c[0], c[1]])
-                    } else {
-                        u16::from_le_bytes([c[0], c[1]])
-                    }
-                })
+                .map(|c| if big_endian { u16::from_be_bytes([c[0], c[1]]) } else { u16::from_le_bytes([c[0], c[1]]) })
                 .collect(),
         ),
         VoxelType::I16 => VoxelData::I16(
             bytes
                 .chunks_exact(2)
-                .map(|c| {
-                    if big_endian {
-                        i16::from_be_bytes([c[0], c[1]])
-                    } else {
-                        i16::from_le_bytes([c[0], c[1]])
-                    }
-                })
+                .map(|c| if big_endian { i16::from_be_bytes([c[0], c[1]]) } else { i16::from_le_bytes([c[0], c[1]]) })
                 .collect(),
         ),
         VoxelType::F32 => VoxelData::F32(
@@ -360,11 +389,7 @@ pub fn load_raw(path: &Path, dims: [usize; 3], t: VoxelType, big_endian: bool) -
                 .chunks_exact(4)
                 .map(|c| {
                     let b = [c[0], c[1], c[2], c[3]];
-                    if big_endian {
-                        f32::from_be_bytes(b)
-                    } else {
-                        f32::from_le_bytes(b)
-                    }
+                    if big_endian { f32::from_be_bytes(b) } else { f32::from_le_bytes(b) }
                 })
                 .collect(),
         ),
@@ -373,46 +398,47 @@ pub fn load_raw(path: &Path, dims: [usize; 3], t: VoxelType, big_endian: bool) -
 }
 
 impl RenderArgs {
-    /// The tissue preset for `vol`.
-    pub fn tissue(&self, vol: &Volume) -> Result<Tissue> {
-        let ct = presets::looks_like_ct(vol);
-        let mut t = match self.tissue.as_deref() {
-            None if ct => presets::ct_tissue("skin").context("skin preset")?,
-            None | Some("auto") => {
-                presets::generic(presets::otsu_threshold(vol), vol.value_range().1)
-            }
-            Some(name) => match presets::ct_tissue(name) {
-                Some(t) if ct => t,
-                Some(_) => bail!(
-                    "--tissue {name} is a CT preset (Hounsfield units) but this volume is not CT; use --tissue auto or --iso VALUE"
-                ),
-                None => bail!("unknown tissue '{name}' (expected skin, fat, soft, bone or auto)"),
-            },
-        };
-        if let Some(iso) = self.iso {
-            if !iso.is_finite() {
-                bail!("--iso must be a finite number");
-            }
-            t.threshold = iso;
-            if self.tissue.is_none() || !ct {
-                t.tf = TransferFunction::ramp(
-                    iso,
-                    iso + (vol.value_range().1 - iso).max(1.0),
-                    0.6,
-                    t.rgb,
-                );
+    /// A renderer for `vol` set up from these arguments: the volume's tissue
+    /// presets (CT in Hounsfield units, else from the histogram) share one
+    /// threshold-coded mask, so `--tissue` and `--cycle-tissues` switch in O(1);
+    /// `--iso` makes a custom threshold instead.
+    pub fn renderer(&self, vol: Volume) -> Result<Renderer> {
+        let settings = self.settings()?;
+        let tissues = presets::tissues_for(&vol);
+        let hi = vol.value_range().1;
+        let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
+        match self.tissue.as_deref() {
+            None | Some("auto") => {}
+            Some(name) => {
+                if r.select_tissue_named(name).is_err() {
+                    let names: Vec<&str> = tissues.iter().map(|t| t.name).collect();
+                    usage!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "));
+                }
             }
         }
-        Ok(t)
+        if let Some(iso) = self.iso {
+            if !iso.is_finite() {
+                usage!("--iso must be a finite number");
+            }
+            if settings.mode == Mode::Blend {
+                r.set_transfer_function(&presets::generic(iso, hi).tf);
+            } else {
+                r.set_iso(iso)?;
+            }
+        }
+        Ok(r)
     }
 
     /// Render settings.
     pub fn settings(&self) -> Result<Settings> {
+        if !(1..=crate::mask::MAX_CELL).contains(&self.cell) {
+            usage!("--cell must be 1..={}, got {}", crate::mask::MAX_CELL, self.cell);
+        }
         if !(self.ert > 0.0 && self.ert <= 1.0) {
-            bail!("--ert must be in (0, 1], got {}", self.ert);
+            usage!("--ert must be in (0, 1], got {}", self.ert);
         }
         if self.size == 0 || self.size > 16384 {
-            bail!("--size must be 1..=16384, got {}", self.size);
+            usage!("--size must be 1..=16384, got {}", self.size);
         }
         Ok(Settings {
             method: match self.method {
@@ -432,6 +458,7 @@ impl RenderArgs {
                 SearchArg::Bitscan => Search::Bitscan,
             },
             ert: self.ert,
+            cell: self.cell,
             threads: self.threads,
             ..Settings::default()
         })
@@ -445,27 +472,10 @@ impl RenderArgs {
         }
         if let Some(z) = self.zoom {
             if !(z.is_finite() && z > 0.0) {
-                bail!("--zoom must be finite and > 0, got {z}");
+                usage!("--zoom must be finite and > 0, got {z}");
             }
         }
-        Ok(Camera {
-            rotation: r,
-            zoom: self.zoom,
-            size: [self.size, self.size],
-        })
-    }
-
-    /// A renderer for `vol` set up from these arguments.
-    pub fn renderer(&self, vol: Volume) -> Result<(Renderer, Tissue)> {
-        let tissue = self.tissue(&vol)?;
-        let settings = self.settings()?;
-        let tf = match settings.mode {
-            Mode::Iso => tissue.iso_tf(),
-            Mode::Blend => tissue.tf.clone(),
-        };
-        let mut r = Renderer::new(vol, &tf, settings)?;
-        r.set_iso(tissue.threshold)?;
-        Ok((r, tissue))
+        Ok(Camera { rotation: r, zoom: self.zoom, size: [self.size, self.size] })
     }
 }
 
@@ -502,18 +512,14 @@ fn median(v: &mut [f64]) -> f64 {
     }
     v.sort_by(f64::total_cmp);
     let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
 }
 
 /// Runs `shearwarp render`.
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let (vol, name) = cmd.volume.load()?;
     let dims = vol.dims();
-    let (mut r, tissue) = cmd.render.renderer(vol)?;
+    let mut r = cmd.render.renderer(vol)?;
     let cam = cmd.render.camera()?;
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let stats = r.render(&cam, &mut img)?;
@@ -521,8 +527,8 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     if cmd.json {
         let s = r.settings();
         let j = serde_json::json!({
-            "volume": name, "dims": dims, "tissue": tissue.name, "iso": r.iso(),
-            "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(),
+            "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
+            "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
             "size": cam.size[0], "output": cmd.output, "build_ms": stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(),
@@ -539,7 +545,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             cam.size[1],
             r.settings().method.name(),
             r.settings().mode.name(),
-            tissue.name,
+            r.classification_name(),
             stats.build_ms,
             stats.shear_ms,
             stats.render_ms,
@@ -551,11 +557,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
 
 /// Degrees per frame that move the outermost slice of the deepest axis by one voxel.
 pub fn one_bit_step_deg(vol: &Volume) -> f64 {
-    let h = vol
-        .dims()
-        .iter()
-        .map(|&n| (n as f64 - 1.0) / 2.0)
-        .fold(1.0, f64::max);
+    let h = vol.dims().iter().map(|&n| (n as f64 - 1.0) / 2.0).fold(1.0, f64::max);
     (1.0 / h).to_degrees()
 }
 
@@ -564,28 +566,29 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let (vol, name) = cmd.volume.load()?;
     let dims = vol.dims();
     let step = match cmd.step_deg.as_str() {
-        "auto" => one_bit_step_deg(&vol),
+        "auto" => one_bit_step_deg(&vol) * cmd.render.cell as f64,
         s => s
             .parse::<f64>()
             .ok()
             .filter(|x| x.is_finite() && *x > 0.0)
-            .with_context(|| {
-                format!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'")
-            })?,
+            .with_context(|| format!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'"))?,
     };
     if !(cmd.degrees.is_finite() && cmd.degrees > 0.0) {
-        bail!("--degrees must be a positive number, got {}", cmd.degrees);
+        usage!("--degrees must be a positive number, got {}", cmd.degrees);
     }
     let frames = ((cmd.degrees / step).round() as usize).max(1);
     if frames > 1_000_000 {
-        bail!("{frames} frames is too many (raise --step-deg)");
+        usage!("{frames} frames is too many (raise --step-deg)");
     }
-    let (mut r, tissue) = cmd.render.renderer(vol)?;
+    let mut r = cmd.render.renderer(vol)?;
     let cam0 = cmd.render.camera()?;
+    if cmd.cycle_tissues > 0 && r.tissues().is_none_or(|(t, _)| t.len() < 2) {
+        usage!("--cycle-tissues needs tissue presets (it cannot be combined with --iso)");
+    }
+    let mut switch_ns: Vec<f64> = Vec::new();
     let build_ms = r.prepare_all_axes();
     if let Some(d) = &cmd.frames_dir {
-        std::fs::create_dir_all(d)
-            .with_context(|| format!("{}: cannot create directory", d.display()))?;
+        std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create directory", d.display()))?;
     }
     let keep_frames = cmd.gif.is_some() || cmd.apng.is_some();
     let mut kept: Vec<image::RgbImage> = Vec::new();
@@ -598,6 +601,13 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let mut img = Image::new(cam0.size[0], cam0.size[1]);
     let mut all: Vec<FrameStats> = Vec::with_capacity(frames);
     for f in 0..frames {
+        if cmd.cycle_tissues > 0 && f > 0 && f % cmd.cycle_tissues == 0 {
+            let n = r.tissues().map_or(1, |(t, _)| t.len());
+            let next = (r.tissues().map_or(0, |(_, c)| c) + 1) % n;
+            let t = std::time::Instant::now();
+            r.select_tissue(next)?;
+            switch_ns.push(t.elapsed().as_secs_f64() * 1e9);
+        }
         let mut cam = cam0;
         cam.rotation = rotate_eye(cam0.rotation, axis, f as f64 * step);
         let st = r.render(&cam, &mut img)?;
@@ -612,17 +622,8 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     }
     pb.finish_and_clear();
     let col = |g: fn(&FrameStats) -> f64| median(&mut all.iter().map(g).collect::<Vec<_>>());
-    let (shear, render, warp, frame) = (
-        col(|s| s.shear_ms),
-        col(|s| s.render_ms),
-        col(|s| s.warp_ms),
-        col(|s| s.frame_ms()),
-    );
-    let fps = if frame > 0.0 {
-        1000.0 / frame
-    } else {
-        f64::INFINITY
-    };
+    let (shear, render, warp, frame) = (col(|s| s.shear_ms), col(|s| s.render_ms), col(|s| s.warp_ms), col(|s| s.frame_ms()));
+    let fps = if frame > 0.0 { 1000.0 / frame } else { f64::INFINITY };
     if let Some(p) = &cmd.gif {
         write_gif(p, &kept)?;
     }
@@ -632,8 +633,9 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let s = r.settings();
     if cmd.json {
         let j = serde_json::json!({
-            "volume": name, "dims": dims, "tissue": tissue.name, "iso": r.iso(),
-            "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(),
+            "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
+            "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
+            "tissue_switches": switch_ns.len(), "tissue_switch_ns_median": median(&mut switch_ns),
             "threads": if s.threads == 0 { rayon::current_num_threads() } else { s.threads },
             "size": cam0.size[0], "axis": AXES[axis],
             "frames": frames, "degrees": frames as f64 * step, "step_deg": step, "build_ms": build_ms,
@@ -643,7 +645,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         println!("{j}");
     } else {
         println!(
-            "{name} {}×{}×{}, {}×{}, {} {} ({} words, {} search), tissue {} (iso {}):",
+            "{name} {}×{}×{}, {}×{}, {} {} ({} words, {} search, cell {}), tissue {} (iso {}):",
             dims[0],
             dims[1],
             dims[2],
@@ -653,46 +655,75 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             s.mode.name(),
             s.word.name(),
             s.search.name(),
-            tissue.name,
+            s.cell,
+            r.classification_name(),
             r.iso()
         );
-        println!(
-            "  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms",
-            frames as f64 * step
-        );
-        println!(
-            "  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms"
-        );
+        if !switch_ns.is_empty() {
+            println!("  {} tissue switches, median {:.0} ns each", switch_ns.len(), median(&mut switch_ns));
+        }
+        println!("  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms", frames as f64 * step);
+        println!("  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms");
         println!("  {fps:.1} frames/s, {:.1} degrees/s", fps * step);
+    }
+    Ok(())
+}
+
+/// Runs `shearwarp info`.
+pub fn run_info(cmd: &InfoCmd) -> Result<()> {
+    if cmd.bins == 0 || cmd.bins > 4096 {
+        usage!("--bins must be 1..=4096, got {}", cmd.bins);
+    }
+    let (vol, name) = cmd.volume.load()?;
+    let (lo, hi) = vol.value_range();
+    let hist = vol.histogram(cmd.bins);
+    let tissues = presets::tissues_for(&vol);
+    let ct = presets::looks_like_ct(&vol);
+    if cmd.json {
+        let j = serde_json::json!({
+            "volume": name, "dims": vol.dims(), "type": vol.data().voxel_type().name(), "spacing": vol.spacing(),
+            "min": lo, "max": hi, "histogram": hist, "ct_hounsfield": ct,
+            "tissues": tissues.iter().map(|t| serde_json::json!({"name": t.name, "threshold": t.threshold})).collect::<Vec<_>>(),
+        });
+        println!("{j}");
+        return Ok(());
+    }
+    let d = vol.dims();
+    let sp = vol.spacing();
+    println!("{name}");
+    println!("  dims      {} × {} × {} ({} voxels, {})", d[0], d[1], d[2], vol.len(), vol.data().voxel_type().name());
+    println!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
+    println!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
+    println!("  histogram ({} bins, log scale):", cmd.bins);
+    let maxl = hist.iter().map(|&c| ((c + 1) as f64).ln()).fold(0.0, f64::max).max(1e-9);
+    for (i, &c) in hist.iter().enumerate() {
+        let a = lo + (hi - lo) * i as f32 / cmd.bins as f32;
+        let bar = "#".repeat((((c + 1) as f64).ln() / maxl * 40.0) as usize);
+        println!("    {a:>10.1} {c:>10} {bar}");
+    }
+    println!("  suggested tissue thresholds ({}):", if ct { "CT presets" } else { "from the histogram" });
+    for t in &tissues {
+        println!("    --tissue {:<5} threshold {}", t.name, t.threshold);
     }
     Ok(())
 }
 
 fn write_gif(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
     use image::codecs::gif::{GifEncoder, Repeat};
-    let f = std::fs::File::create(path)
-        .with_context(|| format!("{}: cannot create", path.display()))?;
+    let f = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
     let mut enc = GifEncoder::new_with_speed(std::io::BufWriter::new(f), 10);
     enc.set_repeat(Repeat::Infinite)?;
     for fr in frames {
         let rgba = image::DynamicImage::ImageRgb8(fr.clone()).to_rgba8();
-        enc.encode_frame(image::Frame::from_parts(
-            rgba,
-            0,
-            0,
-            image::Delay::from_numer_denom_ms(40, 1),
-        ))
-        .with_context(|| format!("{}: cannot write GIF frame", path.display()))?;
+        enc.encode_frame(image::Frame::from_parts(rgba, 0, 0, image::Delay::from_numer_denom_ms(40, 1)))
+            .with_context(|| format!("{}: cannot write GIF frame", path.display()))?;
     }
     Ok(())
 }
 
 fn write_apng(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
-    let Some(first) = frames.first() else {
-        bail!("no frames to write")
-    };
-    let f = std::fs::File::create(path)
-        .with_context(|| format!("{}: cannot create", path.display()))?;
+    let Some(first) = frames.first() else { usage!("no frames to write") };
+    let f = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(f), first.width(), first.height());
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
@@ -712,16 +743,14 @@ pub fn main() -> std::process::ExitCode {
     let res = match &cli.command {
         Command::Render(c) => run_render(c),
         Command::Rotate(c) => run_rotate(c),
+        Command::Info(c) => run_info(c),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            // input problems (files, values) are usage errors; everything else is a failure
-            let input = e.chain().any(|c| {
-                c.downcast_ref::<crate::Error>().is_some()
-                    || c.downcast_ref::<std::io::Error>().is_some()
-            });
+            // bad arguments and bad input are usage errors (2); failures while running are 1
+            let input = e.chain().any(|c| c.downcast_ref::<Usage>().is_some() || c.downcast_ref::<crate::Error>().is_some());
             std::process::ExitCode::from(if input { 2 } else { 1 })
         }
     }

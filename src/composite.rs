@@ -21,12 +21,7 @@ pub struct Shading {
 
 impl Default for Shading {
     fn default() -> Self {
-        Shading {
-            ambient: 0.15,
-            diffuse: 0.75,
-            specular: 0.3,
-            shininess: 20,
-        }
+        Shading { ambient: 0.15, diffuse: 0.75, specular: 0.3, shininess: 20 }
     }
 }
 
@@ -48,11 +43,7 @@ pub fn headlight_ndl(g: [f32; 3], m: [f32; 3], scale: [f32; 3]) -> f32 {
     let dot = g[0] * m[0] + g[1] * m[1] + g[2] * m[2];
     let (a, b, c) = (g[0] * scale[0], g[1] * scale[1], g[2] * scale[2]);
     let len2 = a * a + b * b + c * c;
-    if len2 > 1e-30 {
-        (dot.abs() / len2.sqrt()).min(1.0)
-    } else {
-        1.0
-    }
+    if len2 > 1e-30 { (dot.abs() / len2.sqrt()).min(1.0) } else { 1.0 }
 }
 
 /// Front-to-back "over": adds a sample of colour `rgb` and opacity `alpha` behind
@@ -120,12 +111,7 @@ impl Intermediate {
     #[inline(always)]
     pub fn get(&self, p: isize, q: isize) -> [f32; 4] {
         match self.valid {
-            Some(r)
-                if p >= r.p0 as isize
-                    && p <= r.p1 as isize
-                    && q >= r.q0 as isize
-                    && q <= r.q1 as isize =>
-            {
+            Some(r) if p >= r.p0 as isize && p <= r.p1 as isize && q >= r.q0 as isize && q <= r.q1 as isize => {
                 self.rgba[q as usize * self.size[0] + p as usize]
             }
             _ => [0.0; 4],
@@ -135,9 +121,7 @@ impl Intermediate {
     /// Iso depth at `(p, q)` (NaN outside the valid rectangle or without a hit).
     pub fn depth_at(&self, p: usize, q: usize) -> f32 {
         match self.valid {
-            Some(r) if p >= r.p0 && p <= r.p1 && q >= r.q0 && q <= r.q1 => {
-                self.depth[q * self.size[0] + p]
-            }
+            Some(r) if p >= r.p0 && p <= r.p1 && q >= r.q0 && q <= r.q1 => self.depth[q * self.size[0] + p],
             _ => f32::NAN,
         }
     }

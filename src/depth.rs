@@ -47,6 +47,8 @@ pub trait Word:
     fn as_u64(self) -> u64;
     /// Clears the lowest set bit (`x & (x − 1)`).
     fn clear_lowest(self) -> Self;
+    /// The low `BITS` bits of `x`.
+    fn from_u64(x: u64) -> Self;
     /// Name for reports (`u32` / `u64`).
     const NAME: &'static str;
 }
@@ -72,6 +74,10 @@ impl Word for u32 {
     fn clear_lowest(self) -> Self {
         self & self.wrapping_sub(1)
     }
+    #[inline(always)]
+    fn from_u64(x: u64) -> Self {
+        x as u32
+    }
 }
 
 impl Word for u64 {
@@ -94,6 +100,10 @@ impl Word for u64 {
     #[inline(always)]
     fn clear_lowest(self) -> Self {
         self & self.wrapping_sub(1)
+    }
+    #[inline(always)]
+    fn from_u64(x: u64) -> Self {
+        x
     }
 }
 
@@ -207,28 +217,187 @@ pub fn tz<W: Word>(w: W, s: Search) -> u32 {
     }
 }
 
-/// The bit of slice `k` within its word.
+/// The bit of slice `k` within its word (1-bit rows).
 #[inline(always)]
 pub fn bit_of<W: Word>(k: usize) -> W {
     W::MSB >> (k as u32 % W::BITS)
 }
 
-/// Iterates the set bits of one depth row front to back, clearing each visited
-/// bit in a local copy of the current word: the "next" search of the paper.
+/// Code widths a depth row may use: `nb` bits per slice, `nb` ∈ {1, 2, 4} so
+/// that codes never straddle a byte (3-bit codes would waste bits in every word
+/// and break the per-byte tables; 4 bits hold 15 thresholds instead of 7).
+pub const CODE_WIDTHS: [u32; 3] = [1, 2, 4];
+
+/// Smallest code width whose codes can tell `thresholds + 1` intervals apart.
+pub fn code_width_for(thresholds: usize) -> Option<u32> {
+    CODE_WIDTHS.into_iter().find(|&nb| thresholds < (1usize << nb))
+}
+
+/// Slot layout of `nb`-bit codes in a word: slice `k` is slot `k % slots` of
+/// word `k / slots`, slot 0 in the most significant bits.
+#[inline(always)]
+pub fn slot_shift<W: Word>(nb: u32, slot: u32) -> u32 {
+    W::BITS - nb * (slot + 1)
+}
+
+/// All `nb` bits of the slot of slice `k` (a 1-bit row's `bit_of`).
+#[inline(always)]
+pub fn slot_mask<W: Word>(nb: u32, k: usize) -> W {
+    let slots = W::BITS / nb;
+    let ones = W::from_u64((1u64 << nb) - 1);
+    ones << slot_shift::<W>(nb, k as u32 % slots)
+}
+
+/// Finds slices whose code is at least `c` in rows of `nb`-bit codes (`nb = 1`,
+/// `c = 1` is the plain binary mask). Holds the per-threshold byte tables.
+#[derive(Clone, Debug)]
+pub struct Matcher {
+    nb: u32,
+    c: u32,
+    /// The top bit of every slot (as a 64-bit pattern; truncates for u32).
+    top: u64,
+    /// First slot (from the MSB) of a byte with code ≥ c, or `8/nb` if none.
+    first: [u8; 256],
+    /// Last slot of a byte with code ≥ c, or `8/nb` if none.
+    last: [u8; 256],
+}
+
+impl Matcher {
+    /// A matcher for codes ≥ `c` of width `nb` (`nb` ∈ [`CODE_WIDTHS`], `1 ≤ c < 2^nb`).
+    pub fn new(nb: u32, c: u32) -> Self {
+        assert!(CODE_WIDTHS.contains(&nb) && c >= 1 && c < (1 << nb), "bad code width {nb} / threshold {c}");
+        let mut top = 0u64;
+        let mut b = 64;
+        while b >= nb {
+            b -= nb;
+            top |= 1u64 << (b + nb - 1);
+        }
+        let spb = 8 / nb;
+        let mut first = [spb as u8; 256];
+        let mut last = [spb as u8; 256];
+        for byte in 0..256u32 {
+            for j in 0..spb {
+                let code = (byte >> (8 - nb * (j + 1))) & ((1 << nb) - 1);
+                if code >= c {
+                    if first[byte as usize] == spb as u8 {
+                        first[byte as usize] = j as u8;
+                    }
+                    last[byte as usize] = j as u8;
+                }
+            }
+        }
+        Matcher { nb, c, top, first, last }
+    }
+
+    /// The plain binary matcher (1-bit codes, set bits).
+    pub fn binary() -> Self {
+        Self::new(1, 1)
+    }
+
+    /// Code width.
+    pub fn width(&self) -> u32 {
+        self.nb
+    }
+
+    /// Threshold index.
+    pub fn threshold(&self) -> u32 {
+        self.c
+    }
+
+    /// The top bit of every slot whose code is ≥ c (bit-plane comparator, SWAR).
+    #[inline(always)]
+    pub fn hits<W: Word>(&self, w: W) -> W {
+        if self.nb == 1 {
+            return w;
+        }
+        let x = w.as_u64();
+        let top = self.top;
+        let (mut eq, mut gt) = (top, 0u64);
+        for i in 0..self.nb {
+            let plane = (x << i) & top;
+            if (self.c >> (self.nb - 1 - i)) & 1 == 0 {
+                gt |= eq & plane;
+                eq &= !plane;
+            } else {
+                eq &= plane;
+            }
+        }
+        W::from_u64(gt | eq)
+    }
+
+    /// The first (ascending: from the MSB; else from the LSB) slot of `w` whose
+    /// code is ≥ c.
+    #[inline(always)]
+    pub fn first_slot<W: Word>(&self, w: W, ascending: bool, search: Search) -> Option<u32> {
+        if w == W::ZERO {
+            return None;
+        }
+        match (search, self.nb) {
+            // the paper's Depth: binary search for the first non-zero byte + byte table
+            (Search::Lut, 1) => Some(if ascending { lz_lut(w) } else { W::BITS - 1 - tz_lut(w) }),
+            // per-threshold byte tables: "first code ≥ c in this byte"
+            (Search::Lut, nb) => {
+                let x = w.as_u64();
+                let (bytes, spb) = (W::BITS / 8, 8 / nb);
+                if ascending {
+                    for bi in 0..bytes {
+                        let f = self.first[((x >> (W::BITS - 8 * (bi + 1))) & 0xFF) as usize] as u32;
+                        if f < spb {
+                            return Some(bi * spb + f);
+                        }
+                    }
+                } else {
+                    for bi in (0..bytes).rev() {
+                        let l = self.last[((x >> (W::BITS - 8 * (bi + 1))) & 0xFF) as usize] as u32;
+                        if l < spb {
+                            return Some(bi * spb + l);
+                        }
+                    }
+                }
+                None
+            }
+            (Search::Bitscan, nb) => {
+                let h = self.hits(w);
+                if h == W::ZERO {
+                    return None;
+                }
+                Some(if ascending { h.lz() / nb } else { (W::BITS - 1 - h.tz()) / nb })
+            }
+        }
+    }
+}
+
+/// Iterates the slices of one depth row whose code matches, front to back,
+/// clearing each visited slot in a local copy of the current word: the "next"
+/// search of the paper, which also skips internal empty regions.
 pub struct SetBits<'a, W: Word> {
     row: &'a [W],
     /// Index of the word being consumed.
     w: usize,
-    /// Remaining bits of that word.
+    /// Remaining codes of that word.
     cur: W,
     ascending: bool,
     search: Search,
+    m: &'a Matcher,
+}
+
+static BINARY: std::sync::OnceLock<Matcher> = std::sync::OnceLock::new();
+
+/// The shared binary matcher.
+pub fn binary_matcher() -> &'static Matcher {
+    BINARY.get_or_init(Matcher::binary)
 }
 
 impl<'a, W: Word> SetBits<'a, W> {
-    /// Starts a front-to-back walk over `row`.
+    /// Starts a front-to-back walk over the set bits of a 1-bit `row`.
     #[inline(always)]
     pub fn new(row: &'a [W], ascending: bool, search: Search) -> Self {
+        Self::with_matcher(row, ascending, search, binary_matcher())
+    }
+
+    /// Starts a walk over the slices of `row` whose code `m` matches.
+    #[inline(always)]
+    pub fn with_matcher(row: &'a [W], ascending: bool, search: Search, m: &'a Matcher) -> Self {
         let (w, cur) = if row.is_empty() {
             (0, W::ZERO)
         } else if ascending {
@@ -236,57 +405,7 @@ impl<'a, W: Word> SetBits<'a, W> {
         } else {
             (row.len() - 1, row[row.len() - 1])
         };
-        SetBits {
-            row,
-            w,
-            cur,
-            ascending,
-            search,
-        }
-    }
-
-    /// Drops every bit at or before slice `k` in walking order, so the next call
-    /// returns the first set slice strictly after `k`.
-    #[inline]
-    pub fn skip_through(&mut self, k: usize) {
-        let b = W::BITS as usize;
-        let wk = k / b;
-        let pos = (k % b) as u32; // bit index from the MSB
-        if self.ascending {
-            if wk >= self.row.len() {
-                // past the end: nothing is left
-                self.w = self.row.len().saturating_sub(1);
-                self.cur = W::ZERO;
-                return;
-            }
-            if wk > self.w {
-                self.w = wk;
-                self.cur = self.row[wk];
-            }
-            if wk == self.w {
-                // keep bits strictly after pos (towards the LSB)
-                let keep = if pos + 1 >= W::BITS {
-                    W::ZERO
-                } else {
-                    !W::ZERO >> (pos + 1)
-                };
-                self.cur &= keep;
-            }
-        } else {
-            if wk < self.w {
-                self.w = wk;
-                self.cur = self.row[wk];
-            }
-            if wk == self.w {
-                // keep bits strictly before pos from the MSB (towards the MSB)
-                let keep = if pos == 0 {
-                    W::ZERO
-                } else {
-                    !(!W::ZERO >> pos)
-                };
-                self.cur &= keep;
-            }
-        }
+        SetBits { row, w, cur, ascending, search, m }
     }
 }
 
@@ -294,38 +413,32 @@ impl<W: Word> Iterator for SetBits<'_, W> {
     type Item = usize;
     #[inline(always)]
     fn next(&mut self) -> Option<usize> {
-        let b = W::BITS as usize;
-        if self.ascending {
-            loop {
-                if self.cur != W::ZERO {
-                    let z = lz(self.cur, self.search);
-                    self.cur &= !(W::MSB >> z);
-                    return Some(self.w * b + z as usize);
-                }
+        let nb = self.m.nb;
+        let slots = (W::BITS / nb) as usize;
+        loop {
+            if let Some(slot) = self.m.first_slot(self.cur, self.ascending, self.search) {
+                // clear the visited slot (all its bits) so the next search moves on
+                let ones = W::from_u64((1u64 << nb) - 1);
+                self.cur &= !(ones << slot_shift::<W>(nb, slot));
+                return Some(self.w * slots + slot as usize);
+            }
+            if self.ascending {
                 self.w += 1;
                 if self.w >= self.row.len() {
                     return None;
                 }
-                self.cur = self.row[self.w];
-            }
-        } else {
-            loop {
-                if self.cur != W::ZERO {
-                    let z = tz(self.cur, self.search);
-                    self.cur = self.cur.clear_lowest();
-                    return Some(self.w * b + (b - 1 - z as usize));
-                }
+            } else {
                 if self.w == 0 || self.row.is_empty() {
                     return None;
                 }
                 self.w -= 1;
-                self.cur = self.row[self.w];
             }
+            self.cur = self.row[self.w];
         }
     }
 }
 
-/// The first set slice of a row in walking order, or `None` (no clearing).
+/// The first matching slice of a 1-bit row in walking order, or `None`.
 #[inline]
 pub fn first_set<W: Word>(row: &[W], ascending: bool, search: Search) -> Option<usize> {
     SetBits::new(row, ascending, search).next()
@@ -338,11 +451,7 @@ mod tests {
     fn naive_first<W: Word>(row: &[W], ascending: bool) -> Option<usize> {
         let n = row.len() * W::BITS as usize;
         let set = |k: usize| row[k / W::BITS as usize] & bit_of::<W>(k) != W::ZERO;
-        if ascending {
-            (0..n).find(|&k| set(k))
-        } else {
-            (0..n).rev().find(|&k| set(k))
-        }
+        if ascending { (0..n).find(|&k| set(k)) } else { (0..n).rev().find(|&k| set(k)) }
     }
 
     #[test]
@@ -402,19 +511,6 @@ mod tests {
                     want.reverse();
                 }
                 assert_eq!(all, want);
-                // skip_through: the next after k is the first set strictly after k
-                for k in [0, 1, 7, 31, 32, 33, 63, 64, 100]
-                    .into_iter()
-                    .filter(|&k| k < n)
-                {
-                    let mut it = SetBits::new(row, asc, s);
-                    it.skip_through(k);
-                    let exp = want
-                        .iter()
-                        .copied()
-                        .find(|&x| if asc { x > k } else { x < k });
-                    assert_eq!(it.next(), exp, "k={k} asc={asc}");
-                }
             }
         }
     }
@@ -438,5 +534,67 @@ mod tests {
                 check_row(&row64);
             }
         }
+    }
+
+    fn check_codes<W: Word>(nb: u32, row: &[W]) {
+        let slots = (W::BITS / nb) as usize;
+        let code = |k: usize| -> u32 {
+            let w = row[k / slots].as_u64();
+            ((w >> slot_shift::<W>(nb, (k % slots) as u32)) & ((1 << nb) - 1)) as u32
+        };
+        let n = row.len() * slots;
+        for c in 1..(1u32 << nb) {
+            let m = Matcher::new(nb, c);
+            for asc in [true, false] {
+                let mut want: Vec<usize> = (0..n).filter(|&k| code(k) >= c).collect();
+                if !asc {
+                    want.reverse();
+                }
+                for s in [Search::Lut, Search::Bitscan] {
+                    let got: Vec<usize> = SetBits::with_matcher(row, asc, s, &m).collect();
+                    assert_eq!(got, want, "nb={nb} c={c} asc={asc} {s:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn code_search_lut_bitscan_and_naive_agree() {
+        // exhaustive over every byte in every byte position, then random words
+        for nb in CODE_WIDTHS {
+            for byte in 0..256u64 {
+                for pos in 0..8 {
+                    check_codes::<u64>(nb, &[byte << (8 * pos)]);
+                    if pos < 4 {
+                        check_codes::<u32>(nb, &[(byte << (8 * pos)) as u32]);
+                    }
+                }
+            }
+        }
+        let mut s = 0xABCDEFu64;
+        for _ in 0..3000 {
+            let mut row = [0u64; 3];
+            for w in row.iter_mut() {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                *w = if s & 7 == 0 { 0 } else { s & (s >> 9) };
+            }
+            for nb in CODE_WIDTHS {
+                check_codes::<u64>(nb, &row);
+                check_codes::<u32>(nb, &row.map(|x| x as u32));
+            }
+        }
+    }
+
+    #[test]
+    fn code_widths() {
+        assert_eq!(code_width_for(1), Some(1));
+        assert_eq!(code_width_for(3), Some(2));
+        assert_eq!(code_width_for(4), Some(4));
+        assert_eq!(code_width_for(15), Some(4));
+        assert_eq!(code_width_for(16), None);
+        assert_eq!(slot_mask::<u32>(2, 0), 0xC000_0000);
+        assert_eq!(slot_mask::<u64>(4, 17), 0xF << (64 - 4 * 2));
     }
 }

@@ -15,9 +15,7 @@ pub enum Error {
     #[error("invalid {what}: {why}")]
     BadValue { what: &'static str, why: String },
     /// A voxel that is NaN or infinite.
-    #[error(
-        "voxel {index} is {value} (NaN and infinite voxels are rejected; clean the data first)"
-    )]
+    #[error("voxel {index} is {value} (NaN and infinite voxels are rejected; clean the data first)")]
     NonFinite { index: usize, value: f32 },
     /// A file that could not be read or parsed.
     #[error("{path}: {why}")]
@@ -40,16 +38,10 @@ pub type Result<T> = std::result::Result<T, Error>;
 impl Error {
     /// Builds a [`Error::File`] for `path`.
     pub fn file(path: impl Into<PathBuf>, why: impl Into<String>) -> Self {
-        Error::File {
-            path: path.into(),
-            why: why.into(),
-        }
+        Error::File { path: path.into(), why: why.into() }
     }
     /// Builds a [`Error::BadValue`].
     pub fn value(what: &'static str, why: impl Into<String>) -> Self {
-        Error::BadValue {
-            what,
-            why: why.into(),
-        }
+        Error::BadValue { what, why: why.into() }
     }
 }

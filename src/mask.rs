@@ -1,16 +1,27 @@
-//! Stage 3 — the bit-packed binary cell mask of one principal axis, and its shear.
+//! Stage 3 — the bit-packed cell mask of one principal axis, and its shear.
 //!
-//! Owns [`BinaryMask`]: for every cell `(ci, cj)` of every slice `k` one bit that
-//! is 1 when the cell *may* hold a visible sample (decided by a predicate on the
-//! range of its four in-slice corner densities, so it is conservative for any
-//! transfer function), packed along depth into words of type `W` (u32 or u64,
-//! one implementation), and kept *sheared*: the bit of cell `(ci, cj, k)` sits at
-//! mask column `(ci + pad − floor_i[k], cj + pad − floor_j[k])`.
+//! Owns [`CellCodes`] (one small code per cell `(ci, cj)` of every slice `k`,
+//! computed from the range of its four in-slice corner densities: 1 bit "may be
+//! visible" for a single transfer function, or the interval index of the highest
+//! corner among `n` tissue thresholds — the paper's adaptive threshold codes) and
+//! [`BinaryMask`]: those codes, `nb` bits per slice, packed along depth into words
+//! of type `W` (u32 or u64, one implementation) and kept *sheared*.
+//!
+//! **Super cells.** With cell size `s`, slice `k` sits at super offset
+//! `F[k] = ceil(f[k] / s)`, `f[k] = floor(trans[k])`, and a ray at intermediate
+//! column `p` reads super column `P = floor((p − pad)/s) + PAD`. Writing
+//! `a = p − pad = s·A + α` and `f = s·F − φ` (`0 ≤ α, φ < s`), the ray's cell at
+//! slice `k` is `ci = a + f = s·(A + F) + α − φ`, within `s − 1` of `s·SI` for the
+//! super cell `SI = A + F` found at `P` in slice `k`. So super cell `SI` holds the
+//! highest code of the cells `[s·SI − (s − 1), s·SI + (s − 1)]` (its own and its
+//! neighbours' halves, along both axes), and every ray's row is conservative: the
+//! image is the same for every `s`, while the mask shrinks by about `s²` and each
+//! shear step moves slices by `s` voxels. With `s = 1` nothing is dilated.
 //!
 //! Layout: `words[(q · width + p) · nw + w]` — the `nw` words of one depth row
-//! (one ray of the intermediate image) are contiguous. The grid is padded by
-//! `pad = ceil((nk − 1)/2) + 2` on every side, enough for any shear up to 45°
-//! about the centre slice, so no bit is ever shifted out.
+//! (one super column) are contiguous. The grid is padded by `PAD` super cells on
+//! every side, enough for any shear up to 45° about the centre slice, so no bit
+//! is ever shifted out.
 //!
 //! Shearing: [`BinaryMask::shear_to`] moves the mask to a target [`ShearState`],
 //! by incremental one-bit steps (per-bit shift vectors: each slice moves −1, 0
@@ -19,26 +30,29 @@
 //! from the unsheared cell bits). Either way only the occupied rectangle of the
 //! grid is touched.
 
-use bitvec::prelude::*;
 use rayon::prelude::*;
 
-use crate::depth::{Word, bit_of};
+use crate::depth::{Word, code_width_for, slot_shift};
+use crate::error::{Error, Result};
 use crate::shear::{ShearState, shift_vectors};
 use crate::slices::SliceStack;
 
 /// Steps above this count are done as one direct shear instead.
 pub const MAX_INCREMENTAL_STEPS: u32 = 6;
 
-/// Padding and grid size of the sheared mask (and intermediate image) for a
-/// volume of `cells` cells per slice and `nk` slices: `pad = ceil((nk − 1)/2) + 2`
-/// covers every translation `|trans| ≤ (nk − 1)/2` of a view whose shear is at most
-/// one (plus rounding), so no bit is ever shifted out.
+/// Largest super-cell size.
+pub const MAX_CELL: usize = 8;
+
+/// Padding and grid size of the intermediate image for a volume of `cells`
+/// cells per slice and `nk` slices: `pad = ceil((nk − 1)/2) + 2` covers every
+/// translation `|trans| ≤ (nk − 1)/2` of a view whose shear is at most one (plus
+/// rounding).
 pub fn geometry(cells: [usize; 2], nk: usize) -> (usize, [usize; 2]) {
     let pad = nk.saturating_sub(1).div_ceil(2) + 2;
     (pad, [cells[0] + 2 * pad, cells[1] + 2 * pad])
 }
 
-/// Inclusive rectangle `[p0, p1] × [q0, q1]` of mask columns.
+/// Inclusive rectangle `[p0, p1] × [q0, q1]` of grid columns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Rect {
     pub p0: usize,
@@ -50,22 +64,17 @@ pub struct Rect {
 impl Rect {
     fn union(a: Option<Rect>, b: Option<Rect>) -> Option<Rect> {
         match (a, b) {
-            (Some(a), Some(b)) => Some(Rect {
-                p0: a.p0.min(b.p0),
-                p1: a.p1.max(b.p1),
-                q0: a.q0.min(b.q0),
-                q1: a.q1.max(b.q1),
-            }),
+            (Some(a), Some(b)) => Some(Rect { p0: a.p0.min(b.p0), p1: a.p1.max(b.p1), q0: a.q0.min(b.q0), q1: a.q1.max(b.q1) }),
             (a, None) => a,
             (None, b) => b,
         }
     }
 }
 
-/// How many words a step or shear touched (for the "limit of the shear step" report).
+/// How much a shear did (for the "limit of the shear step" report).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ShearWork {
-    /// Incremental one-bit steps performed.
+    /// Incremental one-step shears performed.
     pub steps: u32,
     /// Direct shears performed.
     pub direct: u32,
@@ -73,48 +82,29 @@ pub struct ShearWork {
     pub words: u64,
 }
 
-/// The sheared binary cell mask of one principal axis.
+/// Unsheared per-cell codes of one principal axis.
 #[derive(Clone, Debug)]
-pub struct BinaryMask<W: Word> {
+pub struct CellCodes {
     /// Cells along i and j.
-    cells: [usize; 2],
+    pub cells: [usize; 2],
     /// Slices.
-    nk: usize,
-    /// Padding on each side.
-    pad: usize,
-    /// Grid size `[width, height]` in mask columns.
-    grid: [usize; 2],
-    /// Words per depth row.
-    nw: usize,
-    words: Vec<W>,
-    /// Unsheared cell bits, slice-major: `k · ci·cj + cj · ci + ci`.
-    base: BitVec<u64, Lsb0>,
-    /// Per-slice bounding box of set cells `[ci0, ci1, cj0, cj1]`.
-    bbox: Vec<Option<[usize; 4]>>,
-    /// Current mask offset of each slice along i and j: `pad − floor[k]`.
-    off: [Vec<i32>; 2],
-    /// Scratch for shifts (no allocation per frame).
-    up: Vec<W>,
-    down: Vec<W>,
-    keep: Vec<W>,
-    row_buf: Vec<W>,
-    target: [Vec<i32>; 2],
+    pub nk: usize,
+    /// Bits per code.
+    pub nb: u32,
+    /// Code of cell `(ci, cj, k)` at `(k · cells_j + cj) · cells_i + ci`.
+    pub codes: Vec<u8>,
 }
 
-impl<W: Word> BinaryMask<W> {
-    /// Builds the mask of `stack`: cell `(ci, cj, k)` is set when
-    /// `visible(lo, hi)` for the range `[lo, hi]` of its four corner densities.
-    /// The mask starts unsheared (identity state).
-    pub fn build(stack: &SliceStack, visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
+impl CellCodes {
+    /// Codes from `code(lo, hi)` of each cell's corner range (must be `< 2^nb`).
+    pub fn build(stack: &SliceStack, nb: u32, code: impl Fn(f32, f32) -> u8 + Sync) -> Self {
         let [ci_n, cj_n] = stack.cells();
         let nk = stack.n[2];
         let per = ci_n * cj_n;
-        // classify cells slice by slice in parallel; a row's column minima/maxima are reused
-        let slices: Vec<(BitVec<u64, Lsb0>, Option<[usize; 4]>)> = (0..nk)
-            .into_par_iter()
-            .map(|k| {
-                let mut bits = bitvec![u64, Lsb0; 0; per];
-                let mut bb: Option<[usize; 4]> = None;
+        let mut codes = vec![0u8; per * nk];
+        if per > 0 {
+            codes.par_chunks_mut(per).enumerate().for_each(|(k, out)| {
+                // a row's column minima/maxima are shared by neighbouring cells
                 let mut colmin = vec![0f32; ci_n + 1];
                 let mut colmax = vec![0f32; ci_n + 1];
                 for cj in 0..cj_n {
@@ -126,44 +116,144 @@ impl<W: Word> BinaryMask<W> {
                     for ci in 0..ci_n {
                         let lo = colmin[ci].min(colmin[ci + 1]);
                         let hi = colmax[ci].max(colmax[ci + 1]);
-                        if visible(lo, hi) {
-                            bits.set(cj * ci_n + ci, true);
-                            bb = Some(match bb {
-                                None => [ci, ci, cj, cj],
-                                Some([a, b, c, d]) => [a.min(ci), b.max(ci), c.min(cj), d.max(cj)],
-                            });
-                        }
+                        out[cj * ci_n + ci] = code(lo, hi);
                     }
                 }
-                (bits, bb)
-            })
-            .collect();
-        let mut base = BitVec::with_capacity(per * nk);
-        let mut bbox = Vec::with_capacity(nk);
-        for (bits, bb) in slices {
-            base.extend_from_bitslice(&bits);
-            bbox.push(bb);
+            });
         }
-        Self::from_cells([ci_n, cj_n], nk, base, bbox)
+        CellCodes { cells: [ci_n, cj_n], nk, nb, codes }
     }
 
-    /// Builds from unsheared cell bits directly (used by super-cell and code masks).
-    pub fn from_cells(
-        cells: [usize; 2],
-        nk: usize,
-        base: BitVec<u64, Lsb0>,
-        bbox: Vec<Option<[usize; 4]>>,
-    ) -> Self {
-        let (pad, grid) = geometry(cells, nk);
-        let nw = nk.div_ceil(W::BITS as usize).max(1);
+    /// 1-bit codes: 1 where `visible(lo, hi)`.
+    pub fn binary(stack: &SliceStack, visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
+        Self::build(stack, 1, |lo, hi| visible(lo, hi) as u8)
+    }
+
+    /// Adaptive threshold codes: the index of the interval of the highest corner
+    /// among the ascending `thresholds` (0 below the first, `n` at or above the
+    /// last), in the smallest code width that holds `n + 1` intervals.
+    pub fn thresholds(stack: &SliceStack, thresholds: &[f32]) -> Result<Self> {
+        if thresholds.is_empty() || !thresholds.windows(2).all(|w| w[0] < w[1]) || thresholds.iter().any(|t| t.is_nan()) {
+            return Err(Error::value("thresholds", format!("{thresholds:?} (need 1..=15 strictly ascending values)")));
+        }
+        let nb = code_width_for(thresholds.len())
+            .ok_or_else(|| Error::value("thresholds", format!("{} thresholds (at most 15)", thresholds.len())))?;
+        Ok(Self::build(stack, nb, |_, hi| thresholds.partition_point(|&t| t <= hi) as u8))
+    }
+
+    /// The code of cell `(ci, cj, k)`.
+    #[inline]
+    pub fn code(&self, ci: usize, cj: usize, k: usize) -> u8 {
+        self.codes[(k * self.cells[1] + cj) * self.cells[0] + ci]
+    }
+
+    /// Super-cell codes for cell size `s` (dilated: see the module docs), with
+    /// each slice's bounding box of non-zero super cells.
+    fn supercells(&self, s: usize) -> ([usize; 2], Vec<u8>, Vec<Option<[usize; 4]>>) {
+        let [ci_n, cj_n] = self.cells;
+        // super cell SI covers cells [s·SI − (s − 1), s·SI + (s − 1)]; count those that cover any cell
+        let count = |c: usize| if c == 0 { 0 } else { (c + s - 2) / s + 1 };
+        let span = |si: usize, c: usize| ((s * si).saturating_sub(s - 1), (s * si + s).min(c));
+        let sc = [count(ci_n), count(cj_n)];
+        let per = sc[0] * sc[1];
+        let mut out = vec![0u8; per * self.nk];
+        let mut bbox = vec![None; self.nk];
+        if per == 0 {
+            return (sc, out, bbox);
+        }
+        out.par_chunks_mut(per).zip(bbox.par_iter_mut()).enumerate().for_each(|(k, (o, bb))| {
+            let slice = &self.codes[k * ci_n * cj_n..(k + 1) * ci_n * cj_n];
+            // max over the span along i, then along j
+            let mut rows = vec![0u8; sc[0] * cj_n];
+            for cj in 0..cj_n {
+                let r = &slice[cj * ci_n..(cj + 1) * ci_n];
+                for si in 0..sc[0] {
+                    let (a, b) = span(si, ci_n);
+                    rows[cj * sc[0] + si] = r[a..b].iter().copied().max().unwrap_or(0);
+                }
+            }
+            for sj in 0..sc[1] {
+                let (a, b) = span(sj, cj_n);
+                for si in 0..sc[0] {
+                    let m = (a..b).map(|cj| rows[cj * sc[0] + si]).max().unwrap_or(0);
+                    o[sj * sc[0] + si] = m;
+                    if m != 0 {
+                        *bb = Some(match *bb {
+                            None => [si, si, sj, sj],
+                            Some([p, q, r, t]) => [p.min(si), q.max(si), r.min(sj), t.max(sj)],
+                        });
+                    }
+                }
+            }
+        });
+        (sc, out, bbox)
+    }
+}
+
+/// The sheared, bit-packed cell mask of one principal axis.
+#[derive(Clone, Debug)]
+pub struct BinaryMask<W: Word> {
+    /// Super-cell size.
+    s: usize,
+    /// Bits per slice code.
+    nb: u32,
+    /// Super cells along i and j.
+    cells: [usize; 2],
+    /// Slices.
+    nk: usize,
+    /// Padding of the intermediate image (voxel units).
+    vpad: usize,
+    /// Padding on each side (super cells).
+    pad: usize,
+    /// Grid size `[width, height]` in super columns.
+    grid: [usize; 2],
+    /// Words per depth row.
+    nw: usize,
+    words: Vec<W>,
+    /// Unsheared super-cell codes, slice-major.
+    codes: Vec<u8>,
+    /// Per-slice bounding box of non-zero super cells `[si0, si1, sj0, sj1]`.
+    bbox: Vec<Option<[usize; 4]>>,
+    /// Current grid offset of each slice along i and j: `PAD − F[k]`.
+    off: [Vec<i32>; 2],
+    /// Scratch for shifts (no allocation per frame).
+    up: Vec<W>,
+    down: Vec<W>,
+    keep: Vec<W>,
+    row_buf: Vec<W>,
+    target: [Vec<i32>; 2],
+}
+
+impl<W: Word> BinaryMask<W> {
+    /// Builds the 1-bit mask of `stack` (cell size 1): cell `(ci, cj, k)` is set
+    /// when `visible(lo, hi)` for the range `[lo, hi]` of its four corner densities.
+    /// The mask starts unsheared.
+    pub fn build(stack: &SliceStack, visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
+        Self::from_codes(&CellCodes::binary(stack, visible), 1)
+    }
+
+    /// Packs `codes` with super-cell size `s` (1..=[`MAX_CELL`]), unsheared.
+    pub fn from_codes(codes: &CellCodes, s: usize) -> Self {
+        let s = s.clamp(1, MAX_CELL);
+        let (vpad, _) = geometry(codes.cells, codes.nk);
+        let (cells, sc, bbox) = codes.supercells(s);
+        let pad = vpad.div_ceil(s) + 1;
+        let grid = [cells[0] + 2 * pad, cells[1] + 2 * pad];
+        let nb = codes.nb;
+        let slots = (W::BITS / nb) as usize;
+        let nw = codes.nk.div_ceil(slots).max(1);
+        let nk = codes.nk;
         let mut m = BinaryMask {
+            s,
+            nb,
             cells,
             nk,
+            vpad,
             pad,
             grid,
             nw,
             words: vec![W::ZERO; grid[0] * grid[1] * nw],
-            base,
+            codes: sc,
             bbox,
             off: [vec![pad as i32; nk], vec![pad as i32; nk]],
             up: vec![W::ZERO; nw],
@@ -176,11 +266,19 @@ impl<W: Word> BinaryMask<W> {
         m
     }
 
-    /// Grid size `[width, height]` in mask columns (= intermediate image size).
+    /// Super-cell size.
+    pub fn cell_size(&self) -> usize {
+        self.s
+    }
+    /// Bits per code.
+    pub fn code_width(&self) -> u32 {
+        self.nb
+    }
+    /// Grid size `[width, height]` in super columns.
     pub fn grid(&self) -> [usize; 2] {
         self.grid
     }
-    /// Padding on each side.
+    /// Padding on each side, in super cells.
     pub fn pad(&self) -> usize {
         self.pad
     }
@@ -192,15 +290,29 @@ impl<W: Word> BinaryMask<W> {
     pub fn slices(&self) -> usize {
         self.nk
     }
-    /// Cells along i and j.
+    /// Super cells along i and j.
     pub fn cells(&self) -> [usize; 2] {
         self.cells
     }
-    /// The depth row of mask column `(p, q)`.
+    /// The depth row of grid column `(p, q)`.
     #[inline(always)]
     pub fn row(&self, p: usize, q: usize) -> &[W] {
         let s = (q * self.grid[0] + p) * self.nw;
         &self.words[s..s + self.nw]
+    }
+    /// The depth row that ray `(p, q)` of the intermediate image reads.
+    #[inline(always)]
+    pub fn ray_row(&self, p: usize, q: usize) -> &[W] {
+        let (sp, sq) = self.ray_column(p, q);
+        self.row(sp, sq)
+    }
+    /// The super column of ray `(p, q)`: `floor((p − pad)/s) + PAD`.
+    #[inline(always)]
+    pub fn ray_column(&self, p: usize, q: usize) -> (usize, usize) {
+        let s = self.s as i64;
+        let a = (p as i64 - self.vpad as i64).div_euclid(s) + self.pad as i64;
+        let b = (q as i64 - self.vpad as i64).div_euclid(s) + self.pad as i64;
+        (a as usize, b as usize)
     }
     /// All words (for comparisons in tests).
     pub fn words(&self) -> &[W] {
@@ -210,26 +322,30 @@ impl<W: Word> BinaryMask<W> {
     pub fn bytes(&self) -> usize {
         self.words.len() * W::BITS as usize / 8
     }
-    /// The unsheared cell bit of `(ci, cj, k)`.
-    pub fn cell(&self, ci: usize, cj: usize, k: usize) -> bool {
-        self.base[(k * self.cells[1] + cj) * self.cells[0] + ci]
+    /// The unsheared code of super cell `(si, sj, k)`.
+    pub fn code(&self, si: usize, sj: usize, k: usize) -> u8 {
+        self.codes[(k * self.cells[1] + sj) * self.cells[0] + si]
     }
-    /// Current integer offsets `floor(trans)` of each slice along i and j.
+    /// True when the unsheared super cell has a non-zero code.
+    pub fn cell(&self, si: usize, sj: usize, k: usize) -> bool {
+        self.code(si, sj, k) != 0
+    }
+    /// Current super offsets `F[k]` of each slice along i and j.
     pub fn floors(&self) -> [Vec<i32>; 2] {
         [0, 1].map(|a| self.off[a].iter().map(|o| self.pad as i32 - o).collect())
     }
 
-    /// The occupied rectangle of the grid for the given offsets, if any bit is set.
+    /// The occupied rectangle of the grid for the given offsets, if any code is set.
     fn occupied(&self, off: &[Vec<i32>; 2]) -> Option<Rect> {
         let mut r: Option<Rect> = None;
         for (k, bb) in self.bbox.iter().enumerate() {
-            if let Some([ci0, ci1, cj0, cj1]) = *bb {
+            if let Some([i0, i1, j0, j1]) = *bb {
                 let (oi, oj) = (off[0][k], off[1][k]);
                 let s = Rect {
-                    p0: (ci0 as i32 + oi) as usize,
-                    p1: (ci1 as i32 + oi) as usize,
-                    q0: (cj0 as i32 + oj) as usize,
-                    q1: (cj1 as i32 + oj) as usize,
+                    p0: (i0 as i32 + oi) as usize,
+                    p1: (i1 as i32 + oi) as usize,
+                    q0: (j0 as i32 + oj) as usize,
+                    q1: (j1 as i32 + oj) as usize,
                 };
                 r = Rect::union(r, Some(s));
             }
@@ -237,45 +353,47 @@ impl<W: Word> BinaryMask<W> {
         r
     }
 
-    /// The occupied rectangle in the current state.
+    /// The occupied rectangle in the current state, in super columns.
     pub fn occupied_rect(&self) -> Option<Rect> {
         self.occupied(&self.off)
     }
 
-    /// Checks that a state fits this mask (slice count and ≤ 45° shear).
+    /// The rays of the intermediate image whose super column is occupied.
+    pub fn occupied_rays(&self, inter: [usize; 2]) -> Option<Rect> {
+        let r = self.occupied_rect()?;
+        let s = self.s as i64;
+        // P = floor((p − vpad)/s) + PAD  ⇔  p ∈ [(P − PAD)·s + vpad, (P − PAD)·s + vpad + s − 1]
+        let lo = |pp: usize| (pp as i64 - self.pad as i64) * s + self.vpad as i64;
+        let p0 = lo(r.p0).max(0) as usize;
+        let q0 = lo(r.q0).max(0) as usize;
+        let p1 = (lo(r.p1) + s - 1).min(inter[0] as i64 - 1);
+        let q1 = (lo(r.q1) + s - 1).min(inter[1] as i64 - 1);
+        if p1 < p0 as i64 || q1 < q0 as i64 {
+            return None;
+        }
+        Some(Rect { p0, p1: p1 as usize, q0, q1: q1 as usize })
+    }
+
+    /// Target offsets of a state; panics only if the state is not for this mask.
     fn offsets_for(&self, state: &ShearState, out: &mut [Vec<i32>; 2]) {
-        assert_eq!(
-            state.slices(),
-            self.nk,
-            "shear state for a different slice count"
-        );
+        assert_eq!(state.slices(), self.nk, "shear state for a different slice count");
         for a in 0..2 {
             for (o, &f) in out[a].iter_mut().zip(&state.floor[a]) {
-                let v = self.pad as i32 - f;
+                // F = ceil(f / s)
+                let v = self.pad as i32 + (-f).div_euclid(self.s as i32);
                 // pad covers |floor| ≤ ceil((nk-1)/2)+1: a principal-axis view never exceeds it
-                assert!(
-                    v >= 0 && v as usize + self.cells[a] <= self.grid[a],
-                    "shear beyond 45° for this mask"
-                );
+                assert!(v >= 0 && v as usize + self.cells[a] <= self.grid[a], "shear beyond 45° for this mask");
                 *o = v;
             }
         }
     }
 
     /// Moves the mask to `state`: incrementally when every slice is at most
-    /// [`MAX_INCREMENTAL_STEPS`] bits away, else by a direct shear.
+    /// [`MAX_INCREMENTAL_STEPS`] super cells away, else by a direct shear.
     pub fn shear_to(&mut self, state: &ShearState) -> ShearWork {
         let mut target = std::mem::take(&mut self.target);
         self.offsets_for(state, &mut target);
-        let dist = (0..2)
-            .flat_map(|a| {
-                self.off[a]
-                    .iter()
-                    .zip(&target[a])
-                    .map(|(x, y)| (x - y).unsigned_abs())
-            })
-            .max()
-            .unwrap_or(0);
+        let dist = (0..2).flat_map(|a| self.off[a].iter().zip(&target[a]).map(|(x, y)| (x - y).unsigned_abs())).max().unwrap_or(0);
         let work = if dist == 0 {
             ShearWork::default()
         } else if dist <= MAX_INCREMENTAL_STEPS {
@@ -293,7 +411,7 @@ impl<W: Word> BinaryMask<W> {
     }
 
     /// Moves the mask to `state` by a direct shear (the reset): clear the occupied
-    /// region, then scatter every cell bit to its target position.
+    /// region, then scatter every code to its target position.
     pub fn shear_direct(&mut self, state: &ShearState) -> ShearWork {
         let mut target = std::mem::take(&mut self.target);
         self.offsets_for(state, &mut target);
@@ -317,49 +435,42 @@ impl<W: Word> BinaryMask<W> {
             self.off[a].copy_from_slice(&target[a]);
         }
         self.scatter();
-        ShearWork {
-            steps: 0,
-            direct: 1,
-            words,
-        }
+        ShearWork { steps: 0, direct: 1, words }
     }
 
-    /// Writes every base cell bit at its current offset (the grid must be clear there).
+    /// Writes every code at its current offset (the grid must be clear there).
     fn scatter(&mut self) {
         let [ci_n, cj_n] = self.cells;
-        let (gw, nw, nk) = (self.grid[0], self.nw, self.nk);
-        let (base, off, bbox) = (&self.base, &self.off, &self.bbox);
+        let (gw, nw, nk, nb) = (self.grid[0], self.nw, self.nk, self.nb);
+        let slots = (W::BITS / nb) as usize;
+        let (codes, off, bbox) = (&self.codes, &self.off, &self.bbox);
         // parallel over grid rows q: each row's words are written by one task
-        self.words
-            .par_chunks_mut(gw * nw)
-            .enumerate()
-            .for_each(|(q, row)| {
-                for k in 0..nk {
-                    let Some([_, _, cj0, cj1]) = bbox[k] else {
-                        continue;
-                    };
-                    let cj = q as i32 - off[1][k];
-                    if cj < cj0 as i32 || cj > cj1 as i32 {
-                        continue;
-                    }
-                    let cj = cj as usize;
-                    debug_assert!(cj < cj_n);
-                    let bit = bit_of::<W>(k);
-                    let w = k / W::BITS as usize;
-                    let start = (k * cj_n + cj) * ci_n;
-                    for ci in base[start..start + ci_n].iter_ones() {
+        self.words.par_chunks_mut(gw * nw).enumerate().for_each(|(q, row)| {
+            for k in 0..nk {
+                let Some([i0, i1, j0, j1]) = bbox[k] else { continue };
+                let cj = q as i32 - off[1][k];
+                if cj < j0 as i32 || cj > j1 as i32 {
+                    continue;
+                }
+                let cj = cj as usize;
+                debug_assert!(cj < cj_n);
+                let shift = slot_shift::<W>(nb, (k % slots) as u32);
+                let w = k / slots;
+                let line = &codes[(k * cj_n + cj) * ci_n..(k * cj_n + cj + 1) * ci_n];
+                for (ci, &c) in line.iter().enumerate().take(i1 + 1).skip(i0) {
+                    if c != 0 {
                         let p = (ci as i32 + off[0][k]) as usize;
-                        row[p * nw + w] |= bit;
+                        row[p * nw + w] |= W::from_u64(c as u64) << shift;
                     }
                 }
-            });
+            }
+        });
     }
 
-    /// One incremental step: every slice moves at most one column along i and one
-    /// row along j towards `target`. Returns the number of words touched.
+    /// One incremental step: every slice moves at most one super column along i
+    /// and one super row along j towards `target`. Returns the words touched.
     fn step_towards(&mut self, target: &[Vec<i32>; 2]) -> u64 {
         let before = self.occupied_rect();
-        // next offsets: one step towards the target per slice
         let mut next = std::mem::take(&mut self.off);
         let prev = next.clone();
         for a in 0..2 {
@@ -374,12 +485,12 @@ impl<W: Word> BinaryMask<W> {
         };
         let mut touched = 0;
         // along i (columns p)
-        if shift_vectors(&prev[0], &next[0], &mut self.up, &mut self.down) > 0 {
+        if shift_vectors(self.nb, &prev[0], &next[0], &mut self.up, &mut self.down) > 0 {
             self.set_keep();
             touched += self.shift_columns(r);
         }
         // along j (rows q)
-        if shift_vectors(&prev[1], &next[1], &mut self.up, &mut self.down) > 0 {
+        if shift_vectors(self.nb, &prev[1], &next[1], &mut self.up, &mut self.down) > 0 {
             self.set_keep();
             touched += self.shift_rows(r);
         }
@@ -399,31 +510,19 @@ impl<W: Word> BinaryMask<W> {
         let gw = self.grid[0];
         let (up, down, keep) = (&self.up, &self.down, &self.keep);
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
-        self.words
-            .par_chunks_mut(gw * nw)
-            .skip(r.q0)
-            .take(r.q1 - r.q0 + 1)
-            .for_each(|row| {
-                for w in 0..nw {
-                    let (u, d, kp) = (up[w], down[w], keep[w]);
-                    // the column before the rect is empty (outside the occupied region)
-                    let mut prev = if ps > 0 {
-                        row[(ps - 1) * nw + w]
-                    } else {
-                        W::ZERO
-                    };
-                    for p in ps..=pe {
-                        let cur = row[p * nw + w];
-                        let next = if p + 1 < gw {
-                            row[(p + 1) * nw + w]
-                        } else {
-                            W::ZERO
-                        };
-                        row[p * nw + w] = (cur & kp) | (prev & u) | (next & d);
-                        prev = cur;
-                    }
+        self.words.par_chunks_mut(gw * nw).skip(r.q0).take(r.q1 - r.q0 + 1).for_each(|row| {
+            for w in 0..nw {
+                let (u, d, kp) = (up[w], down[w], keep[w]);
+                // the column before the rect is empty (outside the occupied region)
+                let mut prev = if ps > 0 { row[(ps - 1) * nw + w] } else { W::ZERO };
+                for p in ps..=pe {
+                    let cur = row[p * nw + w];
+                    let next = if p + 1 < gw { row[(p + 1) * nw + w] } else { W::ZERO };
+                    row[p * nw + w] = (cur & kp) | (prev & u) | (next & d);
+                    prev = cur;
                 }
-            });
+            }
+        });
         ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
     }
 
@@ -454,10 +553,11 @@ impl<W: Word> BinaryMask<W> {
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
     }
 
-    /// One paper-style rotation step of `state` (see [`ShearState::rotated`]),
-    /// applied to the mask incrementally; returns the new state.
+    /// One paper-style rotation step of `state` (see [`ShearState::rotated`]):
+    /// the end slices move by `s` voxels (one super cell), applied incrementally.
+    /// Returns the new state.
     pub fn rotate_step(&mut self, state: &ShearState, along: usize, dir: i32) -> ShearState {
-        let next = state.rotated(along, dir);
+        let next = state.rotated(along, dir * self.s as i32);
         self.shear_to(&next);
         next
     }
@@ -470,8 +570,7 @@ mod tests {
 
     fn blob(n: [usize; 3], seed: u64) -> Volume {
         Volume::from_fn(n, [1.0; 3], |x, y, z| {
-            let mut s =
-                seed ^ (x as u64 * 0x9E37_79B9 + y as u64 * 0x85EB_CA6B + z as u64 * 0xC2B2_AE35);
+            let mut s = seed ^ (x as u64 * 0x9E37_79B9 + y as u64 * 0x85EB_CA6B + z as u64 * 0xC2B2_AE35);
             s ^= s << 13;
             s ^= s >> 7;
             s ^= s << 17;
@@ -481,20 +580,30 @@ mod tests {
         .unwrap()
     }
 
-    /// The mask recomputed from scratch: bit (p, q, k) set iff base cell at
-    /// (p − off_i, q − off_j) is set.
+    /// The mask recomputed from scratch with a bit vector per code plane: code
+    /// (p, q, k) is the unsheared code at (p − off_i, q − off_j).
     fn naive<W: Word>(m: &BinaryMask<W>) -> Vec<W> {
-        let mut out = vec![W::ZERO; m.words.len()];
+        use bitvec::prelude::*;
+        let slots = (W::BITS / m.nb) as usize;
+        let mut planes = vec![bitvec![0; m.grid[0] * m.grid[1] * m.nk]; m.nb as usize];
         let fl = m.floors();
         for k in 0..m.nk {
             for cj in 0..m.cells[1] {
                 for ci in 0..m.cells[0] {
-                    if m.cell(ci, cj, k) {
-                        let p = (ci as i32 + m.pad as i32 - fl[0][k]) as usize;
-                        let q = (cj as i32 + m.pad as i32 - fl[1][k]) as usize;
-                        out[(q * m.grid[0] + p) * m.nw + k / W::BITS as usize] |= bit_of::<W>(k);
+                    let c = m.code(ci, cj, k);
+                    let p = (ci as i32 + m.pad as i32 - fl[0][k]) as usize;
+                    let q = (cj as i32 + m.pad as i32 - fl[1][k]) as usize;
+                    for (b, plane) in planes.iter_mut().enumerate() {
+                        plane.set((q * m.grid[0] + p) * m.nk + k, (c >> b) & 1 == 1);
                     }
                 }
+            }
+        }
+        let mut out = vec![W::ZERO; m.words.len()];
+        for col in 0..m.grid[0] * m.grid[1] {
+            for k in 0..m.nk {
+                let c: u64 = (0..m.nb as usize).map(|b| (planes[b][col * m.nk + k] as u64) << b).sum();
+                out[col * m.nw + k / slots] |= W::from_u64(c) << slot_shift::<W>(m.nb, (k % slots) as u32);
             }
         }
         out
@@ -510,9 +619,7 @@ mod tests {
         let lim = (n[2] as i64 - 1) / 2;
         let mut net = [0i64; 2];
         for step in 0..400 {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             let along = (seed >> 35) as usize & 1;
             let dir = if (seed >> 45) & 1 == 0 { 1 } else { -1 };
             if (net[along] + dir as i64).abs() > lim {
@@ -547,9 +654,7 @@ mod tests {
         for k in 0..7 {
             for cj in 0..7 {
                 for ci in 0..8 {
-                    let any = [(0, 0), (1, 0), (0, 1), (1, 1)]
-                        .iter()
-                        .any(|&(a, b)| st.at(ci + a, cj + b, k) > 50.0);
+                    let any = [(0, 0), (1, 0), (0, 1), (1, 1)].iter().any(|&(a, b)| st.at(ci + a, cj + b, k) > 50.0);
                     assert_eq!(m.cell(ci, cj, k), any);
                 }
             }

@@ -52,13 +52,8 @@ impl Phantom {
         match s.trim().to_ascii_lowercase().as_str() {
             "head" => Ok(Phantom::Head),
             "sphere" => Ok(Phantom::Sphere),
-            "marschner-lobb" | "marschner_lobb" | "marschnerlobb" | "ml" => {
-                Ok(Phantom::MarschnerLobb)
-            }
-            other => Err(Error::value(
-                "phantom",
-                format!("'{other}' (expected head, sphere or marschner-lobb)"),
-            )),
+            "marschner-lobb" | "marschner_lobb" | "marschnerlobb" | "ml" => Ok(Phantom::MarschnerLobb),
+            other => Err(Error::value("phantom", format!("'{other}' (expected head, sphere or marschner-lobb)"))),
         }
     }
 
@@ -105,16 +100,11 @@ impl fmt::Display for Phantom {
 
 /// Checks `dims` and allocates the voxels, filling each z-slice in parallel:
 /// `fill(z, slice)` receives slice `z` (x-fastest, `nx * ny` voxels).
-fn build_slices<T: Copy + Default + Send>(
-    dims: [usize; 3],
-    fill: impl Fn(usize, &mut [T]) + Sync,
-) -> Result<([usize; 3], Vec<T>)> {
+fn build_slices<T: Copy + Default + Send>(dims: [usize; 3], fill: impl Fn(usize, &mut [T]) + Sync) -> Result<([usize; 3], Vec<T>)> {
     let d = check_dims(dims.map(|n| n as u64))?;
     let slice = d[0] * d[1];
     let mut v = vec![T::default(); slice * d[2]];
-    v.par_chunks_mut(slice)
-        .enumerate()
-        .for_each(|(z, s)| fill(z, s));
+    v.par_chunks_mut(slice).enumerate().for_each(|(z, s)| fill(z, s));
     Ok((d, v))
 }
 
@@ -193,11 +183,7 @@ pub fn marschner_lobb_value(x: f64, y: f64, z: f64) -> f64 {
 /// Normalised coordinate of grid index `i` on an axis of `n` samples:
 /// `−1 + 2i/(n−1)`, or 0 when the axis has a single sample.
 fn ml_coord(i: usize, n: usize) -> f64 {
-    if n <= 1 {
-        0.0
-    } else {
-        -1.0 + 2.0 * i as f64 / (n - 1) as f64
-    }
+    if n <= 1 { 0.0 } else { -1.0 + 2.0 * i as f64 / (n - 1) as f64 }
 }
 
 /// The Marschner–Lobb signal sampled on a grid over `[−1, 1]³` (`f32` voxels).
@@ -217,13 +203,7 @@ pub fn marschner_lobb(dims: [usize; 3]) -> Result<Volume> {
         }
     })?;
     let m = d.iter().copied().max().unwrap_or(1);
-    let spacing = d.map(|n| {
-        if n <= 1 || m <= 1 {
-            1.0
-        } else {
-            (m - 1) as f32 / (n - 1) as f32
-        }
-    });
+    let spacing = d.map(|n| if n <= 1 || m <= 1 { 1.0 } else { (m - 1) as f32 / (n - 1) as f32 });
     Volume::new(d, spacing, VoxelData::F32(data))
 }
 
@@ -332,11 +312,7 @@ fn coverage(d_vox: f64) -> f64 {
 fn ellipse_sdf(px: f64, py: f64, rx: f64, ry: f64) -> f64 {
     let k0 = ((px / rx).powi(2) + (py / ry).powi(2)).sqrt();
     let k1 = ((px / (rx * rx)).powi(2) + (py / (ry * ry)).powi(2)).sqrt();
-    if k1 > 0.0 {
-        k0 * (k0 - 1.0) / k1
-    } else {
-        -rx.min(ry)
-    }
+    if k1 > 0.0 { k0 * (k0 - 1.0) / k1 } else { -rx.min(ry) }
 }
 
 /// Approximate signed distance to an axis-aligned ellipsoid centred at the
@@ -345,11 +321,7 @@ fn ellipse_sdf(px: f64, py: f64, rx: f64, ry: f64) -> f64 {
 fn ellipsoid_sdf(p: DVec3, r: DVec3) -> f64 {
     let k0 = (p / r).length();
     let k1 = (p / (r * r)).length();
-    if k1 > 0.0 {
-        k0 * (k0 - 1.0) / k1
-    } else {
-        -r.min_element()
-    }
+    if k1 > 0.0 { k0 * (k0 - 1.0) / k1 } else { -r.min_element() }
 }
 
 /// Signed distance to a vertical (z-aligned) elliptic cylinder with radii `r`
@@ -379,39 +351,16 @@ enum Shape {
     /// Segment `a`–`b` thickened by `r`.
     Capsule { a: DVec3, b: DVec3, r: f64 },
     /// Vertical elliptic cylinder with rounded edges.
-    Cylinder {
-        cx: f64,
-        cy: f64,
-        r: [f64; 2],
-        z: [f64; 2],
-        round: f64,
-    },
+    Cylinder { cx: f64, cy: f64, r: [f64; 2], z: [f64; 2], round: f64 },
     /// `count` vertical elliptic cylinders of `height`, stacked downward from
     /// `top` every `period`.
-    Stack {
-        cx: f64,
-        cy: f64,
-        r: [f64; 2],
-        top: f64,
-        height: f64,
-        period: f64,
-        count: usize,
-    },
+    Stack { cx: f64, cy: f64, r: [f64; 2], top: f64, height: f64, period: f64, count: usize },
     /// Horizontal ring of radius `major` around `c` with an elliptic cross
     /// section (`minor` = radial, vertical radius), kept only where `y ≥ y_min`.
-    Arch {
-        c: DVec3,
-        major: f64,
-        minor: [f64; 2],
-        y_min: f64,
-    },
+    Arch { c: DVec3, major: f64, minor: [f64; 2], y_min: f64 },
     /// `shape` cut to the side of the plane `n·p = off` that `n` points away from
     /// (`n` unit length).
-    Cut {
-        shape: Box<Shape>,
-        n: DVec3,
-        off: f64,
-    },
+    Cut { shape: Box<Shape>, n: DVec3, off: f64 },
     /// Union.
     Union(Vec<Shape>),
     /// Smooth union with blend radius `k`.
@@ -432,45 +381,20 @@ impl Shape {
                 let t = ((p - *a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0);
                 (p - (*a + ab * t)).length() - r
             }
-            Shape::Cylinder {
-                cx,
-                cy,
-                r,
-                z,
-                round,
-            } => cylinder_sdf(p, *cx, *cy, *r, z[0], z[1], *round),
-            Shape::Stack {
-                cx,
-                cy,
-                r,
-                top,
-                height,
-                period,
-                count,
-            } => {
-                let k = ((top - 0.5 * height - p.z) / period)
-                    .round()
-                    .clamp(0.0, (*count as f64 - 1.0).max(0.0));
+            Shape::Cylinder { cx, cy, r, z, round } => cylinder_sdf(p, *cx, *cy, *r, z[0], z[1], *round),
+            Shape::Stack { cx, cy, r, top, height, period, count } => {
+                let k = ((top - 0.5 * height - p.z) / period).round().clamp(0.0, (*count as f64 - 1.0).max(0.0));
                 let z1 = top - k * period;
                 cylinder_sdf(p, *cx, *cy, *r, z1 - height, z1, 0.01)
             }
-            Shape::Arch {
-                c,
-                major,
-                minor,
-                y_min,
-            } => {
+            Shape::Arch { c, major, minor, y_min } => {
                 let q = p - *c;
                 let radial = (q.x * q.x + q.y * q.y).sqrt() - major;
                 ellipse_sdf(radial, q.z, minor[0], minor[1]).max(y_min - p.y)
             }
             Shape::Cut { shape, n, off } => shape.sdf(p).max(n.dot(p) - off),
             Shape::Union(v) => v.iter().map(|s| s.sdf(p)).fold(f64::INFINITY, f64::min),
-            Shape::SmoothUnion(v, k) => v
-                .iter()
-                .map(|s| s.sdf(p))
-                .reduce(|a, b| smin(a, b, *k))
-                .unwrap_or(f64::INFINITY),
+            Shape::SmoothUnion(v, k) => v.iter().map(|s| s.sdf(p)).reduce(|a, b| smin(a, b, *k)).unwrap_or(f64::INFINITY),
         }
     }
 
@@ -480,42 +404,17 @@ impl Shape {
             Shape::Ellipsoid { c, r } => (*c - *r, *c + *r),
             Shape::BentEllipsoid { c, r, bend } => {
                 let drop = bend.abs() * r.y * r.y;
-                (
-                    *c - *r - DVec3::new(0.0, 0.0, drop),
-                    *c + *r + DVec3::new(0.0, 0.0, drop),
-                )
+                (*c - *r - DVec3::new(0.0, 0.0, drop), *c + *r + DVec3::new(0.0, 0.0, drop))
             }
             Shape::Capsule { a, b, r } => (a.min(*b) - *r, a.max(*b) + *r),
-            Shape::Cylinder { cx, cy, r, z, .. } => (
-                DVec3::new(cx - r[0], cy - r[1], z[0]),
-                DVec3::new(cx + r[0], cy + r[1], z[1]),
-            ),
-            Shape::Stack {
-                cx,
-                cy,
-                r,
-                top,
-                height,
-                period,
-                count,
-            } => {
+            Shape::Cylinder { cx, cy, r, z, .. } => (DVec3::new(cx - r[0], cy - r[1], z[0]), DVec3::new(cx + r[0], cy + r[1], z[1])),
+            Shape::Stack { cx, cy, r, top, height, period, count } => {
                 let bottom = top - (*count as f64 - 1.0).max(0.0) * period - height;
-                (
-                    DVec3::new(cx - r[0], cy - r[1], bottom),
-                    DVec3::new(cx + r[0], cy + r[1], *top),
-                )
+                (DVec3::new(cx - r[0], cy - r[1], bottom), DVec3::new(cx + r[0], cy + r[1], *top))
             }
-            Shape::Arch {
-                c,
-                major,
-                minor,
-                y_min,
-            } => {
+            Shape::Arch { c, major, minor, y_min } => {
                 let e = major + minor[0];
-                (
-                    DVec3::new(c.x - e, (c.y - e).max(*y_min), c.z - minor[1]),
-                    DVec3::new(c.x + e, c.y + e, c.z + minor[1]),
-                )
+                (DVec3::new(c.x - e, (c.y - e).max(*y_min), c.z - minor[1]), DVec3::new(c.x + e, c.y + e, c.z + minor[1]))
             }
             Shape::Cut { shape, .. } => shape.bounds(),
             Shape::Union(v) => union_bounds(v, 0.0),
@@ -526,10 +425,7 @@ impl Shape {
 
 fn union_bounds(v: &[Shape], grow: f64) -> (DVec3, DVec3) {
     let init = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-    let (lo, hi) = v
-        .iter()
-        .map(Shape::bounds)
-        .fold(init, |(a, b), (c, d)| (a.min(c), b.max(d)));
+    let (lo, hi) = v.iter().map(Shape::bounds).fold(init, |(a, b), (c, d)| (a.min(c), b.max(d)));
     (lo - grow, hi + grow)
 }
 
@@ -552,18 +448,11 @@ struct Anatomy {
 }
 
 fn ell(c: [f64; 3], r: [f64; 3]) -> Shape {
-    Shape::Ellipsoid {
-        c: DVec3::from(c),
-        r: DVec3::from(r),
-    }
+    Shape::Ellipsoid { c: DVec3::from(c), r: DVec3::from(r) }
 }
 
 fn capsule(a: [f64; 3], b: [f64; 3], r: f64) -> Shape {
-    Shape::Capsule {
-        a: DVec3::from(a),
-        b: DVec3::from(b),
-        r,
-    }
+    Shape::Capsule { a: DVec3::from(a), b: DVec3::from(b), r }
 }
 
 /// Left/right mirror image (x → −x) of `s`'s ellipsoid or capsule parameters.
@@ -571,16 +460,8 @@ fn mirror(s: &Shape) -> Shape {
     let m = |v: &DVec3| DVec3::new(-v.x, v.y, v.z);
     match s {
         Shape::Ellipsoid { c, r } => Shape::Ellipsoid { c: m(c), r: *r },
-        Shape::BentEllipsoid { c, r, bend } => Shape::BentEllipsoid {
-            c: m(c),
-            r: *r,
-            bend: *bend,
-        },
-        Shape::Capsule { a, b, r } => Shape::Capsule {
-            a: m(a),
-            b: m(b),
-            r: *r,
-        },
+        Shape::BentEllipsoid { c, r, bend } => Shape::BentEllipsoid { c: m(c), r: *r, bend: *bend },
+        Shape::Capsule { a, b, r } => Shape::Capsule { a: m(a), b: m(b), r: *r },
         other => other.clone(),
     }
 }
@@ -592,11 +473,7 @@ impl Anatomy {
     }
 
     fn paint(&mut self, shape: usize, inset: f64, value: i16) {
-        self.layers.push(Layer {
-            shape,
-            inset,
-            value: f64::from(value),
-        });
+        self.layers.push(Layer { shape, inset, value: f64::from(value) });
     }
 
     /// Adds `s` and its mirror image, both painted with `value`.
@@ -611,11 +488,7 @@ impl Anatomy {
     /// The anatomy. Design units: the head's box is ±1 in x and y, ±0.88 in z
     /// ([`HEAD_EXTENT`]); one unit is roughly 10 cm.
     fn new() -> Anatomy {
-        let mut a = Anatomy {
-            shapes: Vec::new(),
-            skin: 0,
-            layers: Vec::new(),
-        };
+        let mut a = Anatomy { shapes: Vec::new(), skin: 0, layers: Vec::new() };
         // Skin envelope: cranium, face, jaw, chin, nose and neck blended smoothly.
         a.skin = a.shape(Shape::SmoothUnion(
             vec![
@@ -624,13 +497,7 @@ impl Anatomy {
                 ell([0.0, 0.30, -0.52], [0.55, 0.48, 0.28]),
                 ell([0.0, 0.64, -0.60], [0.22, 0.18, 0.15]),
                 ell([0.0, 0.87, -0.12], [0.075, 0.10, 0.16]),
-                Shape::Cylinder {
-                    cx: 0.0,
-                    cy: -0.16,
-                    r: [0.40, 0.42],
-                    z: [-0.84, -0.10],
-                    round: 0.06,
-                },
+                Shape::Cylinder { cx: 0.0, cy: -0.16, r: [0.40, 0.42], z: [-0.84, -0.10], round: 0.06 },
             ],
             0.10,
         ));
@@ -661,73 +528,31 @@ impl Anatomy {
         a.paint(cavity, 0.0, hu::CSF);
         a.paint(cavity, 0.02, hu::GREY_MATTER);
         a.paint(cavity, 0.07, hu::WHITE_MATTER);
-        let ventricle = Shape::BentEllipsoid {
-            c: DVec3::new(0.10, -0.06, 0.24),
-            r: DVec3::new(0.05, 0.24, 0.075),
-            bend: 0.8,
-        };
+        let ventricle = Shape::BentEllipsoid { c: DVec3::new(0.10, -0.06, 0.24), r: DVec3::new(0.05, 0.24, 0.075), bend: 0.8 };
         a.paint_pair(ventricle, hu::CSF);
 
         // Mandible (body and rami) with teeth.
         let ramus = capsule([0.34, 0.31, -0.57], [0.42, 0.12, -0.22], 0.045);
         let mandible = a.shape(Shape::Union(vec![
-            Shape::Arch {
-                c: DVec3::new(0.0, 0.34, -0.58),
-                major: 0.34,
-                minor: [0.05, 0.085],
-                y_min: 0.30,
-            },
+            Shape::Arch { c: DVec3::new(0.0, 0.34, -0.58), major: 0.34, minor: [0.05, 0.085], y_min: 0.30 },
             mirror(&ramus),
             ramus,
         ]));
         a.paint(mandible, 0.0, hu::CORTICAL);
         a.paint(mandible, 0.02, hu::CANCELLOUS);
-        let teeth = a.shape(Shape::Arch {
-            c: DVec3::new(0.0, 0.34, -0.45),
-            major: 0.33,
-            minor: [0.03, 0.07],
-            y_min: 0.34,
-        });
+        let teeth = a.shape(Shape::Arch { c: DVec3::new(0.0, 0.34, -0.45), major: 0.33, minor: [0.03, 0.07], y_min: 0.34 });
         a.paint(teeth, 0.0, hu::TEETH);
 
         // Cervical spine: discs, vertebral bodies, arches, spinal cord.
         let (top, height, period, count) = (-0.31, 0.065, 0.085, 5);
-        let discs = a.shape(Shape::Cylinder {
-            cx: 0.0,
-            cy: -0.16,
-            r: [0.105, 0.085],
-            z: [-0.715, -0.31],
-            round: 0.01,
-        });
+        let discs = a.shape(Shape::Cylinder { cx: 0.0, cy: -0.16, r: [0.105, 0.085], z: [-0.715, -0.31], round: 0.01 });
         a.paint(discs, 0.0, hu::DISC);
-        let bodies = a.shape(Shape::Stack {
-            cx: 0.0,
-            cy: -0.16,
-            r: [0.11, 0.09],
-            top,
-            height,
-            period,
-            count,
-        });
+        let bodies = a.shape(Shape::Stack { cx: 0.0, cy: -0.16, r: [0.11, 0.09], top, height, period, count });
         a.paint(bodies, 0.0, hu::CORTICAL);
         a.paint(bodies, 0.015, hu::VERTEBRA_CANCELLOUS);
-        let arches = a.shape(Shape::Stack {
-            cx: 0.0,
-            cy: -0.35,
-            r: [0.12, 0.11],
-            top,
-            height,
-            period,
-            count,
-        });
+        let arches = a.shape(Shape::Stack { cx: 0.0, cy: -0.35, r: [0.12, 0.11], top, height, period, count });
         a.paint(arches, 0.0, hu::VERTEBRA_ARCH);
-        let cord = a.shape(Shape::Cylinder {
-            cx: 0.0,
-            cy: -0.34,
-            r: [0.05, 0.05],
-            z: [-0.74, -0.15],
-            round: 0.04,
-        });
+        let cord = a.shape(Shape::Cylinder { cx: 0.0, cy: -0.34, r: [0.05, 0.05], z: [-0.74, -0.15], round: 0.04 });
         a.paint(cord, 0.0, hu::CORD);
 
         // Orbits with eyes.
@@ -771,11 +596,7 @@ impl Frame {
             scale[a] = usable / HEAD_EXTENT[a];
         }
         let sigma = (scale[0] * scale[1] * scale[2]).cbrt();
-        Frame {
-            centre,
-            scale,
-            sigma,
-        }
+        Frame { centre, scale, sigma }
     }
 
     /// Design-space position of voxel `(x, y, z)`.
@@ -799,9 +620,7 @@ impl Frame {
     /// `[lo, hi]`, padded by `pad` voxels; empty when `first > last`.
     fn range(&self, a: usize, lo: f64, hi: f64, pad: f64, n: usize) -> (i64, i64) {
         let first = (self.centre[a] + self.scale[a] * lo - pad).floor().max(0.0);
-        let last = (self.centre[a] + self.scale[a] * hi + pad)
-            .ceil()
-            .min(n as f64 - 1.0);
+        let last = (self.centre[a] + self.scale[a] * hi + pad).ceil().min(n as f64 - 1.0);
         (first as i64, last as i64)
     }
 }
@@ -838,19 +657,9 @@ impl HeadModel {
             let (lo, hi) = (lo.to_array(), hi.to_array());
             [0, 1, 2].map(|a| frame.range(a, lo[a] - grow, hi[a] + grow, pad, dims[a]))
         };
-        let layer_ranges = anatomy
-            .layers
-            .iter()
-            .map(|l| ranges(l.shape, (-l.inset).max(0.0)))
-            .collect();
+        let layer_ranges = anatomy.layers.iter().map(|l| ranges(l.shape, (-l.inset).max(0.0))).collect();
         let skin_ranges = ranges(anatomy.skin, 0.0);
-        HeadModel {
-            anatomy,
-            frame,
-            dims,
-            layer_ranges,
-            skin_ranges,
-        }
+        HeadModel { anatomy, frame, dims, layer_ranges, skin_ranges }
     }
 
     #[inline]
@@ -866,16 +675,10 @@ impl HeadModel {
     fn fill_slice(&self, z: usize, out: &mut [i16]) {
         let [nx, ny, _] = self.dims;
         let n = self.anatomy.shapes.len();
-        let mut memo = Memo {
-            value: vec![0.0; n],
-            stamp: vec![0; n],
-            now: 0,
-        };
+        let mut memo = Memo { value: vec![0.0; n], stamp: vec![0; n], now: 0 };
         let zi = z as i64;
         let inside = |r: (i64, i64), i: i64| r.0 <= i && i <= r.1;
-        let slice_layers: Vec<usize> = (0..self.anatomy.layers.len())
-            .filter(|&l| inside(self.layer_ranges[l][2], zi))
-            .collect();
+        let slice_layers: Vec<usize> = (0..self.anatomy.layers.len()).filter(|&l| inside(self.layer_ranges[l][2], zi)).collect();
         let mut row_layers = Vec::with_capacity(slice_layers.len());
         let sigma = self.frame.sigma;
         let air = f64::from(hu::AIR);
@@ -888,12 +691,7 @@ impl HeadModel {
                 continue;
             }
             row_layers.clear();
-            row_layers.extend(
-                slice_layers
-                    .iter()
-                    .copied()
-                    .filter(|&l| inside(self.layer_ranges[l][1], yi)),
-            );
+            row_layers.extend(slice_layers.iter().copied().filter(|&l| inside(self.layer_ranges[l][1], yi)));
             let (x0, x1) = self.skin_ranges[0];
             for x in x0.max(0)..=x1.min(nx as i64 - 1) {
                 memo.now += 1;
@@ -910,8 +708,7 @@ impl HeadModel {
                         continue;
                     }
                     let layer = &self.anatomy.layers[l];
-                    let a =
-                        coverage((self.distance(layer.shape, p, &mut memo) + layer.inset) * sigma);
+                    let a = coverage((self.distance(layer.shape, p, &mut memo) + layer.inset) * sigma);
                     if a > 0.0 {
                         acc += weight * a * layer.value;
                         weight *= 1.0 - a;

@@ -46,14 +46,7 @@ pub fn ct_tissues() -> Vec<Tissue> {
             threshold: -500.0,
             rgb: skin_rgb,
             tf: tf(
-                &[
-                    (-500.0, 0.0),
-                    (-300.0, 0.08),
-                    (200.0, 0.08),
-                    (300.0, 0.0),
-                    (400.0, 0.0),
-                    (700.0, 0.9),
-                ],
+                &[(-500.0, 0.0), (-300.0, 0.08), (200.0, 0.08), (300.0, 0.0), (400.0, 0.0), (700.0, 0.9)],
                 &[(-500.0, skin_rgb), (200.0, soft_rgb), (400.0, bone_rgb)],
             ),
         },
@@ -62,15 +55,7 @@ pub fn ct_tissues() -> Vec<Tissue> {
             threshold: -200.0,
             rgb: fat_rgb,
             tf: tf(
-                &[
-                    (-200.0, 0.0),
-                    (-100.0, 0.15),
-                    (-50.0, 0.02),
-                    (250.0, 0.02),
-                    (300.0, 0.0),
-                    (400.0, 0.0),
-                    (700.0, 0.9),
-                ],
+                &[(-200.0, 0.0), (-100.0, 0.15), (-50.0, 0.02), (250.0, 0.02), (300.0, 0.0), (400.0, 0.0), (700.0, 0.9)],
                 &[(-200.0, fat_rgb), (0.0, soft_rgb), (400.0, bone_rgb)],
             ),
         },
@@ -79,14 +64,7 @@ pub fn ct_tissues() -> Vec<Tissue> {
             threshold: -20.0,
             rgb: soft_rgb,
             tf: tf(
-                &[
-                    (-20.0, 0.0),
-                    (40.0, 0.12),
-                    (250.0, 0.12),
-                    (300.0, 0.0),
-                    (400.0, 0.0),
-                    (700.0, 0.9),
-                ],
+                &[(-20.0, 0.0), (40.0, 0.12), (250.0, 0.12), (300.0, 0.0), (400.0, 0.0), (700.0, 0.9)],
                 &[(-20.0, soft_rgb), (400.0, bone_rgb)],
             ),
         },
@@ -94,18 +72,14 @@ pub fn ct_tissues() -> Vec<Tissue> {
             name: "bone",
             threshold: 300.0,
             rgb: bone_rgb,
-            tf: tf(
-                &[(300.0, 0.0), (700.0, 0.6), (1500.0, 1.0)],
-                &[(300.0, [0.9, 0.8, 0.6]), (1000.0, bone_rgb)],
-            ),
+            tf: tf(&[(300.0, 0.0), (700.0, 0.6), (1500.0, 1.0)], &[(300.0, [0.9, 0.8, 0.6]), (1000.0, bone_rgb)]),
         },
     ]
 }
 
 fn tf(op: &[(f32, f32)], col: &[(f32, [f32; 3])]) -> TransferFunction {
     // the presets are static data; validation can only fail on a typo here, which the tests catch
-    TransferFunction::new(op.to_vec(), col.to_vec())
-        .unwrap_or_else(|e| panic!("invalid built-in preset: {e}"))
+    TransferFunction::new(op.to_vec(), col.to_vec()).unwrap_or_else(|e| panic!("invalid built-in preset: {e}"))
 }
 
 /// The CT preset called `name`.
@@ -127,16 +101,18 @@ pub fn otsu_threshold(v: &Volume) -> f32 {
         return lo;
     }
     let h = v.histogram(256);
-    let total: f64 = h.iter().sum::<u64>() as f64;
-    let sum_all: f64 = h
-        .iter()
-        .enumerate()
-        .map(|(i, &c)| i as f64 * c as f64)
-        .sum();
-    let (mut w0, mut sum0, mut best, mut best_t) = (0.0, 0.0, -1.0, 0usize);
-    for (t, &c) in h.iter().enumerate() {
-        w0 += c as f64;
-        sum0 += t as f64 * c as f64;
+    let t = otsu_bins(&h, 0, 256).unwrap_or(0);
+    lo + (hi - lo) * (t as f32 + 1.0) / 256.0
+}
+
+/// Otsu's split of histogram bins `[a, b)`: the last bin of the lower class.
+fn otsu_bins(h: &[u64], a: usize, b: usize) -> Option<usize> {
+    let total: f64 = h[a..b].iter().sum::<u64>() as f64;
+    let sum_all: f64 = (a..b).map(|i| i as f64 * h[i] as f64).sum();
+    let (mut w0, mut sum0, mut best, mut best_t) = (0.0, 0.0, -1.0, None);
+    for t in a..b {
+        w0 += h[t] as f64;
+        sum0 += t as f64 * h[t] as f64;
         let w1 = total - w0;
         if w0 == 0.0 || w1 == 0.0 {
             continue;
@@ -145,10 +121,47 @@ pub fn otsu_threshold(v: &Volume) -> f32 {
         let between = w0 * w1 * (m0 - m1) * (m0 - m1);
         if between > best {
             best = between;
-            best_t = t;
+            best_t = Some(t);
         }
     }
-    lo + (hi - lo) * (best_t as f32 + 1.0) / 256.0
+    best_t
+}
+
+/// Suggested lower thresholds for a volume without a known scale (MRI): Otsu's
+/// background/object split, then Otsu again inside the object twice, giving up to
+/// three ascending thresholds ("low", "mid", "high" tissue presets).
+pub fn histogram_thresholds(v: &Volume) -> Vec<f32> {
+    let (lo, hi) = v.value_range();
+    if hi <= lo {
+        return vec![];
+    }
+    let h = v.histogram(256);
+    let to_density = |t: usize| lo + (hi - lo) * (t as f32 + 1.0) / 256.0;
+    let mut out = vec![];
+    let mut start = 0;
+    for _ in 0..3 {
+        match otsu_bins(&h, start, 256) {
+            Some(t) if t + 1 < 256 => {
+                out.push(to_density(t));
+                start = t + 1;
+            }
+            _ => break,
+        }
+    }
+    out
+}
+
+/// Tissue presets for a volume: the CT presets for Hounsfield data, else
+/// histogram presets ("low", "mid", "high") from [`histogram_thresholds`].
+pub fn tissues_for(v: &Volume) -> Vec<Tissue> {
+    if looks_like_ct(v) {
+        return ct_tissues();
+    }
+    let hi = v.value_range().1;
+    let names = ["low", "mid", "high"];
+    let ts = histogram_thresholds(v);
+    let ts = if ts.is_empty() { vec![otsu_threshold(v)] } else { ts };
+    ts.iter().zip(names).map(|(&t, name)| Tissue { name, ..generic(t, hi) }).collect()
 }
 
 /// A generic preset for non-CT data: threshold at `t`, grey iso surface, and a
@@ -156,15 +169,7 @@ pub fn otsu_threshold(v: &Volume) -> f32 {
 pub fn generic(t: f32, hi: f32) -> Tissue {
     let rgb = [0.92, 0.9, 0.85];
     let top = if hi > t { hi } else { t + 1.0 };
-    Tissue {
-        name: "auto",
-        threshold: t,
-        rgb,
-        tf: tf(
-            &[(t, 0.0), (t + (top - t) * 0.5, 0.25), (top, 0.6)],
-            &[(t, rgb)],
-        ),
-    }
+    Tissue { name: "auto", threshold: t, rgb, tf: tf(&[(t, 0.0), (t + (top - t) * 0.5, 0.25), (top, 0.6)], &[(t, rgb)]) }
 }
 
 #[cfg(test)]
@@ -184,13 +189,18 @@ mod tests {
     }
 
     #[test]
+    fn histogram_thresholds_find_three_populations() {
+        let v = Volume::from_fn([40, 10, 10], [1.0; 3], |x, _, _| [0.0, 50.0, 120.0, 220.0][x / 10]).unwrap();
+        let t = histogram_thresholds(&v);
+        assert_eq!(t.len(), 3, "{t:?}");
+        assert!(t[0] > 0.0 && t[0] <= 50.0 && t[1] > 50.0 && t[1] <= 120.0 && t[2] > 120.0 && t[2] <= 220.0, "{t:?}");
+        let tissues = tissues_for(&v);
+        assert_eq!(tissues.iter().map(|t| t.name).collect::<Vec<_>>(), ["low", "mid", "high"]);
+    }
+
+    #[test]
     fn otsu_separates_two_populations() {
-        let v = Volume::from_fn(
-            [10, 10, 10],
-            [1.0; 3],
-            |x, _, _| if x < 5 { 10.0 } else { 200.0 },
-        )
-        .unwrap();
+        let v = Volume::from_fn([10, 10, 10], [1.0; 3], |x, _, _| if x < 5 { 10.0 } else { 200.0 }).unwrap();
         let t = otsu_threshold(&v);
         assert!(t > 10.0 && t <= 200.0, "{t}");
     }

@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use crate::classify::Classifier;
 use crate::composite::{Intermediate, Shading, composite, headlight_ndl};
-use crate::depth::{Search, SetBits, Word};
+use crate::depth::{Matcher, Search, SetBits, Word};
 use crate::mask::{BinaryMask, Rect};
 use crate::shear::ShearState;
 use crate::slices::SliceStack;
@@ -61,12 +61,7 @@ impl SliceParams {
             self.floor[a].clear();
             self.floor[a].extend_from_slice(&st.floor[a]);
             self.weight[a].clear();
-            self.weight[a].extend(
-                st.trans[a]
-                    .iter()
-                    .zip(&st.floor[a])
-                    .map(|(t, &f)| (t - f as f64) as f32),
-            );
+            self.weight[a].extend(st.trans[a].iter().zip(&st.floor[a]).map(|(t, &f)| (t - f as f64) as f32));
         }
     }
 }
@@ -100,10 +95,7 @@ pub struct RayResult {
     pub depth: f32,
 }
 
-const MISS: RayResult = RayResult {
-    rgba: [0.0; 4],
-    depth: f32::NAN,
-};
+const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN };
 
 impl<'a> RayContext<'a> {
     /// Sets up the rays of one frame.
@@ -144,12 +136,7 @@ impl<'a> RayContext<'a> {
         let ci = p - self.pad + self.params.floor[0][k];
         let cj = q - self.pad + self.params.floor[1][k];
         if (ci as u32) < self.cells[0] && (cj as u32) < self.cells[1] {
-            Some((
-                ci as usize,
-                cj as usize,
-                self.params.weight[0][k],
-                self.params.weight[1][k],
-            ))
+            Some((ci as usize, cj as usize, self.params.weight[0][k], self.params.weight[1][k]))
         } else {
             None
         }
@@ -184,10 +171,7 @@ impl<'a> RayContext<'a> {
                 break;
             }
         }
-        RayResult {
-            rgba: acc,
-            depth: f32::NAN,
-        }
+        RayResult { rgba: acc, depth: f32::NAN }
     }
 
     #[inline(always)]
@@ -208,23 +192,9 @@ impl<'a> RayContext<'a> {
     /// shades it.
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
-    fn iso_hit(
-        &self,
-        p: i32,
-        q: i32,
-        k: usize,
-        ci: usize,
-        cj: usize,
-        wi: f32,
-        wj: f32,
-        d: f32,
-    ) -> RayResult {
+    fn iso_hit(&self, p: i32, q: i32, k: usize, ci: usize, cj: usize, wi: f32, wj: f32, d: f32) -> RayResult {
         let g = self.stack.gradient(ci, cj, k, wi, wj);
-        let prev = if self.ascending {
-            k.checked_sub(1)
-        } else {
-            Some(k + 1).filter(|&x| x < self.stack.n[2])
-        };
+        let prev = if self.ascending { k.checked_sub(1) } else { Some(k + 1).filter(|&x| x < self.stack.n[2]) };
         let refined = prev.and_then(|kp| {
             let (pi, pj, pwi, pwj) = self.locate(p, q, kp)?;
             let dp = self.stack.bilinear(pi, pj, kp, pwi, pwj);
@@ -240,90 +210,55 @@ impl<'a> RayContext<'a> {
         };
         let ndl = headlight_ndl(grad, self.grad_m, self.grad_s);
         let [r, gg, b] = self.shading.shade(self.iso_rgb, ndl);
-        RayResult {
-            rgba: [r, gg, b, 1.0],
-            depth,
-        }
+        RayResult { rgba: [r, gg, b, 1.0], depth }
     }
 }
 
-/// Rays of `rect` of the intermediate image through the binary mask (jumping from
-/// set bit to set bit), in parallel over rows; marks `rect` valid.
+/// Rays of `rect` of the intermediate image through the sheared mask: each ray
+/// reads its (super) column and visits only the slices whose code `m` matches,
+/// in parallel over rows; marks `rect` valid.
 pub fn render_binary<W: Word>(
     ctx: &RayContext,
     mask: &BinaryMask<W>,
     search: Search,
+    m: &Matcher,
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
-    render_rows(ctx, rect, out, |p, q| {
-        ctx.trace(
-            p as i32,
-            q as i32,
-            SetBits::new(mask.row(p, q), ctx.ascending, search),
-        )
-    });
+    render_rows(ctx, rect, out, |p, q| ctx.trace(p as i32, q as i32, SetBits::with_matcher(mask.ray_row(p, q), ctx.ascending, search, m)));
 }
 
 /// The brute-force reference: every slice of every ray of `rect`, no mask.
 pub fn render_brute(ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate) {
     let nk = ctx.stack.n[2];
     render_rows(ctx, rect, out, |p, q| {
-        if ctx.ascending {
-            ctx.trace(p as i32, q as i32, 0..nk)
-        } else {
-            ctx.trace(p as i32, q as i32, (0..nk).rev())
-        }
+        if ctx.ascending { ctx.trace(p as i32, q as i32, 0..nk) } else { ctx.trace(p as i32, q as i32, (0..nk).rev()) }
     });
 }
 
-fn render_rows(
-    _ctx: &RayContext,
-    rect: Option<Rect>,
-    out: &mut Intermediate,
-    ray: impl Fn(usize, usize) -> RayResult + Sync,
-) {
+fn render_rows(_ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate, ray: impl Fn(usize, usize) -> RayResult + Sync) {
     out.seal(rect);
     let Some(r) = rect else { return };
     let w = out.size[0];
     let (rgba, depth) = (&mut out.rgba, &mut out.depth);
-    rgba.par_chunks_mut(w)
-        .zip(depth.par_chunks_mut(w))
-        .enumerate()
-        .skip(r.q0)
-        .take(r.q1 - r.q0 + 1)
-        .for_each(|(q, (crow, drow))| {
-            for p in r.p0..=r.p1 {
-                let res = ray(p, q);
-                crow[p] = res.rgba;
-                drow[p] = res.depth;
-            }
-        });
+    rgba.par_chunks_mut(w).zip(depth.par_chunks_mut(w)).enumerate().skip(r.q0).take(r.q1 - r.q0 + 1).for_each(|(q, (crow, drow))| {
+        for p in r.p0..=r.p1 {
+            let res = ray(p, q);
+            crow[p] = res.rgba;
+            drow[p] = res.depth;
+        }
+    });
 }
 
 /// The rectangle of the intermediate grid that rays through the volume can reach
 /// under these slice offsets (geometry only, no mask): used by brute force.
-pub fn volume_rect(
-    params: &SliceParams,
-    cells: [usize; 2],
-    pad: usize,
-    grid: [usize; 2],
-) -> Option<Rect> {
+pub fn volume_rect(params: &SliceParams, cells: [usize; 2], pad: usize, grid: [usize; 2]) -> Option<Rect> {
     if cells[0] == 0 || cells[1] == 0 || params.floor[0].is_empty() {
         return None;
     }
     let span = |a: usize| {
-        let lo = params.floor[a]
-            .iter()
-            .map(|f| pad as i32 - f)
-            .min()
-            .unwrap_or(0)
-            .max(0) as usize;
-        let hi = params.floor[a]
-            .iter()
-            .map(|f| pad as i32 - f + cells[a] as i32 - 1)
-            .max()
-            .unwrap_or(0) as usize;
+        let lo = params.floor[a].iter().map(|f| pad as i32 - f).min().unwrap_or(0).max(0) as usize;
+        let hi = params.floor[a].iter().map(|f| pad as i32 - f + cells[a] as i32 - 1).max().unwrap_or(0) as usize;
         (lo, hi.min(grid[a] - 1))
     };
     let (p0, p1) = span(0);

@@ -1,20 +1,22 @@
 //! The frame pipeline: volume → classify → mask → factorize → composite → warp.
 //!
-//! Owns [`Renderer`], which holds the volume, the classification, one
+//! Owns [`Renderer`], which holds the volume, the classification (one transfer
+//! function, or a set of tissue presets sharing one threshold-coded mask), one
 //! [`SliceStack`] and one sheared mask per principal axis (each built only when a
-//! view first needs it, and rebuilt only when the classification changes), the
-//! reusable intermediate image and per-slice parameters, and a rayon pool of the
-//! requested size. [`Renderer::render`] runs one frame and reports how long each
-//! stage took. The output is the same for any thread count: every pixel is
-//! computed by exactly one task from the same inputs.
+//! view first needs it, and rebuilt only when the classification or cell size
+//! changes), the reusable intermediate image and per-slice parameters, and a rayon
+//! pool of the requested size. [`Renderer::render`] runs one frame and reports how
+//! long each stage took. The output is the same for any thread count: every pixel
+//! is computed by exactly one task from the same inputs.
 
 use std::time::Instant;
 
 use crate::classify::{Classifier, TransferFunction};
 use crate::composite::{Intermediate, Shading};
-use crate::depth::Search;
+use crate::depth::{Matcher, Search, binary_matcher};
 use crate::error::{Error, Result};
-use crate::mask::{BinaryMask, Rect, ShearWork, geometry};
+use crate::mask::{BinaryMask, CellCodes, MAX_CELL, Rect, ShearWork, geometry};
+use crate::presets::Tissue;
 use crate::raycast::{Mode, RayContext, SliceParams, render_binary, render_brute, volume_rect};
 use crate::shear::ShearState;
 use crate::slices::SliceStack;
@@ -67,6 +69,8 @@ pub struct Settings {
     pub mode: Mode,
     pub word: WordSize,
     pub search: Search,
+    /// Super-cell size (1..=8).
+    pub cell: usize,
     /// Early ray termination threshold (blend mode); 1.0 disables it.
     pub ert: f32,
     pub shading: Shading,
@@ -81,6 +85,7 @@ impl Default for Settings {
             mode: Mode::Iso,
             word: WordSize::U64,
             search: Search::Bitscan,
+            cell: 1,
             ert: 0.99,
             shading: Shading::default(),
             threads: 0,
@@ -98,7 +103,7 @@ pub struct FrameStats {
     pub warp_ms: f64,
     /// Principal axis of the view.
     pub axis: usize,
-    /// One-bit steps, direct shears and words touched by the shear.
+    /// One-step shears, direct shears and words touched by the shear.
     pub shear_steps: u32,
     pub shear_direct: u32,
     pub shear_words: u64,
@@ -119,10 +124,22 @@ enum AnyMask {
     W64(BinaryMask<u64>),
 }
 
+impl AnyMask {
+    fn bytes(&self) -> usize {
+        match self {
+            AnyMask::W32(m) => m.bytes(),
+            AnyMask::W64(m) => m.bytes(),
+        }
+    }
+}
+
+/// What a cached mask was built for.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct MaskKey {
-    mode: Mode,
+    /// Predicate masks depend on the mode; code masks do not.
+    mode: Option<Mode>,
     word: WordSize,
+    cell: usize,
     generation: u64,
 }
 
@@ -132,16 +149,32 @@ struct AxisMask {
     mask: AnyMask,
 }
 
+/// Tissue presets sharing one threshold-coded mask.
+struct TissueSet {
+    tissues: Vec<Tissue>,
+    /// Per tissue: the iso (threshold) classifier and the blend classifier.
+    iso_cls: Vec<Classifier>,
+    blend_cls: Vec<Classifier>,
+    /// Ascending thresholds; tissue `i` is code `i + 1`.
+    thresholds: Vec<f32>,
+    /// Matcher "code ≥ i + 1" per tissue.
+    matchers: Vec<Matcher>,
+    current: usize,
+}
+
 /// Renders frames of one volume.
 pub struct Renderer {
     volume: Volume,
     range: (f32, f32),
+    /// The single transfer function (when no tissue set is active).
     classifier: Classifier,
     iso: f32,
+    tissues: Option<TissueSet>,
     settings: Settings,
     /// Bumped whenever the classification changes (invalidates masks).
     generation: u64,
     stacks: [Option<SliceStack>; 3],
+    codes: [Option<(u64, CellCodes)>; 3],
     masks: [Option<AxisMask>; 3],
     params: SliceParams,
     inter: Intermediate,
@@ -157,20 +190,78 @@ impl Renderer {
         let classifier = Classifier::new(tf, range.0, range.1);
         let iso = tf.lower_threshold().unwrap_or(f32::INFINITY);
         let pool = build_pool(settings.threads)?;
+        check_cell(settings.cell)?;
         Ok(Renderer {
             volume,
             range,
             classifier,
             iso,
+            tissues: None,
             settings,
             generation: 0,
             stacks: [None, None, None],
+            codes: [None, None, None],
             masks: [None, None, None],
             params: SliceParams::default(),
             inter: Intermediate::default(),
             last_fact: None,
             pool,
         })
+    }
+
+    /// A renderer that switches between `tissues` (1..=15 presets with distinct
+    /// lower thresholds) in O(1): one mask of adaptive threshold codes serves
+    /// them all, so a switch changes a table, never the mask. Starts at tissue 0.
+    pub fn with_tissues(volume: Volume, tissues: &[Tissue], settings: Settings) -> Result<Self> {
+        let first = tissues.first().ok_or_else(|| Error::value("tissues", "need at least one preset"))?;
+        let mut r = Self::new(volume, &first.tf, settings)?;
+        let mut ts: Vec<Tissue> = tissues.to_vec();
+        ts.sort_by(|a, b| a.threshold.total_cmp(&b.threshold));
+        let thresholds: Vec<f32> = ts.iter().map(|t| t.threshold).collect();
+        if thresholds.windows(2).any(|w| w[0] >= w[1]) || thresholds.iter().any(|t| !t.is_finite()) {
+            return Err(Error::value("tissues", format!("thresholds must be finite and distinct, got {thresholds:?}")));
+        }
+        for t in &ts {
+            // the code mask is conservative only if each tissue is transparent below its threshold
+            if let Some(lt) = t.tf.lower_threshold() {
+                if lt < t.threshold {
+                    return Err(Error::value("tissues", format!("{} has opacity below its threshold {}", t.name, t.threshold)));
+                }
+            }
+        }
+        let nb = crate::depth::code_width_for(ts.len()).ok_or_else(|| Error::value("tissues", "at most 15 presets"))?;
+        let (lo, hi) = r.range;
+        r.tissues = Some(TissueSet {
+            iso_cls: ts.iter().map(|t| Classifier::new(&t.iso_tf(), lo, hi)).collect(),
+            blend_cls: ts.iter().map(|t| Classifier::new(&t.tf, lo, hi)).collect(),
+            matchers: (1..=ts.len() as u32).map(|c| Matcher::new(nb, c)).collect(),
+            thresholds,
+            tissues: ts,
+            current: 0,
+        });
+        r.generation += 1;
+        Ok(r)
+    }
+
+    /// The tissue presets (sorted by threshold) and the index of the current one.
+    pub fn tissues(&self) -> Option<(&[Tissue], usize)> {
+        self.tissues.as_ref().map(|t| (t.tissues.as_slice(), t.current))
+    }
+
+    /// Switches to tissue `i` of the set: O(1), no mask rebuild and no re-shear.
+    pub fn select_tissue(&mut self, i: usize) -> Result<()> {
+        let ts = self.tissues.as_mut().ok_or_else(|| Error::value("tissue", "this renderer has no tissue presets"))?;
+        if i >= ts.tissues.len() {
+            return Err(Error::value("tissue", format!("index {i} (have {})", ts.tissues.len())));
+        }
+        ts.current = i;
+        Ok(())
+    }
+
+    /// Selects a tissue by name.
+    pub fn select_tissue_named(&mut self, name: &str) -> Result<()> {
+        let i = self.tissues.as_ref().and_then(|t| t.tissues.iter().position(|x| x.name == name));
+        self.select_tissue(i.ok_or_else(|| Error::value("tissue", format!("'{name}' is not in this renderer's presets")))?)
     }
 
     /// The volume.
@@ -181,24 +272,32 @@ impl Renderer {
     pub fn settings(&self) -> Settings {
         self.settings
     }
-    /// Changes settings (rebuilding the thread pool if the count changed).
+    /// Changes settings (rebuilding the thread pool if the count changed; masks
+    /// follow on the next frame if the word size or cell size changed).
     pub fn set_settings(&mut self, s: Settings) -> Result<()> {
+        check_cell(s.cell)?;
         if s.threads != self.settings.threads {
             self.pool = build_pool(s.threads)?;
         }
         self.settings = s;
         Ok(())
     }
-    /// Replaces the transfer function (masks are rebuilt on the next frame).
+    /// Replaces the classification by one transfer function (leaves any tissue
+    /// set; masks are rebuilt on the next frame).
     pub fn set_transfer_function(&mut self, tf: &TransferFunction) {
         self.classifier = Classifier::new(tf, self.range.0, self.range.1);
         self.iso = tf.lower_threshold().unwrap_or(f32::INFINITY);
+        self.tissues = None;
         self.generation += 1;
     }
-    /// Sets the iso value of the preview (masks are rebuilt on the next iso frame).
+    /// Sets a custom iso value for the preview (leaves any tissue set; masks are
+    /// rebuilt on the next frame).
     pub fn set_iso(&mut self, iso: f32) -> Result<()> {
         if iso.is_nan() {
             return Err(Error::value("iso value", "NaN"));
+        }
+        if let Some(ts) = self.tissues.take() {
+            self.classifier = ts.blend_cls[ts.current].clone();
         }
         self.iso = iso;
         self.generation += 1;
@@ -206,11 +305,25 @@ impl Renderer {
     }
     /// The iso value of the preview.
     pub fn iso(&self) -> f32 {
-        self.iso
+        match &self.tissues {
+            Some(ts) => ts.thresholds[ts.current],
+            None => self.iso,
+        }
     }
-    /// The classifier.
+    /// Name of the current classification (tissue name or "custom").
+    pub fn classification_name(&self) -> &str {
+        match &self.tissues {
+            Some(ts) => ts.tissues[ts.current].name,
+            None => "custom",
+        }
+    }
+    /// The classifier the current mode uses.
     pub fn classifier(&self) -> &Classifier {
-        &self.classifier
+        match (&self.tissues, self.settings.mode) {
+            (Some(ts), Mode::Iso) => &ts.iso_cls[ts.current],
+            (Some(ts), Mode::Blend) => &ts.blend_cls[ts.current],
+            (None, _) => &self.classifier,
+        }
     }
     /// The intermediate image of the last frame.
     pub fn intermediate(&self) -> &Intermediate {
@@ -222,20 +335,14 @@ impl Renderer {
     }
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
-        self.masks
-            .iter()
-            .flatten()
-            .map(|m| match &m.mask {
-                AnyMask::W32(m) => m.bytes(),
-                AnyMask::W64(m) => m.bytes(),
-            })
-            .sum()
+        self.masks.iter().flatten().map(|m| m.mask.bytes()).sum()
     }
 
     fn mask_key(&self) -> MaskKey {
         MaskKey {
-            mode: self.settings.mode,
+            mode: if self.tissues.is_some() { None } else { Some(self.settings.mode) },
             word: self.settings.word,
+            cell: self.settings.cell,
             generation: self.generation,
         }
     }
@@ -252,14 +359,26 @@ impl Renderer {
             let key = self.mask_key();
             if self.masks[axis].as_ref().map(|m| m.key) != Some(key) {
                 let stack = self.stacks[axis].as_ref().expect("stack built above");
-                let (mode, iso, cls) = (self.settings.mode, self.iso, &self.classifier);
-                let visible = move |lo: f32, hi: f32| match mode {
-                    Mode::Iso => hi >= iso,
-                    Mode::Blend => cls.may_be_visible(lo, hi),
-                };
+                // cell codes depend only on the classification; cell size and word size reuse them
+                let codes_key = key.generation * 2 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64);
+                if self.codes[axis].as_ref().map(|c| c.0) != Some(codes_key) {
+                    let codes = self.pool.install(|| match (&self.tissues, self.settings.mode) {
+                        (Some(ts), _) => CellCodes::thresholds(stack, &ts.thresholds).expect("thresholds validated in with_tissues"),
+                        (None, Mode::Iso) => {
+                            let iso = self.iso;
+                            CellCodes::binary(stack, |_, hi| hi >= iso)
+                        }
+                        (None, Mode::Blend) => {
+                            let cls = &self.classifier;
+                            CellCodes::binary(stack, |lo, hi| cls.may_be_visible(lo, hi))
+                        }
+                    });
+                    self.codes[axis] = Some((codes_key, codes));
+                }
+                let codes = &self.codes[axis].as_ref().expect("built above").1;
                 let mask = self.pool.install(|| match key.word {
-                    WordSize::U32 => AnyMask::W32(BinaryMask::build(stack, visible)),
-                    WordSize::U64 => AnyMask::W64(BinaryMask::build(stack, visible)),
+                    WordSize::U32 => AnyMask::W32(BinaryMask::from_codes(codes, key.cell)),
+                    WordSize::U64 => AnyMask::W64(BinaryMask::from_codes(codes, key.cell)),
                 });
                 self.masks[axis] = Some(AxisMask { key, mask });
             }
@@ -276,18 +395,17 @@ impl Renderer {
     /// Renders one frame of `camera` into `out` (resized if needed).
     pub fn render(&mut self, camera: &Camera, out: &mut Image) -> Result<FrameStats> {
         let f = Factorization::new(camera, self.volume.dims(), self.volume.spacing())?;
-        let mut stats = FrameStats {
-            axis: f.axis,
-            ..Default::default()
-        };
+        let mut stats = FrameStats { axis: f.axis, ..Default::default() };
         stats.build_ms = self.ensure_axis(f.axis);
-        let min_sp = self
-            .volume
-            .spacing()
-            .iter()
-            .fold(f32::MAX, |a, &b| a.min(b)) as f64;
-        self.classifier
-            .set_sample_ratio((f.sample_spacing / min_sp) as f32);
+        let mode = self.settings.mode;
+        if mode == Mode::Blend {
+            let min_sp = self.volume.spacing().iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
+            let ratio = (f.sample_spacing / min_sp) as f32;
+            match &mut self.tissues {
+                Some(ts) => ts.blend_cls[ts.current].set_sample_ratio(ratio),
+                None => self.classifier.set_sample_ratio(ratio),
+            }
+        }
 
         // shear
         let t = Instant::now();
@@ -306,8 +424,8 @@ impl Renderer {
                 stats.shear_direct = w.direct;
                 stats.shear_words = w.words;
                 match &m.mask {
-                    AnyMask::W32(m) => m.occupied_rect(),
-                    AnyMask::W64(m) => m.occupied_rect(),
+                    AnyMask::W32(m) => m.occupied_rays(grid),
+                    AnyMask::W64(m) => m.occupied_rays(grid),
                 }
             }
             Method::Brute => volume_rect(&self.params, stack.cells(), pad, grid),
@@ -317,22 +435,17 @@ impl Renderer {
         // render the intermediate image
         let t = Instant::now();
         self.inter.prepare(grid);
-        let ctx = RayContext::new(
-            stack,
-            &self.classifier,
-            &self.params,
-            &f,
-            pad,
-            self.settings.mode,
-            self.iso,
-            self.settings.shading,
-            self.settings.ert,
-        );
+        let (cls, iso, matcher): (&Classifier, f32, &Matcher) = match (&self.tissues, mode) {
+            (Some(ts), Mode::Iso) => (&ts.iso_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
+            (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
+            (None, _) => (&self.classifier, self.iso, binary_matcher()),
+        };
+        let ctx = RayContext::new(stack, cls, &self.params, &f, pad, mode, iso, self.settings.shading, self.settings.ert);
         let (inter, search) = (&mut self.inter, self.settings.search);
         let mask = self.masks[f.axis].as_ref().map(|m| &m.mask);
         self.pool.install(|| match (self.settings.method, mask) {
-            (Method::Binary, Some(AnyMask::W32(m))) => render_binary(&ctx, m, search, rect, inter),
-            (Method::Binary, Some(AnyMask::W64(m))) => render_binary(&ctx, m, search, rect, inter),
+            (Method::Binary, Some(AnyMask::W32(m))) => render_binary(&ctx, m, search, matcher, rect, inter),
+            (Method::Binary, Some(AnyMask::W64(m))) => render_binary(&ctx, m, search, matcher, rect, inter),
             _ => render_brute(&ctx, rect, inter),
         });
         stats.rays = rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);
@@ -342,12 +455,15 @@ impl Renderer {
         let t = Instant::now();
         out.prepare(camera.size[0], camera.size[1]);
         let inter = &self.inter;
-        self.pool
-            .install(|| warp(inter, &f, [pad as f64, pad as f64], out));
+        self.pool.install(|| warp(inter, &f, [pad as f64, pad as f64], out));
         stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
         self.last_fact = Some(f);
         Ok(stats)
     }
+}
+
+fn check_cell(cell: usize) -> Result<()> {
+    if (1..=MAX_CELL).contains(&cell) { Ok(()) } else { Err(Error::value("cell size", format!("{cell} (must be 1..={MAX_CELL})"))) }
 }
 
 fn build_pool(threads: usize) -> Result<rayon::ThreadPool> {

@@ -91,26 +91,24 @@ fn line(ends: [f64; 2], nk: usize, k: usize) -> f64 {
     (ends[0] * (l - k as f64) + ends[1] * k as f64) / l
 }
 
-/// Per-word shift vectors for one step along one axis: bit `k` of `up` is set when
-/// slice `k` moves one position up (towards higher mask index), of `down` when it
-/// moves one down. `from`/`to` are the slices' current and target mask offsets.
+/// Per-word shift vectors for one step along one axis, for rows of `nb`-bit
+/// codes: every bit of slice `k`'s slot is set in `up` when the slice moves one
+/// position up (towards higher mask index), in `down` when it moves one down, so
+/// the bits of a code always move together. `from`/`to` are the slices' current
+/// and target mask offsets.
 ///
 /// Returns the largest `|to − from|` seen; the vectors are only meaningful when
 /// that is at most 1.
-pub fn shift_vectors<W: crate::depth::Word>(
-    from: &[i32],
-    to: &[i32],
-    up: &mut [W],
-    down: &mut [W],
-) -> u32 {
+pub fn shift_vectors<W: crate::depth::Word>(nb: u32, from: &[i32], to: &[i32], up: &mut [W], down: &mut [W]) -> u32 {
     up.fill(W::ZERO);
     down.fill(W::ZERO);
     let mut worst = 0u32;
+    let slots = (W::BITS / nb) as usize;
     for (k, (&a, &b)) in from.iter().zip(to).enumerate() {
         let d = b - a;
         worst = worst.max(d.unsigned_abs());
-        let w = k / W::BITS as usize;
-        let bit = crate::depth::bit_of::<W>(k);
+        let w = k / slots;
+        let bit = crate::depth::slot_mask::<W>(nb, k);
         if d > 0 {
             up[w] |= bit;
         } else if d < 0 {
@@ -141,10 +139,7 @@ mod tests {
             let next = s.rotated(along, dir);
             for a in 0..2 {
                 for k in 0..nk {
-                    assert!(
-                        (next.floor[a][k] - s.floor[a][k]).abs() <= 1,
-                        "a slice moved more than one bit"
-                    );
+                    assert!((next.floor[a][k] - s.floor[a][k]).abs() <= 1, "a slice moved more than one bit");
                 }
             }
             s = next;
@@ -164,8 +159,12 @@ mod tests {
         let to = vec![-1, 0, 1, 1, 2, 0, 2];
         let mut up = vec![0u32; 1];
         let mut down = vec![0u32; 1];
-        assert_eq!(shift_vectors(&from, &to, &mut up, &mut down), 1);
+        assert_eq!(shift_vectors(1, &from, &to, &mut up, &mut down), 1);
         assert_eq!(up[0], (1 << 29) | (1 << 27));
         assert_eq!(down[0], (1 << 31) | (1 << 26));
+        // 2-bit codes: both bits of a slot move together
+        assert_eq!(shift_vectors(2, &from, &to, &mut up, &mut down), 1);
+        assert_eq!(up[0], (0b11 << 26) | (0b11 << 22));
+        assert_eq!(down[0], (0b11 << 30) | (0b11 << 20));
     }
 }

@@ -43,17 +43,15 @@ impl SliceStack {
         let stride = [1usize, d[0], d[0] * d[1]];
         let (si, sj, sk) = (stride[perm[0]], stride[perm[1]], stride[perm[2]]);
         let src = vol.data();
-        data.par_chunks_mut(n[0] * n[1].max(1))
-            .enumerate()
-            .for_each(|(k, slice)| {
-                for j in 0..n[1] {
-                    let row = &mut slice[j * n[0]..(j + 1) * n[0]];
-                    let base = k * sk + j * sj;
-                    for (i, out) in row.iter_mut().enumerate() {
-                        *out = src.get(base + i * si);
-                    }
+        data.par_chunks_mut(n[0] * n[1].max(1)).enumerate().for_each(|(k, slice)| {
+            for j in 0..n[1] {
+                let row = &mut slice[j * n[0]..(j + 1) * n[0]];
+                let base = k * sk + j * sj;
+                for (i, out) in row.iter_mut().enumerate() {
+                    *out = src.get(base + i * si);
                 }
-            });
+            }
+        });
         SliceStack { axis, n, data }
     }
 
@@ -78,12 +76,7 @@ impl SliceStack {
     pub fn cell_range(&self, ci: usize, cj: usize, k: usize) -> (f32, f32) {
         let b = ci + self.n[0] * (cj + self.n[1] * k);
         let n0 = self.n[0];
-        let (a, c, d, e) = (
-            self.data[b],
-            self.data[b + 1],
-            self.data[b + n0],
-            self.data[b + n0 + 1],
-        );
+        let (a, c, d, e) = (self.data[b], self.data[b + 1], self.data[b + n0], self.data[b + n0 + 1]);
         (a.min(c).min(d.min(e)), a.max(c).max(d.max(e)))
     }
 
@@ -96,12 +89,7 @@ impl SliceStack {
     pub fn bilinear(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> f32 {
         let n0 = self.n[0];
         let b = ci + n0 * (cj + self.n[1] * k);
-        let (v00, v10, v01, v11) = (
-            self.data[b],
-            self.data[b + 1],
-            self.data[b + n0],
-            self.data[b + n0 + 1],
-        );
+        let (v00, v10, v01, v11) = (self.data[b], self.data[b + 1], self.data[b + n0], self.data[b + n0 + 1]);
         let top = v00 + (v10 - v00) * wi;
         let bot = v01 + (v11 - v01) * wi;
         let d = top + (bot - top) * wj;
@@ -149,8 +137,7 @@ mod tests {
 
     #[test]
     fn permutation_matches_volume() {
-        let v =
-            Volume::from_fn([3, 4, 5], [1.0; 3], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
+        let v = Volume::from_fn([3, 4, 5], [1.0; 3], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
         for axis in 0..3 {
             let s = SliceStack::new(&v, axis);
             let p = permutation(axis);
@@ -170,17 +157,12 @@ mod tests {
 
     #[test]
     fn bilinear_stays_in_the_corner_range_and_gradient_is_exact_for_linear() {
-        let v = Volume::from_fn([5, 5, 5], [1.0; 3], |x, y, z| {
-            0.1 * x as f32 + 3.0 * y as f32 - 2.0 * z as f32
-        })
-        .unwrap();
+        let v = Volume::from_fn([5, 5, 5], [1.0; 3], |x, y, z| 0.1 * x as f32 + 3.0 * y as f32 - 2.0 * z as f32).unwrap();
         let s = SliceStack::new(&v, 2);
         let d = s.bilinear(1, 2, 3, 0.25, 0.5);
         assert!((d - (0.125 + 7.5 - 6.0)).abs() < 1e-5);
         let g = s.gradient(1, 1, 2, 0.3, 0.7);
-        assert!(
-            (g[0] - 0.1).abs() < 1e-5 && (g[1] - 3.0).abs() < 1e-5 && (g[2] + 2.0).abs() < 1e-5
-        );
+        assert!((g[0] - 0.1).abs() < 1e-5 && (g[1] - 3.0).abs() < 1e-5 && (g[2] + 2.0).abs() < 1e-5);
         let (lo, hi) = s.cell_range(1, 2, 3);
         assert!(lo <= d && d <= hi);
     }

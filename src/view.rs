@@ -44,11 +44,7 @@ pub struct Camera {
 impl Camera {
     /// A camera with the given rotation and output size, zoom to fit.
     pub fn new(rotation: DMat3, size: [usize; 2]) -> Self {
-        Camera {
-            rotation,
-            zoom: None,
-            size,
-        }
+        Camera { rotation, zoom: None, size }
     }
 }
 
@@ -126,29 +122,17 @@ impl Factorization {
         let r = camera.rotation;
         let [w, h] = camera.size;
         if w == 0 || h == 0 || w > 1 << 15 || h > 1 << 15 {
-            return Err(Error::value(
-                "image size",
-                format!("{w}×{h} (each side must be 1..=32768)"),
-            ));
+            return Err(Error::value("image size", format!("{w}×{h} (each side must be 1..=32768)")));
         }
-        if !r.is_finite()
-            || (r.determinant() - 1.0).abs() > 1e-6
-            || !(r * r.transpose()).abs_diff_eq(DMat3::IDENTITY, 1e-6)
-        {
-            return Err(Error::value(
-                "rotation",
-                "must be a finite proper rotation matrix",
-            ));
+        if !r.is_finite() || (r.determinant() - 1.0).abs() > 1e-6 || !(r * r.transpose()).abs_diff_eq(DMat3::IDENTITY, 1e-6) {
+            return Err(Error::value("rotation", "must be a finite proper rotation matrix"));
         }
         let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
         let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
         let zoom = match camera.zoom {
             Some(z) if z.is_finite() && z > 0.0 => z,
             Some(z) => {
-                return Err(Error::value(
-                    "zoom",
-                    format!("{z} (must be finite and > 0)"),
-                ));
+                return Err(Error::value("zoom", format!("{z} (must be finite and > 0)")));
             }
             None => {
                 let diag = ((nd - 1.0).max(DVec3::ONE) * sp).length();
@@ -168,10 +152,7 @@ impl Factorization {
         let centre = (nd - 1.0) / 2.0;
         let img = |v: DVec3| -> DVec2 {
             let e = r * ((v - centre) * sp);
-            DVec2::new(
-                (w as f64 - 1.0) / 2.0 + zoom * e.x,
-                (h as f64 - 1.0) / 2.0 - zoom * e.y,
-            )
+            DVec2::new((w as f64 - 1.0) / 2.0 + zoom * e.x, (h as f64 - 1.0) / 2.0 - zoom * e.y)
         };
         let unperm = |ijk: DVec3| -> DVec3 {
             let mut v = DVec3::ZERO;
@@ -221,10 +202,7 @@ impl Factorization {
         let det = m00 * m11 - m01 * m10;
         let inv = [[m11 / det, -m01 / det], [-m10 / det, m00 / det]];
         let t = self.warp_t;
-        let it = [
-            -(inv[0][0] * t[0] + inv[0][1] * t[1]),
-            -(inv[1][0] * t[0] + inv[1][1] * t[1]),
-        ];
+        let it = [-(inv[0][0] * t[0] + inv[0][1] * t[1]), -(inv[1][0] * t[0] + inv[1][1] * t[1])];
         (inv, it)
     }
 }
@@ -254,17 +232,10 @@ mod tests {
         assert_eq!(f.axis, 2);
         assert!(f.shear[0].abs() <= 1.0 + 1e-9);
         for eps in [1e-12, -1e-12] {
-            let f = fact(
-                rotate_eye(DMat3::IDENTITY, 1, 45.0 + eps),
-                [16, 16, 16],
-                [1.0; 3],
-            );
+            let f = fact(rotate_eye(DMat3::IDENTITY, 1, 45.0 + eps), [16, 16, 16], [1.0; 3]);
             assert_eq!(f.axis, 2);
         }
-        assert_eq!(
-            fact(rotate_eye(DMat3::IDENTITY, 1, 45.1), [16, 16, 16], [1.0; 3]).axis,
-            0
-        );
+        assert_eq!(fact(rotate_eye(DMat3::IDENTITY, 1, 45.1), [16, 16, 16], [1.0; 3]).axis, 0);
         // the main diagonal: all three equal → z
         assert_eq!(principal_axis(DVec3::new(1.0, 1.0, 1.0)), 2);
         assert_eq!(principal_axis(DVec3::new(1.0, -1.0, 0.5)), 1);
@@ -274,9 +245,7 @@ mod tests {
     fn shear_is_at_most_one_for_any_view() {
         let mut seed = 12345u64;
         let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         for _ in 0..1000 {
@@ -304,18 +273,12 @@ mod tests {
             v[f.perm[1]] = b + tj;
             v[f.perm[2]] = k as f64;
             let e = r * ((v - centre) * sp3);
-            pix.push((
-                (200.0 - 1.0) / 2.0 + f.zoom * e.x,
-                (100.0 - 1.0) / 2.0 - f.zoom * e.y,
-            ));
+            pix.push(((200.0 - 1.0) / 2.0 + f.zoom * e.x, (100.0 - 1.0) / 2.0 - f.zoom * e.y));
         }
         let u = f.warp_m[0][0] * a + f.warp_m[0][1] * b + f.warp_t[0];
         let v = f.warp_m[1][0] * a + f.warp_m[1][1] * b + f.warp_t[1];
         for p in pix {
-            assert!(
-                (p.0 - u).abs() < 1e-9 && (p.1 - v).abs() < 1e-9,
-                "{p:?} vs {u},{v}"
-            );
+            assert!((p.0 - u).abs() < 1e-9 && (p.1 - v).abs() < 1e-9, "{p:?} vs {u},{v}");
         }
         let (inv, it) = f.inverse_warp();
         let a2 = inv[0][0] * u + inv[0][1] * v + it[0];

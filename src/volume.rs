@@ -39,10 +39,7 @@ impl VoxelType {
             "u16" | "uint16" | "ushort" => Ok(VoxelType::U16),
             "i16" | "int16" | "short" => Ok(VoxelType::I16),
             "f32" | "float" | "float32" => Ok(VoxelType::F32),
-            other => Err(Error::value(
-                "voxel type",
-                format!("'{other}' (expected u8, u16, i16 or f32)"),
-            )),
+            other => Err(Error::value("voxel type", format!("'{other}' (expected u8, u16, i16 or f32)"))),
         }
     }
     /// The canonical name (`u8`, ...).
@@ -105,25 +102,16 @@ impl VoxelData {
 /// Every loader calls this on header values before it reserves memory, so a
 /// header claiming 100000³ voxels fails at once.
 pub fn check_dims(dims: [u64; 3]) -> Result<[usize; 3]> {
-    let bad = |why: String| {
-        Err(Error::BadDims {
-            dims: dims.to_vec(),
-            why,
-        })
-    };
+    let bad = |why: String| Err(Error::BadDims { dims: dims.to_vec(), why });
     if dims.contains(&0) {
         return bad("every dimension must be at least 1".into());
     }
     if let Some(d) = dims.iter().find(|&&d| d > MAX_DIM as u64) {
-        return bad(format!(
-            "{d} exceeds the largest supported edge of {MAX_DIM} voxels"
-        ));
+        return bad(format!("{d} exceeds the largest supported edge of {MAX_DIM} voxels"));
     }
     let n = dims[0] * dims[1] * dims[2];
     if n > MAX_VOXELS {
-        return bad(format!(
-            "{n} voxels exceed the supported maximum of {MAX_VOXELS}"
-        ));
+        return bad(format!("{n} voxels exceed the supported maximum of {MAX_VOXELS}"));
     }
     Ok([dims[0] as usize, dims[1] as usize, dims[2] as usize])
 }
@@ -154,19 +142,11 @@ impl Volume {
                 return Err(Error::NonFinite { index, value });
             }
         }
-        Ok(Volume {
-            dims: d,
-            spacing,
-            data,
-        })
+        Ok(Volume { dims: d, spacing, data })
     }
 
     /// Builds an f32 volume by evaluating `f(x, y, z)` at every voxel.
-    pub fn from_fn(
-        dims: [usize; 3],
-        spacing: [f32; 3],
-        f: impl Fn(usize, usize, usize) -> f32,
-    ) -> Result<Self> {
+    pub fn from_fn(dims: [usize; 3], spacing: [f32; 3], f: impl Fn(usize, usize, usize) -> f32) -> Result<Self> {
         let d = check_dims(dims.map(|d| d as u64))?;
         let mut v = Vec::with_capacity(d[0] * d[1] * d[2]);
         for z in 0..d[2] {
@@ -231,11 +211,7 @@ impl Volume {
         let bins = bins.max(1);
         let (lo, hi) = self.value_range();
         let mut h = vec![0u64; bins];
-        let scale = if hi > lo {
-            bins as f64 / (hi as f64 - lo as f64)
-        } else {
-            0.0
-        };
+        let scale = if hi > lo { bins as f64 / (hi as f64 - lo as f64) } else { 0.0 };
         for i in 0..self.len() {
             let b = ((self.data.get(i) as f64 - lo as f64) * scale) as usize;
             h[b.min(bins - 1)] += 1;
@@ -250,19 +226,11 @@ impl Volume {
 
 fn check_spacing(spacing: [f32; 3]) -> Result<()> {
     if spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
-        return Err(Error::value(
-            "spacing",
-            format!("{spacing:?} (each must be finite and > 0)"),
-        ));
+        return Err(Error::value("spacing", format!("{spacing:?} (each must be finite and > 0)")));
     }
-    let (lo, hi) = spacing
-        .iter()
-        .fold((f32::MAX, 0f32), |(a, b), &s| (a.min(s), b.max(s)));
+    let (lo, hi) = spacing.iter().fold((f32::MAX, 0f32), |(a, b), &s| (a.min(s), b.max(s)));
     if hi / lo > 1.0e4 {
-        return Err(Error::value(
-            "spacing",
-            format!("{spacing:?}: anisotropy above 10^4 is not supported"),
-        ));
+        return Err(Error::value("spacing", format!("{spacing:?}: anisotropy above 10^4 is not supported")));
     }
     Ok(())
 }
@@ -296,8 +264,7 @@ mod tests {
 
     #[test]
     fn indexing_is_x_fastest() {
-        let v =
-            Volume::from_fn([3, 4, 5], [1.0; 3], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
+        let v = Volume::from_fn([3, 4, 5], [1.0; 3], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
         assert_eq!(v.get(2, 3, 4), 432.0);
         assert_eq!(v.value_range(), (0.0, 432.0));
         assert_eq!(v.histogram(4).iter().sum::<u64>(), 60);

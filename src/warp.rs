@@ -24,11 +24,7 @@ pub struct Image {
 impl Image {
     /// A transparent image.
     pub fn new(width: usize, height: usize) -> Self {
-        Image {
-            width,
-            height,
-            data: vec![[0.0; 4]; width * height],
-        }
+        Image { width, height, data: vec![[0.0; 4]; width * height] }
     }
 
     /// Resizes (and clears) when the size differs.
@@ -54,9 +50,7 @@ impl Image {
 
     /// Writes a PNG.
     pub fn save_png(&self, path: &std::path::Path) -> Result<()> {
-        self.to_rgb8()
-            .save_with_format(path, image::ImageFormat::Png)
-            .map_err(|e| Error::file(path, format!("cannot write PNG: {e}")))
+        self.to_rgb8().save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::file(path, format!("cannot write PNG: {e}")))
     }
 
     /// Fraction of pixels with any coverage.
@@ -73,11 +67,7 @@ fn to8(c: f32) -> u8 {
 /// Span `[lo, hi]` of `u` where `lo_b < a·u + b < hi_b`, intersected with `[lo, hi]`.
 fn clip_span(lo: f64, hi: f64, a: f64, b: f64, lo_b: f64, hi_b: f64) -> (f64, f64) {
     if a.abs() < 1e-12 {
-        return if b > lo_b && b < hi_b {
-            (lo, hi)
-        } else {
-            (1.0, 0.0)
-        };
+        return if b > lo_b && b < hi_b { (lo, hi) } else { (1.0, 0.0) };
     }
     let (x0, x1) = ((lo_b - b) / a, (hi_b - b) / a);
     (lo.max(x0.min(x1)), hi.min(x0.max(x1)))
@@ -98,23 +88,9 @@ pub fn warp(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut
         // p(u) = inv00·u + inv01·v + it0 + origin0, same for q
         let (pa, pb) = (inv[0][0], inv[0][1] * vf + it[0] + origin[0]);
         let (qa, qb) = (inv[1][0], inv[1][1] * vf + it[1] + origin[1]);
-        let (lo, hi) = clip_span(
-            0.0,
-            (w - 1) as f64,
-            pa,
-            pb,
-            r.p0 as f64 - 1.0,
-            r.p1 as f64 + 1.0,
-        );
+        let (lo, hi) = clip_span(0.0, (w - 1) as f64, pa, pb, r.p0 as f64 - 1.0, r.p1 as f64 + 1.0);
         let (lo, hi) = clip_span(lo, hi, qa, qb, r.q0 as f64 - 1.0, r.q1 as f64 + 1.0);
-        let (u0, u1) = if lo <= hi {
-            (
-                lo.ceil().max(0.0) as usize,
-                (hi.floor() as usize).min(w - 1),
-            )
-        } else {
-            (1, 0)
-        };
+        let (u0, u1) = if lo <= hi { (lo.ceil().max(0.0) as usize, (hi.floor() as usize).min(w - 1)) } else { (1, 0) };
         if u0 > u1 {
             row.fill([0.0; 4]);
             return;

@@ -26,10 +26,7 @@ fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
     let blobs: Vec<([f32; 3], f32, f32)> = (0..4)
         .map(|_| {
             let c = [0, 1, 2].map(|a| (next() % 1000) as f32 / 1000.0 * dims[a] as f32);
-            let r = 1.0
-                + (next() % 1000) as f32 / 1000.0
-                    * dims.iter().copied().max().unwrap() as f32
-                    * 0.4;
+            let r = 1.0 + (next() % 1000) as f32 / 1000.0 * dims.iter().copied().max().unwrap() as f32 * 0.4;
             let v = 50.0 + (next() % 200) as f32;
             (c, r, v)
         })
@@ -42,18 +39,12 @@ fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
             for x in 0..dims[0] {
                 let mut v = 0f32;
                 for (c, r, val) in &blobs {
-                    let d = ((x as f32 - c[0]).powi(2)
-                        + (y as f32 - c[1]).powi(2)
-                        + (z as f32 - c[2]).powi(2))
-                    .sqrt();
+                    let d = ((x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2) + (z as f32 - c[2]).powi(2)).sqrt();
                     if d < *r {
                         v = v.max(val * (1.0 - d / r).min(0.5) * 2.0);
                     }
                 }
-                let h = (x as u64 * 73856093)
-                    ^ (y as u64 * 19349663)
-                    ^ (z as u64 * 83492791)
-                    ^ noise_seed;
+                let h = (x as u64 * 73856093) ^ (y as u64 * 19349663) ^ (z as u64 * 83492791) ^ noise_seed;
                 if h % 17 == 0 {
                     v += (h % 97) as f32;
                 }
@@ -70,20 +61,12 @@ fn random_tf(seed: u64) -> TransferFunction {
         0 => TransferFunction::threshold(a, [0.9, 0.8, 0.7]),
         1 => TransferFunction::ramp(a, a + 60.0, 0.4 + (seed % 5) as f32 * 0.1, [0.5, 0.7, 0.9]),
         // non-monotone: a band of opacity
-        _ => TransferFunction::new(
-            vec![(a, 0.0), (a + 5.0, 0.8), (a + 10.0, 0.0)],
-            vec![(0.0, [1.0, 0.2, 0.2]), (250.0, [0.2, 0.2, 1.0])],
-        )
-        .unwrap(),
+        _ => TransferFunction::new(vec![(a, 0.0), (a + 5.0, 0.8), (a + 10.0, 0.0)], vec![(0.0, [1.0, 0.2, 0.2]), (250.0, [0.2, 0.2, 1.0])])
+            .unwrap(),
     }
 }
 
-fn render(
-    vol: &Volume,
-    tf: &TransferFunction,
-    s: Settings,
-    cam: &Camera,
-) -> (Image, Vec<[f32; 4]>, Vec<f32>) {
+fn render(vol: &Volume, tf: &TransferFunction, s: Settings, cam: &Camera) -> (Image, Vec<[f32; 4]>, Vec<f32>) {
     let mut r = Renderer::new(vol.clone(), tf, s).unwrap();
     let mut img = Image::new(cam.size[0], cam.size[1]);
     r.render(cam, &mut img).unwrap();
@@ -106,7 +89,7 @@ fn same_bits(a: &[f32], b: &[f32]) -> bool {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(48))]
+    #![proptest_config(ProptestConfig::with_cases(cases(48)))]
 
     /// Lossless skipping: the accelerated image equals brute force sample for sample.
     #[test]
@@ -195,9 +178,7 @@ fn no_drift_after_thousands_of_random_steps() {
     for word64 in [false, true] {
         let mut seed = 0x5EED_u64;
         let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             seed >> 11
         };
         let nk = st.n[2];
@@ -235,8 +216,7 @@ fn no_drift_after_thousands_of_random_steps() {
                 for a in 0..2 {
                     for k in 0..nk {
                         let l = (nk - 1) as f64;
-                        let closed =
-                            (state.ends[a][0] * (l - k as f64) + state.ends[a][1] * k as f64) / l;
+                        let closed = (state.ends[a][0] * (l - k as f64) + state.ends[a][1] * k as f64) / l;
                         assert!((state.trans[a][k] - closed).abs() < 1e-9);
                     }
                 }
@@ -254,17 +234,11 @@ fn full_turn_about_each_axis_has_no_drift() {
     let vol = random_volume([24, 20, 28], 7, [1.0, 1.0, 1.5]);
     for axis in 0..3 {
         let stacks: Vec<SliceStack> = (0..3).map(|a| SliceStack::new(&vol, a)).collect();
-        let mut masks: Vec<BinaryMask<u64>> = stacks
-            .iter()
-            .map(|s| BinaryMask::build(s, |_, hi| hi > 60.0))
-            .collect();
+        let mut masks: Vec<BinaryMask<u64>> = stacks.iter().map(|s| BinaryMask::build(s, |_, hi| hi > 60.0)).collect();
         let base = DMat3::from_euler(EulerRot::XYZ, 0.3, 0.2, 0.1);
         let steps = 720;
         for f in 0..=steps {
-            let cam = Camera::new(
-                rotate_eye(base, axis, 360.0 * f as f64 / steps as f64),
-                [32, 32],
-            );
+            let cam = Camera::new(rotate_eye(base, axis, 360.0 * f as f64 / steps as f64), [32, 32]);
             let fac = Factorization::new(&cam, vol.dims(), vol.spacing()).unwrap();
             let state = ShearState::from_view(&fac);
             masks[fac.axis].shear_to(&state);
@@ -284,8 +258,7 @@ fn full_turn_about_each_axis_has_no_drift() {
 fn principal_axis_switches_are_seamless() {
     let n = 40;
     let vol = Volume::from_fn([n, n, n], [1.0; 3], |x, y, z| {
-        let d = ((x as f32 - 26.0).powi(2) + (y as f32 - 17.0).powi(2) + (z as f32 - 20.0).powi(2))
-            .sqrt();
+        let d = ((x as f32 - 26.0).powi(2) + (y as f32 - 17.0).powi(2) + (z as f32 - 20.0).powi(2)).sqrt();
         (100.0 + 25.0 * (7.0 - d)).clamp(0.0, 200.0)
     })
     .unwrap();
@@ -295,10 +268,7 @@ fn principal_axis_switches_are_seamless() {
     let mut prev: Option<(f64, f64, f64)> = None;
     let mut axes = std::collections::BTreeSet::new();
     for f in 0..=360 {
-        let cam = Camera::new(
-            rotate_eye(DMat3::from_rotation_x(0.4), 1, f as f64),
-            [128, 128],
-        );
+        let cam = Camera::new(rotate_eye(DMat3::from_rotation_x(0.4), 1, f as f64), [128, 128]);
         let st = r.render(&cam, &mut img).unwrap();
         axes.insert(st.axis);
         let (mut a, mut cx, mut cy) = (0.0, 0.0, 0.0);
@@ -312,16 +282,15 @@ fn principal_axis_switches_are_seamless() {
         }
         let (cx, cy) = (cx / a, cy / a);
         if let Some((pa, px, py)) = prev {
-            assert!(
-                ((a - pa) / pa).abs() < 0.08,
-                "area jumped at {f}°: {pa} → {a}"
-            );
+            assert!(((a - pa) / pa).abs() < 0.08, "area jumped at {f}°: {pa} → {a}");
             assert!((cx - px).hypot(cy - py) < 1.2, "centroid jumped at {f}°");
         }
         prev = Some((a, cx, cy));
     }
-    assert!(
-        axes.len() >= 2,
-        "the turn should cross principal-axis switches"
-    );
+    assert!(axes.len() >= 2, "the turn should cross principal-axis switches");
+}
+
+/// Case count: `PROPTEST_CASES` when set (for long soak runs), else `default`.
+fn cases(default: u32) -> u32 {
+    std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }

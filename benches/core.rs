@@ -64,7 +64,7 @@ fn benches(c: &mut Criterion) {
             let (mut dir, mut pos) = (1, 0i32);
             g.bench_function(BenchmarkId::from_parameter(s), |b| {
                 b.iter(|| {
-                    if pos.abs() >= 20 {
+                    if pos.abs() >= 40 / s as i32 {
                         dir = -dir;
                     }
                     pos += dir;

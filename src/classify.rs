@@ -206,6 +206,19 @@ impl Classifier {
     pub fn node_density(&self, i: usize) -> f32 {
         self.d0 + self.step * i as f32
     }
+
+    /// The table node nearest to density `d` (clamped into the table): the
+    /// pre-classified paths quantize each voxel's density to it.
+    #[inline(always)]
+    pub fn nearest_node(&self, d: f32) -> usize {
+        ((self.pos(d) + 0.5) as usize).min(TABLE_NODES - 1)
+    }
+
+    /// Colour and opacity of table node `i` *before* the sample-spacing
+    /// correction of [`Classifier::set_sample_ratio`].
+    pub fn raw_node(&self, i: usize) -> Rgba {
+        Rgba { a: self.raw_alpha[i], ..self.table[i] }
+    }
 }
 
 #[cfg(test)]

@@ -126,7 +126,9 @@ pub struct RenderArgs {
     /// Output image size N (N×N pixels).
     #[arg(long, default_value_t = 512)]
     pub size: usize,
-    /// Render path.
+    /// Render path: binary (bit-packed mask + post-classified raycaster), rle
+    /// (run-length-encoded pre-classified shear-warp), brute or brute-rle (their
+    /// unaccelerated references).
     #[arg(long, value_enum, default_value = "binary")]
     pub method: MethodArg,
     /// Iso-surface preview or full alpha blending.
@@ -151,7 +153,8 @@ pub struct RenderArgs {
     /// Iso value (overrides the preset's threshold).
     #[arg(long, allow_negative_numbers = true)]
     pub iso: Option<f32>,
-    /// Early ray termination threshold in blend mode (1 disables it).
+    /// Early ray termination threshold in blend mode, and in both modes with
+    /// --method rle / brute-rle (1 disables it).
     #[arg(long, default_value_t = 0.99)]
     pub ert: f32,
     /// Pixels per world unit (default: fit the bounding diagonal).
@@ -172,7 +175,9 @@ pub struct RenderArgs {
 #[derive(ValueEnum, Clone, Copy, Debug)]
 pub enum MethodArg {
     Binary,
+    Rle,
     Brute,
+    BruteRle,
 }
 /// Modes on the command line.
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -444,6 +449,8 @@ impl RenderArgs {
             method: match self.method {
                 MethodArg::Binary => Method::Binary,
                 MethodArg::Brute => Method::Brute,
+                MethodArg::Rle => Method::Rle,
+                MethodArg::BruteRle => Method::BruteRle,
             },
             mode: match self.mode {
                 ModeArg::Iso => Mode::Iso,
@@ -640,7 +647,8 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             "size": cam0.size[0], "axis": AXES[axis],
             "frames": frames, "degrees": frames as f64 * step, "step_deg": step, "build_ms": build_ms,
             "shear_ms_median": shear, "render_ms_median": render, "warp_ms_median": warp, "frame_ms_median": frame,
-            "fps": fps, "degrees_per_second": fps * step, "mask_bytes": r.mask_bytes(),
+            "fps": fps, "degrees_per_second": fps * step, "mask_bytes": r.mask_bytes(), "rle_bytes": r.rle_bytes(),
+            "rle_axis_bytes": r.rle_axis_bytes(),
         });
         println!("{j}");
     } else {

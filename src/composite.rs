@@ -57,6 +57,17 @@ pub fn composite(acc: &mut [f32; 4], rgb: [f32; 3], alpha: f32) {
     acc[3] += t;
 }
 
+/// Front-to-back "over" of an already premultiplied sample `s = [α·r, α·g, α·b, α]`
+/// (the pre-classified paths blend premultiplied voxels, then composite the blend).
+#[inline(always)]
+pub fn composite_premultiplied(acc: &mut [f32; 4], s: [f32; 4]) {
+    let t = 1.0 - acc[3];
+    acc[0] += t * s[0];
+    acc[1] += t * s[1];
+    acc[2] += t * s[2];
+    acc[3] += t * s[3];
+}
+
 /// The intermediate (base-plane) image.
 #[derive(Clone, Debug, Default)]
 pub struct Intermediate {

@@ -17,6 +17,7 @@ pub mod phantom;
 pub mod presets;
 pub mod raycast;
 pub mod render;
+pub mod rle;
 pub mod shear;
 pub mod slices;
 pub mod view;

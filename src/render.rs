@@ -6,7 +6,10 @@
 //! view first needs it, and rebuilt only when the classification or cell size
 //! changes), the reusable intermediate image and per-slice parameters, and a rayon
 //! pool of the requested size. [`Renderer::render`] runs one frame and reports how
-//! long each stage took. The output is the same for any thread count: every pixel
+//! long each stage took. The pre-classified paths ([`Method::Rle`],
+//! [`Method::BruteRle`]) keep their classification and per-axis run-length
+//! encodings in a [`RleCache`], encoded lazily like the masks and re-encoded when
+//! the classification (transfer function, iso value, tissue or mode) changes. The output is the same for any thread count: every pixel
 //! is computed by exactly one task from the same inputs.
 
 use std::time::Instant;
@@ -18,6 +21,7 @@ use crate::error::{Error, Result};
 use crate::mask::{BinaryMask, CellCodes, MAX_CELL, Rect, ShearWork, geometry};
 use crate::presets::Tissue;
 use crate::raycast::{Mode, RayContext, SliceParams, render_binary, render_brute, volume_rect};
+use crate::rle::{ClassKey, RleCache};
 use crate::shear::ShearState;
 use crate::slices::SliceStack;
 use crate::view::{Camera, Factorization};
@@ -32,6 +36,16 @@ pub enum Method {
     Binary,
     /// Unaccelerated reference: every slice of every ray, same sample positions.
     Brute,
+    /// Lacroute's run-length-encoded, pre-classified shear-warp ([`crate::rle`]):
+    /// voxels are classified and shaded before interpolation, transparent voxels
+    /// skipped run by run, opaque pixels through skip links, and every pixel stops
+    /// at opacity [`Settings::ert`] — in iso mode too, where the transfer function
+    /// is the iso threshold (opaque from the iso value on, in the iso colour).
+    Rle,
+    /// The pre-classified reference for [`Method::Rle`]: the same samples,
+    /// every voxel of every slice, no runs and no skip links.
+    #[serde(rename = "brute-rle")]
+    BruteRle,
 }
 
 impl Method {
@@ -40,6 +54,8 @@ impl Method {
         match self {
             Method::Binary => "binary",
             Method::Brute => "brute",
+            Method::Rle => "rle",
+            Method::BruteRle => "brute-rle",
         }
     }
 }
@@ -71,7 +87,8 @@ pub struct Settings {
     pub search: Search,
     /// Super-cell size (1..=8).
     pub cell: usize,
-    /// Early ray termination threshold (blend mode); 1.0 disables it.
+    /// Early ray termination threshold (blend mode; both modes of the
+    /// pre-classified paths); 1.0 disables it.
     pub ert: f32,
     pub shading: Shading,
     /// Worker threads (0 = all cores).
@@ -180,6 +197,8 @@ pub struct Renderer {
     inter: Intermediate,
     last_fact: Option<Factorization>,
     pool: rayon::ThreadPool,
+    /// Classification, encodings and tables of the pre-classified paths.
+    rle: RleCache,
 }
 
 impl Renderer {
@@ -206,6 +225,7 @@ impl Renderer {
             inter: Intermediate::default(),
             last_fact: None,
             pool,
+            rle: RleCache::new(),
         })
     }
 
@@ -338,6 +358,41 @@ impl Renderer {
         self.masks.iter().flatten().map(|m| m.mask.bytes()).sum()
     }
 
+    /// Bytes of the run-length encodings that exist now, per axis.
+    pub fn rle_axis_bytes(&self) -> [usize; 3] {
+        self.rle.bytes()
+    }
+
+    /// Bytes of the run-length encodings that exist now.
+    pub fn rle_bytes(&self) -> usize {
+        self.rle.bytes().iter().sum()
+    }
+
+    /// The pre-classified state (classification and encodings) of the RLE paths.
+    pub fn rle_cache(&self) -> &RleCache {
+        &self.rle
+    }
+
+    /// What the pre-classified state depends on: classification generation,
+    /// tissue and mode.
+    fn rle_key(&self) -> ClassKey {
+        let tissue = self.tissues.as_ref().map_or(0, |t| t.current as u64 + 1);
+        (self.generation << 8) | (tissue << 1) | (self.settings.mode == Mode::Blend) as u64
+    }
+
+    /// The classifier the pre-classified paths encode: the current mode's, with
+    /// a custom iso value as a threshold transfer function in the iso colour.
+    fn preclass_classifier(&self) -> std::borrow::Cow<'_, Classifier> {
+        match (&self.tissues, self.settings.mode) {
+            (None, Mode::Iso) => {
+                let c = self.classifier.classify(self.iso);
+                let tf = TransferFunction::threshold(self.iso, [c.r, c.g, c.b]);
+                std::borrow::Cow::Owned(Classifier::new(&tf, self.range.0, self.range.1))
+            }
+            _ => std::borrow::Cow::Borrowed(self.classifier()),
+        }
+    }
+
     fn mask_key(&self) -> MaskKey {
         MaskKey {
             mode: if self.tissues.is_some() { None } else { Some(self.settings.mode) },
@@ -381,6 +436,17 @@ impl Renderer {
                     WordSize::U64 => AnyMask::W64(BinaryMask::from_codes(codes, key.cell)),
                 });
                 self.masks[axis] = Some(AxisMask { key, mask });
+            }
+        }
+        if matches!(self.settings.method, Method::Rle | Method::BruteRle) {
+            let key = self.rle_key();
+            if !self.rle.is_for(key) {
+                let cls = self.preclass_classifier().into_owned();
+                self.rle.reset(key, &cls, self.volume.spacing());
+            }
+            if self.settings.method == Method::Rle {
+                let (rle, stack) = (&mut self.rle, self.stacks[axis].as_ref().expect("stack built above"));
+                self.pool.install(|| rle.ensure_axis(stack));
             }
         }
         t.elapsed().as_secs_f64() * 1e3
@@ -429,6 +495,17 @@ impl Renderer {
                 }
             }
             Method::Brute => volume_rect(&self.params, stack.cells(), pad, grid),
+            Method::Rle | Method::BruteRle => {
+                // opacity correction as the binary path's (iso opacities are 0 or 1)
+                let min_sp = self.volume.spacing().iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
+                let ratio = if mode == Mode::Blend { (f.sample_spacing / min_sp) as f32 } else { 1.0 };
+                let (rle, shading) = (&mut self.rle, self.settings.shading);
+                self.pool.install(|| rle.prepare_view(&f, ratio, shading));
+                match self.settings.method {
+                    Method::Rle => self.rle.rect(&f, &self.params, pad, grid),
+                    _ => volume_rect(&self.params, stack.cells(), pad, grid),
+                }
+            }
         };
         stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
 
@@ -443,7 +520,11 @@ impl Renderer {
         let ctx = RayContext::new(stack, cls, &self.params, &f, pad, mode, iso, self.settings.shading, self.settings.ert);
         let (inter, search) = (&mut self.inter, self.settings.search);
         let mask = self.masks[f.axis].as_ref().map(|m| &m.mask);
+        let (rle, ert) = (&mut self.rle, self.settings.ert);
+        let params = &self.params;
         self.pool.install(|| match (self.settings.method, mask) {
+            (Method::Rle, _) => rle.render(&f, params, pad, ert, rect, inter),
+            (Method::BruteRle, _) => rle.render_brute(stack, &f, params, pad, ert, rect, inter),
             (Method::Binary, Some(AnyMask::W32(m))) => render_binary(&ctx, m, search, matcher, rect, inter),
             (Method::Binary, Some(AnyMask::W64(m))) => render_binary(&ctx, m, search, matcher, rect, inter),
             _ => render_brute(&ctx, rect, inter),

@@ -1,0 +1,981 @@
+//! Stage 5d — the run-length-encoded, pre-classified volume (Lacroute's shear-warp).
+//!
+//! Owns the second acceleration structure of the crate, the one VolPack uses:
+//!
+//! - [`Preclass`]: the per-voxel classification both pre-classified paths share.
+//!   A voxel's density is quantized to the nearest node of the [`Classifier`]'s
+//!   table; that node ([`RleVoxel::class`], u16) indexes the voxel's raw opacity
+//!   (before the per-view sample-spacing correction) *and* its colour, so one
+//!   index stores both. A voxel whose node has zero opacity is transparent. Its
+//!   shading index ([`RleVoxel::normal`]) is the 16-bit octahedral code of the
+//!   central-difference gradient ([`SliceStack::gradient_at`]) mapped to object
+//!   (world) space with the voxel spacing; code [`ZERO_NORMAL`] is a zero gradient,
+//!   which faces the viewer like [`crate::composite::headlight_ndl`]'s.
+//! - [`RleVolume`]: one principal axis's encoding. Every scanline (row `j` of
+//!   slice `k`, along `i`) is a list of `(transparent, non-transparent)` run-length
+//!   pairs (u16; the transparent run after the last pair is implicit), and only
+//!   the non-transparent voxels are stored. Built from a [`SliceStack`] when a view
+//!   first needs the axis; a new transfer function or tissue re-encodes.
+//! - [`ViewTables`]: the per-view lookup tables: the opacity-corrected,
+//!   premultiplied colour of every class node (`α' = 1 − (1 − α)^ratio`, rebuilt
+//!   when the ratio changes — VolPack's opacity-correction table) and the shade
+//!   table `[ambient + diffuse·|n·l|, specular·|n·l|^shininess]` of every normal
+//!   code for the headlight (rebuilt when the view direction or the material
+//!   changes). A voxel's shaded, premultiplied colour is
+//!   `[α'r·d + α'·s, α'g·d + α'·s, α'b·d + α'·s, α']`.
+//! - The compositing ([`render_rle`]): slice by slice, front to back, into the
+//!   shared intermediate image. Per slice the bilinear weights are computed once;
+//!   the two voxel scanlines under an intermediate row are traversed together so
+//!   transparent voxels are skipped run by run; opaque intermediate pixels are
+//!   skipped through per-pixel skip links with path compression (Lacroute's
+//!   opaque-pixel links); a pixel is finished once its opacity reaches
+//!   [`crate::render::Settings::ert`]. Parallel over bands of intermediate rows
+//!   (each band walks all slices front to back), so the image is the same for any
+//!   thread count.
+//! - Its reference ([`render_brute_preclassified`]): the same samples at the same
+//!   positions, classifying every voxel of every slice from the densities, with no
+//!   runs and no links. Skipping adds nothing but exact zeros, so the two images
+//!   are equal bit for bit (the tests allow 1e-5).
+//!
+//! The sample geometry is the crate's (see [`crate::raycast::SliceParams`]):
+//! intermediate pixel `(p, q)` samples cell `(p − pad + floor_i[k], q − pad +
+//! floor_j[k])` of slice `k` with in-cell weights `(weight_i[k], weight_j[k])`.
+//! The sample is the bilinear blend of the four voxels' premultiplied colours,
+//! composited "over" ([`composite_premultiplied`]).
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use rayon::prelude::*;
+
+use crate::classify::{Classifier, TABLE_NODES};
+use crate::composite::{Intermediate, Shading, composite_premultiplied};
+use crate::mask::Rect;
+use crate::raycast::SliceParams;
+use crate::slices::SliceStack;
+use crate::view::{Factorization, permutation};
+
+/// Number of normal (shading) codes: 256 × 256 octahedral cells.
+pub const NORMAL_CODES: usize = 1 << 16;
+
+/// The normal code of a zero gradient (shaded as facing the viewer).
+pub const ZERO_NORMAL: u16 = 0;
+
+/// Intermediate rows per parallel band.
+const BAND: usize = 8;
+
+/// End of a scanline for the run cursors.
+const INF: u32 = u32::MAX;
+
+/// One non-transparent voxel of the encoding.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[repr(C)]
+pub struct RleVoxel {
+    /// Classifier table node of the voxel's density: indexes its raw opacity and colour.
+    pub class: u16,
+    /// Octahedral code of its object-space gradient direction ([`ZERO_NORMAL`] if none).
+    pub normal: u16,
+}
+
+/// The octahedral code of an object-space gradient `g` (any length).
+///
+/// `g` is projected onto the octahedron `|x| + |y| + |z| = 1`, the lower half
+/// folded over the upper, and the square `[−1, 1]²` quantized to 256 × 256 cells
+/// (code `u + 256·v`). The corner `(0, 0)` is the −z pole, as is `(255, 255)`; the
+/// encoder never emits the former, which is [`ZERO_NORMAL`].
+pub fn encode_normal(g: [f32; 3]) -> u16 {
+    let len2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+    // the same cut-off as headlight_ndl (NaN also counts as zero)
+    if !(len2 > 1e-30) {
+        return ZERO_NORMAL;
+    }
+    let l1 = g[0].abs() + g[1].abs() + g[2].abs();
+    let (mut x, mut y) = (g[0] / l1, g[1] / l1);
+    if g[2] < 0.0 {
+        let (ax, ay) = (x.abs(), y.abs());
+        x = (1.0 - ay).copysign(x);
+        y = (1.0 - ax).copysign(y);
+    }
+    let q = |c: f32| ((c + 1.0) * 127.5 + 0.5).clamp(0.0, 255.0) as u16;
+    let code = q(x) | (q(y) << 8);
+    if code == ZERO_NORMAL { u16::MAX } else { code }
+}
+
+/// The (unnormalized, L1-unit) direction at the centre of octahedral cell `(u, v)`.
+#[inline(always)]
+fn oct_dir(u: f32, v: f32) -> [f32; 3] {
+    let (x0, y0) = (u * (2.0 / 255.0) - 1.0, v * (2.0 / 255.0) - 1.0);
+    let z = 1.0 - x0.abs() - y0.abs();
+    // unfold the lower half: x = (1 − |y0|)·sign(x0) when z < 0, branch-free
+    let t = (-z).max(0.0);
+    [x0 - t.copysign(x0), y0 - t.copysign(y0), z]
+}
+
+/// The unit direction of a normal code (`None` for [`ZERO_NORMAL`]).
+pub fn decode_normal(code: u16) -> Option<[f32; 3]> {
+    if code == ZERO_NORMAL {
+        return None;
+    }
+    let d = oct_dir((code & 255) as f32, (code >> 8) as f32);
+    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    Some(d.map(|c| c / len))
+}
+
+/// Source of [`Preclass`] ids (tables remember which classification they were built for).
+static PRECLASS_IDS: AtomicU64 = AtomicU64::new(1);
+
+/// The per-voxel classification shared by the RLE path and its brute-force reference.
+#[derive(Clone, Debug)]
+pub struct Preclass {
+    id: u64,
+    cls: Classifier,
+    /// Raw opacity of each table node (before the per-view correction).
+    alpha: Vec<f32>,
+    /// `ln(1 − α)` of each node (−∞ for α = 1), for the per-view correction.
+    ln_clear: Vec<f32>,
+    /// Colour of each node.
+    rgb: Vec<[f32; 3]>,
+    /// `1 / spacing` per object axis (voxel-space gradient → object space).
+    inv_spacing: [f32; 3],
+}
+
+impl Preclass {
+    /// The classification of `cls` for a volume with voxel `spacing`.
+    pub fn new(cls: &Classifier, spacing: [f32; 3]) -> Self {
+        let nodes: Vec<_> = (0..TABLE_NODES).map(|i| cls.raw_node(i)).collect();
+        Preclass {
+            id: PRECLASS_IDS.fetch_add(1, Ordering::Relaxed),
+            cls: cls.clone(),
+            alpha: nodes.iter().map(|n| n.a).collect(),
+            ln_clear: nodes.iter().map(|n| (1.0 - n.a).ln()).collect(),
+            rgb: nodes.iter().map(|n| [n.r, n.g, n.b]).collect(),
+            inv_spacing: spacing.map(|s| 1.0 / s),
+        }
+    }
+
+    /// The classifier this classification quantizes to.
+    pub fn classifier(&self) -> &Classifier {
+        &self.cls
+    }
+
+    /// Voxel `(i, j, k)` of `stack`, or `None` when it is transparent.
+    #[inline]
+    pub fn classify_voxel(&self, stack: &SliceStack, i: usize, j: usize, k: usize) -> Option<RleVoxel> {
+        let node = self.cls.nearest_node(stack.at(i, j, k));
+        if !(self.alpha[node] > 0.0) {
+            return None;
+        }
+        let g = stack.gradient_at(i, j, k);
+        let perm = permutation(stack.axis);
+        let mut w = [0f32; 3];
+        for c in 0..3 {
+            w[perm[c]] = g[c] * self.inv_spacing[perm[c]];
+        }
+        Some(RleVoxel { class: node as u16, normal: encode_normal(w) })
+    }
+
+    /// Raw opacity of a voxel (before the per-view correction).
+    pub fn opacity(&self, v: RleVoxel) -> f32 {
+        self.alpha[v.class as usize]
+    }
+
+    /// Unshaded colour of a voxel.
+    pub fn color(&self, v: RleVoxel) -> [f32; 3] {
+        self.rgb[v.class as usize]
+    }
+}
+
+/// One principal axis of the volume, run-length encoded.
+#[derive(Clone, Debug)]
+pub struct RleVolume {
+    /// Principal axis (0 = x, 1 = y, 2 = z).
+    pub axis: usize,
+    /// Sizes along `(i, j, k)`.
+    pub n: [usize; 3],
+    /// Run lengths: per scanline `(transparent, non-transparent)` pairs.
+    runs: Vec<u16>,
+    /// Scanline `s = j + nj·k` owns `runs[scan_runs[s]..scan_runs[s + 1]]`.
+    scan_runs: Vec<u32>,
+    /// ... and `voxels[scan_voxels[s]..scan_voxels[s + 1]]`.
+    scan_voxels: Vec<u32>,
+    /// The non-transparent voxels, scanline by scanline, in `i` order.
+    voxels: Vec<RleVoxel>,
+    /// Per slice, the bounding box `[i0, i1, j0, j1]` (inclusive) of its
+    /// non-transparent voxels; `i0 > i1` when the slice is empty.
+    bbox: Vec<[u32; 4]>,
+}
+
+/// One slice's part of an encoding (built in parallel, then concatenated).
+struct SliceRuns {
+    runs: Vec<u16>,
+    voxels: Vec<RleVoxel>,
+    /// Per scanline: end of its runs and voxels (relative to the slice).
+    ends: Vec<(u32, u32)>,
+    bbox: [u32; 4],
+}
+
+impl RleVolume {
+    /// Encodes `stack` (one principal axis) under classification `pre`, in
+    /// parallel over slices (on the current rayon pool).
+    pub fn encode(stack: &SliceStack, pre: &Preclass) -> Self {
+        let [ni, nj, nk] = stack.n;
+        let slices: Vec<SliceRuns> = (0..nk)
+            .into_par_iter()
+            .map(|k| {
+                let mut s =
+                    SliceRuns { runs: Vec::new(), voxels: Vec::new(), ends: Vec::with_capacity(nj), bbox: [u32::MAX, 0, u32::MAX, 0] };
+                for j in 0..nj {
+                    // `gap` is where the current transparent run began
+                    let (mut gap, mut run): (usize, Option<usize>) = (0, None);
+                    for i in 0..ni {
+                        match pre.classify_voxel(stack, i, j, k) {
+                            Some(v) => {
+                                run.get_or_insert(i);
+                                s.voxels.push(v);
+                            }
+                            None => {
+                                if let Some(start) = run.take() {
+                                    s.push_pair(start - gap, i - start, start, i - 1, j);
+                                    gap = i;
+                                }
+                            }
+                        }
+                    }
+                    if let Some(start) = run {
+                        s.push_pair(start - gap, ni - start, start, ni - 1, j);
+                    }
+                    s.ends.push((s.runs.len() as u32, s.voxels.len() as u32));
+                }
+                s
+            })
+            .collect();
+        let total_runs: usize = slices.iter().map(|s| s.runs.len()).sum();
+        let total_voxels: usize = slices.iter().map(|s| s.voxels.len()).sum();
+        let mut rle = RleVolume {
+            axis: stack.axis,
+            n: stack.n,
+            runs: Vec::with_capacity(total_runs),
+            scan_runs: Vec::with_capacity(nj * nk + 1),
+            scan_voxels: Vec::with_capacity(nj * nk + 1),
+            voxels: Vec::with_capacity(total_voxels),
+            bbox: Vec::with_capacity(nk),
+        };
+        rle.scan_runs.push(0);
+        rle.scan_voxels.push(0);
+        for s in slices {
+            // run and voxel counts fit u32: the volume has at most 2^30 voxels
+            let (r0, v0) = (rle.runs.len() as u32, rle.voxels.len() as u32);
+            rle.scan_runs.extend(s.ends.iter().map(|e| r0 + e.0));
+            rle.scan_voxels.extend(s.ends.iter().map(|e| v0 + e.1));
+            rle.runs.extend_from_slice(&s.runs);
+            rle.voxels.extend_from_slice(&s.voxels);
+            rle.bbox.push(s.bbox);
+        }
+        rle
+    }
+
+    /// Bytes held by the encoding.
+    pub fn bytes(&self) -> usize {
+        self.runs.len() * 2 + (self.scan_runs.len() + self.scan_voxels.len()) * 4 + self.voxels.len() * 4 + self.bbox.len() * 16
+    }
+
+    /// Number of non-transparent voxels stored.
+    pub fn voxel_count(&self) -> usize {
+        self.voxels.len()
+    }
+
+    /// Number of non-transparent runs.
+    pub fn run_count(&self) -> usize {
+        self.runs.len() / 2
+    }
+
+    /// The `(transparent, non-transparent)` run-length pairs of scanline `(j, k)`.
+    pub fn scanline_runs(&self, j: usize, k: usize) -> &[u16] {
+        let s = j + self.n[1] * k;
+        &self.runs[self.scan_runs[s] as usize..self.scan_runs[s + 1] as usize]
+    }
+
+    /// Decodes scanline `(j, k)`: its non-transparent voxels with their `i`.
+    pub fn decode_scanline(&self, j: usize, k: usize) -> impl Iterator<Item = (usize, RleVoxel)> + '_ {
+        let s = j + self.n[1] * k;
+        let vox = &self.voxels[self.scan_voxels[s] as usize..self.scan_voxels[s + 1] as usize];
+        let mut pos = 0usize;
+        let mut next = 0usize;
+        self.scanline_runs(j, k).chunks_exact(2).flat_map(move |pair| {
+            let start = pos + pair[0] as usize;
+            let len = pair[1] as usize;
+            pos = start + len;
+            let first = next;
+            next += len;
+            (0..len).map(move |t| (start + t, vox[first + t]))
+        })
+    }
+
+    /// A run cursor at the start of scanline `s = j + nj·k`.
+    #[inline(always)]
+    fn cursor(&self, s: usize) -> Cursor<'_> {
+        let runs = &self.runs[self.scan_runs[s] as usize..self.scan_runs[s + 1] as usize];
+        let vox = &self.voxels[self.scan_voxels[s] as usize..self.scan_voxels[s + 1] as usize];
+        Cursor::new(runs, vox)
+    }
+
+    /// The rectangle of the intermediate grid this view can write: the union over
+    /// slices of the pixels whose cell touches a non-transparent voxel.
+    pub fn rect(&self, params: &SliceParams, pad: usize, grid: [usize; 2]) -> Option<Rect> {
+        let [ni, nj, _] = self.n;
+        if ni < 2 || nj < 2 {
+            return None;
+        }
+        let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
+        for (k, b) in self.bbox.iter().enumerate() {
+            if b[0] > b[1] {
+                continue;
+            }
+            // voxel v touches cells v − 1 and v
+            let span = [(b[0], b[1], ni), (b[2], b[3], nj)];
+            for (a, &(v0, v1, n)) in span.iter().enumerate() {
+                let off = pad as i64 - params.floor[a][k] as i64;
+                lo[a] = lo[a].min((v0 as i64 - 1).max(0) + off);
+                hi[a] = hi[a].max((v1 as i64).min(n as i64 - 2) + off);
+            }
+        }
+        if lo[0] > hi[0] {
+            return None;
+        }
+        let clamp = |x: i64, a: usize| x.clamp(0, grid[a] as i64 - 1) as usize;
+        Some(Rect { p0: clamp(lo[0], 0), p1: clamp(hi[0], 0), q0: clamp(lo[1], 1), q1: clamp(hi[1], 1) })
+    }
+}
+
+impl SliceRuns {
+    /// Appends a pair: `gap` transparent voxels, then `len` non-transparent ones
+    /// spanning `i0..=i1` of row `j` (scanlines are at most 2^14 long, so u16 fits).
+    fn push_pair(&mut self, gap: usize, len: usize, i0: usize, i1: usize, j: usize) {
+        self.runs.push(gap as u16);
+        self.runs.push(len as u16);
+        let b = &mut self.bbox;
+        b[0] = b[0].min(i0 as u32);
+        b[1] = b[1].max(i1 as u32);
+        b[2] = b[2].min(j as u32);
+        b[3] = b[3].max(j as u32);
+    }
+}
+
+/// Walks the non-transparent runs of one scanline with a monotone column.
+#[derive(Clone, Copy)]
+struct Cursor<'a> {
+    runs: &'a [u16],
+    vox: &'a [RleVoxel],
+    /// Next pair to read.
+    r: usize,
+    /// Current non-transparent run `[s, e)` (`INF` past the last one) ...
+    s: u32,
+    e: u32,
+    /// ... whose first voxel is `vox[v]`.
+    v: u32,
+}
+
+impl<'a> Cursor<'a> {
+    #[inline(always)]
+    fn new(runs: &'a [u16], vox: &'a [RleVoxel]) -> Self {
+        let mut c = Cursor { runs, vox, r: 0, s: 0, e: 0, v: 0 };
+        c.next_run();
+        c
+    }
+
+    #[inline(always)]
+    fn next_run(&mut self) {
+        self.v += self.e - self.s;
+        if self.r + 1 < self.runs.len() {
+            self.s = self.e + self.runs[self.r] as u32;
+            self.e = self.s + self.runs[self.r + 1] as u32;
+            self.r += 2;
+        } else {
+            self.s = INF;
+            self.e = INF;
+        }
+    }
+
+    /// Moves to the run containing or following column `x` (`x` never decreases).
+    #[inline(always)]
+    fn seek(&mut self, x: u32) {
+        while self.e <= x {
+            self.next_run();
+        }
+    }
+
+    /// First non-transparent column at or after `x` (after `seek(x)`).
+    #[inline(always)]
+    fn first_from(&self, x: u32) -> u32 {
+        self.s.max(x)
+    }
+
+    /// The voxel at column `x` (after `seek(x)`), `None` if transparent.
+    #[inline(always)]
+    fn at(&self, x: u32) -> Option<RleVoxel> {
+        if x >= self.s { Some(self.vox[(self.v + (x - self.s)) as usize]) } else { None }
+    }
+}
+
+/// The per-view lookup tables of the pre-classified paths.
+#[derive(Clone, Debug, Default)]
+pub struct ViewTables {
+    /// Per class node: opacity-corrected premultiplied colour `[α'r, α'g, α'b, α']`.
+    lut: Vec<[f32; 4]>,
+    /// Per normal code: `[ambient + diffuse·ndl, specular·ndl^shininess]`.
+    shade: Vec<[f32; 2]>,
+    lut_key: Option<(u64, u32)>,
+    shade_key: Option<([u32; 3], Shading)>,
+}
+
+impl ViewTables {
+    /// Brings the tables up to date for classification `pre`, sample-spacing
+    /// `ratio`, object-space headlight direction `light` and material `shading`;
+    /// rebuilds only what changed. Returns true if anything was rebuilt.
+    pub fn update(&mut self, pre: &Preclass, ratio: f32, light: [f32; 3], shading: Shading) -> bool {
+        let ratio = if ratio.is_finite() && ratio > 0.0 { ratio } else { 1.0 };
+        let mut rebuilt = false;
+        let lut_key = Some((pre.id, ratio.to_bits()));
+        if self.lut_key != lut_key {
+            self.lut.resize(TABLE_NODES, [0.0; 4]);
+            for (i, out) in self.lut.iter_mut().enumerate() {
+                let a = pre.alpha[i];
+                // α' = 1 − (1 − α)^ratio = 1 − exp(ratio · ln(1 − α))
+                let a = if a <= 0.0 || a >= 1.0 || ratio == 1.0 { a.clamp(0.0, 1.0) } else { 1.0 - (ratio * pre.ln_clear[i]).exp() };
+                let c = pre.rgb[i];
+                *out = [a * c[0], a * c[1], a * c[2], a];
+            }
+            self.lut_key = lut_key;
+            rebuilt = true;
+        }
+        let shade_key = Some((light.map(f32::to_bits), shading));
+        if self.shade_key != shade_key {
+            self.shade.resize(NORMAL_CODES, [0.0; 2]);
+            self.shade.par_chunks_mut(256 * 16).enumerate().for_each(|(c, chunk)| {
+                for (r, row) in chunk.chunks_mut(256).enumerate() {
+                    shade_row(row, (c * 16 + r) as f32, light, &shading);
+                }
+            });
+            // a zero gradient faces the viewer
+            self.shade[ZERO_NORMAL as usize] = shade_entry(1.0, 1.0, &shading);
+            self.shade_key = shade_key;
+            rebuilt = true;
+        }
+        rebuilt
+    }
+
+    /// Shaded, opacity-corrected, premultiplied colour of a voxel.
+    #[inline(always)]
+    pub fn voxel(&self, v: RleVoxel) -> [f32; 4] {
+        let c = self.lut[v.class as usize];
+        let [d, s] = self.shade[v.normal as usize];
+        let as_ = c[3] * s;
+        [c[0] * d + as_, c[1] * d + as_, c[2] * d + as_, c[3]]
+    }
+
+    /// [`ViewTables::voxel`], transparent black for `None`.
+    #[inline(always)]
+    fn get(&self, v: Option<RleVoxel>) -> [f32; 4] {
+        match v {
+            Some(v) => self.voxel(v),
+            None => [0.0; 4],
+        }
+    }
+}
+
+#[inline(always)]
+fn shade_entry(ndl: f32, pow: f32, sh: &Shading) -> [f32; 2] {
+    [sh.ambient + sh.diffuse * ndl, sh.specular * pow]
+}
+
+/// Shade-table row `v` (codes `u + 256·v`): plain loops over the row so they vectorize.
+fn shade_row(out: &mut [[f32; 2]], v: f32, l: [f32; 3], sh: &Shading) {
+    let mut ndl = [0f32; 256];
+    for (u, n) in ndl.iter_mut().enumerate() {
+        let d = oct_dir(u as f32, v);
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        *n = ((d[0] * l[0] + d[1] * l[1] + d[2] * l[2]).abs() / len).min(1.0);
+    }
+    // ndl^shininess by repeated squaring, one exponent bit at a time for the whole row
+    let mut pow = [1f32; 256];
+    let mut base = ndl;
+    let mut e = sh.shininess.unsigned_abs();
+    while e > 0 {
+        if e & 1 == 1 {
+            for (p, b) in pow.iter_mut().zip(&base) {
+                *p *= b;
+            }
+        }
+        e >>= 1;
+        if e > 0 {
+            for b in base.iter_mut() {
+                *b *= *b;
+            }
+        }
+    }
+    if sh.shininess < 0 {
+        for p in pow.iter_mut() {
+            *p = 1.0 / *p;
+        }
+    }
+    for ((o, &n), &p) in out.iter_mut().zip(&ndl).zip(&pow) {
+        *o = shade_entry(n, p, sh);
+    }
+}
+
+/// The headlight direction (towards the viewer) in object space for view `f`.
+pub fn headlight_object(f: &Factorization) -> [f32; 3] {
+    // grad_to_eye_z[c] = R[2][perm[c]] · grad_scale[c]
+    let mut l = [0f32; 3];
+    for c in 0..3 {
+        l[f.perm[c]] = (f.grad_to_eye_z[c] / f.grad_scale[c]) as f32;
+    }
+    l
+}
+
+/// Weights of the cell's voxels `(ci, cj)`, `(ci + 1, cj)`, `(ci, cj + 1)`, `(ci + 1, cj + 1)`.
+#[inline(always)]
+fn cell_weights(wi: f32, wj: f32) -> [f32; 4] {
+    [(1.0 - wi) * (1.0 - wj), wi * (1.0 - wj), (1.0 - wi) * wj, wi * wj]
+}
+
+/// The bilinear blend of four premultiplied voxels (both paths use exactly this).
+#[inline(always)]
+fn blend(c00: [f32; 4], c10: [f32; 4], c01: [f32; 4], c11: [f32; 4], w: [f32; 4]) -> [f32; 4] {
+    let mut s = [0f32; 4];
+    for c in 0..4 {
+        s[c] = c00[c] * w[0] + c10[c] * w[1] + c01[c] * w[2] + c11[c] * w[3];
+    }
+    s
+}
+
+/// First pixel at or after `x` that is not opaque, compressing the path.
+///
+/// `links[x] == 0` means pixel `x` is not opaque; otherwise `x + links[x]` is a
+/// pixel further on to continue from. The row's last entry is a sentinel that
+/// never becomes opaque, so the walk always ends.
+#[inline(always)]
+fn find(links: &mut [u32], x: usize) -> usize {
+    if links[x] == 0 {
+        return x;
+    }
+    let mut y = x;
+    while links[y] != 0 {
+        y += links[y] as usize;
+    }
+    // every pixel on the way now points straight at y
+    let mut z = x;
+    while z != y {
+        let next = z + links[z] as usize;
+        links[z] = (y - z) as u32;
+        z = next;
+    }
+    y
+}
+
+/// Composites slice `k`'s cells between scanlines `bot` (row `cj`) and `top`
+/// (row `cj + 1`) into one intermediate row: pixel `x = ci + off` for cell
+/// columns `ci` in `[ci_lo, ci_hi]`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn composite_row(
+    mut bot: Cursor,
+    mut top: Cursor,
+    ci_lo: u32,
+    ci_hi: u32,
+    off: isize,
+    w: [f32; 4],
+    t: &ViewTables,
+    ert: f32,
+    px: &mut [[f32; 4]],
+    links: &mut [u32],
+) {
+    let mut ci = ci_lo;
+    loop {
+        // skip opaque pixels through the links
+        let x = find(links, (ci as isize + off) as usize);
+        ci = (x as isize - off) as u32;
+        if ci > ci_hi {
+            return;
+        }
+        // skip transparent voxels: pixel ci reads columns ci and ci + 1 of both scanlines
+        bot.seek(ci);
+        top.seek(ci);
+        let nx = bot.first_from(ci).min(top.first_from(ci));
+        if nx > ci + 1 {
+            if nx == INF || nx - 1 > ci_hi {
+                return;
+            }
+            ci = nx - 1;
+            continue;
+        }
+        // a span of pixels touching non-transparent voxels; the right column of one
+        // pixel is the left column of the next, so each voxel is shaded once per row
+        let (vb, vt) = (bot.at(ci), top.at(ci));
+        let (mut lb, mut lt, mut left_any) = (t.get(vb), t.get(vt), vb.is_some() || vt.is_some());
+        loop {
+            let x = (ci as isize + off) as usize;
+            if links[x] != 0 {
+                break; // opaque: back to the links
+            }
+            let c1 = ci + 1;
+            bot.seek(c1);
+            top.seek(c1);
+            let (vb, vt) = (bot.at(c1), top.at(c1));
+            let right_any = vb.is_some() || vt.is_some();
+            if !left_any && !right_any {
+                break; // all four voxels transparent: back to run skipping
+            }
+            let (rb, rt) = (t.get(vb), t.get(vt));
+            let acc = &mut px[x];
+            composite_premultiplied(acc, blend(lb, rb, lt, rt, w));
+            if !(acc[3] < ert) {
+                links[x] = 1;
+            }
+            (lb, lt, left_any) = (rb, rt, right_any);
+            ci = c1;
+            if ci > ci_hi {
+                return;
+            }
+        }
+    }
+}
+
+/// Clears `rect`'s part of the intermediate rows in `px` / `depth` (row stride `gw`).
+fn clear_rows(px: &mut [[f32; 4]], depth: &mut [f32], gw: usize, r: &Rect) {
+    for (row, drow) in px.chunks_mut(gw).zip(depth.chunks_mut(gw)) {
+        row[r.p0..=r.p1].fill([0.0; 4]);
+        drow[r.p0..=r.p1].fill(f32::NAN);
+    }
+}
+
+/// Slice indices front to back.
+fn front_to_back(nk: usize, ascending: bool) -> impl Iterator<Item = usize> {
+    (0..nk).map(move |s| if ascending { s } else { nk - 1 - s })
+}
+
+/// Composites `rle` into `rect` of the intermediate image (every pixel of `rect`
+/// written, transparent where nothing composited; depth NaN) and seals it.
+/// `links` is scratch space, grown as needed and reused across frames.
+#[allow(clippy::too_many_arguments)]
+pub fn render_rle(
+    rle: &RleVolume,
+    tables: &ViewTables,
+    params: &SliceParams,
+    pad: usize,
+    ascending: bool,
+    ert: f32,
+    rect: Option<Rect>,
+    links: &mut Vec<u32>,
+    out: &mut Intermediate,
+) {
+    out.seal(rect);
+    let Some(r) = rect else { return };
+    let [ni, nj, nk] = rle.n;
+    let gw = out.size[0];
+    let width = r.p1 - r.p0 + 1;
+    let lw = width + 1; // links per row, with the sentinel
+    let rows = r.q1 - r.q0 + 1;
+    if links.len() < rows * lw {
+        links.resize(rows * lw, 0);
+    }
+    let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
+    let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];
+    let bands = px.par_chunks_mut(gw * BAND).zip(depth.par_chunks_mut(gw * BAND)).zip(links[..rows * lw].par_chunks_mut(lw * BAND));
+    bands.enumerate().for_each(|(b, ((px, depth), links))| {
+        clear_rows(px, depth, gw, &r);
+        links.fill(0);
+        // nothing composites when even an empty pixel counts as terminated
+        if !(ert > 0.0) {
+            return;
+        }
+        let q_first = r.q0 + b * BAND;
+        let nrows = px.len() / gw;
+        let all_done = (1u64 << nrows) - 1;
+        let mut done = 0u64; // rows whose pixels are all opaque
+        for k in front_to_back(nk, ascending) {
+            let bb = rle.bbox[k];
+            if bb[0] > bb[1] {
+                continue;
+            }
+            let w = cell_weights(params.weight[0][k], params.weight[1][k]);
+            // cell column ci lands on pixel ci + op (row-relative: ci + off)
+            let op = pad as isize - params.floor[0][k] as isize;
+            let off = op - r.p0 as isize;
+            // cells of the rect that touch the slice's non-transparent box
+            let ci_lo = (r.p0 as isize - op).max(bb[0] as isize - 1).max(0);
+            let ci_hi = (r.p1 as isize - op).min(bb[1] as isize).min(ni as isize - 2);
+            if ci_lo > ci_hi {
+                continue;
+            }
+            let fj = params.floor[1][k] as isize;
+            for row in 0..nrows {
+                if done & (1 << row) != 0 {
+                    continue;
+                }
+                let cj = (q_first + row) as isize - pad as isize + fj;
+                if cj < 0 || cj > nj as isize - 2 || cj + 1 < bb[2] as isize || cj > bb[3] as isize {
+                    continue;
+                }
+                let lrow = &mut links[row * lw..(row + 1) * lw];
+                if find(lrow, 0) == width {
+                    done |= 1 << row;
+                    continue;
+                }
+                let s = cj as usize + nj * k;
+                let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
+                composite_row(rle.cursor(s), rle.cursor(s + 1), ci_lo as u32, ci_hi as u32, off, w, tables, ert, prow, lrow);
+            }
+            if done == all_done {
+                break;
+            }
+        }
+    });
+}
+
+/// The reference for [`render_rle`]: slice by slice, front to back, every voxel
+/// of the slice is classified from the densities into `slice_buf` (reused), then
+/// every pixel of `rect` whose opacity is below `ert` composites its cell's
+/// sample. No runs, no links; same positions, weights and arithmetic.
+#[allow(clippy::too_many_arguments)]
+pub fn render_brute_preclassified(
+    stack: &SliceStack,
+    pre: &Preclass,
+    tables: &ViewTables,
+    params: &SliceParams,
+    pad: usize,
+    ascending: bool,
+    ert: f32,
+    rect: Option<Rect>,
+    slice_buf: &mut Vec<[f32; 4]>,
+    out: &mut Intermediate,
+) {
+    out.seal(rect);
+    let Some(r) = rect else { return };
+    let [ni, nj, nk] = stack.n;
+    let gw = out.size[0];
+    let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
+    let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];
+    px.par_chunks_mut(gw).zip(depth.par_chunks_mut(gw)).for_each(|(p, d)| clear_rows(p, d, gw, &r));
+    slice_buf.resize(ni * nj, [0.0; 4]);
+    for k in front_to_back(nk, ascending) {
+        slice_buf.par_chunks_mut(ni).enumerate().for_each(|(j, row)| {
+            for (i, c) in row.iter_mut().enumerate() {
+                *c = tables.get(pre.classify_voxel(stack, i, j, k));
+            }
+        });
+        let buf = &slice_buf[..];
+        let w = cell_weights(params.weight[0][k], params.weight[1][k]);
+        let (fi, fj) = (params.floor[0][k] as isize, params.floor[1][k] as isize);
+        px.par_chunks_mut(gw).enumerate().for_each(|(row, prow)| {
+            let cj = (r.q0 + row) as isize - pad as isize + fj;
+            if cj < 0 || cj > nj as isize - 2 {
+                return;
+            }
+            for p in r.p0..=r.p1 {
+                let ci = p as isize - pad as isize + fi;
+                if ci < 0 || ci > ni as isize - 2 {
+                    continue;
+                }
+                let acc = &mut prow[p];
+                if !(acc[3] < ert) {
+                    continue;
+                }
+                let b = ci as usize + ni * cj as usize;
+                composite_premultiplied(acc, blend(buf[b], buf[b + 1], buf[b + ni], buf[b + ni + 1], w));
+            }
+        });
+    }
+}
+
+/// What a [`RleCache`]'s encodings were built for (chosen by the owner).
+pub type ClassKey = u64;
+
+/// A renderer's pre-classified state: the classification, the encodings of the
+/// axes views have needed so far, the per-view tables and the scratch buffers.
+#[derive(Debug, Default)]
+pub struct RleCache {
+    key: Option<ClassKey>,
+    pre: Option<Preclass>,
+    axes: [Option<RleVolume>; 3],
+    tables: ViewTables,
+    links: Vec<u32>,
+    slice_buf: Vec<[f32; 4]>,
+}
+
+impl RleCache {
+    /// An empty cache.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// True when the cache holds classification `key`.
+    pub fn is_for(&self, key: ClassKey) -> bool {
+        self.key == Some(key)
+    }
+
+    /// Adopts classification `cls` under `key`, dropping every encoding.
+    pub fn reset(&mut self, key: ClassKey, cls: &Classifier, spacing: [f32; 3]) {
+        self.key = Some(key);
+        self.pre = Some(Preclass::new(cls, spacing));
+        self.axes = [None, None, None];
+    }
+
+    /// The classification (after [`RleCache::reset`]).
+    pub fn preclass(&self) -> Option<&Preclass> {
+        self.pre.as_ref()
+    }
+
+    /// The encoding of `axis`, if built.
+    pub fn axis(&self, axis: usize) -> Option<&RleVolume> {
+        self.axes[axis].as_ref()
+    }
+
+    /// Encodes `stack`'s axis unless it is already encoded (on the current rayon
+    /// pool). Returns true if it encoded; false also when there is no classification.
+    pub fn ensure_axis(&mut self, stack: &SliceStack) -> bool {
+        let Some(pre) = &self.pre else { return false };
+        if self.axes[stack.axis].is_some() {
+            return false;
+        }
+        self.axes[stack.axis] = Some(RleVolume::encode(stack, pre));
+        true
+    }
+
+    /// Bytes of each axis's encoding (0 where not built).
+    pub fn bytes(&self) -> [usize; 3] {
+        [0, 1, 2].map(|a| self.axes[a].as_ref().map_or(0, RleVolume::bytes))
+    }
+
+    /// Brings the per-view tables up to date (see [`ViewTables::update`]).
+    pub fn prepare_view(&mut self, f: &Factorization, ratio: f32, shading: Shading) -> bool {
+        match &self.pre {
+            Some(pre) => self.tables.update(pre, ratio, headlight_object(f), shading),
+            None => false,
+        }
+    }
+
+    /// The rectangle [`RleCache::render`] writes for view `f` (None if the axis
+    /// is not encoded or nothing is visible).
+    pub fn rect(&self, f: &Factorization, params: &SliceParams, pad: usize, grid: [usize; 2]) -> Option<Rect> {
+        self.axes[f.axis].as_ref()?.rect(params, pad, grid)
+    }
+
+    /// Composites view `f` from the encoding of its axis (see [`render_rle`]);
+    /// an axis that is not encoded renders transparent.
+    pub fn render(&mut self, f: &Factorization, params: &SliceParams, pad: usize, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
+        match &self.axes[f.axis] {
+            Some(rle) => render_rle(rle, &self.tables, params, pad, f.ascending, ert, rect, &mut self.links, out),
+            None => out.seal(None),
+        }
+    }
+
+    /// The brute-force pre-classified reference of view `f` over `rect` (see
+    /// [`render_brute_preclassified`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_brute(
+        &mut self,
+        stack: &SliceStack,
+        f: &Factorization,
+        params: &SliceParams,
+        pad: usize,
+        ert: f32,
+        rect: Option<Rect>,
+        out: &mut Intermediate,
+    ) {
+        match &self.pre {
+            Some(pre) => {
+                render_brute_preclassified(stack, pre, &self.tables, params, pad, f.ascending, ert, rect, &mut self.slice_buf, out)
+            }
+            None => out.seal(None),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn octahedral_codes_are_within_a_degree() {
+        let mut seed = 99u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f32 / (1u64 << 53) as f32 * 2.0 - 1.0
+        };
+        let mut worst = 0f32;
+        for _ in 0..100_000 {
+            let g = [rnd(), rnd(), rnd()];
+            let len = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+            let code = encode_normal(g);
+            assert_ne!(code, ZERO_NORMAL);
+            let n = decode_normal(code).unwrap();
+            let cos = (n[0] * g[0] + n[1] * g[1] + n[2] * g[2]) / len;
+            worst = worst.max(cos.clamp(-1.0, 1.0).acos().to_degrees());
+        }
+        assert!(worst < 1.0, "worst angle {worst}°");
+        // axes and poles
+        for g in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]] {
+            let n = decode_normal(encode_normal(g)).unwrap();
+            assert!((0..3).all(|c| (n[c] - g[c]).abs() < 1e-2), "{g:?} → {n:?}");
+        }
+        assert_eq!(encode_normal([0.0; 3]), ZERO_NORMAL);
+        assert_eq!(encode_normal([f32::NAN, 0.0, 1.0]), ZERO_NORMAL);
+    }
+
+    #[test]
+    fn shade_table_matches_the_shading_model() {
+        let sh = Shading::default();
+        let l = [0.36f32, -0.48, 0.8];
+        let mut out = vec![[0.0; 2]; 256];
+        for v in [0u16, 17, 128, 255] {
+            shade_row(&mut out, v as f32, l, &sh);
+            for u in 0..256u16 {
+                let code = u | (v << 8);
+                let Some(n) = decode_normal(code) else { continue };
+                let ndl = (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).abs().min(1.0);
+                let want = shade_entry(ndl, ndl.powi(sh.shininess), &sh);
+                let got = out[u as usize];
+                assert!((got[0] - want[0]).abs() < 1e-5 && (got[1] - want[1]).abs() < 1e-5, "{code}: {got:?} vs {want:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn links_compress_paths() {
+        let mut links = vec![0u32; 11];
+        for x in [2, 3, 4, 5, 7, 8] {
+            links[x] = 1;
+        }
+        assert_eq!(find(&mut links, 0), 0);
+        assert_eq!(find(&mut links, 2), 6);
+        assert_eq!(links[2], 4);
+        assert_eq!(links[3], 3);
+        assert_eq!(find(&mut links, 7), 9);
+        // 6 becomes opaque: 2 → 6 → 7 → 9
+        links[6] = 1;
+        assert_eq!(find(&mut links, 2), 9);
+        assert_eq!(links[2], 7);
+        links[9] = 1;
+        assert_eq!(find(&mut links, 0), 0);
+        assert_eq!(find(&mut links, 3), 10);
+    }
+
+    #[test]
+    fn cursor_walks_runs() {
+        // columns 2..4 and 7..8 non-transparent
+        let runs = [2u16, 2, 3, 1];
+        let vox: Vec<RleVoxel> = (0..3).map(|c| RleVoxel { class: c, normal: 0 }).collect();
+        let mut c = Cursor::new(&runs, &vox);
+        let mut got = vec![];
+        for x in 0..10 {
+            c.seek(x);
+            got.push(c.at(x).map(|v| v.class));
+            if x == 4 {
+                assert_eq!(c.first_from(x), 7);
+            }
+        }
+        assert_eq!(got, [None, None, Some(0), Some(1), None, None, None, Some(2), None, None]);
+        c.seek(50);
+        assert_eq!(c.first_from(50), INF);
+    }
+}

@@ -18,11 +18,85 @@
 //! with rayon, and is defined in normalised coordinates so that it looks the
 //! same at every resolution.
 
+use std::fmt;
+use std::str::FromStr;
+
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::volume::{Volume, VoxelData, check_dims};
+
+// ---------------------------------------------------------------------------
+// Phantom selector
+// ---------------------------------------------------------------------------
+
+/// One of the built-in phantoms.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Phantom {
+    /// The CT head of [`head`] (Hounsfield units, `i16`).
+    Head,
+    /// The analytic ball of [`sphere`] (`f32`).
+    Sphere,
+    /// The Marschner–Lobb signal of [`marschner_lobb`] (`f32`).
+    MarschnerLobb,
+}
+
+impl Phantom {
+    /// Every phantom, in a stable order.
+    pub const ALL: [Phantom; 3] = [Phantom::Head, Phantom::Sphere, Phantom::MarschnerLobb];
+
+    /// Parses `head`, `sphere`, `marschner-lobb` (also `marschner_lobb`,
+    /// `marschnerlobb` and `ml`), ignoring case and surrounding blanks.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "head" => Ok(Phantom::Head),
+            "sphere" => Ok(Phantom::Sphere),
+            "marschner-lobb" | "marschner_lobb" | "marschnerlobb" | "ml" => Ok(Phantom::MarschnerLobb),
+            other => Err(Error::value("phantom", format!("'{other}' (expected head, sphere or marschner-lobb)"))),
+        }
+    }
+
+    /// The canonical name: `head`, `sphere` or `marschner-lobb`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Phantom::Head => "head",
+            Phantom::Sphere => "sphere",
+            Phantom::MarschnerLobb => "marschner-lobb",
+        }
+    }
+
+    /// The default grid size: head 128×128×113, sphere 128³, Marschner–Lobb 41³.
+    pub fn default_dims(self) -> [usize; 3] {
+        match self {
+            Phantom::Head => [128, 128, 113],
+            Phantom::Sphere => [128, 128, 128],
+            Phantom::MarschnerLobb => [41, 41, 41],
+        }
+    }
+
+    /// Builds the phantom at `dims` (`[nx, ny, nz]`).
+    pub fn build(self, dims: [usize; 3]) -> Result<Volume> {
+        match self {
+            Phantom::Head => head(dims),
+            Phantom::Sphere => sphere(dims),
+            Phantom::MarschnerLobb => marschner_lobb(dims),
+        }
+    }
+}
+
+impl FromStr for Phantom {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        Phantom::parse(s)
+    }
+}
+
+impl fmt::Display for Phantom {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// Checks `dims` and allocates the voxels, filling each z-slice in parallel:
 /// `fill(z, slice)` receives slice `z` (x-fastest, `nx * ny` voxels).
@@ -1282,5 +1356,29 @@ mod tests {
         assert_eq!(marschner_lobb([21, 31, 11]).unwrap().spacing(), [1.5, 1.0, 3.0]);
         assert_eq!(marschner_lobb([41, 41, 41]).unwrap().get(20, 20, 20), 0.6);
         assert!(marschner_lobb([1, 1, 1]).is_ok());
+    }
+
+    // ----- selector -----
+
+    #[test]
+    fn phantom_names_parse_and_build() {
+        assert_eq!(Phantom::parse("head").unwrap(), Phantom::Head);
+        assert_eq!(Phantom::parse(" Sphere ").unwrap(), Phantom::Sphere);
+        assert_eq!(Phantom::parse("marschner-lobb").unwrap(), Phantom::MarschnerLobb);
+        assert_eq!(Phantom::parse("ML").unwrap(), Phantom::MarschnerLobb);
+        assert_eq!("marschner_lobb".parse::<Phantom>().unwrap(), Phantom::MarschnerLobb);
+        let e = Phantom::parse("teapot").unwrap_err();
+        assert!(e.to_string().contains("teapot"), "{e}");
+        for p in Phantom::ALL {
+            assert_eq!(Phantom::parse(p.name()).unwrap(), p);
+            assert_eq!(p.to_string(), p.name());
+            let small = p.default_dims().map(|n| n / 4 + 1);
+            let v = p.build(small).unwrap();
+            assert_eq!(v.dims(), small);
+        }
+        assert_eq!(Phantom::Head.default_dims(), [128, 128, 113]);
+        assert_eq!(Phantom::Sphere.default_dims(), [128, 128, 128]);
+        assert_eq!(Phantom::MarschnerLobb.default_dims(), [41, 41, 41]);
+        assert!(Phantom::Sphere.build([0, 1, 1]).is_err());
     }
 }

@@ -750,10 +750,12 @@ impl HeadModel {
     fn new(dims: [usize; 3]) -> HeadModel {
         let anatomy = Anatomy::new();
         let frame = Frame::new(dims);
-        // Bounds are exact for the primitives; the distances are approximate,
-        // so pad generously beyond the half edge width.
+        // Bounds are exact for the primitives but the distances approximate,
+        // so pad generously beyond the half edge width, in voxels and in
+        // design units (checked by a test up to 1024³).
         let pad = EDGE_WIDTH + 2.0;
         let ranges = |shape: usize, grow: f64| -> Ranges {
+            let grow = grow + 0.03;
             let (lo, hi) = anatomy.shapes[shape].bounds();
             let (lo, hi) = (lo.to_array(), hi.to_array());
             [0, 1, 2].map(|a| frame.range(a, lo[a] - grow, hi[a] + grow, pad, dims[a]))
@@ -1187,12 +1189,15 @@ mod tests {
 
     #[test]
     fn head_is_deterministic_and_skipping_changes_nothing() {
-        for dims in [[16, 16, 16], [17, 23, 19], [64, 56, 48]] {
+        for dims in [[16, 16, 16], [17, 23, 19], [64, 56, 48], [128, 128, 113]] {
             let a = head(dims).unwrap();
             let b = head(dims).unwrap();
             assert_eq!(a, b);
-            // Reference: every shape evaluated at every voxel, serially.
-            let model = HeadModel::new(dims);
+            // Reference: every layer evaluated at every voxel, serially.
+            let mut model = HeadModel::new(dims);
+            let full = dims.map(|n| (0, n as i64 - 1));
+            model.layer_ranges.iter_mut().for_each(|r| *r = full);
+            model.skin_ranges = full;
             let slice = dims[0] * dims[1];
             let mut reference = vec![0i16; slice * dims[2]];
             for (z, s) in reference.chunks_mut(slice).enumerate() {
@@ -1201,6 +1206,41 @@ mod tests {
             let d = i16s(&a);
             let diff = d.iter().zip(&reference).filter(|(p, q)| p != q).count();
             assert_eq!(diff, 0, "{dims:?}: {diff} voxels differ from the reference");
+        }
+    }
+
+    #[test]
+    fn layer_ranges_hold_everything_a_layer_covers() {
+        // Voxels just outside a layer's (or the skin's) index range must have
+        // zero coverage, at every resolution.
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for dims in [[16, 16, 16], [40, 96, 30], [128, 128, 113], [512, 512, 512], [1024, 1024, 1024]] {
+            let m = HeadModel::new(dims);
+            let checks = m.anatomy.layers.iter().zip(&m.layer_ranges).map(|(l, r)| (l.shape, l.inset, *r));
+            for (shape, inset, r) in checks.chain([(m.anatomy.skin, 0.0, m.skin_ranges)]) {
+                for _ in 0..4000 {
+                    // A point within 6 voxels outside the range on one axis.
+                    let a = (rnd() * 3.0) as usize % 3;
+                    let mut v = [0.0; 3];
+                    for b in 0..3 {
+                        let (lo, hi) = (r[b].0 as f64, r[b].1 as f64);
+                        v[b] = lo + (hi - lo) * rnd();
+                    }
+                    let out = 1.0 + 5.0 * rnd();
+                    v[a] = if rnd() < 0.5 { r[a].0 as f64 - out } else { r[a].1 as f64 + out };
+                    if v[a] < 0.0 || v[a] > dims[a] as f64 - 1.0 {
+                        continue;
+                    }
+                    let d = m.anatomy.shapes[shape].sdf(m.frame.design(v)) + inset;
+                    assert_eq!(coverage(d * m.frame.sigma), 0.0, "{dims:?}: shape {shape} inset {inset} covers {v:?} outside {r:?}");
+                }
+            }
         }
     }
 

@@ -119,8 +119,9 @@ pub const SPHERE_ISO: f32 = 100.0;
 /// Centre and radius, in voxel units, of the sphere phantom at `dims`.
 ///
 /// The centre is the middle of the grid, `((nx−1)/2, (ny−1)/2, (nz−1)/2)`, and
-/// the radius is `R = 0.4 · min(nx, ny, nz)`, so the ball stays at least
-/// `0.1 · min(dims) − 0.5` voxels clear of every face.
+/// the radius is `R = 0.4 · min(nx, ny, nz)`, so the iso-surface stays
+/// `0.1 · min(dims) − 0.5` voxels clear of the nearest face. (The density ramp
+/// reaches 4 voxels beyond `R`, so below about 45 voxels the faces cut it.)
 pub fn sphere_geometry(dims: [usize; 3]) -> ([f64; 3], f64) {
     let centre = dims.map(|n| (n as f64 - 1.0) / 2.0);
     let min = dims.iter().copied().min().unwrap_or(0);
@@ -265,13 +266,13 @@ const EDGE_WIDTH: f64 = 1.5;
 ///
 /// The anatomy is defined in normalised coordinates and mapped onto the grid
 /// per axis, so it looks the same at every resolution and fills most of any
-/// grid (non-cubic grids stretch it), always leaving an air margin of at least
-/// two voxels (three at 128 and up to 4 % of the edge at large sizes) on every
-/// face. Contents, outside in (HU values in [`hu`]):
+/// grid (non-cubic grids stretch it). Its design box ends max(3 voxels, 2 % of
+/// the edge) inside every face, so at least two voxels of pure air (−1000)
+/// remain on every side (on grids of at least 8 voxels per edge). Contents, outside in (HU values in [`hu`]):
 ///
 /// * air (−1000) around the head;
 /// * skin (40), then a subcutaneous fat layer (−100), then muscle (50) in the
-///   face and neck;
+///   face and neck; the ears are skin only;
 /// * the skull: outer and inner cortical tables (1350) around diploë (550),
 ///   closed below by a skull base, with a thickened brow;
 /// * the brain: a thin CSF layer (5), grey matter (38) and white matter (30),
@@ -284,11 +285,21 @@ const EDGE_WIDTH: f64 = 1.5;
 ///   core 400) on discs (80), vertebral arches (900) and the spinal cord (32),
 ///   which passes through the skull base.
 ///
-/// All cavities are enclosed, so the skin (iso-value −500), the tissue below
-/// it (−200 and 0) and the skull (300) are closed surfaces, and rays cross
-/// empty space inside the head. Every tissue boundary is anti-aliased with a
-/// smooth ramp about one voxel wide computed from signed distances, so
-/// iso-surfaces are smooth rather than staircased.
+/// Every tissue boundary is anti-aliased with a smooth ramp about one voxel
+/// wide computed from signed distances, so iso-surfaces are smooth rather than
+/// staircased. The skin is an unbroken layer over everything else, so the air
+/// cavities are enclosed and rays cross empty space inside the head. What the
+/// usual thresholds show (as in a real CT):
+///
+/// * −500: the skin surface, with the sinuses, nasal cavity and airway as
+///   closed internal cavities;
+/// * −200: the same outer surface (fat, −100, lies above the threshold);
+/// * 0: again the skin outside (skin is 40), but the fat below it is now
+///   excluded, so cut views show a thin skin shell around muscle, brain and
+///   eyes; the brain (30–38) is the soft tissue inside the skull;
+/// * 300: the bone — skull, facial skeleton, mandible, teeth and vertebrae —
+///   closed apart from the anatomical openings (orbits, nasal aperture and
+///   the foramen magnum).
 ///
 /// Designed for 16³ … 512³; smaller grids work but the head becomes a blur.
 pub fn head(dims: [usize; 3]) -> Result<Volume> {
@@ -978,8 +989,7 @@ mod tests {
         }
     }
 
-    /// Checks that every voxel within `margin` of a face is air, and that the
-    /// head reaches within `margin + slack` voxels of the y and z faces.
+    /// Checks that every voxel within `margin` of a face is exactly air.
     fn assert_air_margin(v: &Volume, margin: usize) {
         let [nx, ny, nz] = v.dims();
         let edge = |i: usize, n: usize| i < margin || i + margin >= n;
@@ -997,9 +1007,12 @@ mod tests {
 
     #[test]
     fn head_leaves_an_air_margin_and_fills_the_volume() {
-        for dims in [[16, 16, 16], [17, 23, 19], [128, 128, 113], [40, 96, 30]] {
+        for dims in [[8, 9, 10], [16, 16, 16], [17, 23, 19], [128, 128, 113], [40, 96, 30]] {
             let v = head(dims).unwrap();
             assert_air_margin(&v, 2);
+            if dims[0] < 16 {
+                continue;
+            }
             // It fills most of the volume: the skin reaches within 8 % of the
             // edge (plus the margin) along y (nose, back of head) and z.
             let [nx, ny, nz] = dims;

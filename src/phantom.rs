@@ -268,7 +268,9 @@ const EDGE_WIDTH: f64 = 1.5;
 /// per axis, so it looks the same at every resolution and fills most of any
 /// grid (non-cubic grids stretch it). Its design box ends max(3 voxels, 2 % of
 /// the edge) inside every face, so at least two voxels of pure air (−1000)
-/// remain on every side (on grids of at least 8 voxels per edge). Contents, outside in (HU values in [`hu`]):
+/// remain on every side (on grids of at least 8 voxels per edge).
+///
+/// Contents, outside in (HU values in [`hu`]):
 ///
 /// * air (−1000) around the head;
 /// * skin (40), then a subcutaneous fat layer (−100), then muscle (50) in the

@@ -4,6 +4,7 @@
 //! shear-warp fast rotator (Csébfalvi 1999).
 
 pub mod error;
+pub mod phantom;
 pub mod volume;
 
 pub use error::{Error, Result};

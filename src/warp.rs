@@ -124,12 +124,14 @@ pub fn warp(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut
         // every tap of this span lies in the valid rectangle or its cleared ring,
         // whose left/top edge is at least 1, so p, q > 0 here. Coordinates step in
         // 32.32 fixed point: exact integer parts, no float→int conversion per pixel,
-        // drift below 1e-7 pixel over a row.
+        // drift below 1e-6 pixel over a row.
         let iw = inter.size[0];
         let (ih, rgba) = (inter.size[1], &inter.rgba);
         const ONE: f64 = 4_294_967_296.0;
-        let (mut p, mut q) = (((pa * u0 as f64 + pb) * ONE) as i64, ((qa * u0 as f64 + qb) * ONE) as i64);
+        // p(u) = round(pb·2³²) + u·round(pa·2³²): a function of u alone, so the same
+        // pixel gets the same coordinate whatever span (valid rectangle) it is in
         let (dp, dq) = ((pa * ONE).round() as i64, (qa * ONE).round() as i64);
+        let (mut p, mut q) = ((pb * ONE).round() as i64 + u0 as i64 * dp, (qb * ONE).round() as i64 + u0 as i64 * dq);
         for px in row[u0..u1].iter_mut() {
             let (x0, y0) = (((p >> 32) as usize).min(iw - 2), ((q >> 32) as usize).min(ih - 2));
             let fx = (p & 0xFFFF_FFFF) as f32 * (1.0 / ONE as f32);

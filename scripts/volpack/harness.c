@@ -362,6 +362,7 @@ static void usage(FILE *f)
 "  --frames-out DIR      write frames listed by --save-frames as PGM into DIR\n"
 "  --save-frames LIST    comma-separated frame indices (default 0,45)\n"
 "  --write-den FILE      write the (generated/upsampled) input volume as .den\n"
+"                        (with --frames 0: write it and exit, no VolPack work)\n"
 "  --times               also print every frame time in the JSON\n");
 }
 
@@ -483,8 +484,11 @@ int main(int argc, char **argv)
     }
     if (name)
         snprintf(vname, sizeof vname, "%s", name);
-    if (write_den_path)
+    if (write_den_path) {
         write_den(write_den_path, scalars, dims);
+        if (frames == 0) /* only the volume file was wanted */
+            return 0;
+    }
 
     /* ---- VolPack context, voxel layout ---- */
     vpContext *vpc = vpCreateContext();

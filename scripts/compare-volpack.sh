@@ -129,6 +129,7 @@ fi
 run_ours() { # run_ours DEN SIZE TF METHOD -> prints frame_ms_median
     local den=$1 size=$2 tf=$3 method=$4 mode json
     if [ "$tf" = opaque ]; then mode=iso; else mode=blend; fi
+    # 1-degree steps, so --degrees FRAMES renders FRAMES frames like VolPack
     # shellcheck disable=SC2086  # SHEARWARP_EXTRA_ARGS is a flag list
     json=$("$SHEARWARP" rotate --den "$den" --axis y --degrees "$FRAMES" --step-deg 1 \
         --size "$size" --method "$method" --mode "$mode" --threads 1 --json \

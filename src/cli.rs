@@ -37,6 +37,21 @@ impl std::fmt::Display for Usage {
 
 impl std::error::Error for Usage {}
 
+/// Prints a line to stdout; a closed pipe (`shearwarp … | head`) ends the
+/// program quietly instead of panicking like `println!`.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        if let Err(e) = writeln!(out, $($t)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            return Err(anyhow::Error::new(e).context("cannot write to standard output"));
+        }
+    }};
+}
+
 /// Returns a [`Usage`] error from the current function.
 macro_rules! usage {
     ($($t:tt)*) => {
@@ -533,7 +548,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(),
         });
-        println!("{j}");
+        say!("{j}");
     } else {
         eprintln!(
             "{name} {}×{}×{} → {} ({}×{}, {} {}, tissue {}): build {:.1} ms, shear {:.2} ms, render {:.2} ms, warp {:.2} ms",
@@ -642,9 +657,9 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             "shear_ms_median": shear, "render_ms_median": render, "warp_ms_median": warp, "frame_ms_median": frame,
             "fps": fps, "degrees_per_second": fps * step, "mask_bytes": r.mask_bytes(),
         });
-        println!("{j}");
+        say!("{j}");
     } else {
-        println!(
+        say!(
             "{name} {}×{}×{}, {}×{}, {} {} ({} words, {} search, cell {}), tissue {} (iso {}):",
             dims[0],
             dims[1],
@@ -660,11 +675,11 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             r.iso()
         );
         if !switch_ns.is_empty() {
-            println!("  {} tissue switches, median {:.0} ns each", switch_ns.len(), median(&mut switch_ns));
+            say!("  {} tissue switches, median {:.0} ns each", switch_ns.len(), median(&mut switch_ns));
         }
-        println!("  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms", frames as f64 * step);
-        println!("  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms");
-        println!("  {fps:.1} frames/s, {:.1} degrees/s", fps * step);
+        say!("  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms", frames as f64 * step);
+        say!("  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms");
+        say!("  {fps:.1} frames/s, {:.1} degrees/s", fps * step);
     }
     Ok(())
 }
@@ -685,25 +700,25 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
             "min": lo, "max": hi, "histogram": hist, "ct_hounsfield": ct,
             "tissues": tissues.iter().map(|t| serde_json::json!({"name": t.name, "threshold": t.threshold})).collect::<Vec<_>>(),
         });
-        println!("{j}");
+        say!("{j}");
         return Ok(());
     }
     let d = vol.dims();
     let sp = vol.spacing();
-    println!("{name}");
-    println!("  dims      {} × {} × {} ({} voxels, {})", d[0], d[1], d[2], vol.len(), vol.data().voxel_type().name());
-    println!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
-    println!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
-    println!("  histogram ({} bins, log scale):", cmd.bins);
+    say!("{name}");
+    say!("  dims      {} × {} × {} ({} voxels, {})", d[0], d[1], d[2], vol.len(), vol.data().voxel_type().name());
+    say!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
+    say!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
+    say!("  histogram ({} bins, log scale):", cmd.bins);
     let maxl = hist.iter().map(|&c| ((c + 1) as f64).ln()).fold(0.0, f64::max).max(1e-9);
     for (i, &c) in hist.iter().enumerate() {
         let a = lo + (hi - lo) * i as f32 / cmd.bins as f32;
         let bar = "#".repeat((((c + 1) as f64).ln() / maxl * 40.0) as usize);
-        println!("    {a:>10.1} {c:>10} {bar}");
+        say!("    {a:>10.1} {c:>10} {bar}");
     }
-    println!("  suggested tissue thresholds ({}):", if ct { "CT presets" } else { "from the histogram" });
+    say!("  suggested tissue thresholds ({}):", if ct { "CT presets" } else { "from the histogram" });
     for t in &tissues {
-        println!("    --tissue {:<5} threshold {}", t.name, t.threshold);
+        say!("    --tissue {:<5} threshold {}", t.name, t.threshold);
     }
     Ok(())
 }

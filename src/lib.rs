@@ -4,6 +4,7 @@
 //! shear-warp fast rotator (Csébfalvi 1999).
 
 pub mod error;
+pub mod io;
 pub mod volume;
 
 pub use error::{Error, Result};

@@ -297,7 +297,13 @@ fn read_header(path: &Path, r: &mut impl BufRead) -> Result<(Vec<(String, String
             if k.contains(":=") {
                 continue;
             }
-            fields.push((k.trim().to_ascii_lowercase(), v.trim().to_string()));
+            let (k, v) = (k.trim().to_ascii_lowercase(), v.trim().to_string());
+            // "data file: LIST" ends the header: the file names follow.
+            let list = (k == "data file" || k == "datafile") && v.starts_with("LIST");
+            fields.push((k, v));
+            if list {
+                break;
+            }
         } else if text.contains(":=") {
             continue;
         } else {
@@ -407,7 +413,7 @@ fn parse_fields(path: &Path, fields: &[(String, String)]) -> Result<Header> {
             "data file" => {
                 let v = value.as_str();
                 let tokens: Vec<&str> = v.split_whitespace().collect();
-                if v == "LIST" || (tokens.len() >= 4 && v.contains('%')) {
+                if v.starts_with("LIST") || (tokens.len() >= 4 && v.contains('%')) {
                     return Err(err(format!(
                         "NRRD 'data file: {}': data split over several files are not supported",
                         clip(v)

@@ -6,7 +6,9 @@
 //! Files without `DICM` at byte 128 (READMEs, ...) and DICOMDIR files are
 //! ignored; a directory holding no slice, or several series when a directory
 //! was given, is an error. Files must be DICOM Part 10 files (with the
-//! 128-byte preamble); the deflated transfer syntax is not supported.
+//! 128-byte preamble). Uncompressed transfer syntaxes and the compressed ones
+//! dicom-rs decodes natively (RLE, JPEG baseline/extended/lossless) are
+//! read; deflate and JPEG 2000 are not.
 //!
 //! Every file first passes [`check_structure`]: a walk of its element tree
 //! that proves each declared length fits inside the file and that sequences
@@ -15,7 +17,9 @@
 //!
 //! Slices are read header-only first (`read_until(PixelData)`), checked (same
 //! Rows×Columns, ImageOrientationPatient and PixelSpacing; one sample per
-//! pixel; one frame; 8, 16 or 32 bits allocated) and sorted by
+//! pixel; one frame; 8 or 16 bits allocated with 1 ≤ BitsStored ≤
+//! BitsAllocated; a compressed slice may not claim more than 1024× its file
+//! size in decoded pixels) and sorted by
 //! ImagePositionPatient · normal, where normal = row cosines × column
 //! cosines. x runs along a row (the column index), y down the columns (the
 //! row index) and z along the normal. Spacing: x = PixelSpacing\[1\] (the
@@ -50,6 +54,8 @@ use crate::volume::{Volume, VoxelData, check_dims};
 const MAX_FILE: u64 = 1 << 31;
 /// Deepest sequence nesting accepted.
 const MAX_DEPTH: u32 = 32;
+/// Largest accepted ratio of a compressed slice's decoded size to its file size.
+const MAX_EXPANSION: u64 = 1024;
 /// Media Storage SOP Class of a DICOMDIR.
 const DICOMDIR_CLASS: &str = "1.2.840.10008.1.3.10";
 
@@ -100,7 +106,7 @@ pub fn load_dicom(path: &Path) -> Result<Volume> {
             continue;
         }
         // Non-image objects (reports, presentation states) are not slices.
-        let Some(info) = slice_info(f, &obj)? else {
+        let Some(info) = slice_info(f, &obj, bytes.len() as u64)? else {
             continue;
         };
         if chosen.as_deref().is_some_and(|c| same_file(c, f)) {
@@ -115,7 +121,7 @@ pub fn load_dicom(path: &Path) -> Result<Volume> {
         let bytes = read_if_dicom(c)?
             .ok_or_else(|| Error::file(c, "not a DICOM file: no 'DICM' at byte 128"))?;
         let obj = open_object(c, &bytes, true)?;
-        let info = slice_info(c, &obj)?
+        let info = slice_info(c, &obj, bytes.len() as u64)?
             .ok_or_else(|| Error::file(c, "DICOM file has no Rows/Columns: not an image"))?;
         chosen_series = Some(info.series.clone());
         slices.push(info);
@@ -210,7 +216,7 @@ pub fn load_dicom(path: &Path) -> Result<Volume> {
         let bytes = read_if_dicom(&s.path)?
             .ok_or_else(|| Error::file(&s.path, "no longer a DICOM file"))?;
         let obj = open_object(&s.path, &bytes, false)?;
-        let now = slice_info(&s.path, &obj)?;
+        let now = slice_info(&s.path, &obj, bytes.len() as u64)?;
         if now.map(|n| (n.rows, n.cols)) != Some((s.rows, s.cols)) {
             return Err(Error::file(
                 &s.path,
@@ -310,7 +316,7 @@ fn open_object(path: &Path, bytes: &[u8], headers_only: bool) -> Result<DefaultD
 }
 
 /// The slice's header facts; `None` for an object with no Rows/Columns (not an image).
-fn slice_info(path: &Path, obj: &DefaultDicomObject) -> Result<Option<SliceInfo>> {
+fn slice_info(path: &Path, obj: &DefaultDicomObject, file_len: u64) -> Result<Option<SliceInfo>> {
     let err = |why: String| Error::file(path, why);
     let floats = |tag: Tag, name: &str| -> Result<Option<Vec<f64>>> {
         match obj.element_opt(tag) {
@@ -369,10 +375,50 @@ fn slice_info(path: &Path, obj: &DefaultDicomObject) -> Result<Option<SliceInfo>
             "DICOM file has {frames} frames: only single-frame slices are supported"
         )));
     }
-    let bits = int(tags::BITS_ALLOCATED, "BitsAllocated")?.unwrap_or(16);
-    if ![8, 16, 32].contains(&bits) {
+    // dicom-pixeldata converts 8- and 16-bit samples through a lookup table
+    // of 2^BitsStored entries (and asserts 1 <= BitsStored <= 32): check
+    // them here so a corrupt header is an error, not a panic or a huge table.
+    let bits = int(tags::BITS_ALLOCATED, "BitsAllocated")?
+        .ok_or_else(|| err("DICOM image has no BitsAllocated (0028,0100)".into()))?;
+    if bits != 8 && bits != 16 {
         return Err(err(format!(
-            "DICOM BitsAllocated {bits} is not supported (8, 16 or 32 are)"
+            "DICOM BitsAllocated {bits} is not supported (8 or 16 are)"
+        )));
+    }
+    let stored = int(tags::BITS_STORED, "BitsStored")?
+        .ok_or_else(|| err("DICOM image has no BitsStored (0028,0101)".into()))?;
+    if stored == 0 || stored > bits {
+        return Err(err(format!(
+            "DICOM BitsStored {stored} does not fit BitsAllocated {bits}"
+        )));
+    }
+    if let Some(high) = int(tags::HIGH_BIT, "HighBit")?
+        && high >= bits
+    {
+        return Err(err(format!(
+            "DICOM HighBit {high} does not fit BitsAllocated {bits}"
+        )));
+    }
+    if let Some(rep) = int(tags::PIXEL_REPRESENTATION, "PixelRepresentation")?
+        && rep > 1
+    {
+        return Err(err(format!(
+            "DICOM PixelRepresentation {rep} is neither 0 (unsigned) nor 1 (signed)"
+        )));
+    }
+    // A compressed slice may not claim more pixels than its bytes could
+    // plausibly expand to, so a tiny file cannot make a decoder allocate
+    // gigabytes.
+    let ts = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']);
+    let native = [
+        "1.2.840.10008.1.2",
+        "1.2.840.10008.1.2.1",
+        "1.2.840.10008.1.2.2",
+    ];
+    let slice_bytes = rows as u64 * cols as u64 * (bits as u64 / 8);
+    if !native.contains(&ts) && slice_bytes > MAX_EXPANSION * file_len + (1 << 20) {
+        return Err(err(format!(
+            "compressed DICOM slice claims {cols}×{rows} pixels, more than its {file_len} bytes can hold"
         )));
     }
     let series = match obj.element_opt(tags::SERIES_INSTANCE_UID) {
@@ -508,6 +554,13 @@ fn sort_slices(slices: &mut [SliceInfo]) -> Result<f64> {
 /// Decodes one slice's pixels, Modality LUT applied, row-major (x fastest).
 fn decode_slice(path: &Path, obj: &DefaultDicomObject) -> Result<Vec<f32>> {
     let err = |why: String| Error::file(path, why);
+    let ts = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']);
+    if ts == RLE_LOSSLESS {
+        check_rle(obj).map_err(|why| err(format!("invalid RLE pixel data: {why}")))?;
+    }
+    if JPEG.contains(&ts) {
+        check_jpeg(obj).map_err(|why| err(format!("invalid JPEG pixel data: {why}")))?;
+    }
     let decoded = obj
         .decode_pixel_data()
         .map_err(|e| err(format!("cannot decode the pixel data: {e}")))?;
@@ -521,6 +574,183 @@ fn decode_slice(path: &Path, obj: &DefaultDicomObject) -> Result<Vec<f32>> {
         )));
     }
     Ok(v)
+}
+
+/// The RLE Lossless transfer syntax.
+const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+
+/// Checks RLE Lossless pixel data the way dicom-rs's decoder will read it,
+/// because that decoder indexes past short segments and slices a short
+/// header without checking (it panics): one fragment of at least 64 bytes,
+/// one segment per byte of a sample, in-bounds increasing offsets, and every
+/// segment PackBits-decoding to at least Rows×Columns bytes.
+fn check_rle(obj: &DefaultDicomObject) -> std::result::Result<(), String> {
+    let get = |tag: Tag| -> std::result::Result<u32, String> {
+        obj.element(tag)
+            .ok()
+            .and_then(|e| e.to_int::<u32>().ok())
+            .ok_or_else(|| format!("missing {tag}"))
+    };
+    let (rows, cols, bits) = (
+        get(tags::ROWS)?,
+        get(tags::COLUMNS)?,
+        get(tags::BITS_ALLOCATED)?,
+    );
+    let fragments = obj
+        .element(tags::PIXEL_DATA)
+        .ok()
+        .and_then(|e| e.fragments())
+        .ok_or("the pixel data are not encapsulated fragments")?;
+    if fragments.len() != 1 {
+        return Err(format!(
+            "{} fragments, expected 1 for a single frame",
+            fragments.len()
+        ));
+    }
+    let f = &fragments[0];
+    if f.len() < 64 {
+        return Err(format!(
+            "the fragment has {} bytes, less than the 64-byte RLE header",
+            f.len()
+        ));
+    }
+    let word = |i: usize| {
+        u32::from_le_bytes([f[4 * i], f[4 * i + 1], f[4 * i + 2], f[4 * i + 3]]) as usize
+    };
+    let segments = word(0);
+    let want = (bits / 8) as usize;
+    if segments != want {
+        return Err(format!(
+            "{segments} segments, expected {want} for {bits}-bit samples"
+        ));
+    }
+    let mut offsets: Vec<usize> = (1..=segments).map(word).collect();
+    offsets.push(f.len());
+    let need = rows as usize * cols as usize;
+    for w in offsets.windows(2) {
+        if w[0] < 64 || w[0] > w[1] || w[1] > f.len() {
+            return Err(format!(
+                "segment offsets {:?} are out of order or out of range",
+                &offsets[..segments]
+            ));
+        }
+        // PackBits: n >= 0 copies n+1 literal bytes, -127..=-1 repeats the
+        // next byte 1-n times, -128 is a no-op.
+        let seg = &f[w[0]..w[1]];
+        let (mut i, mut out) = (0usize, 0usize);
+        while out < need {
+            let Some(&h) = seg.get(i) else {
+                return Err(format!("a segment decodes to {out} bytes, expected {need}"));
+            };
+            let h = h as i8;
+            i += 1;
+            if h >= 0 {
+                let n = h as usize + 1;
+                if i + n > seg.len() {
+                    return Err("a literal run runs past the end of its segment".into());
+                }
+                i += n;
+                out += n;
+            } else if h != -128 {
+                if i >= seg.len() {
+                    return Err("a repeat run has no byte to repeat".into());
+                }
+                i += 1;
+                out += (1 - h as isize) as usize;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The JPEG transfer syntaxes dicom-rs decodes (baseline, extended, lossless).
+const JPEG: [&str; 4] = [
+    "1.2.840.10008.1.2.4.50",
+    "1.2.840.10008.1.2.4.51",
+    "1.2.840.10008.1.2.4.57",
+    "1.2.840.10008.1.2.4.70",
+];
+
+/// Checks the JPEG stream's frame header against the DICOM header, because
+/// dicom-rs copies whatever the JPEG decodes into a buffer sized from Rows and
+/// Columns (and the decoder's `info()` panics on odd precisions): the first
+/// frame header — found the way jpeg-decoder scans markers — must be one
+/// grey-scale component of exactly Columns×Rows with a precision that fits
+/// BitsAllocated.
+fn check_jpeg(obj: &DefaultDicomObject) -> std::result::Result<(), String> {
+    let get = |tag: Tag| -> std::result::Result<u32, String> {
+        obj.element(tag)
+            .ok()
+            .and_then(|e| e.to_int::<u32>().ok())
+            .ok_or_else(|| format!("missing {tag}"))
+    };
+    let (rows, cols, bits) = (
+        get(tags::ROWS)?,
+        get(tags::COLUMNS)?,
+        get(tags::BITS_ALLOCATED)?,
+    );
+    let fragments = obj
+        .element(tags::PIXEL_DATA)
+        .ok()
+        .and_then(|e| e.fragments())
+        .ok_or("the pixel data are not encapsulated fragments")?;
+    let b: Vec<u8> = fragments.iter().flatten().copied().collect();
+    if !b.starts_with(&[0xFF, 0xD8]) {
+        return Err("the stream does not start with a JPEG SOI marker".into());
+    }
+    let mut i = 2;
+    let (precision, height, width, components) = loop {
+        // Like jpeg-decoder: skip to 0xFF, skip fill bytes, 0x00 is no marker.
+        while b.get(i).is_some_and(|&x| x != 0xFF) {
+            i += 1;
+        }
+        while b.get(i) == Some(&0xFF) {
+            i += 1;
+        }
+        let Some(&m) = b.get(i) else {
+            return Err("no frame header before the end of the stream".into());
+        };
+        i += 1;
+        match m {
+            0x00 | 0x01 | 0xD0..=0xD8 => continue,
+            0xD9 | 0xDA => return Err("no frame header before the image data".into()),
+            _ => {}
+        }
+        let len = match (b.get(i), b.get(i + 1)) {
+            (Some(&h), Some(&l)) => u16::from_be_bytes([h, l]) as usize,
+            _ => return Err("a marker segment is cut short".into()),
+        };
+        if len < 2 || i + len > b.len() {
+            return Err("a marker segment length is out of range".into());
+        }
+        let is_sof = matches!(m, 0xC0..=0xCF) && !matches!(m, 0xC4 | 0xC8 | 0xCC);
+        if is_sof {
+            if len < 8 {
+                return Err("the frame header is too short".into());
+            }
+            let h = u16::from_be_bytes([b[i + 3], b[i + 4]]);
+            let w = u16::from_be_bytes([b[i + 5], b[i + 6]]);
+            break (b[i + 2], h, w, b[i + 7]);
+        }
+        i += len;
+    };
+    if components != 1 {
+        return Err(format!("{components} colour components, expected 1"));
+    }
+    let fits = match bits {
+        8 => (2..=8).contains(&precision),
+        16 => (9..=16).contains(&precision),
+        _ => false,
+    };
+    if !fits {
+        return Err(format!("{precision}-bit samples in a {bits}-bit image"));
+    }
+    if (width as u32, height as u32) != (cols, rows) {
+        return Err(format!(
+            "the JPEG is {width}×{height} but the DICOM header says {cols}×{rows}"
+        ));
+    }
+    Ok(())
 }
 
 /// Walks the element tree of a Part 10 file (preamble, `DICM`, file meta
@@ -538,11 +768,21 @@ pub fn check_structure(b: &[u8]) -> std::result::Result<usize, String> {
         big: false,
         explicit: true,
     };
-    // The file meta group: explicit VR little endian, group 0002 only.
+    // The file meta group, read as dicom-rs reads it: explicit VR little
+    // endian, a (0002,0000) group length first, then elements until that
+    // many bytes are consumed (whatever their group).
     let mut pos = 132;
+    let (tag, _, len, hdr) = meta.header(pos)?;
+    if tag != (0x0002, 0x0000) || len != Some(4) {
+        return Err("the file meta group does not start with its group length (0002,0000)".into());
+    }
+    meta.need(pos + hdr, 4)?;
+    let group_length = meta.u32(pos + hdr) as u64;
+    pos += hdr + 4;
+    let mut consumed = 0u64;
     let mut ts: Option<String> = None;
-    while pos + 4 <= b.len() && meta.u16(pos) == 0x0002 {
-        let (tag, vr, len, hdr) = meta.header(pos)?;
+    while consumed < group_length {
+        let (tag, _, len, hdr) = meta.header(pos)?;
         let start = pos + hdr;
         let len =
             len.ok_or_else(|| format!("file meta element {} has an undefined length", show(tag)))?;
@@ -556,7 +796,7 @@ pub fn check_structure(b: &[u8]) -> std::result::Result<usize, String> {
                 .to_string();
             ts = Some(s);
         }
-        let _ = vr;
+        consumed += (hdr + len) as u64;
         pos = end;
     }
     let ts = ts.ok_or("the file meta group has no TransferSyntaxUID (0002,0010)")?;
@@ -650,32 +890,28 @@ impl Walker<'_> {
             return Ok((tag, None, undefined(self.u32(pos + 4)), 8));
         }
         let vr = [self.b[pos + 4], self.b[pos + 5]];
-        if !vr.iter().all(u8::is_ascii_uppercase) {
-            return Err(format!(
-                "element {} at byte {pos} has no valid VR",
-                show(tag)
-            ));
-        }
-        if matches!(
-            &vr,
-            b"OB"
-                | b"OD"
-                | b"OF"
-                | b"OL"
-                | b"OV"
-                | b"OW"
-                | b"SQ"
-                | b"UC"
-                | b"UR"
-                | b"UT"
-                | b"UN"
-                | b"SV"
-                | b"UV"
-        ) {
+        // The VRs with a 16-bit length, as dicom-rs decodes them; dicom-rs
+        // reads any unknown VR as UN with a 32-bit length, so unknown VRs are
+        // rejected here to keep both readings of the file identical.
+        const SHORT: [&[u8; 2]; 21] = [
+            b"AE", b"AS", b"AT", b"CS", b"DA", b"DS", b"DT", b"FL", b"FD", b"IS", b"LO", b"LT",
+            b"PN", b"SH", b"SL", b"SS", b"ST", b"TM", b"UI", b"UL", b"US",
+        ];
+        const LONG: [&[u8; 2]; 13] = [
+            b"OB", b"OD", b"OF", b"OL", b"OV", b"OW", b"SQ", b"UC", b"UR", b"UT", b"UN", b"SV",
+            b"UV",
+        ];
+        if SHORT.contains(&&vr) {
+            Ok((tag, Some(vr), Some(self.u16(pos + 6) as usize), 8))
+        } else if LONG.contains(&&vr) {
             self.need(pos, 12)?;
             Ok((tag, Some(vr), undefined(self.u32(pos + 8)), 12))
         } else {
-            Ok((tag, Some(vr), Some(self.u16(pos + 6) as usize), 8))
+            Err(format!(
+                "element {} at byte {pos} has an unknown VR {:?}",
+                show(tag),
+                String::from_utf8_lossy(&vr)
+            ))
         }
     }
 
@@ -718,24 +954,13 @@ impl Walker<'_> {
             };
             match len {
                 None => {
-                    // Undefined length: a sequence, encapsulated pixel data,
-                    // or UN holding an implicit-VR sequence.
-                    if tag == (0x7FE0, 0x0010) || matches!(vr, Some([b'O', _])) {
+                    // Undefined length, as dicom-rs reads it: encapsulated
+                    // pixel data (fragments) for PixelData, else a sequence
+                    // of data set items in the same encoding, whatever the VR.
+                    if tag == (0x7FE0, 0x0010) {
                         pos = self.fragments(start, end)?;
-                    } else if is_sq || vr.is_none() {
-                        pos = self.items(start, end, depth + 1, None)?;
-                    } else if vr == Some(*b"UN") {
-                        let inner = Walker {
-                            b: self.b,
-                            big: false,
-                            explicit: false,
-                        };
-                        pos = inner.items(start, end, depth + 1, None)?;
                     } else {
-                        return Err(format!(
-                            "element {} has an undefined length but is not a sequence",
-                            show(tag)
-                        ));
+                        pos = self.items(start, end, depth + 1, None)?;
                     }
                 }
                 Some(len) => {
@@ -745,16 +970,6 @@ impl Walker<'_> {
                         .ok_or_else(|| too_long(tag, len, end - start))?;
                     if is_sq {
                         self.items(start, stop, depth + 1, Some(stop))?;
-                    } else if vr == Some(*b"UN")
-                        && len >= 8
-                        && self.b[start..start + 4] == [0xFE, 0xFF, 0x00, 0xE0]
-                    {
-                        let inner = Walker {
-                            b: self.b,
-                            big: false,
-                            explicit: false,
-                        };
-                        inner.items(start, stop, depth + 1, Some(stop))?;
                     }
                     pos = stop;
                 }

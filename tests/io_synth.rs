@@ -437,9 +437,11 @@ fn set_f32(b: &mut [u8], at: usize, v: f32, big: bool) {
 fn nifti_written_by_the_crate_round_trips() {
     let dir = tempfile::tempdir().unwrap();
     let arr = ndarray::Array3::from_shape_fn((5, 4, 3), |(x, y, z)| pattern(x, y, z) as i16);
-    let mut hdr = nifti::NiftiHeader::default();
-    hdr.pixdim = [1.0, 0.5, 0.75, 2.5, 1.0, 1.0, 1.0, 1.0];
-    hdr.xyzt_units = 2; // mm
+    let mut hdr = nifti::NiftiHeader {
+        pixdim: [1.0, 0.5, 0.75, 2.5, 1.0, 1.0, 1.0, 1.0],
+        xyzt_units: 2, // mm
+        ..Default::default()
+    };
     for (name, big) in [("le.nii", false), ("be.nii.gz", true)] {
         hdr.endianness = if big {
             nifti::Endianness::Big
@@ -516,15 +518,16 @@ fn nifti_scl_slope_gives_f32_and_unit_slope_keeps_type() {
 fn nifti_rejections_are_clear() {
     let dir = tempfile::tempdir().unwrap();
     let base = nifti_bytes_u8(DIMS, &[7; 60]);
-    let mut cases: Vec<(&str, Vec<u8>, &str)> = Vec::new();
-    cases.push(("trunc.nii", base[..base.len() - 10].to_vec(), "truncated"));
-    cases.push(("trunc.nii.gz", gz(&base[..base.len() - 10]), "truncated"));
-    cases.push(("hdr.nii", base[..200].to_vec(), "header"));
-    cases.push((
-        "extra.nii.gz",
-        gz(&[base.clone(), vec![0; 50]].concat()),
-        "more than",
-    ));
+    let mut cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("trunc.nii", base[..base.len() - 10].to_vec(), "truncated"),
+        ("trunc.nii.gz", gz(&base[..base.len() - 10]), "truncated"),
+        ("hdr.nii", base[..200].to_vec(), "header"),
+        (
+            "extra.nii.gz",
+            gz(&[base.clone(), vec![0; 50]].concat()),
+            "more than",
+        ),
+    ];
     let mut b = base.clone();
     b[42..44].copy_from_slice(&0u16.to_le_bytes());
     cases.push(("zero.nii", b, "dim[1] is 0"));

@@ -327,6 +327,11 @@ fn nrrd_rejections_are_clear() {
             nrrd_header("short", "little", "raw", "data file: nowhere.raw\n").into_bytes(),
             "nowhere.raw",
         ),
+        (
+            "device.nhdr",
+            nrrd_header("short", "little", "gzip", "data file: /dev/zero\n").into_bytes(),
+            "not a regular file",
+        ),
         ("magic.nrrd", b"NRRDXXXX\ntype: short\n\n".to_vec(), "magic"),
         (
             "dup.nrrd",

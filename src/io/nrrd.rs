@@ -136,6 +136,23 @@ pub fn load_nrrd(path: &Path) -> Result<Volume> {
             } else {
                 path.parent().unwrap_or(Path::new(".")).join(p)
             };
+            // Only a regular file: a FIFO or device named by a header could
+            // block or never end.
+            match std::fs::metadata(&p) {
+                Ok(m) if m.is_file() => {}
+                Ok(_) => {
+                    return Err(Error::file(
+                        path,
+                        format!("the NRRD data file {} is not a regular file", p.display()),
+                    ));
+                }
+                Err(e) => {
+                    return Err(Error::file(
+                        path,
+                        format!("cannot open the NRRD data file {}: {e}", p.display()),
+                    ));
+                }
+            }
             let f = File::open(&p).map_err(|e| {
                 Error::file(
                     path,

@@ -53,7 +53,7 @@ pub enum Format {
 }
 
 impl Format {
-    /// All formats, in the order [`Format::infer`] tries their magic bytes.
+    /// Every supported format.
     pub const ALL: [Format; 5] = [
         Format::Nrrd,
         Format::Nifti,

@@ -328,6 +328,14 @@ fn nrrd_rejections_are_clear() {
             "nowhere.raw",
         ),
         (
+            "gzskip.nrrd",
+            with_body(
+                nrrd_header("short", "little", "gzip", "byte skip: 999999999\n\n"),
+                &gz(&good),
+            ),
+            "byte skip",
+        ),
+        (
             "device.nhdr",
             nrrd_header("short", "little", "gzip", "data file: /dev/zero\n").into_bytes(),
             "not a regular file",

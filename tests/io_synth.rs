@@ -999,4 +999,12 @@ fn format_inference_and_missing_files() {
         Format::infer(&gone).unwrap_err(),
         Error::Io { .. }
     ));
+    // Devices (and FIFOs) are refused instead of read.
+    let o = LoadOptions {
+        format: Some(Format::Raw),
+        raw: None,
+    };
+    let e = load(Path::new("/dev/zero"), &o).unwrap_err();
+    assert!(e.to_string().contains("not a regular file"), "{e}");
+    assert!(Format::infer(Path::new("/dev/null")).is_err());
 }

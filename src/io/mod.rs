@@ -101,6 +101,9 @@ impl Format {
         if meta.is_dir() {
             return Ok(Format::Dicom);
         }
+        if !meta.is_file() {
+            return Err(Error::file(path, "not a regular file or directory"));
+        }
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().to_ascii_lowercase())
@@ -150,6 +153,11 @@ pub struct LoadOptions {
 ///
 /// Quiet and progress-free. Every error names the file and the problem.
 pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume> {
+    // A FIFO or device could block or never end: only files and directories.
+    let meta = std::fs::metadata(path).map_err(|e| io_error(path, e))?;
+    if !meta.is_file() && !meta.is_dir() {
+        return Err(Error::file(path, "not a regular file or directory"));
+    }
     let format = match opts.format {
         Some(f) => f,
         None => Format::infer(path)?,

@@ -48,6 +48,18 @@ fn runner() -> TestRunner {
     }
 }
 
+/// A temp dir in memory (`/dev/shm`) where there is one: the suite writes a
+/// file per input, and on a busy disk that, not the loaders, dominates.
+fn scratch() -> tempfile::TempDir {
+    let shm = Path::new("/dev/shm");
+    if shm.is_dir()
+        && let Ok(d) = tempfile::Builder::new().prefix("io_fuzz").tempdir_in(shm)
+    {
+        return d;
+    }
+    tempfile::tempdir().unwrap()
+}
+
 /// Peak resident set size of this process, in MiB (0 where unknown).
 fn peak_rss_mib() -> u64 {
     let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
@@ -298,7 +310,7 @@ fn nrrd_seeds() -> Vec<Vec<u8>> {
 }
 
 fn nifti_seed(arr_kind: u8, big: bool, slope: Option<(f32, f32)>) -> Vec<u8> {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = scratch();
     let p = dir.path().join("s.nii");
     let hdr = nifti::NiftiHeader {
         endianness: if big { nifti::Endianness::Big } else { nifti::Endianness::Little },
@@ -435,7 +447,7 @@ fn dicom_seed(ts: &str, with_sequence: bool, pixels: Pixels) -> Vec<u8> {
         use dicom_pixeldata::Transcode;
         file.transcode(&dicom_transfer_syntax_registry::entries::JPEG_BASELINE.erased()).unwrap();
     }
-    let dir = tempfile::tempdir().unwrap();
+    let dir = scratch();
     let p = dir.path().join("s.dcm");
     file.write_to_file(&p).unwrap();
     std::fs::read(&p).unwrap()
@@ -460,7 +472,7 @@ fn dicom_seeds() -> Vec<Vec<u8>> {
 }
 
 fn den_seeds() -> Vec<Vec<u8>> {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = scratch();
     let p = dir.path().join("s.den");
     shearwarp::io::den::save_den(&p, [5, 4, 3], &voxel_bytes(60, 1, false)).unwrap();
     let le = std::fs::read(&p).unwrap();
@@ -481,7 +493,7 @@ fn den_seeds() -> Vec<Vec<u8>> {
 #[test]
 fn fuzz_nrrd() {
     let seeds = nrrd_seeds();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = scratch();
     std::fs::write(dir.path().join("d.raw"), voxel_bytes(60, 2, false)).unwrap();
     let detached = b"NRRD0004\ntype: short\ndimension: 3\nsizes: 5 4 3\nspacings: 1 2 3\nendian: little\n\
         encoding: raw\ndata file: d.raw\nbyte skip: 0\n"
@@ -501,7 +513,7 @@ fn fuzz_nrrd() {
 #[test]
 fn fuzz_nifti() {
     let seeds = nifti_seeds();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = scratch();
     fuzz("nifti", inputs(seeds.len()), |input| {
         let p = dir.path().join("f.nii");
         std::fs::write(&p, realize(&seeds, &input)).unwrap();
@@ -512,7 +524,7 @@ fn fuzz_nifti() {
 #[test]
 fn fuzz_dicom() {
     let seeds = dicom_seeds();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = scratch();
     let series = dir.path().join("series");
     std::fs::create_dir(&series).unwrap();
     // A valid companion slice 5 mm above the seeds (only the synthetic seeds share its series).
@@ -536,7 +548,7 @@ fn fuzz_dicom() {
 #[test]
 fn fuzz_den() {
     let seeds = den_seeds();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = scratch();
     fuzz("den", inputs(seeds.len()), |input| {
         let p = dir.path().join("f.den");
         std::fs::write(&p, realize(&seeds, &input)).unwrap();
@@ -551,6 +563,7 @@ fn fuzz_raw() {
     let sidecar = br#"{"dims":[5,4,3],"type":"u16","endian":"big","spacing":[0.5,0.5,2],"header_bytes":4}"#.to_vec();
     let data = voxel_bytes(64, 2, true)[..124].to_vec();
     let seeds = [sidecar, data];
+<<<<<<< HEAD
     let dir = tempfile::tempdir().unwrap();
     let dim = prop_oneof![0usize..8, Just(1usize << 14), Just((1usize << 14) + 1), Just(100_000), any::<usize>()];
     let ty = prop::sample::select(&[VoxelType::U8, VoxelType::U16, VoxelType::I16, VoxelType::F32][..]);
@@ -561,9 +574,84 @@ fn fuzz_raw() {
     );
     let strategy = prop_oneof![(inputs(2), inputs(2)).prop_map(|(s, d)| (Some((s, d)), None)), spec.prop_map(|s| (None, Some(s))),];
     fuzz("raw", strategy, |(side, spec)| {
+=======
+    let dir = scratch();
+    let dim = prop_oneof![
+        8 => 1usize..6,
+        1 => Just(0usize),
+        1 => Just(1usize << 14),
+        1 => Just((1usize << 14) + 1),
+        1 => Just(100_000usize),
+        1 => any::<usize>(),
+    ];
+    let ty = prop::sample::select(
+        &[
+            VoxelType::U8,
+            VoxelType::U16,
+            VoxelType::I16,
+            VoxelType::F32,
+        ][..],
+    );
+    let spec = (
+        [dim.clone(), dim.clone(), dim],
+        ty,
+        any::<bool>(),
+        prop_oneof![4 => 0u64..16, 1 => any::<u64>()],
+        0usize..512,
+    )
+        .prop_map(|(dims, voxel_type, big_endian, header_bytes, len)| {
+            (
+                RawSpec {
+                    dims,
+                    voxel_type,
+                    big_endian,
+                    spacing: [1.0, 1.0, 1.0],
+                    header_bytes,
+                },
+                len,
+            )
+        });
+    // A well-formed sidecar with extreme field values, and data whose length
+    // is exact, off by a few bytes, or arbitrary.
+    let json_num = prop::sample::select(
+        &[
+            "3", "2", "1", "4", "5", "0", "-1", "16385", "100000", "1e9", "2.5", "\"x\"",
+        ][..],
+    );
+    let json_f = prop::sample::select(&["1", "0.5", "2", "1", "0", "-1", "1e30", "\"nan\""][..]);
+    let side_json = (
+        [json_num.clone(), json_num.clone(), json_num.clone()],
+        prop::sample::select(&["u8", "u16", "i16", "f32", "float", "i64", ""][..]),
+        prop::sample::select(&["little", "big", "middle"][..]),
+        [json_f.clone(), json_f.clone(), json_f],
+        prop_oneof![3 => Just("0"), 2 => Just("4"), 1 => Just("-4"), 1 => Just("18446744073709551615")],
+        -3i64..=3,
+        prop::bool::weighted(0.7),
+    )
+        .prop_map(|(d, t, e, sp, hb, delta, exact)| {
+            let json = format!(
+                r#"{{"dims":[{},{},{}],"type":"{t}","endian":"{e}","spacing":[{},{},{}],"header_bytes":{hb}}}"#,
+                d[0], d[1], d[2], sp[0], sp[1], sp[2]
+            );
+            let size = match t {
+                "u8" => 1,
+                "u16" | "i16" => 2,
+                _ => 4,
+            };
+            let n: i64 = d.iter().map(|x| x.parse::<i64>().unwrap_or(1).clamp(0, 64)).product();
+            let len = (n * size + hb.parse::<i64>().unwrap_or(0).clamp(0, 64) + if exact { 0 } else { delta }).max(0);
+            (json.into_bytes(), voxel_bytes(len as usize, 1, false))
+        });
+    let strategy = prop_oneof![
+        (inputs(2), inputs(2)).prop_map(|(s, d)| (Some((s, d)), None, None)),
+        spec.prop_map(|s| (None, Some(s), None)),
+        side_json.prop_map(|j| (None, None, Some(j))),
+    ];
+    fuzz("raw", strategy, |(side, spec, json)| {
+>>>>>>> io
         let p = dir.path().join("f.raw");
-        match (side, spec) {
-            (Some((s, d)), _) => {
+        match (side, spec, json) {
+            (Some((s, d)), _, _) => {
                 let s = match s {
                     Input::Mutated { muts, .. } => apply(seeds[0].clone(), &muts),
                     Input::Random(b) => b,
@@ -576,11 +664,24 @@ fn fuzz_raw() {
                 std::fs::write(dir.path().join("f.raw.json"), s).unwrap();
                 load(&p, &LoadOptions::default())
             }
-            (None, Some((spec, len))) => {
+            (None, Some((spec, len)), _) => {
+                let expected = spec
+                    .dims
+                    .iter()
+                    .try_fold(spec.voxel_type.size(), |a, &d| a.checked_mul(d));
+                let len = match expected {
+                    Some(e) if e <= 4096 && len % 3 == 0 => e + spec.header_bytes.min(64) as usize,
+                    _ => len,
+                };
                 std::fs::write(&p, voxel_bytes(len, 1, false)).unwrap();
                 load(&p, &LoadOptions { format: Some(Format::Raw), raw: Some(spec) })
             }
-            (None, None) => unreachable!(),
+            (None, None, Some((json, data))) => {
+                std::fs::write(&p, data).unwrap();
+                std::fs::write(dir.path().join("f.raw.json"), json).unwrap();
+                load(&p, &LoadOptions::default())
+            }
+            (None, None, None) => unreachable!(),
         }
     });
 }
@@ -588,7 +689,7 @@ fn fuzz_raw() {
 #[test]
 fn seeds_are_valid_files() {
     // The fuzz seeds themselves load, so mutations start from real structure.
-    let dir = tempfile::tempdir().unwrap();
+    let dir = scratch();
     let check = |name: &str, bytes: &[u8], f: Format| {
         let p: &Path = &dir.path().join(name);
         std::fs::write(p, bytes).unwrap();

@@ -3,25 +3,28 @@
 //!
 //! The input is a directory, or one slice file, in which case the series is
 //! the slices in that file's directory with the same SeriesInstanceUID.
-//! Files without `DICM` at byte 128 (READMEs, ...) and DICOMDIR files are
-//! ignored; a directory holding no slice, or several series when a directory
-//! was given, is an error. Files must be DICOM Part 10 files (with the
-//! 128-byte preamble). Uncompressed transfer syntaxes and the compressed ones
-//! dicom-rs decodes natively (RLE, JPEG baseline/extended/lossless) are
-//! read; deflate and JPEG 2000 are not.
+//! Files without `DICM` at byte 128 (READMEs, ...), DICOMDIR files and
+//! objects without Rows/Columns are ignored; any other DICOM file in the
+//! directory must parse, or loading fails naming it. A directory holding no
+//! slice, or several series when a directory was given, is an error. Files
+//! must be DICOM Part 10 files (with the 128-byte preamble). Uncompressed
+//! transfer syntaxes and the compressed ones dicom-rs decodes natively (RLE,
+//! JPEG baseline/extended/lossless) are read; deflate and JPEG 2000 are not.
 //!
-//! Every file first passes [`check_structure`]: a walk of its element tree
-//! that proves each declared length fits inside the file and that sequences
-//! nest at most 32 deep, so dicom-rs (which allocates what a length field
-//! claims) never allocates more than the file holds.
+//! Every file first passes [`check_structure`]: a walk of its element tree,
+//! reading it exactly as dicom-rs will, that proves each declared length fits
+//! inside the file and that sequences nest at most 32 deep, so dicom-rs
+//! (which allocates what a length field claims) never allocates more than
+//! the file holds. RLE segments and JPEG frame headers are checked against
+//! Rows×Columns before dicom-rs decodes them, because its adapters index out
+//! of bounds on inconsistent ones.
 //!
 //! Slices are read header-only first (`read_until(PixelData)`), checked (same
 //! Rows×Columns, ImageOrientationPatient and PixelSpacing; one sample per
 //! pixel; one frame; 8 or 16 bits allocated with 1 ≤ BitsStored ≤
 //! BitsAllocated; a compressed slice may not claim more than 1024× its file
-//! size in decoded pixels) and sorted by
-//! ImagePositionPatient · normal, where normal = row cosines × column
-//! cosines. x runs along a row (the column index), y down the columns (the
+//! size in decoded pixels) and sorted by ImagePositionPatient · normal,
+//! where normal = row cosines × column cosines. x runs along a row (the column index), y down the columns (the
 //! row index) and z along the normal. Spacing: x = PixelSpacing\[1\] (the
 //! column spacing), y = PixelSpacing\[0\] (the row spacing), z = the distance
 //! between consecutive slice positions, which must be non-zero and uniform
@@ -143,6 +146,10 @@ pub fn load_dicom(path: &Path) -> Result<Volume> {
             ));
         }
     };
+
+    if slices.is_empty() {
+        return Err(Error::file(path, "the chosen DICOM series has no slices"));
+    }
 
     // Consistency and geometry.
     let first = slices[0].clone();

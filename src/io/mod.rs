@@ -53,8 +53,19 @@ pub enum Format {
 }
 
 impl Format {
+<<<<<<< HEAD
     /// All formats, in the order [`Format::infer`] tries their magic bytes.
     pub const ALL: [Format; 5] = [Format::Nrrd, Format::Nifti, Format::Dicom, Format::Den, Format::Raw];
+=======
+    /// Every supported format.
+    pub const ALL: [Format; 5] = [
+        Format::Nrrd,
+        Format::Nifti,
+        Format::Dicom,
+        Format::Den,
+        Format::Raw,
+    ];
+>>>>>>> io
 
     /// The format's lower-case name (`raw`, `nrrd`, `nifti`, `dicom`, `den`).
     pub fn name(self) -> &'static str {
@@ -92,7 +103,17 @@ impl Format {
         if meta.is_dir() {
             return Ok(Format::Dicom);
         }
+<<<<<<< HEAD
         let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+=======
+        if !meta.is_file() {
+            return Err(Error::file(path, "not a regular file or directory"));
+        }
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+>>>>>>> io
         let by_ext = [
             (".nii.gz", Format::Nifti),
             (".nii", Format::Nifti),
@@ -138,6 +159,11 @@ pub struct LoadOptions {
 ///
 /// Quiet and progress-free. Every error names the file and the problem.
 pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume> {
+    // A FIFO or device could block or never end: only files and directories.
+    let meta = std::fs::metadata(path).map_err(|e| io_error(path, e))?;
+    if !meta.is_file() && !meta.is_dir() {
+        return Err(Error::file(path, "not a regular file or directory"));
+    }
     let format = match opts.format {
         Some(f) => f,
         None => Format::infer(path)?,

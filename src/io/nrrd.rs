@@ -6,7 +6,8 @@
 //! members are fine); the types uchar, signed char, short, ushort, int,
 //! uint, float and double under all of the spec's synonyms (`unsigned char`,
 //! `uint8`, `int16_t`, `signed short int`, ...); `endian`; `byte skip`
-//! (including -1 for raw: the data are the file's last bytes) and `line skip`.
+//! (including -1 for raw: the data are the file's last bytes; at most 64 MiB
+//! into gzip data) and `line skip`.
 //! u8, u16 and i16 data are kept as they are, signed char widens to i16, and
 //! the rest becomes f32.
 //!
@@ -31,6 +32,9 @@ use crate::volume::{Volume, check_dims};
 const MAX_LINE: u64 = 64 << 10;
 /// Largest header accepted, in bytes.
 const MAX_HEADER: u64 = 1 << 20;
+/// Largest `byte skip` accepted inside gzip data (skipped bytes must be
+/// decompressed, so this bounds the work a header can ask for).
+const MAX_GZIP_SKIP: u64 = 64 << 20;
 /// Largest `line skip` accepted.
 const MAX_LINE_SKIP: u64 = 1 << 20;
 
@@ -186,6 +190,15 @@ pub fn load_nrrd(path: &Path) -> Result<Volume> {
         Encoding::Gzip => {
             if h.byte_skip < 0 {
                 return Err(Error::file(path, "NRRD 'byte skip: -1' is only allowed with raw encoding"));
+            }
+            if h.byte_skip as u64 > MAX_GZIP_SKIP {
+                return Err(Error::file(
+                    path,
+                    format!(
+                        "NRRD byte skip {} into gzip data is more than the {MAX_GZIP_SKIP} bytes supported",
+                        h.byte_skip
+                    ),
+                ));
             }
             let mut gz = flate2::bufread::MultiGzDecoder::new(reader);
             let skipped = std::io::copy(&mut (&mut gz).take(h.byte_skip as u64), &mut std::io::sink())

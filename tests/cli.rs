@@ -10,7 +10,10 @@ fn sw() -> Command {
 
 #[test]
 fn help_lists_commands_and_examples() {
-    sw().arg("--help").assert().success().stdout(predicate::str::contains("render").and(predicate::str::contains("rotate")).and(predicate::str::contains("Examples")));
+    sw().arg("--help")
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("render").and(predicate::str::contains("rotate")).and(predicate::str::contains("Examples")));
     for c in ["render", "rotate", "info"] {
         sw().args([c, "--help"]).assert().success().stdout(predicate::str::contains("--phantom"));
     }
@@ -20,7 +23,12 @@ fn help_lists_commands_and_examples() {
 fn render_writes_a_non_blank_png() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("head.png");
-    sw().args(["render", "--phantom-dims", "48,48,42", "--size", "96", "-o"]).arg(&out).arg("--json").assert().success().stdout(predicate::str::contains("\"coverage\""));
+    sw().args(["render", "--phantom-dims", "48,48,42", "--size", "96", "-o"])
+        .arg(&out)
+        .arg("--json")
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("\"coverage\""));
     let img = image::open(&out).unwrap().to_rgb8();
     assert_eq!(img.dimensions(), (96, 96));
     let lit = img.pixels().filter(|p| p.0.iter().any(|&c| c > 20)).count();
@@ -32,7 +40,8 @@ fn rotate_json_has_the_promised_fields() {
     let out = sw().args(["rotate", "--phantom-dims", "40,40,36", "--size", "64", "--degrees", "10", "--json"]).output().unwrap();
     assert!(out.status.success());
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    for k in ["frames", "degrees", "shear_ms_median", "render_ms_median", "warp_ms_median", "frame_ms_median", "fps", "degrees_per_second"] {
+    for k in ["frames", "degrees", "shear_ms_median", "render_ms_median", "warp_ms_median", "frame_ms_median", "fps", "degrees_per_second"]
+    {
         assert!(j[k].is_number(), "missing {k}: {j}");
     }
     assert!(j["frames"].as_u64().unwrap() >= 1);
@@ -61,7 +70,12 @@ fn bad_input_is_a_clear_error_with_exit_code_2() {
     let dir = tempfile::tempdir().unwrap();
     let short = dir.path().join("short.raw");
     std::fs::write(&short, vec![0u8; 100]).unwrap();
-    sw().args(["render", "--raw"]).arg(&short).args(["--dims", "10,10,10", "--type", "u8"]).assert().code(2).stderr(predicate::str::contains("short.raw"));
+    sw().args(["render", "--raw"])
+        .arg(&short)
+        .args(["--dims", "10,10,10", "--type", "u8"])
+        .assert()
+        .code(2)
+        .stderr(predicate::str::contains("short.raw"));
     sw().args(["render", "/no/such/file.nrrd"]).assert().code(2).stderr(predicate::str::contains("/no/such/file.nrrd"));
     sw().args(["render", "--tissue", "liver"]).assert().code(2).stderr(predicate::str::contains("unknown tissue"));
     sw().args(["render", "--cell", "0"]).assert().code(2);
@@ -94,7 +108,9 @@ fn real_scans_render() {
     };
     let dir = std::path::PathBuf::from(dir);
     let out = tempfile::tempdir().unwrap();
-    for (f, tissue) in [("brainsmall.den", "low"), ("chest-ct-lung1.nrrd", "bone"), ("head-mri-ch2.nii.gz", "low"), ("dicom-brain-pd", "mid")] {
+    for (f, tissue) in
+        [("brainsmall.den", "low"), ("chest-ct-lung1.nrrd", "bone"), ("head-mri-ch2.nii.gz", "low"), ("dicom-brain-pd", "mid")]
+    {
         let png = out.path().join(format!("{f}.png"));
         let o = sw().arg("render").arg(dir.join(f)).args(["--tissue", tissue, "--size", "128", "--json", "-o"]).arg(&png).output().unwrap();
         assert!(o.status.success(), "{f}: {}", String::from_utf8_lossy(&o.stderr));

@@ -563,18 +563,6 @@ fn fuzz_raw() {
     let sidecar = br#"{"dims":[5,4,3],"type":"u16","endian":"big","spacing":[0.5,0.5,2],"header_bytes":4}"#.to_vec();
     let data = voxel_bytes(64, 2, true)[..124].to_vec();
     let seeds = [sidecar, data];
-<<<<<<< HEAD
-    let dir = tempfile::tempdir().unwrap();
-    let dim = prop_oneof![0usize..8, Just(1usize << 14), Just((1usize << 14) + 1), Just(100_000), any::<usize>()];
-    let ty = prop::sample::select(&[VoxelType::U8, VoxelType::U16, VoxelType::I16, VoxelType::F32][..]);
-    let spec = ([dim.clone(), dim.clone(), dim], ty, any::<bool>(), prop_oneof![0u64..16, any::<u64>()], 0usize..512).prop_map(
-        |(dims, voxel_type, big_endian, header_bytes, len)| {
-            (RawSpec { dims, voxel_type, big_endian, spacing: [1.0, 1.0, 1.0], header_bytes }, len)
-        },
-    );
-    let strategy = prop_oneof![(inputs(2), inputs(2)).prop_map(|(s, d)| (Some((s, d)), None)), spec.prop_map(|s| (None, Some(s))),];
-    fuzz("raw", strategy, |(side, spec)| {
-=======
     let dir = scratch();
     let dim = prop_oneof![
         8 => 1usize..6,
@@ -584,40 +572,15 @@ fn fuzz_raw() {
         1 => Just(100_000usize),
         1 => any::<usize>(),
     ];
-    let ty = prop::sample::select(
-        &[
-            VoxelType::U8,
-            VoxelType::U16,
-            VoxelType::I16,
-            VoxelType::F32,
-        ][..],
+    let ty = prop::sample::select(&[VoxelType::U8, VoxelType::U16, VoxelType::I16, VoxelType::F32][..]);
+    let spec = ([dim.clone(), dim.clone(), dim], ty, any::<bool>(), prop_oneof![4 => 0u64..16, 1 => any::<u64>()], 0usize..512).prop_map(
+        |(dims, voxel_type, big_endian, header_bytes, len)| {
+            (RawSpec { dims, voxel_type, big_endian, spacing: [1.0, 1.0, 1.0], header_bytes }, len)
+        },
     );
-    let spec = (
-        [dim.clone(), dim.clone(), dim],
-        ty,
-        any::<bool>(),
-        prop_oneof![4 => 0u64..16, 1 => any::<u64>()],
-        0usize..512,
-    )
-        .prop_map(|(dims, voxel_type, big_endian, header_bytes, len)| {
-            (
-                RawSpec {
-                    dims,
-                    voxel_type,
-                    big_endian,
-                    spacing: [1.0, 1.0, 1.0],
-                    header_bytes,
-                },
-                len,
-            )
-        });
     // A well-formed sidecar with extreme field values, and data whose length
     // is exact, off by a few bytes, or arbitrary.
-    let json_num = prop::sample::select(
-        &[
-            "3", "2", "1", "4", "5", "0", "-1", "16385", "100000", "1e9", "2.5", "\"x\"",
-        ][..],
-    );
+    let json_num = prop::sample::select(&["3", "2", "1", "4", "5", "0", "-1", "16385", "100000", "1e9", "2.5", "\"x\""][..]);
     let json_f = prop::sample::select(&["1", "0.5", "2", "1", "0", "-1", "1e30", "\"nan\""][..]);
     let side_json = (
         [json_num.clone(), json_num.clone(), json_num.clone()],
@@ -648,7 +611,6 @@ fn fuzz_raw() {
         side_json.prop_map(|j| (None, None, Some(j))),
     ];
     fuzz("raw", strategy, |(side, spec, json)| {
->>>>>>> io
         let p = dir.path().join("f.raw");
         match (side, spec, json) {
             (Some((s, d)), _, _) => {
@@ -665,10 +627,7 @@ fn fuzz_raw() {
                 load(&p, &LoadOptions::default())
             }
             (None, Some((spec, len)), _) => {
-                let expected = spec
-                    .dims
-                    .iter()
-                    .try_fold(spec.voxel_type.size(), |a, &d| a.checked_mul(d));
+                let expected = spec.dims.iter().try_fold(spec.voxel_type.size(), |a, &d| a.checked_mul(d));
                 let len = match expected {
                     Some(e) if e <= 4096 && len % 3 == 0 => e + spec.header_bytes.min(64) as usize,
                     _ => len,

@@ -195,50 +195,12 @@ fn nrrd_rejections_are_clear() {
             with_body("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 5 -4 3\nencoding: raw\n\n".into(), &[]),
             "not positive integers",
         ),
-<<<<<<< HEAD
         ("sizes.nrrd", with_body("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 5 4\nencoding: raw\n\n".into(), &[]), "dimension is 3"),
         ("list.nhdr", nrrd_header("short", "little", "raw", "data file: LIST\nslice1.raw\n").into_bytes(), "several files"),
         ("nodata.nhdr", nrrd_header("short", "little", "raw", "").into_bytes(), "no data"),
         ("missing.nhdr", nrrd_header("short", "little", "raw", "data file: nowhere.raw\n").into_bytes(), "nowhere.raw"),
+        ("gzskip.nrrd", with_body(nrrd_header("short", "little", "gzip", "byte skip: 999999999\n\n"), &gz(&good)), "byte skip"),
         ("device.nhdr", nrrd_header("short", "little", "gzip", "data file: /dev/zero\n").into_bytes(), "not a regular file"),
-=======
-        (
-            "sizes.nrrd",
-            with_body(
-                "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 5 4\nencoding: raw\n\n".into(),
-                &[],
-            ),
-            "dimension is 3",
-        ),
-        (
-            "list.nhdr",
-            nrrd_header("short", "little", "raw", "data file: LIST\nslice1.raw\n").into_bytes(),
-            "several files",
-        ),
-        (
-            "nodata.nhdr",
-            nrrd_header("short", "little", "raw", "").into_bytes(),
-            "no data",
-        ),
-        (
-            "missing.nhdr",
-            nrrd_header("short", "little", "raw", "data file: nowhere.raw\n").into_bytes(),
-            "nowhere.raw",
-        ),
-        (
-            "gzskip.nrrd",
-            with_body(
-                nrrd_header("short", "little", "gzip", "byte skip: 999999999\n\n"),
-                &gz(&good),
-            ),
-            "byte skip",
-        ),
-        (
-            "device.nhdr",
-            nrrd_header("short", "little", "gzip", "data file: /dev/zero\n").into_bytes(),
-            "not a regular file",
-        ),
->>>>>>> io
         ("magic.nrrd", b"NRRDXXXX\ntype: short\n\n".to_vec(), "magic"),
         ("dup.nrrd", with_body(nrrd_header("short", "little", "raw", "type: short\n\n"), &good), "repeats"),
         ("empty.nrrd", Vec::new(), "empty"),
@@ -697,20 +659,10 @@ fn format_inference_and_missing_files() {
     let gone = dir.path().join("gone.nrrd");
     assert!(matches!(load(&gone, &opts()).unwrap_err(), Error::Io { .. }));
     let gone = dir.path().join("gone");
-<<<<<<< HEAD
     assert!(matches!(Format::infer(&gone).unwrap_err(), Error::Io { .. }));
-=======
-    assert!(matches!(
-        Format::infer(&gone).unwrap_err(),
-        Error::Io { .. }
-    ));
     // Devices (and FIFOs) are refused instead of read.
-    let o = LoadOptions {
-        format: Some(Format::Raw),
-        raw: None,
-    };
+    let o = LoadOptions { format: Some(Format::Raw), raw: None };
     let e = load(Path::new("/dev/zero"), &o).unwrap_err();
     assert!(e.to_string().contains("not a regular file"), "{e}");
     assert!(Format::infer(Path::new("/dev/null")).is_err());
->>>>>>> io
 }

@@ -53,19 +53,8 @@ pub enum Format {
 }
 
 impl Format {
-<<<<<<< HEAD
-    /// All formats, in the order [`Format::infer`] tries their magic bytes.
-    pub const ALL: [Format; 5] = [Format::Nrrd, Format::Nifti, Format::Dicom, Format::Den, Format::Raw];
-=======
     /// Every supported format.
-    pub const ALL: [Format; 5] = [
-        Format::Nrrd,
-        Format::Nifti,
-        Format::Dicom,
-        Format::Den,
-        Format::Raw,
-    ];
->>>>>>> io
+    pub const ALL: [Format; 5] = [Format::Nrrd, Format::Nifti, Format::Dicom, Format::Den, Format::Raw];
 
     /// The format's lower-case name (`raw`, `nrrd`, `nifti`, `dicom`, `den`).
     pub fn name(self) -> &'static str {
@@ -103,17 +92,10 @@ impl Format {
         if meta.is_dir() {
             return Ok(Format::Dicom);
         }
-<<<<<<< HEAD
-        let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-=======
         if !meta.is_file() {
             return Err(Error::file(path, "not a regular file or directory"));
         }
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default();
->>>>>>> io
+        let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
         let by_ext = [
             (".nii.gz", Format::Nifti),
             (".nii", Format::Nifti),

@@ -194,10 +194,7 @@ pub fn load_nrrd(path: &Path) -> Result<Volume> {
             if h.byte_skip as u64 > MAX_GZIP_SKIP {
                 return Err(Error::file(
                     path,
-                    format!(
-                        "NRRD byte skip {} into gzip data is more than the {MAX_GZIP_SKIP} bytes supported",
-                        h.byte_skip
-                    ),
+                    format!("NRRD byte skip {} into gzip data is more than the {MAX_GZIP_SKIP} bytes supported", h.byte_skip),
                 ));
             }
             let mut gz = flate2::bufread::MultiGzDecoder::new(reader);

@@ -785,8 +785,10 @@ pub fn render_rle(
     let width = r.p1 - r.p0 + 1;
     let lw = width + 1; // links per row, with the sentinel
     let rows = r.q1 - r.q0 + 1;
-    if links.len() < rows * lw {
-        links.resize(rows * lw, 0);
+    // sized for the whole grid once, so no later rectangle grows it
+    let most = out.size[1] * (out.size[0] + 1);
+    if links.len() < most {
+        links.resize(most, 0);
     }
     let fr = RleFrame { rle, tables, params, pad: pad as isize, ascending, ert, r, gw, lw };
     let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];

@@ -66,6 +66,17 @@ pub const NORMAL_CODES: usize = NORMAL_SIDE * NORMAL_SIDE;
 /// The normal code of a zero gradient (shaded as facing the viewer).
 pub const ZERO_NORMAL: u16 = 0;
 
+/// Gaps of at most this many transparent voxels between two non-transparent
+/// runs of a scanline are stored as explicit transparent voxels ("bridged"):
+/// they shade to exact zeros, exactly what skipping them would give, and the
+/// longer runs mean fewer run changes in the compositing loop (measured on
+/// brainsmall's semi-transparent ramp: fewer instructions per frame).
+pub const BRIDGE: usize = 8;
+
+/// The normal code that marks a bridged transparent voxel (real codes are below
+/// [`NORMAL_CODES`]; masked, it indexes a real shade entry, multiplied by zero).
+pub const BRIDGE_NORMAL: u16 = u16::MAX;
+
 /// Intermediate rows per parallel band.
 const BAND: usize = 16;
 
@@ -181,6 +192,14 @@ impl Preclass {
         Some(RleVoxel { class: node as u16, normal: encode_normal(w) })
     }
 
+    /// The stored form of transparent voxel `(i, j, k)` inside a bridged gap:
+    /// its own (zero-opacity) class, so it shades to exact zeros, and the
+    /// [`BRIDGE_NORMAL`] code.
+    #[inline]
+    fn bridge_voxel(&self, stack: &SliceStack, i: usize, j: usize, k: usize) -> RleVoxel {
+        RleVoxel { class: self.cls.nearest_node(stack.at(i, j, k)) as u16, normal: BRIDGE_NORMAL }
+    }
+
     /// Raw opacity of a voxel (before the per-view correction).
     pub fn opacity(&self, v: RleVoxel) -> f32 {
         self.alpha[v.class as usize]
@@ -232,24 +251,36 @@ impl RleVolume {
                 let mut s =
                     SliceRuns { runs: Vec::new(), voxels: Vec::new(), ends: Vec::with_capacity(nj), bbox: [u32::MAX, 0, u32::MAX, 0] };
                 for j in 0..nj {
-                    // `gap` is where the current transparent run began
-                    let (mut gap, mut run): (usize, Option<usize>) = (0, None);
+                    // `gap` is where the current transparent run began; `run` where the
+                    // current non-transparent run began; `pending` counts the
+                    // transparent voxels since its last non-transparent one
+                    let (mut gap, mut run, mut pending): (usize, Option<usize>, usize) = (0, None, 0);
                     for i in 0..ni {
                         match pre.classify_voxel(stack, i, j, k) {
                             Some(v) => {
+                                // a short gap inside the run: bridge it with its transparent voxels
+                                if run.is_some() {
+                                    s.voxels.extend((i - pending..i).map(|b| pre.bridge_voxel(stack, b, j, k)));
+                                }
                                 run.get_or_insert(i);
+                                pending = 0;
                                 s.voxels.push(v);
                             }
                             None => {
-                                if let Some(start) = run.take() {
-                                    s.push_pair(start - gap, i - start, start, i - 1, j);
-                                    gap = i;
+                                if let Some(start) = run {
+                                    pending += 1;
+                                    if pending > BRIDGE {
+                                        let end = i + 1 - pending;
+                                        s.push_pair(start - gap, end - start, start, end - 1, j);
+                                        (gap, run, pending) = (end, None, 0);
+                                    }
                                 }
                             }
                         }
                     }
                     if let Some(start) = run {
-                        s.push_pair(start - gap, ni - start, start, ni - 1, j);
+                        let end = ni - pending;
+                        s.push_pair(start - gap, end - start, start, end - 1, j);
                     }
                     s.ends.push((s.runs.len() as u32, s.voxels.len() as u32));
                 }
@@ -286,9 +317,14 @@ impl RleVolume {
         self.runs.len() * 2 + (self.scan_runs.len() + self.scan_voxels.len()) * 4 + self.voxels.len() * 4 + self.bbox.len() * 16
     }
 
-    /// Number of non-transparent voxels stored.
+    /// Number of voxels stored: the non-transparent ones and the bridged transparent ones.
     pub fn voxel_count(&self) -> usize {
         self.voxels.len()
+    }
+
+    /// Number of bridged transparent voxels stored (see [`BRIDGE`]).
+    pub fn bridged_count(&self) -> usize {
+        self.voxels.iter().filter(|v| v.normal == BRIDGE_NORMAL).count()
     }
 
     /// Number of non-transparent runs.
@@ -296,14 +332,22 @@ impl RleVolume {
         self.runs.len() / 2
     }
 
-    /// The `(transparent, non-transparent)` run-length pairs of scanline `(j, k)`.
+    /// The `(transparent, non-transparent)` run-length pairs of scanline `(j, k)`
+    /// (a non-transparent run may contain bridged transparent voxels).
     pub fn scanline_runs(&self, j: usize, k: usize) -> &[u16] {
         let s = j + self.n[1] * k;
         &self.runs[self.scan_runs[s] as usize..self.scan_runs[s + 1] as usize]
     }
 
-    /// Decodes scanline `(j, k)`: its non-transparent voxels with their `i`.
+    /// Decodes scanline `(j, k)`: its non-transparent voxels with their `i`
+    /// (bridged transparent voxels left out).
     pub fn decode_scanline(&self, j: usize, k: usize) -> impl Iterator<Item = (usize, RleVoxel)> + '_ {
+        self.stored_scanline(j, k).filter(|(_, v)| v.normal != BRIDGE_NORMAL)
+    }
+
+    /// Every voxel stored for scanline `(j, k)` with its `i`, bridged
+    /// transparent voxels included.
+    pub fn stored_scanline(&self, j: usize, k: usize) -> impl Iterator<Item = (usize, RleVoxel)> + '_ {
         let s = j + self.n[1] * k;
         let vox = &self.voxels[self.scan_voxels[s] as usize..self.scan_voxels[s + 1] as usize];
         let mut pos = 0usize;
@@ -378,21 +422,22 @@ struct Cursor<'a> {
     /// Current non-transparent run `[s, e)` (`INF` past the last one) ...
     s: u32,
     e: u32,
-    /// ... whose first voxel is `vox[v]`.
-    v: u32,
+    /// ... whose voxel at column `x` is `vox[base + x]` (wrapping arithmetic).
+    base: u32,
 }
 
 impl<'a> Cursor<'a> {
     #[inline(always)]
     fn new(runs: &'a [u16], vox: &'a [RleVoxel]) -> Self {
-        let mut c = Cursor { runs, vox, r: 0, s: 0, e: 0, v: 0 };
+        let mut c = Cursor { runs, vox, r: 0, s: 0, e: 0, base: 0 };
         c.next_run();
         c
     }
 
     #[inline(always)]
     fn next_run(&mut self) {
-        self.v += self.e - self.s;
+        // the voxel index of the next run's first column is where this run ends
+        let v = self.base.wrapping_add(self.e);
         if self.r + 1 < self.runs.len() {
             self.s = self.e + self.runs[self.r] as u32;
             self.e = self.s + self.runs[self.r + 1] as u32;
@@ -401,12 +446,22 @@ impl<'a> Cursor<'a> {
             self.s = INF;
             self.e = INF;
         }
+        self.base = v.wrapping_sub(self.s);
     }
 
     /// Moves to the run containing or following column `x` (`x` never decreases).
     #[inline(always)]
     fn seek(&mut self, x: u32) {
         while self.e <= x {
+            self.next_run();
+        }
+    }
+
+    /// [`Cursor::seek`] to `x` from `x − 1`: runs are never empty and never
+    /// adjacent, so at most one step.
+    #[inline(always)]
+    fn step(&mut self, x: u32) {
+        if self.e <= x {
             self.next_run();
         }
     }
@@ -420,7 +475,7 @@ impl<'a> Cursor<'a> {
     /// The voxel at column `x` (after `seek(x)`), `None` if transparent.
     #[inline(always)]
     fn at(&self, x: u32) -> Option<RleVoxel> {
-        if x >= self.s { Some(self.vox[(self.v + (x - self.s)) as usize]) } else { None }
+        if x >= self.s { Some(self.vox[self.base.wrapping_add(x) as usize]) } else { None }
     }
 }
 
@@ -625,10 +680,8 @@ fn find(links: &mut [u32], x: usize) -> usize {
 /// columns `ci` in `[ci_lo, ci_hi]`.
 ///
 /// Alternates two skips: opaque pixels through the links, transparent voxels
-/// through the runs. Between them, a span of pixels that touch some
-/// non-transparent voxel is composited segment by segment, a segment being
-/// columns over which both scanlines stay in the same kind of run, so each
-/// segment is a plain loop over one or two voxel slices ([`segment`]).
+/// through the runs. Between them, [`span`] composites the pixels that touch
+/// some non-transparent voxel.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn composite_row(
@@ -662,41 +715,63 @@ fn composite_row(
             ci = nx - 1;
             continue;
         }
-        // the span: pixel ci's left column, then segments of right columns; the
-        // right column of one pixel is the left column of the next
-        let (vb, vt) = (bot.at(ci), top.at(ci));
-        let mut left = Left { b: t.get(vb), t: t.get(vt), any: vb.is_some() || vt.is_some() };
-        loop {
-            let c1 = ci + 1;
-            bot.seek(c1);
-            top.seek(c1);
-            let (bin, tin) = (c1 >= bot.s, c1 >= top.s);
-            // the segment's right columns: [c1, end)
-            let end = (if bin { bot.e } else { bot.s }).min(if tin { top.e } else { top.s }).min(ci_hi + 2);
-            let n = (end - c1) as usize;
-            let x0 = (ci as isize + off) as usize;
-            let (p, l) = (&mut px[x0..x0 + n], &mut links[x0..x0 + n]);
-            let bv = if bin { &bot.vox[(bot.v + c1 - bot.s) as usize..][..n] } else { &[][..] };
-            let tv = if tin { &top.vox[(top.v + c1 - top.s) as usize..][..n] } else { &[][..] };
-            let want = if bin || tin { n } else { 1 };
-            let done = match (bin, tin) {
-                (true, true) => segment::<true, true>(p, l, bv, tv, &mut left, w, t, ert),
-                (true, false) => segment::<true, false>(p, l, bv, &[], &mut left, w, t, ert),
-                (false, true) => segment::<false, true>(p, l, &[], tv, &mut left, w, t, ert),
-                (false, false) => {
-                    if !left.any {
-                        break; // all four voxels transparent: back to run skipping
-                    }
-                    segment::<false, false>(&mut p[..1], &mut l[..1], bv, tv, &mut left, w, t, ert)
+        ci = span(&mut bot, &mut top, ci, ci_hi, off, w, t, ert, px, links);
+        if ci > ci_hi {
+            return;
+        }
+    }
+}
+
+/// Composites the span of pixels from `ci` (not opaque, touching a
+/// non-transparent voxel) up to the first pixel that is opaque or touches only
+/// transparent voxels, or past `ci_hi`; returns where it stopped.
+///
+/// The span is walked in segments: columns over which both scanlines stay in the
+/// same kind of run, so each is a plain loop over one or two voxel slices
+/// ([`segment`]). The right column of one pixel is the left column of the next,
+/// so each voxel is shaded once per row.
+#[allow(clippy::too_many_arguments)]
+#[inline(never)] // one small function per span keeps the loops' state in registers
+fn span(
+    bot: &mut Cursor,
+    top: &mut Cursor,
+    mut ci: u32,
+    ci_hi: u32,
+    off: isize,
+    w: &Weights,
+    t: &ViewTables,
+    ert: f32,
+    px: &mut [[f32; 4]],
+    links: &mut [u32],
+) -> u32 {
+    let (vb, vt) = (bot.at(ci), top.at(ci));
+    let mut left = Left { b: t.get(vb), t: t.get(vt), any: vb.is_some() || vt.is_some() };
+    loop {
+        let c1 = ci + 1;
+        bot.step(c1);
+        top.step(c1);
+        let (bin, tin) = (c1 >= bot.s, c1 >= top.s);
+        // the segment's right columns: [c1, end)
+        let end = (if bin { bot.e } else { bot.s }).min(if tin { top.e } else { top.s }).min(ci_hi + 2);
+        let n = (end - c1) as usize;
+        let x0 = (ci as isize + off) as usize;
+        let (p, l) = (&mut px[x0..x0 + n], &mut links[x0..x0 + n]);
+        let bv = if bin { &bot.vox[bot.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
+        let tv = if tin { &top.vox[top.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
+        let (want, done) = match (bin, tin) {
+            (true, true) => (n, segment::<true, true>(p, l, bv, tv, &mut left, w, t, ert)),
+            (true, false) => (n, segment::<true, false>(p, l, bv, &[], &mut left, w, t, ert)),
+            (false, true) => (n, segment::<false, true>(p, l, &[], tv, &mut left, w, t, ert)),
+            (false, false) => {
+                if !left.any {
+                    return ci; // all four voxels transparent: back to run skipping
                 }
-            };
-            ci += done as u32;
-            if ci > ci_hi {
-                return;
+                (1, segment::<false, false>(&mut p[..1], &mut l[..1], &[], &[], &mut left, w, t, ert))
             }
-            if done < want {
-                break; // an opaque pixel: back to the links
-            }
+        };
+        ci += done as u32;
+        if done < want || ci > ci_hi {
+            return ci; // an opaque pixel (back to the links), or the end
         }
     }
 }
@@ -713,7 +788,7 @@ struct Left {
 /// `bv` / `tv` (bottom / top scanline; `B` / `T` false: transparent, the slice
 /// is unused). Stops before the first opaque pixel; returns how many it did.
 #[allow(clippy::too_many_arguments)]
-#[inline(never)] // measured: inlining the four copies into the band loop costs registers
+#[inline(always)]
 fn segment<const B: bool, const T: bool>(
     px: &mut [[f32; 4]],
     links: &mut [u32],

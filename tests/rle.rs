@@ -10,7 +10,7 @@ use shearwarp::phantom;
 use shearwarp::presets::{Tissue, ct_tissues};
 use shearwarp::raycast::Mode;
 use shearwarp::render::{Method, Renderer, Settings};
-use shearwarp::rle::{Preclass, RleVolume};
+use shearwarp::rle::{BRIDGE_NORMAL, Preclass, RleVolume};
 use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, rotate_eye};
 use shearwarp::volume::{Volume, VoxelData};
@@ -156,8 +156,9 @@ proptest! {
     }
 
     /// Decoding the runs of every scanline gives back exactly the classified
-    /// non-transparent voxels (position, class, normal), and the raw opacity and
-    /// colour a voxel stands for are its classifier node's.
+    /// non-transparent voxels (position, class, normal), the raw opacity and
+    /// colour a voxel stands for are its classifier node's, and bridged gap
+    /// voxels are transparent.
     #[test]
     fn encoding_round_trips(
         nx in 1usize..26, ny in 1usize..26, nz in 1usize..26, seed in any::<u64>(), tfs in any::<u64>(),
@@ -183,6 +184,11 @@ proptest! {
                 prop_assert!(runs.len() % 2 == 0);
                 prop_assert!(runs.chunks(2).all(|p| p[1] > 0));
                 prop_assert!(runs.iter().map(|&r| r as usize).sum::<usize>() <= ni);
+                // bridged voxels sit at transparent positions, with zero opacity
+                for (i, v) in rle.stored_scanline(j, k).filter(|(_, v)| v.normal == BRIDGE_NORMAL) {
+                    prop_assert!(pre.classify_voxel(&stack, i, j, k).is_none());
+                    prop_assert_eq!(pre.opacity(v), 0.0);
+                }
                 for (_, v) in &decoded {
                     prop_assert!(pre.opacity(*v) > 0.0);
                     let node = cls.raw_node(v.class as usize);
@@ -192,8 +198,9 @@ proptest! {
                 count += decoded.len();
             }
         }
-        prop_assert_eq!(count, rle.voxel_count());
-        prop_assert!(rle.bytes() >= 4 * count);
+        // stored: the non-transparent voxels plus the bridged transparent ones
+        prop_assert_eq!(count + rle.bridged_count(), rle.voxel_count());
+        prop_assert!(rle.bytes() >= 4 * rle.voxel_count());
     }
 }
 

@@ -6,11 +6,12 @@
 //! view first needs it, and rebuilt only when the classification or cell size
 //! changes), the reusable intermediate image and per-slice parameters, and a rayon
 //! pool of the requested size. [`Renderer::render`] runs one frame and reports how
-//! long each stage took. The pre-classified paths ([`Method::Rle`],
-//! [`Method::BruteRle`]) keep their classification and per-axis run-length
-//! encodings in a [`RleCache`], encoded lazily like the masks and re-encoded when
-//! the classification (transfer function, iso value, tissue or mode) changes. The output is the same for any thread count: every pixel
-//! is computed by exactly one task from the same inputs.
+//! long each stage took. The output is the same for any thread count: every pixel
+//! is computed by exactly one task from the same inputs. The pre-classified paths
+//! ([`Method::Rle`], [`Method::BruteRle`]) keep their classification and per-axis
+//! run-length encodings in a [`RleCache`], encoded lazily like the masks and
+//! re-encoded when the classification (transfer function, iso value, tissue or
+//! mode) changes.
 
 use std::time::Instant;
 

@@ -285,6 +285,29 @@ fn rle_agrees_with_the_binary_path() {
     }
 }
 
+/// Degenerate inputs render without panicking and agree with the reference:
+/// flat volumes (one voxel thick along any axis), nothing visible, everything
+/// opaque, and early-termination thresholds of 0 and NaN (nothing composites).
+#[test]
+fn degenerate_inputs_are_handled() {
+    let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, 0.4, 0.9, 0.2), [24, 24]);
+    for dims in [[1, 6, 7], [6, 1, 7], [6, 7, 1], [1, 1, 5], [1, 1, 1], [3, 4, 5]] {
+        let vol = random_volume(dims, 5, [1.0; 3]);
+        let tfs = [TransferFunction::threshold(1e6, [1.0; 3]), TransferFunction::threshold(-1e6, [1.0; 3]), random_tf(7)];
+        for tf in &tfs {
+            for (mode, ert) in [(Mode::Iso, 0.99), (Mode::Blend, 0.99), (Mode::Blend, 0.0), (Mode::Iso, f32::NAN)] {
+                let base = Settings { mode, ert, threads: 2, ..Settings::default() };
+                let (ri, rpx) = render(&vol, tf, Settings { method: Method::Rle, ..base }, &cam);
+                let (bi, bpx) = render(&vol, tf, Settings { method: Method::BruteRle, ..base }, &cam);
+                assert!(max_diff(&rpx, &bpx) <= TOL && max_diff(&ri.data, &bi.data) <= TOL, "{dims:?} {mode:?} ert {ert}");
+                if !(ert > 0.0) {
+                    assert!(ri.data.iter().all(|c| *c == [0.0; 4]), "ert {ert} composites nothing");
+                }
+            }
+        }
+    }
+}
+
 /// What early ray termination costs in accuracy: RMSE (premultiplied RGB in
 /// [0, 1], over all pixels) between ert 0.95 and ert 1.0 on the head phantom at
 /// 512², iso and blend. Prints; run with `--ignored --nocapture`.

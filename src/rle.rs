@@ -53,6 +53,10 @@
 //! The sample is the bilinear blend of the four voxels' premultiplied colours,
 //! composited "over" ([`composite_premultiplied`]).
 
+// Negated float comparisons (`!(a > b)`) are deliberate here: NaN takes the
+// "no" branch (a NaN gradient is a zero one, a NaN threshold terminates nothing).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -981,12 +985,11 @@ pub fn render_brute_preclassified(
             if cj < 0 || cj > nj as isize - 2 {
                 return;
             }
-            for p in r.p0..=r.p1 {
+            for (p, acc) in prow.iter_mut().enumerate().take(r.p1 + 1).skip(r.p0) {
                 let ci = p as isize - pad as isize + fi;
                 if ci < 0 || ci > ni as isize - 2 {
                     continue;
                 }
-                let acc = &mut prow[p];
                 if !(acc[3] < ert) {
                     continue;
                 }

@@ -51,7 +51,7 @@ fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
                     }
                 }
                 let h = (x as u64 * 73856093) ^ (y as u64 * 19349663) ^ (z as u64 * 83492791) ^ noise_seed;
-                if h % 17 == 0 {
+                if h.is_multiple_of(17) {
                     v += (h % 97) as f32;
                 }
                 data[x + dims[0] * (y + dims[1] * z)] = v;
@@ -181,7 +181,7 @@ proptest! {
                 prop_assert_eq!(&decoded, &want, "scanline ({}, {})", j, k);
                 // runs: (transparent, non-transparent) pairs, every run non-empty, within the scanline
                 let runs = rle.scanline_runs(j, k);
-                prop_assert!(runs.len() % 2 == 0);
+                prop_assert!(runs.len().is_multiple_of(2));
                 prop_assert!(runs.chunks(2).all(|p| p[1] > 0));
                 prop_assert!(runs.iter().map(|&r| r as usize).sum::<usize>() <= ni);
                 // bridged voxels sit at transparent positions, with zero opacity
@@ -300,7 +300,7 @@ fn degenerate_inputs_are_handled() {
                 let (ri, rpx) = render(&vol, tf, Settings { method: Method::Rle, ..base }, &cam);
                 let (bi, bpx) = render(&vol, tf, Settings { method: Method::BruteRle, ..base }, &cam);
                 assert!(max_diff(&rpx, &bpx) <= TOL && max_diff(&ri.data, &bi.data) <= TOL, "{dims:?} {mode:?} ert {ert}");
-                if !(ert > 0.0) {
+                if ert.is_nan() || ert <= 0.0 {
                     assert!(ri.data.iter().all(|c| *c == [0.0; 4]), "ert {ert} composites nothing");
                 }
             }

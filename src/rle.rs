@@ -240,6 +240,10 @@ pub struct RleVolume {
     scan_voxels: Vec<u32>,
     /// The non-transparent voxels, scanline by scanline, in `i` order.
     voxels: Vec<RleVoxel>,
+    /// Per scanline, the first and last column of its non-transparent voxels
+    /// (`[u16::MAX, 0]` when it has none): lets a row pair that has nothing to do
+    /// be rejected without walking its runs.
+    extent: Vec<[u16; 2]>,
     /// Per slice, the bounding box `[i0, i1, j0, j1]` (inclusive) of its
     /// non-transparent voxels; `i0 > i1` when the slice is empty.
     bbox: Vec<[u32; 4]>,
@@ -251,6 +255,7 @@ struct SliceRuns {
     voxels: Vec<RleVoxel>,
     /// Per scanline: end of its runs and voxels (relative to the slice).
     ends: Vec<(u32, u32)>,
+    extent: Vec<[u16; 2]>,
     bbox: [u32; 4],
 }
 
@@ -262,9 +267,15 @@ impl RleVolume {
         let slices: Vec<SliceRuns> = (0..nk)
             .into_par_iter()
             .map(|k| {
-                let mut s =
-                    SliceRuns { runs: Vec::new(), voxels: Vec::new(), ends: Vec::with_capacity(nj), bbox: [u32::MAX, 0, u32::MAX, 0] };
+                let mut s = SliceRuns {
+                    runs: Vec::new(),
+                    voxels: Vec::new(),
+                    ends: Vec::with_capacity(nj),
+                    extent: Vec::with_capacity(nj),
+                    bbox: [u32::MAX, 0, u32::MAX, 0],
+                };
                 for j in 0..nj {
+                    s.extent.push([u16::MAX, 0]);
                     // `gap` is where the current transparent run began; `run` where the
                     // current non-transparent run began; `pending` counts the
                     // transparent voxels since its last non-transparent one
@@ -310,6 +321,7 @@ impl RleVolume {
             scan_runs: Vec::with_capacity(nj * nk + 1),
             scan_voxels: Vec::with_capacity(nj * nk + 1),
             voxels: Vec::with_capacity(total_voxels),
+            extent: Vec::with_capacity(nj * nk),
             bbox: Vec::with_capacity(nk),
         };
         rle.scan_runs.push(0);
@@ -321,6 +333,7 @@ impl RleVolume {
             rle.scan_voxels.extend(s.ends.iter().map(|e| v0 + e.1));
             rle.runs.extend_from_slice(&s.runs);
             rle.voxels.extend_from_slice(&s.voxels);
+            rle.extent.extend_from_slice(&s.extent);
             rle.bbox.push(s.bbox);
         }
         rle
@@ -328,7 +341,10 @@ impl RleVolume {
 
     /// Bytes held by the encoding.
     pub fn bytes(&self) -> usize {
-        self.runs.len() * 2 + (self.scan_runs.len() + self.scan_voxels.len()) * 4 + self.voxels.len() * 4 + self.bbox.len() * 16
+        self.runs.len() * 2
+            + (self.scan_runs.len() + self.scan_voxels.len() + self.extent.len()) * 4
+            + self.voxels.len() * 4
+            + self.bbox.len() * 16
     }
 
     /// Number of voxels stored: the non-transparent ones and the bridged transparent ones.
@@ -376,6 +392,24 @@ impl RleVolume {
         })
     }
 
+    /// Hints the cache to fetch scanline `s`'s voxels near columns `a` and `b`
+    /// (assuming one run from its first non-transparent column: exact for solid
+    /// objects, a harmless guess otherwise).
+    #[inline(always)]
+    fn prefetch_scanline(&self, s: usize, a: usize, b: usize) {
+        if s + 1 >= self.scan_voxels.len() {
+            return;
+        }
+        let (v0, v1) = (self.scan_voxels[s] as usize, self.scan_voxels[s + 1] as usize);
+        if v0 == v1 {
+            return;
+        }
+        let lo = self.extent[s][0] as usize;
+        let at = |c: usize| (v0 + c.saturating_sub(lo)).min(v1 - 1);
+        prefetch(&self.voxels, at(a));
+        prefetch(&self.voxels, at(b));
+    }
+
     /// A run cursor at the start of scanline `s = j + nj·k`.
     #[inline(always)]
     fn cursor(&self, s: usize) -> Cursor<'_> {
@@ -418,12 +452,33 @@ impl SliceRuns {
     fn push_pair(&mut self, gap: usize, len: usize, i0: usize, i1: usize, j: usize) {
         self.runs.push(gap as u16);
         self.runs.push(len as u16);
+        // the scanline's extent (pairs come in increasing i)
+        if let Some(e) = self.extent.last_mut() {
+            e[0] = e[0].min(i0 as u16);
+            e[1] = i1 as u16;
+        }
         let b = &mut self.bbox;
         b[0] = b[0].min(i0 as u32);
         b[1] = b[1].max(i1 as u32);
         b[2] = b[2].min(j as u32);
         b[3] = b[3].max(j as u32);
     }
+}
+
+/// Asks the cache for `v[i]` (a hint: no effect on results; nothing if `i` is out of range).
+#[inline(always)]
+fn prefetch<T>(v: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(r) = v.get(i) {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: a prefetch only hints the cache hierarchy: it never faults and
+        // never reads or writes memory architecturally, so it is sound for any
+        // address; this one is a valid reference besides. Exercised by every RLE
+        // render (tests/rle.rs).
+        unsafe { _mm_prefetch::<_MM_HINT_T0>((r as *const T).cast::<i8>()) }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (v, i);
 }
 
 /// Walks the non-transparent runs of one scanline with a monotone column.
@@ -937,10 +992,26 @@ impl RleFrame<'_> {
                 if cj < 0 || cj > nj as isize - 2 || cj + 1 < bb[2] as isize || cj > bb[3] as isize {
                     continue;
                 }
-                let lrow = &mut links[row * lw..(row + 1) * lw];
                 let s = cj as usize + nj * k;
+                // the pixels that touch the pair's non-transparent columns: from one
+                // left of the first to the last (an empty pair gives lo > hi)
+                let (eb, et) = (rle.extent[s], rle.extent[s + 1]);
+                let lo = (eb[0].min(et[0]) as isize - 1).max(ci_lo);
+                let hi = (eb[1].max(et[1]) as isize).min(ci_hi);
+                if lo > hi {
+                    continue;
+                }
+                // all of them opaque already: nothing to do
+                let lrow = &mut links[row * lw..(row + 1) * lw];
+                let first = find(lrow, (lo + off) as usize) as isize - off;
+                if first > hi {
+                    continue;
+                }
+                // the next row brings in scanline s + 2: ask for its voxels at the
+                // edges this row starts and ends at (silhouettes move slowly)
+                rle.prefetch_scanline(s + 2, first as usize, hi as usize);
                 let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
-                composite_row(rle.cursor(s), rle.cursor(s + 1), ci_lo as u32, ci_hi as u32, off, &w, self.tables, self.ert, prow, lrow);
+                composite_row(rle.cursor(s), rle.cursor(s + 1), first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow);
             }
         }
     }

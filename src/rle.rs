@@ -36,7 +36,10 @@
 //!   skipped through per-pixel skip links with path compression (Lacroute's
 //!   opaque-pixel links); between the skips, a span of pixels is composited in
 //!   segments over which both scanlines stay in the same kind of run, each a
-//!   plain loop over voxel slices; a pixel is finished once its opacity reaches
+//!   plain loop over voxel slices; a row pair whose pixels over its scanlines'
+//!   non-transparent extent are all opaque is rejected without walking runs, and
+//!   the scanline the next row brings in is prefetched at this row's edges (the
+//!   only `unsafe`: a cache hint); a pixel is finished once its opacity reaches
 //!   [`crate::render::Settings::ert`]. Parallel over bands of intermediate rows
 //!   (each band walks all slices front to back), so the image is the same for any
 //!   thread count.

@@ -2,16 +2,18 @@
 //!
 //! Fast, accurate CPU volume rendering built around the bit-packed binary
 //! shear-warp fast rotator (Csébfalvi 1999).
+//!
+//! The pipeline, one module per stage:
+//! volume ([`volume`], [`slices`], [`phantom`]) → classify ([`classify`], [`presets`])
+//! → mask ([`mask`], [`shear`], [`depth`]) → factorize view ([`view`])
+//! → composite into the intermediate image ([`raycast`], [`composite`]) → warp ([`warp`]).
+//! [`render`] runs the pipeline per frame; [`cli`] is the command-line tool.
 
-pub mod error;
-pub mod volume;
-
-pub use error::{Error, Result};
-pub use volume::{Volume, VoxelData, VoxelType};
 pub mod classify;
 pub mod cli;
 pub mod composite;
 pub mod depth;
+pub mod error;
 pub mod mask;
 pub mod phantom;
 pub mod presets;
@@ -20,4 +22,8 @@ pub mod render;
 pub mod shear;
 pub mod slices;
 pub mod view;
+pub mod volume;
 pub mod warp;
+
+pub use error::{Error, Result};
+pub use volume::{Volume, VoxelData, VoxelType};

@@ -156,8 +156,24 @@ impl CellCodes {
         let span = |si: usize, c: usize| ((s * si).saturating_sub(s - 1), (s * si + s).min(c));
         let sc = [count(ci_n), count(cj_n)];
         let per = sc[0] * sc[1];
+        let mut bbox: Vec<Option<[usize; 4]>> = vec![None; self.nk];
+        if s == 1 {
+            // no dilation: the codes themselves, plus each slice's bounding box
+            let out = self.codes.clone();
+            if per > 0 {
+                out.par_chunks(per).zip(bbox.par_iter_mut()).for_each(|(o, bb)| {
+                    for (cj, line) in o.chunks_exact(ci_n).enumerate() {
+                        let (Some(a), Some(b)) = (line.iter().position(|&c| c != 0), line.iter().rposition(|&c| c != 0)) else { continue };
+                        *bb = Some(match *bb {
+                            None => [a, b, cj, cj],
+                            Some([p, q, r, _]) => [p.min(a), q.max(b), r, cj],
+                        });
+                    }
+                });
+            }
+            return (sc, out, bbox);
+        }
         let mut out = vec![0u8; per * self.nk];
-        let mut bbox = vec![None; self.nk];
         if per == 0 {
             return (sc, out, bbox);
         }
@@ -504,25 +520,36 @@ impl<W: Word> BinaryMask<W> {
         }
     }
 
-    /// `new[p] = old[p] & keep | old[p−1] & up | old[p+1] & down` over the rect.
+    /// `new[p] = old[p] & keep | old[p−1] & up | old[p+1] & down` over the rect,
+    /// one grid row per task. The words of a column are contiguous, so the inner
+    /// loop runs over the `nw` words with their own shift vectors.
     fn shift_columns(&mut self, r: Rect) -> u64 {
         let nw = self.nw;
         let gw = self.grid[0];
-        let (up, down, keep) = (&self.up, &self.down, &self.keep);
+        let (up, down, keep) = (&self.up[..], &self.down[..], &self.keep[..]);
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
-        self.words.par_chunks_mut(gw * nw).skip(r.q0).take(r.q1 - r.q0 + 1).for_each(|row| {
-            for w in 0..nw {
-                let (u, d, kp) = (up[w], down[w], keep[w]);
-                // the column before the rect is empty (outside the occupied region)
-                let mut prev = if ps > 0 { row[(ps - 1) * nw + w] } else { W::ZERO };
-                for p in ps..=pe {
-                    let cur = row[p * nw + w];
-                    let next = if p + 1 < gw { row[(p + 1) * nw + w] } else { W::ZERO };
-                    row[p * nw + w] = (cur & kp) | (prev & u) | (next & d);
-                    prev = cur;
+        self.words.par_chunks_mut(gw * nw).skip(r.q0).take(r.q1 - r.q0 + 1).for_each_init(
+            || vec![W::ZERO; nw],
+            |prev, row| {
+                // the column before the rect is outside the occupied region: empty
+                prev.fill(W::ZERO);
+                if ps > 0 {
+                    prev.copy_from_slice(&row[(ps - 1) * nw..ps * nw]);
                 }
-            }
-        });
+                let zero = vec![W::ZERO; 0];
+                for p in ps..=pe {
+                    let (head, tail) = row.split_at_mut((p + 1) * nw);
+                    let cur = &mut head[p * nw..];
+                    let next: &[W] = if p + 1 < gw { &tail[..nw] } else { &zero };
+                    for w in 0..nw {
+                        let old = cur[w];
+                        let nx = next.get(w).copied().unwrap_or(W::ZERO);
+                        cur[w] = (old & keep[w]) | (prev[w] & up[w]) | (nx & down[w]);
+                        prev[w] = old;
+                    }
+                }
+            },
+        );
         ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
     }
 
@@ -538,16 +565,27 @@ impl<W: Word> BinaryMask<W> {
             let s = (r.q0 - 1) * gw * nw;
             prev.copy_from_slice(&self.words[s + ps..s + pe]);
         }
+        let (up, down, keep) = (&self.up[..], &self.down[..], &self.keep[..]);
         for q in r.q0..=r.q1 {
             let (head, tail) = self.words.split_at_mut((q + 1) * gw * nw);
             let row = &mut head[q * gw * nw + ps..q * gw * nw + pe];
-            let next: &[W] = if q + 1 < gh { &tail[ps..pe] } else { &[] };
-            for (idx, cell) in row.iter_mut().enumerate() {
-                let w = idx % nw;
-                let cur = *cell;
-                let nx = next.get(idx).copied().unwrap_or(W::ZERO);
-                *cell = (cur & self.keep[w]) | (prev[idx] & self.up[w]) | (nx & self.down[w]);
-                prev[idx] = cur;
+            if q + 1 < gh {
+                let next = &tail[ps..pe];
+                for ((cw, nw_), pw) in row.chunks_exact_mut(nw).zip(next.chunks_exact(nw)).zip(prev.chunks_exact_mut(nw)) {
+                    for w in 0..nw {
+                        let old = cw[w];
+                        cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nw_[w] & down[w]);
+                        pw[w] = old;
+                    }
+                }
+            } else {
+                for (cw, pw) in row.chunks_exact_mut(nw).zip(prev.chunks_exact_mut(nw)) {
+                    for w in 0..nw {
+                        let old = cw[w];
+                        cw[w] = (old & keep[w]) | (pw[w] & up[w]);
+                        pw[w] = old;
+                    }
+                }
             }
         }
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64

@@ -127,28 +127,70 @@ fn otsu_bins(h: &[u64], a: usize, b: usize) -> Option<usize> {
     best_t
 }
 
-/// Suggested lower thresholds for a volume without a known scale (MRI): Otsu's
-/// background/object split, then Otsu again inside the object twice, giving up to
-/// three ascending thresholds ("low", "mid", "high" tissue presets).
+/// Suggested lower thresholds for a volume without a known scale (MRI): the
+/// three thresholds of multi-level Otsu (four classes with the largest
+/// between-class variance, found exactly by dynamic programming over a 256-bin
+/// histogram), ascending. Fewer when the volume has fewer distinct levels.
 pub fn histogram_thresholds(v: &Volume) -> Vec<f32> {
     let (lo, hi) = v.value_range();
     if hi <= lo {
         return vec![];
     }
     let h = v.histogram(256);
-    let to_density = |t: usize| lo + (hi - lo) * (t as f32 + 1.0) / 256.0;
-    let mut out = vec![];
-    let mut start = 0;
-    for _ in 0..3 {
-        match otsu_bins(&h, start, 256) {
-            Some(t) if t + 1 < 256 => {
-                out.push(to_density(t));
-                start = t + 1;
+    let to_density = |t: usize| lo + (hi - lo) * t as f32 / 256.0;
+    multi_otsu(&h, 4).into_iter().map(to_density).collect()
+}
+
+/// Class boundaries (the first bin of classes 1..k) maximising Σ w·μ² over `k`
+/// non-empty classes of consecutive bins.
+fn multi_otsu(h: &[u64], k: usize) -> Vec<usize> {
+    let n = h.len();
+    let mut pw = vec![0f64; n + 1];
+    let mut ps = vec![0f64; n + 1];
+    for i in 0..n {
+        pw[i + 1] = pw[i] + h[i] as f64;
+        ps[i + 1] = ps[i] + i as f64 * h[i] as f64;
+    }
+    // a class [a, b) must hold voxels
+    let gain = |a: usize, b: usize| {
+        let w = pw[b] - pw[a];
+        if w > 0.0 { Some((ps[b] - ps[a]).powi(2) / w) } else { None }
+    };
+    let k = k.min(h.iter().filter(|&&c| c > 0).count()).max(1);
+    // best[c][b]: best score of c classes covering bins [0, b); from[c][b]: start of the last class
+    let mut best = vec![vec![f64::NEG_INFINITY; n + 1]; k + 1];
+    let mut from = vec![vec![0usize; n + 1]; k + 1];
+    best[0][0] = 0.0;
+    for c in 1..=k {
+        for b in 1..=n {
+            for a in (c - 1)..b {
+                if best[c - 1][a] == f64::NEG_INFINITY {
+                    continue;
+                }
+                if let Some(g) = gain(a, b) {
+                    let v = best[c - 1][a] + g;
+                    if v > best[c][b] {
+                        best[c][b] = v;
+                        from[c][b] = a;
+                    }
+                }
             }
-            _ => break,
         }
     }
-    out
+    if best[k][n] == f64::NEG_INFINITY {
+        return vec![];
+    }
+    let mut cuts = vec![];
+    let mut b = n;
+    for c in (1..=k).rev() {
+        let a = from[c][b];
+        if c > 1 {
+            cuts.push(a);
+        }
+        b = a;
+    }
+    cuts.reverse();
+    cuts
 }
 
 /// Tissue presets for a volume: the CT presets for Hounsfield data, else

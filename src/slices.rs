@@ -117,6 +117,42 @@ impl SliceStack {
     /// Gradient at an in-slice sample: the bilinear blend of the corners' gradients.
     #[inline]
     pub fn gradient(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
+        let n = self.n;
+        if ci >= 1 && cj >= 1 && k >= 1 && ci + 2 < n[0] && cj + 2 < n[1] && k + 1 < n[2] {
+            self.gradient_interior(ci, cj, k, wi, wj)
+        } else {
+            self.gradient_general(ci, cj, k, wi, wj)
+        }
+    }
+
+    /// [`SliceStack::gradient`] for a cell whose 4×4 in-slice neighbourhood and
+    /// both neighbouring slices exist: the 20 distinct voxels are loaded once.
+    /// Bit-identical to the general path (central differences are `(hi − lo)/2`
+    /// there and `(hi − lo)·0.5` here, which IEEE arithmetic makes equal).
+    #[inline(always)]
+    fn gradient_interior(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
+        let (n0, n01) = (self.n[0], self.n[0] * self.n[1]);
+        let b = ci + n0 * cj + n01 * k;
+        let d = &self.data[b - n0 - n01 - 1..b + 2 * n0 + n01 + 3];
+        // local index of voxel (ci + x, cj + y, k + z) for x, y ∈ −1..=2, z ∈ −1..=1
+        let o = n0 + n01 + 1;
+        let at = |x: isize, y: isize, z: isize| d[(o as isize + x + y * n0 as isize + z * n01 as isize) as usize];
+        let gi = |x: isize, y: isize| (at(x + 1, y, 0) - at(x - 1, y, 0)) * 0.5;
+        let gj = |x: isize, y: isize| (at(x, y + 1, 0) - at(x, y - 1, 0)) * 0.5;
+        let gk = |x: isize, y: isize| (at(x, y, 1) - at(x, y, -1)) * 0.5;
+        let blend = |g00: f32, g10: f32, g01: f32, g11: f32| {
+            let top = g00 + (g10 - g00) * wi;
+            let bot = g01 + (g11 - g01) * wi;
+            top + (bot - top) * wj
+        };
+        [
+            blend(gi(0, 0), gi(1, 0), gi(0, 1), gi(1, 1)),
+            blend(gj(0, 0), gj(1, 0), gj(0, 1), gj(1, 1)),
+            blend(gk(0, 0), gk(1, 0), gk(0, 1), gk(1, 1)),
+        ]
+    }
+
+    fn gradient_general(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
         let g00 = self.gradient_at(ci, cj, k);
         let g10 = self.gradient_at(ci + 1, cj, k);
         let g01 = self.gradient_at(ci, cj + 1, k);
@@ -165,5 +201,25 @@ mod tests {
         assert!((g[0] - 0.1).abs() < 1e-5 && (g[1] - 3.0).abs() < 1e-5 && (g[2] + 2.0).abs() < 1e-5);
         let (lo, hi) = s.cell_range(1, 2, 3);
         assert!(lo <= d && d <= hi);
+    }
+
+    #[test]
+    fn interior_gradient_is_bit_identical_to_the_general_path() {
+        let v =
+            Volume::from_fn([9, 8, 7], [1.0; 3], |x, y, z| ((x * 7 + y * 13 + z * 29) % 17) as f32 * 1.37 - (x * y) as f32 * 0.11).unwrap();
+        for axis in 0..3 {
+            let s = SliceStack::new(&v, axis);
+            for k in 1..s.n[2] - 1 {
+                for cj in 1..s.n[1] - 2 {
+                    for ci in 1..s.n[0] - 2 {
+                        for (wi, wj) in [(0.0, 0.0), (0.3, 0.7), (0.999, 0.5)] {
+                            let a = s.gradient_interior(ci, cj, k, wi, wj);
+                            let b = s.gradient_general(ci, cj, k, wi, wj);
+                            assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits));
+                        }
+                    }
+                }
+            }
+        }
     }
 }

@@ -9,6 +9,7 @@
 //! → composite into the intermediate image ([`raycast`], [`composite`]) → warp ([`warp`]).
 //! [`render`] runs the pipeline per frame; [`cli`] is the command-line tool.
 
+pub mod bench;
 pub mod classify;
 pub mod cli;
 pub mod composite;

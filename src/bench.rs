@@ -288,7 +288,7 @@ impl BenchCmd {
 
     /// The phantom the volume was built from (None for files).
     fn phantom(&self) -> Option<Phantom> {
-        if self.volume.raw.is_some() {
+        if self.volume.file.is_some() || self.volume.raw.is_some() || self.volume.den.is_some() {
             return None;
         }
         Some(match self.volume.phantom {

@@ -5,9 +5,11 @@
 //!
 //! * the **median frame time** (shear + render + warp, [`FrameStats::frame_ms`])
 //!   of several repetitions after untimed warm-up frames, with every axis's
-//!   stack and mask prebuilt by [`Renderer::prepare_all_axes`]; the first
-//!   frame of each view also reports its *cold* shear (moving the mask from the
-//!   previous view), which the repeated frames of a still view do not pay;
+//!   stack and mask prebuilt by [`Renderer::prepare_all_axes`], repeated in
+//!   several rounds over the whole matrix so that a change in machine load
+//!   biases no variant; the first frame of each view also reports its *cold*
+//!   shear (moving the mask from the previous state), which the repeated
+//!   frames of a still view do not pay;
 //! * the **error against the reference** ([`crate::reference`], same camera,
 //!   pixel for pixel): RMSE, PSNR, maximum absolute error, SSIM and the
 //!   silhouette error of [`crate::metrics`];

@@ -8,6 +8,9 @@
 //! → mask ([`mask`], [`shear`], [`depth`]) → factorize view ([`view`])
 //! → composite into the intermediate image ([`raycast`], [`composite`]) → warp ([`warp`]).
 //! [`render`] runs the pipeline per frame; [`cli`] is the command-line tool.
+//! Accuracy: [`reference`] (true rays, trilinear, fine steps) and [`truth`]
+//! (analytic iso-surfaces) are what [`metrics`] measures the fast paths
+//! against; [`bench`] runs the speed/accuracy matrix (`shearwarp bench`).
 
 pub mod bench;
 pub mod classify;

@@ -117,7 +117,8 @@ pub struct Variant {
 
 /// Every variant benchmarked for the mode and shared settings of `base`:
 /// the binary fast rotator with cell sizes 1–4, u32 and u64 words, LUT and
-/// bit-scan search; and brute force. Register new render options here.
+/// bit-scan search; in blend mode also without early ray termination; and
+/// brute force. Register new render options here.
 pub fn registry(base: Settings) -> Vec<Variant> {
     let mut v = Vec::new();
     for cell in 1..=4 {
@@ -129,6 +130,10 @@ pub fn registry(base: Settings) -> Vec<Variant> {
                 });
             }
         }
+    }
+    if base.mode == Mode::Blend && base.ert < 1.0 {
+        // what early ray termination costs in accuracy and buys in time
+        v.push(Variant { name: "binary-c1-u64-bitscan-noert".into(), settings: Settings { method: Method::Binary, ert: 1.0, ..base } });
     }
     v.push(Variant { name: "brute".into(), settings: Settings { method: Method::Brute, cell: 1, ..base } });
     v
@@ -840,6 +845,9 @@ mod tests {
     fn registry_covers_the_matrix() {
         let v = registry(Settings::default());
         assert_eq!(v.len(), 4 * 2 * 2 + 1);
+        let b = registry(Settings { mode: Mode::Blend, ..Settings::default() });
+        assert_eq!(b.len(), 4 * 2 * 2 + 2);
+        assert!(b.iter().any(|x| x.settings.ert == 1.0 && x.name.ends_with("noert")));
         let names: std::collections::BTreeSet<&str> = v.iter().map(|x| x.name.as_str()).collect();
         assert_eq!(names.len(), v.len(), "names are unique");
         assert!(names.contains("binary-c1-u64-bitscan") && names.contains("binary-c4-u32-lut") && names.contains("brute"));

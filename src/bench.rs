@@ -503,7 +503,10 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
             refs.push(RefFrame { image, truth });
             pb.inc(1);
         }
-        let mut img = Image::new(cmd.size, cmd.size);
+        // frames alternate between two images: a renderer skips a frame identical to
+        // the one it last wrote into the same image, and every timed frame must be real
+        let mut imgs = [Image::new(cmd.size, cmd.size), Image::new(cmd.size, cmd.size)];
+        let mut flip = 0usize;
         let nv = views.len();
         let mut acc: Vec<Acc> = (0..variants.len() * nv).map(|_| Acc::default()).collect();
         for round in 0..cmd.rounds {
@@ -514,18 +517,19 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                     pb.set_message(format!("{} {} {}", mode.name(), variant.name, view.name));
                     let a = &mut acc[vi * nv + wi];
                     let cam = camera(view);
-                    let cold = r.render(&cam, &mut img)?;
+                    let cold = frame(&mut r, &cam, &mut imgs, &mut flip)?;
                     a.cold.push(cold.shear_ms);
                     a.axis = cold.axis;
                     for _ in 1..cmd.warmup {
-                        r.render(&cam, &mut img)?;
+                        frame(&mut r, &cam, &mut imgs, &mut flip)?;
                     }
                     for _ in 0..cmd.reps {
-                        a.frames.push(r.render(&cam, &mut img)?);
+                        a.frames.push(frame(&mut r, &cam, &mut imgs, &mut flip)?);
                     }
                     if round == 0 {
                         // every render of a view is the same image: measure the error once
-                        a.error = Some(compare(&img, &rf.image.image)?);
+                        let img = &imgs[flip];
+                        a.error = Some(compare(img, &rf.image.image)?);
                         if let Some((t, what)) = &rf.truth {
                             a.depth = Some((*what, depth_error(&fast_path_depth(&r, &cam)?, t, unit)?));
                         }
@@ -558,6 +562,14 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
     pb.finish_and_clear();
     report.summary = summarize(&report.records);
     Ok(report)
+}
+
+/// One real frame into the other of two images (see [`measure`]), returning its stats.
+fn frame(r: &mut Renderer, cam: &Camera, imgs: &mut [Image; 2], flip: &mut usize) -> Result<FrameStats> {
+    *flip ^= 1;
+    let st = r.render(cam, &mut imgs[*flip])?;
+    anyhow::ensure!(!st.skipped, "the renderer skipped a benchmark frame");
+    Ok(st)
 }
 
 /// Aggregates the records per mode and variant and marks each mode's Pareto front.

@@ -11,8 +11,9 @@
 //!   [`sphere_geometry`] (the [`SPHERE_ISO`](crate::phantom::SPHERE_ISO) surface of
 //!   [`crate::phantom::sphere`]);
 //! * [`marschner_lobb_depth`]: the first crossing of
-//!   [`marschner_lobb_value`] = iso along the ray, bracketed with a fine step
-//!   and refined by bisection.
+//!   [`marschner_lobb_value`] = iso along the ray, bracketed by a march whose
+//!   steps a Lipschitz bound of the signal proves cannot jump over a crossing
+//!   (never finer than a tiny floor step), and refined by bisection.
 //!
 //! Both are restricted to the rendered domain, the box of voxel centres: a ray
 //! that enters the box already inside the surface hits at its entry, as the
@@ -26,10 +27,15 @@ use crate::phantom::{marschner_lobb_value, sphere_geometry};
 use crate::reference::Rays;
 use crate::view::Camera;
 
-/// Default bracketing step of [`marschner_lobb_depth`], in the signal's
-/// normalised units (the cube is `[−1, 1]³`): 1/50 of the shortest period of
-/// the radial term (`≈ 0.106`), so no crossing wider than that is missed.
-pub const ML_BRACKET_STEP: f64 = 0.002;
+/// Default floor of the bracketing step of [`marschner_lobb_depth`], in the
+/// signal's normalised units (the cube is `[−1, 1]³`; 41³ samples it every
+/// 0.05): only a crossing thinner than this along the ray can be missed.
+pub const ML_BRACKET_STEP: f64 = 1e-4;
+
+/// A Lipschitz bound of [`marschner_lobb_value`] in normalised units:
+/// `|∂ρ/∂r| ≤ α·2π f_M·(π/2) / (2(1 + α)) = 6π²/10 ≈ 5.922` (with `|∇r| = 1`)
+/// and `|∂ρ/∂z| ≤ (π/2) / (2(1 + α)) ≈ 0.628`, so `|∇ρ| ≤ 5.955`; rounded up.
+pub const ML_LIPSCHITZ: f64 = 6.0;
 
 /// Bisection iterations (the bracket shrinks far below 1e-12).
 const BISECTIONS: u32 = 64;
@@ -64,8 +70,10 @@ pub fn sphere_depth(dims: [usize; 3], spacing: [f32; 3], camera: &Camera) -> Res
 
 /// First-hit depth of the Marschner–Lobb iso-surface `ρ = iso` per pixel, for
 /// the grid of [`crate::phantom::marschner_lobb`] at `dims` (voxel `i` of an
-/// axis of `n` at `−1 + 2i/(n−1)`), bracketed every `step` normalised units
-/// ([`ML_BRACKET_STEP`] is a good choice) and refined by bisection.
+/// axis of `n` at `−1 + 2i/(n−1)`): marched in steps of `|ρ − iso| / L` (the
+/// Lipschitz bound [`ML_LIPSCHITZ`] proves no crossing lies within), never
+/// shorter than `step` normalised units ([`ML_BRACKET_STEP`] is a good
+/// choice), and refined by bisection.
 pub fn marschner_lobb_depth(dims: [usize; 3], spacing: [f32; 3], camera: &Camera, iso: f64, step: f64) -> Result<Vec<f64>> {
     if !(step.is_finite() && step > 1e-6) {
         return Err(Error::value("bracketing step", format!("{step} (must be > 1e-6)")));
@@ -83,17 +91,21 @@ pub fn marschner_lobb_depth(dims: [usize; 3], spacing: [f32; 3], camera: &Camera
         let p = norm(v);
         marschner_lobb_value(p.x, p.y, p.z)
     };
-    Ok(first_crossing(&rays, f, iso, dt))
+    Ok(first_crossing(&rays, f, iso, dt, ML_LIPSCHITZ * speed))
 }
 
 /// First `t` along each pixel's ray (inside the box of voxel centres) where
 /// `f(voxel) ≥ iso`: the entry point if already there, else the first sample of
-/// a `dt` (world units) march that reaches iso, refined by bisection.
-pub fn first_crossing(rays: &Rays, f: impl Fn(DVec3) -> f64 + Sync, iso: f64, dt: f64) -> Vec<f64> {
+/// a march that reaches iso, refined by bisection. `lipschitz` bounds `|df/dt|`
+/// along the ray (world units): each step is `max(dt, (iso − f) / lipschitz)`,
+/// so only a crossing shorter than `dt` can be stepped over (pass 0 for plain
+/// steps of `dt`).
+pub fn first_crossing(rays: &Rays, f: impl Fn(DVec3) -> f64 + Sync, iso: f64, dt: f64, lipschitz: f64) -> Vec<f64> {
     let d = rays.direction();
     per_pixel(rays, |o| {
         let (t0, t1) = rays.clip(o)?;
-        if f(o + t0 * d) >= iso {
+        let mut fa = f(o + t0 * d);
+        if fa >= iso {
             return Some(t0);
         }
         if !dt.is_finite() {
@@ -101,8 +113,10 @@ pub fn first_crossing(rays: &Rays, f: impl Fn(DVec3) -> f64 + Sync, iso: f64, dt
         }
         let mut ta = t0;
         loop {
-            let tb = (ta + dt).min(t1);
-            if f(o + tb * d) >= iso {
+            let safe = if lipschitz > 0.0 { (iso - fa) / lipschitz } else { 0.0 };
+            let tb = (ta + dt.max(safe)).min(t1);
+            let fb = f(o + tb * d);
+            if fb >= iso {
                 let (mut lo, mut hi) = (ta, tb);
                 for _ in 0..BISECTIONS {
                     let m = 0.5 * (lo + hi);
@@ -120,7 +134,7 @@ pub fn first_crossing(rays: &Rays, f: impl Fn(DVec3) -> f64 + Sync, iso: f64, dt
             if tb >= t1 {
                 return None;
             }
-            ta = tb;
+            (ta, fa) = (tb, fb);
         }
     })
 }
@@ -166,13 +180,35 @@ mod tests {
         let c = DVec3::from_array(c);
         let rays = Rays::new(&cam, dims, [1.0; 3]).unwrap();
         // inside ⇔ r − |p − c| ≥ 0
-        let found = first_crossing(&rays, |p| r - (p - c).length(), 0.0, 0.05);
-        for (a, b) in exact.iter().zip(&found) {
+        let found = first_crossing(&rays, |p| r - (p - c).length(), 0.0, 0.05, 0.0);
+        // with the Lipschitz bound of a distance (1 per voxel, spacing 1) and a tiny floor
+        let fast = first_crossing(&rays, |p| r - (p - c).length(), 0.0, 1e-6, 1.0);
+        for (a, (b, c)) in exact.iter().zip(found.iter().zip(&fast)) {
             assert_eq!(a.is_nan(), b.is_nan());
+            assert_eq!(a.is_nan(), c.is_nan());
             if a.is_finite() {
-                assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+                assert!((a - b).abs() < 1e-9 && (a - c).abs() < 1e-9, "{a} vs {b}, {c}");
             }
         }
+    }
+
+    #[test]
+    fn the_marschner_lobb_lipschitz_bound_holds() {
+        // the steepest places: where the radial phase changes fastest (r = 1) and z = 0
+        let mut worst = 0f64;
+        let h = 1e-6;
+        for i in 0..2000 {
+            let t = i as f64 / 2000.0;
+            let (r, phi, z) = (0.5 + 0.5 * t, t * 7.0, (t * 13.0).sin() * 0.3);
+            let (x, y) = (r * phi.cos(), r * phi.sin());
+            let g = DVec3::new(
+                marschner_lobb_value(x + h, y, z) - marschner_lobb_value(x - h, y, z),
+                marschner_lobb_value(x, y + h, z) - marschner_lobb_value(x, y - h, z),
+                marschner_lobb_value(x, y, z + h) - marschner_lobb_value(x, y, z - h),
+            ) / (2.0 * h);
+            worst = worst.max(g.length());
+        }
+        assert!(worst <= ML_LIPSCHITZ && worst > 5.5, "{worst}");
     }
 
     #[test]

@@ -798,6 +798,21 @@ pub fn write_plot(path: &Path, rep: &Report) -> Result<()> {
     Ok(())
 }
 
+/// A number with about three significant digits, without trailing zeros.
+fn fmt_sig(v: f64) -> String {
+    let p = if v >= 100.0 {
+        0
+    } else if v >= 10.0 {
+        1
+    } else if v >= 1.0 {
+        2
+    } else {
+        (3.0 - v.abs().max(1e-12).log10().floor()) as usize - 1
+    };
+    let s = format!("{v:.p$}");
+    if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s }
+}
+
 fn draw_plot<DB: plotters::prelude::DrawingBackend>(
     root: plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
     rep: &Report,
@@ -813,20 +828,35 @@ where
     let (y0, y1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.2), b.max(p.2)));
     let d = rep.dims;
     let title = format!("{} {}×{}×{}, {} px: frame time vs RMSE", rep.volume, d[0], d[1], d[2], rep.size);
+    // both axes are logarithmic: plot log10 on linear axes (whose ticks plotters
+    // spaces well at any range) and label them with the values
+    let widen = |lo: f64, hi: f64, pad: f64| {
+        let (lo, hi) = (lo.log10() - pad, hi.log10() + pad);
+        let extra = (0.6 - (hi - lo)).max(0.0) / 2.0;
+        (lo - extra, hi + extra)
+    };
+    let (x0, x1) = widen(x0, x1, 0.2);
+    let (y0, y1) = widen(y0, y1, 0.25);
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
         .caption(&title, ("sans-serif", 22))
         .margin(18)
         .x_label_area_size(48)
         .y_label_area_size(80)
-        .build_cartesian_2d((x0 / 1.6..x1 * 1.6).log_scale(), (y0 / 2.0..y1 * 2.0).log_scale())?;
+        .build_cartesian_2d(x0..x1, y0..y1)?;
     chart
         .configure_mesh()
-        .x_desc("median frame time (ms)")
-        .y_desc("mean RMSE vs reference")
+        .x_desc("median frame time (ms, log scale)")
+        .y_desc("mean RMSE vs reference (log scale)")
         .label_style(("sans-serif", 14))
-        .y_label_formatter(&|y| format!("{y:.0e}"))
+        .x_labels(8)
+        .y_labels(8)
+        .x_label_formatter(&|x| fmt_sig(10f64.powf(*x)))
+        .y_label_formatter(&|y| format!("{:.1e}", 10f64.powf(*y)))
         .draw()?;
+    let pts: Vec<(&Summary, f64, f64)> = pts.iter().map(|p| (p.0, p.1.log10(), p.2.log10())).collect();
+    // labels of points in the right part of the plot go to their left
+    let label_dx = |x: f64, text: &str| if (x - x0) / (x1 - x0) > 0.6 { -(text.chars().count() as i32) * 7 - 12 } else { 10 };
     for (i, (mode, _, _)) in rep.classification.iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
         let mine: Vec<&(&Summary, f64, f64)> = pts.iter().filter(|p| p.0.mode == mode).collect();
@@ -840,7 +870,7 @@ where
         chart.draw_series(front.iter().map(|p| {
             EmptyElement::at((p.1, p.2))
                 + Circle::new((0, 0), 9, color.stroke_width(2))
-                + Text::new(p.0.variant.clone(), (10, -16), ("sans-serif", 13).into_font().color(&BLACK))
+                + Text::new(p.0.variant.clone(), (label_dx(p.1, &p.0.variant), -16), ("sans-serif", 13).into_font().color(&BLACK))
         }))?;
     }
     chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font(("sans-serif", 14)).draw()?;

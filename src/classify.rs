@@ -147,8 +147,10 @@ impl Classifier {
             return;
         }
         self.ratio = ratio;
+        // ratio 1 restores the raw opacities exactly (1 − (1 − a) rounds), so the
+        // table is a function of the ratio alone, never of the ratios before it
         for (t, &a) in self.table.iter_mut().zip(&self.raw_alpha) {
-            t.a = if a >= 1.0 { 1.0 } else { 1.0 - (1.0 - a).powf(ratio) };
+            t.a = if a >= 1.0 || ratio == 1.0 { a.min(1.0) } else { 1.0 - (1.0 - a).powf(ratio) };
         }
     }
 

@@ -93,6 +93,8 @@ pub enum Command {
     /// Describe a volume: size, type, spacing, value range, histogram, suggested thresholds.
     #[command(after_help = EXAMPLES)]
     Info(InfoCmd),
+    /// Benchmark every render variant: median frame time against error versus a reference renderer.
+    Bench(crate::bench::BenchCmd),
 }
 
 /// Where the volume comes from.
@@ -803,6 +805,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Render(c) => run_render(c),
         Command::Rotate(c) => run_rotate(c),
         Command::Info(c) => run_info(c),
+        Command::Bench(c) => crate::bench::run(c),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -8,7 +8,11 @@
 //! → mask ([`mask`], [`shear`], [`depth`]) → factorize view ([`view`])
 //! → composite into the intermediate image ([`raycast`], [`composite`]) → warp ([`warp`]).
 //! [`render`] runs the pipeline per frame; [`cli`] is the command-line tool.
+//! Accuracy: [`reference`] (true rays, trilinear, fine steps) and [`truth`]
+//! (analytic iso-surfaces) are what [`metrics`] measures the fast paths
+//! against; [`bench`] runs the speed/accuracy matrix (`shearwarp bench`).
 
+pub mod bench;
 pub mod classify;
 pub mod cli;
 pub mod composite;
@@ -16,13 +20,16 @@ pub mod depth;
 pub mod error;
 pub mod io;
 pub mod mask;
+pub mod metrics;
 pub mod phantom;
 pub mod presets;
 pub mod raycast;
+pub mod reference;
 pub mod render;
 pub mod rle;
 pub mod shear;
 pub mod slices;
+pub mod truth;
 pub mod view;
 pub mod volume;
 pub mod warp;

@@ -29,6 +29,12 @@ use crate::view::{Camera, Factorization};
 use crate::volume::Volume;
 use crate::warp::{Image, warp};
 
+/// Largest sheared mask, in bytes, a renderer builds for one axis. It is
+/// allocated zeroed (address space; only the occupied part is ever touched).
+pub const MAX_MASK_BYTES: u64 = 1 << 34;
+/// Largest intermediate image, in pixels, a renderer allocates.
+pub const MAX_INTERMEDIATE_PIXELS: u64 = 1 << 29;
+
 /// Which render path.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -422,9 +428,55 @@ impl Renderer {
         }
     }
 
+    /// Fails when the intermediate image or (binary path) the sheared mask of
+    /// principal axis `axis` would exceed [`MAX_INTERMEDIATE_PIXELS`] or
+    /// [`MAX_MASK_BYTES`] — very elongated volumes (e.g. 16384×4×4 seen along its
+    /// long axis), whose padding for shears up to 45° dwarfs the data. Without
+    /// this the allocation fails and aborts the process.
+    fn check_axis_size(&self, axis: usize) -> Result<()> {
+        let dims = self.volume.dims();
+        let p = crate::view::permutation(axis);
+        let n = [dims[p[0]], dims[p[1]], dims[p[2]]];
+        let cells = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
+        let (vpad, grid) = geometry(cells, n[2]);
+        let too_big = |what: String| {
+            Err(Error::value(
+                "volume shape",
+                format!(
+                    "{}×{}×{} seen along {}: {what}; the volume is too elongated for shear-warp along this axis",
+                    dims[0],
+                    dims[1],
+                    dims[2],
+                    ["x", "y", "z"][axis]
+                ),
+            ))
+        };
+        let px = grid[0] as u64 * grid[1] as u64;
+        if px > MAX_INTERMEDIATE_PIXELS {
+            return too_big(format!("the intermediate image would need {}×{} pixels (limit {MAX_INTERMEDIATE_PIXELS})", grid[0], grid[1]));
+        }
+        if self.settings.method == Method::Binary {
+            // an upper bound of what BinaryMask::from_codes allocates
+            let s = self.settings.cell as u64;
+            let nb = self.tissues.as_ref().and_then(|t| crate::depth::code_width_for(t.thresholds.len())).unwrap_or(1) as u64;
+            let bits = match self.settings.word {
+                WordSize::U32 => 32u64,
+                WordSize::U64 => 64,
+            };
+            let pad = (vpad as u64).div_ceil(s) + 1;
+            let g = cells.map(|c| (c as u64).div_ceil(s) + 1 + 2 * pad);
+            let bytes = g[0] * g[1] * (n[2] as u64).div_ceil(bits / nb).max(1) * (bits / 8);
+            if bytes > MAX_MASK_BYTES {
+                return too_big(format!("its sheared mask would need {bytes} bytes (limit {MAX_MASK_BYTES})"));
+            }
+        }
+        Ok(())
+    }
+
     /// Makes sure the slice stack (and, for the binary path, the mask) of `axis`
     /// exist and are current. Returns the milliseconds spent building.
-    fn ensure_axis(&mut self, axis: usize) -> f64 {
+    fn ensure_axis(&mut self, axis: usize) -> Result<f64> {
+        self.check_axis_size(axis)?;
         let t = Instant::now();
         if self.stacks[axis].is_none() {
             let vol = &self.volume;
@@ -469,13 +521,14 @@ impl Renderer {
                 self.pool.install(|| rle.ensure_axis(stack));
             }
         }
-        t.elapsed().as_secs_f64() * 1e3
+        Ok(t.elapsed().as_secs_f64() * 1e3)
     }
 
     /// Builds the stack and mask of every axis now (so frames measure only shear,
-    /// render and warp). Returns the milliseconds spent.
+    /// render and warp). Returns the milliseconds spent. An axis beyond the
+    /// memory limits is skipped; a frame that needs it returns the error.
     pub fn prepare_all_axes(&mut self) -> f64 {
-        (0..3).map(|a| self.ensure_axis(a)).sum()
+        (0..3).map(|a| self.ensure_axis(a).unwrap_or(0.0)).sum()
     }
 
     /// Renders one frame of `camera` into `out` (resized if needed).
@@ -497,7 +550,7 @@ impl Renderer {
         }
         let f = Factorization::new(camera, self.volume.dims(), self.volume.spacing())?;
         let mut stats = FrameStats { axis: f.axis, ..Default::default() };
-        stats.build_ms = self.ensure_axis(f.axis);
+        stats.build_ms = self.ensure_axis(f.axis)?;
         let mode = self.settings.mode;
         if mode == Mode::Blend {
             let min_sp = self.volume.spacing().iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;

@@ -196,6 +196,20 @@ impl Factorization {
         [self.shear[0] * t, self.shear[1] * t]
     }
 
+    /// The voxel position `[x, y, z]` of sheared point `(a, b)` at (fractional)
+    /// slice `k`: in-slice `(a + s_i·(k − kc), b + s_j·(k − kc))` along `(i, j)`.
+    /// With `(a, b)` from [`Factorization::inverse_warp`] of an image pixel, this
+    /// is where that pixel's ray meets slice `k` (used to turn the intermediate
+    /// image's fractional iso depth into a point in space).
+    pub fn sheared_to_voxel(&self, a: f64, b: f64, k: f64) -> [f64; 3] {
+        let t = k - self.kc;
+        let mut v = [0.0; 3];
+        v[self.perm[0]] = a + self.shear[0] * t;
+        v[self.perm[1]] = b + self.shear[1] * t;
+        v[self.perm[2]] = k;
+        v
+    }
+
     /// The inverse warp: image pixel `(u, v)` to sheared coordinates `(a, b)`.
     pub fn inverse_warp(&self) -> ([[f64; 2]; 2], [f64; 2]) {
         let [[m00, m01], [m10, m11]] = self.warp_m;

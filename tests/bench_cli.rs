@@ -1,0 +1,82 @@
+//! `shearwarp bench` end to end: a tiny matrix writes its Markdown, JSON, CSV
+//! and plots; bad arguments are usage errors.
+
+use assert_cmd::Command;
+use predicates::prelude::*;
+
+fn bench(only: &str) -> Command {
+    let mut c = Command::cargo_bin("shearwarp").unwrap();
+    c.args(["bench", "--phantom", "sphere", "--phantom-dims", "20,20,20", "--size", "32", "--random-views", "1"]);
+    c.args(["--reps", "1", "--rounds", "1", "--only", only, "--ref-step", "0.2", "--quiet"]);
+    c
+}
+
+fn tiny() -> Command {
+    bench("c1-u64-bitscan,c2-u32-lut,brute")
+}
+
+#[test]
+fn a_tiny_matrix_writes_every_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let (csv, svg, png) = (dir.path().join("b.csv"), dir.path().join("b.svg"), dir.path().join("b.png"));
+    let out = tiny().arg("--csv").arg(&csv).arg("--plot").arg(&svg).arg("--plot").arg(&png).arg("--json").assert().success();
+    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    // 8 views × (3 iso variants + 4 blend variants: "c1-u64-bitscan" also picks its no-ERT twin)
+    assert_eq!(json["records"].as_array().unwrap().len(), 8 * 7);
+    assert_eq!(json["summary"].as_array().unwrap().len(), 7);
+    assert_eq!(json["views"].as_array().unwrap().len(), 8);
+    for r in json["records"].as_array().unwrap() {
+        assert!(r["frame_ms"].as_f64().unwrap() >= 0.0);
+        assert!(r["error"]["rmse"].as_f64().unwrap() < 0.2, "{r}");
+        if r["mode"] == "iso" {
+            assert_eq!(r["depth_truth"], "analytic");
+        }
+    }
+    // every binary variant (with the same early ray termination) has exactly brute force's error
+    let rs = json["records"].as_array().unwrap();
+    for r in rs.iter().filter(|r| !r["variant"].as_str().unwrap().ends_with("noert")) {
+        let brute = rs.iter().find(|b| b["variant"] == "brute" && b["view"] == r["view"] && b["mode"] == r["mode"]).unwrap();
+        assert_eq!(r["error"], brute["error"], "{} {}", r["variant"], r["view"]);
+    }
+    // each mode has a Pareto front
+    for mode in ["iso", "blend"] {
+        assert!(json["summary"].as_array().unwrap().iter().any(|s| s["mode"] == mode && s["pareto"] == true));
+    }
+    let csv = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 8 * 7);
+    assert!(csv.starts_with("volume,dims,mode,variant,view,"));
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (1000, 640));
+}
+
+#[test]
+fn rle_is_in_the_matrix_and_matches_its_brute_force() {
+    let out = bench("rle,brute-rle").arg("--json").assert().success();
+    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    let rs = json["records"].as_array().unwrap();
+    assert_eq!(rs.len(), 8 * 2 * 2, "8 views x 2 modes x (rle, brute-rle): the exact name \"rle\" picks only rle");
+    for r in rs.iter().filter(|r| r["variant"] == "rle") {
+        let b = rs.iter().find(|b| b["variant"] == "brute-rle" && b["view"] == r["view"] && b["mode"] == r["mode"]).unwrap();
+        let (e, eb) = (r["error"]["rmse"].as_f64().unwrap(), b["error"]["rmse"].as_f64().unwrap());
+        assert!(e < 0.2 && (e - eb).abs() < 1e-3, "rle {e} vs brute-rle {eb} at {} {}", r["view"], r["mode"]);
+    }
+}
+
+#[test]
+fn markdown_by_default() {
+    tiny().args(["--modes", "iso"]).assert().success().stdout(
+        predicate::str::contains("| variant | frame ms |")
+            .and(predicate::str::contains("| brute |"))
+            .and(predicate::str::contains("vs analytic")),
+    );
+}
+
+#[test]
+fn bad_arguments_are_usage_errors() {
+    tiny().args(["--plot", "x.gif"]).assert().code(2).stderr(predicate::str::contains(".svg or .png"));
+    bench("nothing-like-this").assert().code(2).stderr(predicate::str::contains("matches no variant"));
+    tiny().args(["--ref-step", "0"]).assert().code(2).stderr(predicate::str::contains("--ref-step"));
+    tiny().args(["--reps", "0"]).assert().code(2);
+    tiny().args(["--tissue", "bone"]).assert().code(2).stderr(predicate::str::contains("unknown tissue"));
+}

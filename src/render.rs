@@ -392,6 +392,13 @@ impl Renderer {
         (0..3).map(|a| self.ensure_axis(a)).sum()
     }
 
+    /// Builds the stack and mask of principal axis `axis` (0..3) now if they are
+    /// missing or stale, so a later view along it does not pay for it. Returns the
+    /// milliseconds spent (0 when current).
+    pub fn prepare_axis(&mut self, axis: usize) -> f64 {
+        self.ensure_axis(axis.min(2))
+    }
+
     /// Renders one frame of `camera` into `out` (resized if needed).
     pub fn render(&mut self, camera: &Camera, out: &mut Image) -> Result<FrameStats> {
         let f = Factorization::new(camera, self.volume.dims(), self.volume.spacing())?;

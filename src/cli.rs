@@ -53,6 +53,7 @@ Examples:
   shearwarp rotate --degrees 90 --gif turn.gif
   shearwarp rotate --cell 2 --cycle-tissues 30 --json  # super cells, switch tissues every 30 frames
   shearwarp info --phantom head                        # size, range, histogram, thresholds
+  shearwarp view                                       # interactive window: drag to rotate, keys 1-4 tissues
   shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
 
 /// Fast CPU volume rendering with the binary shear-warp fast rotator.
@@ -75,6 +76,9 @@ pub enum Command {
     /// Describe a volume: size, type, spacing, value range, histogram, suggested thresholds.
     #[command(after_help = EXAMPLES)]
     Info(InfoCmd),
+    /// Interactive window: drag to rotate, 1-4 tissues, [ ] iso, +/- cell, Space blend, R reset, S save, Q quit.
+    #[command(after_help = EXAMPLES)]
+    View(crate::viewer::ViewCmd),
 }
 
 /// Where the volume comes from.
@@ -744,6 +748,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Render(c) => run_render(c),
         Command::Rotate(c) => run_rotate(c),
         Command::Info(c) => run_info(c),
+        Command::View(c) => crate::viewer::run(c),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -22,6 +22,7 @@ pub mod render;
 pub mod shear;
 pub mod slices;
 pub mod view;
+pub mod viewer;
 pub mod volume;
 pub mod warp;
 

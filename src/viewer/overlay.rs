@@ -134,7 +134,7 @@ impl Canvas<'_> {
         for y in y0..y1 {
             for p in &mut self.px[y * self.w + x0..y * self.w + x1] {
                 let c = *p;
-                let ch = |s: u32| (((c >> s) & 0xFF) * keep >> 8) << s;
+                let ch = |s: u32| ((((c >> s) & 0xFF) * keep) >> 8) << s;
                 *p = ch(16) | ch(8) | ch(0);
             }
         }

@@ -14,12 +14,13 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use glam::DMat3;
 
 use crate::depth::Search;
+use crate::io;
 use crate::phantom::Phantom;
 use crate::presets;
 use crate::raycast::Mode;
 use crate::render::{FrameStats, Method, Renderer, Settings, WordSize};
 use crate::view::{Camera, rotate_eye};
-use crate::volume::{Volume, VoxelData, VoxelType};
+use crate::volume::{Volume, VoxelType};
 use crate::warp::Image;
 
 const AXES: [&str; 3] = ["x", "y", "z"];
@@ -37,6 +38,21 @@ impl std::fmt::Display for Usage {
 
 impl std::error::Error for Usage {}
 
+/// Prints a line to stdout; a closed pipe (`shearwarp … | head`) ends the
+/// program quietly instead of panicking like `println!`.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        if let Err(e) = writeln!(out, $($t)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            return Err(anyhow::Error::new(e).context("cannot write to standard output"));
+        }
+    }};
+}
+
 /// Returns a [`Usage`] error from the current function.
 macro_rules! usage {
     ($($t:tt)*) => {
@@ -53,6 +69,8 @@ Examples:
   shearwarp rotate --degrees 90 --gif turn.gif
   shearwarp rotate --cell 2 --cycle-tissues 30 --json  # super cells, switch tissues every 30 frames
   shearwarp info --phantom head                        # size, range, histogram, thresholds
+  shearwarp render scan.nrrd --tissue bone -o bone.png  # NRRD, NIfTI, DICOM directory, .den, raw
+  shearwarp info brain.nii.gz                          # dims, spacing, histogram, thresholds
   shearwarp view                                       # interactive window: drag to rotate, keys 1-4 tissues
   shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
 
@@ -84,15 +102,25 @@ pub enum Command {
 /// Where the volume comes from.
 #[derive(Args, Debug, Clone)]
 pub struct VolumeArgs {
+    /// Volume file: .nrrd/.nhdr, .nii/.nii.gz, .den, .raw (with --dims/--type or a JSON
+    /// sidecar), or a directory (or one .dcm file) of a DICOM series. Without it, a phantom.
+    #[arg(value_name = "FILE")]
+    pub file: Option<PathBuf>,
+    /// File format (default: from the extension or the content).
+    #[arg(long, value_enum)]
+    pub format: Option<FormatArg>,
     /// Built-in phantom (used when no file is given).
     #[arg(long, value_enum, default_value = "head")]
     pub phantom: PhantomArg,
     /// Phantom size X,Y,Z (default: head 128,128,113; sphere 128³; marschner-lobb 41³).
     #[arg(long, value_parser = parse_dims)]
     pub phantom_dims: Option<[usize; 3]>,
-    /// Raw voxel file (needs --dims and --type).
-    #[arg(long)]
+    /// Raw voxel file (same as FILE with --format raw; needs --dims and --type unless it has a JSON sidecar).
+    #[arg(long, value_name = "FILE", conflicts_with = "file")]
     pub raw: Option<PathBuf>,
+    /// VolPack .den file (same as FILE with --format den).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["file", "raw"])]
+    pub den: Option<PathBuf>,
     /// Raw file dimensions X,Y,Z.
     #[arg(long, value_parser = parse_dims)]
     pub dims: Option<[usize; 3]>,
@@ -102,9 +130,22 @@ pub struct VolumeArgs {
     /// Raw data is big-endian.
     #[arg(long)]
     pub big_endian: bool,
+    /// Bytes to skip at the start of a raw file.
+    #[arg(long, default_value_t = 0)]
+    pub header_bytes: u64,
     /// Voxel spacing X,Y,Z (overrides the file's).
     #[arg(long, value_parser = parse_spacing)]
     pub spacing: Option<[f32; 3]>,
+}
+
+/// File formats on the command line.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum FormatArg {
+    Raw,
+    Nrrd,
+    Nifti,
+    Dicom,
+    Den,
 }
 
 /// Built-in phantoms.
@@ -321,25 +362,39 @@ impl VolumeArgs {
     }
 
     fn load_inner(&self) -> Result<(Volume, String)> {
-        let mut vol = if let Some(path) = &self.raw {
-            let dims = self.dims.context("--raw needs --dims X,Y,Z")?;
-            let t = self.voxel_type.context("--raw needs --type u8|u16|i16|f32")?;
-            let t = match t {
-                TypeArg::U8 => VoxelType::U8,
-                TypeArg::U16 => VoxelType::U16,
-                TypeArg::I16 => VoxelType::I16,
-                TypeArg::F32 => VoxelType::F32,
-            };
-            load_raw(path, dims, t, self.big_endian)?
-        } else {
-            let p = self.phantom();
-            let dims = self.phantom_dims.unwrap_or_else(|| p.default_dims());
-            p.build(dims)?
+        let (path, format) = match (&self.file, &self.raw, &self.den) {
+            (Some(p), _, _) => (Some(p), self.format.map(FormatArg::format)),
+            (_, Some(p), _) => (Some(p), Some(io::Format::Raw)),
+            (_, _, Some(p)) => (Some(p), Some(io::Format::Den)),
+            _ => (None, None),
+        };
+        let mut vol = match path {
+            Some(path) => {
+                let raw = match (self.dims, self.voxel_type) {
+                    (Some(dims), Some(t)) => {
+                        let mut spec = io::RawSpec::new(dims, t.voxel_type());
+                        spec.big_endian = self.big_endian;
+                        spec.header_bytes = self.header_bytes;
+                        Some(spec)
+                    }
+                    (None, None) => None,
+                    _ => usage!("raw files need both --dims X,Y,Z and --type (or a JSON sidecar)"),
+                };
+                let spinner = spinner(&format!("loading {}", path.display()));
+                let v = io::load(path, &io::LoadOptions { format, raw })?;
+                spinner.finish_and_clear();
+                v
+            }
+            None => {
+                let p = self.phantom();
+                let dims = self.phantom_dims.unwrap_or_else(|| p.default_dims());
+                p.build(dims)?
+            }
         };
         if let Some(sp) = self.spacing {
             vol.set_spacing(sp)?;
         }
-        let name = match &self.raw {
+        let name = match path {
             Some(p) => p.display().to_string(),
             None => format!("{} phantom", self.phantom().name()),
         };
@@ -355,50 +410,34 @@ impl VolumeArgs {
     }
 }
 
-/// Reads a headerless voxel file of exactly `dims` voxels of type `t`.
-pub fn load_raw(path: &Path, dims: [usize; 3], t: VoxelType, big_endian: bool) -> Result<Volume> {
-    let d = crate::volume::check_dims(dims.map(|x| x as u64))?;
-    let n = d[0] * d[1] * d[2];
-    let want = n as u64 * t.size() as u64;
-    let meta = std::fs::metadata(path).with_context(|| format!("{}: cannot open", path.display()))?;
-    if meta.len() != want {
-        usage!(
-            "{}: holds {} bytes but {}×{}×{} {} voxels need {} bytes (check --dims and --type)",
-            path.display(),
-            meta.len(),
-            d[0],
-            d[1],
-            d[2],
-            t.name(),
-            want
-        );
+impl FormatArg {
+    fn format(self) -> io::Format {
+        match self {
+            FormatArg::Raw => io::Format::Raw,
+            FormatArg::Nrrd => io::Format::Nrrd,
+            FormatArg::Nifti => io::Format::Nifti,
+            FormatArg::Dicom => io::Format::Dicom,
+            FormatArg::Den => io::Format::Den,
+        }
     }
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let data = match t {
-        VoxelType::U8 => VoxelData::U8(bytes),
-        VoxelType::U16 => VoxelData::U16(
-            bytes
-                .chunks_exact(2)
-                .map(|c| if big_endian { u16::from_be_bytes([c[0], c[1]]) } else { u16::from_le_bytes([c[0], c[1]]) })
-                .collect(),
-        ),
-        VoxelType::I16 => VoxelData::I16(
-            bytes
-                .chunks_exact(2)
-                .map(|c| if big_endian { i16::from_be_bytes([c[0], c[1]]) } else { i16::from_le_bytes([c[0], c[1]]) })
-                .collect(),
-        ),
-        VoxelType::F32 => VoxelData::F32(
-            bytes
-                .chunks_exact(4)
-                .map(|c| {
-                    let b = [c[0], c[1], c[2], c[3]];
-                    if big_endian { f32::from_be_bytes(b) } else { f32::from_le_bytes(b) }
-                })
-                .collect(),
-        ),
-    };
-    Volume::new(d, [1.0; 3], data).with_context(|| format!("{}", path.display()))
+}
+
+impl TypeArg {
+    fn voxel_type(self) -> VoxelType {
+        match self {
+            TypeArg::U8 => VoxelType::U8,
+            TypeArg::U16 => VoxelType::U16,
+            TypeArg::I16 => VoxelType::I16,
+            TypeArg::F32 => VoxelType::F32,
+        }
+    }
+}
+
+/// Reads a headerless voxel file of exactly `dims` voxels of type `t` (see [`io::RawSpec`]).
+pub fn load_raw(path: &Path, dims: [usize; 3], t: VoxelType, big_endian: bool) -> Result<Volume> {
+    let mut spec = io::RawSpec::new(dims, t);
+    spec.big_endian = big_endian;
+    Ok(io::load(path, &io::LoadOptions { format: Some(io::Format::Raw), raw: Some(spec) })?)
 }
 
 impl RenderArgs {
@@ -497,6 +536,18 @@ pub fn base_view(v: ViewArg) -> DMat3 {
     }
 }
 
+/// A spinner on stderr while something of unknown length runs (hidden when
+/// stderr is not a terminal).
+fn spinner(msg: &str) -> indicatif::ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new_spinner();
+    pb.set_message(msg.to_string());
+    pb.enable_steady_tick(std::time::Duration::from_millis(100));
+    pb
+}
+
 fn progress(len: u64, quiet: bool, msg: &str) -> indicatif::ProgressBar {
     if quiet || !std::io::stderr().is_terminal() {
         return indicatif::ProgressBar::hidden();
@@ -537,7 +588,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(),
         });
-        println!("{j}");
+        say!("{j}");
     } else {
         eprintln!(
             "{name} {}×{}×{} → {} ({}×{}, {} {}, tissue {}): build {:.1} ms, shear {:.2} ms, render {:.2} ms, warp {:.2} ms",
@@ -646,9 +697,9 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             "shear_ms_median": shear, "render_ms_median": render, "warp_ms_median": warp, "frame_ms_median": frame,
             "fps": fps, "degrees_per_second": fps * step, "mask_bytes": r.mask_bytes(),
         });
-        println!("{j}");
+        say!("{j}");
     } else {
-        println!(
+        say!(
             "{name} {}×{}×{}, {}×{}, {} {} ({} words, {} search, cell {}), tissue {} (iso {}):",
             dims[0],
             dims[1],
@@ -664,11 +715,11 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             r.iso()
         );
         if !switch_ns.is_empty() {
-            println!("  {} tissue switches, median {:.0} ns each", switch_ns.len(), median(&mut switch_ns));
+            say!("  {} tissue switches, median {:.0} ns each", switch_ns.len(), median(&mut switch_ns));
         }
-        println!("  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms", frames as f64 * step);
-        println!("  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms");
-        println!("  {fps:.1} frames/s, {:.1} degrees/s", fps * step);
+        say!("  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms", frames as f64 * step);
+        say!("  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms");
+        say!("  {fps:.1} frames/s, {:.1} degrees/s", fps * step);
     }
     Ok(())
 }
@@ -689,25 +740,25 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
             "min": lo, "max": hi, "histogram": hist, "ct_hounsfield": ct,
             "tissues": tissues.iter().map(|t| serde_json::json!({"name": t.name, "threshold": t.threshold})).collect::<Vec<_>>(),
         });
-        println!("{j}");
+        say!("{j}");
         return Ok(());
     }
     let d = vol.dims();
     let sp = vol.spacing();
-    println!("{name}");
-    println!("  dims      {} × {} × {} ({} voxels, {})", d[0], d[1], d[2], vol.len(), vol.data().voxel_type().name());
-    println!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
-    println!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
-    println!("  histogram ({} bins, log scale):", cmd.bins);
+    say!("{name}");
+    say!("  dims      {} × {} × {} ({} voxels, {})", d[0], d[1], d[2], vol.len(), vol.data().voxel_type().name());
+    say!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
+    say!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
+    say!("  histogram ({} bins, log scale):", cmd.bins);
     let maxl = hist.iter().map(|&c| ((c + 1) as f64).ln()).fold(0.0, f64::max).max(1e-9);
     for (i, &c) in hist.iter().enumerate() {
         let a = lo + (hi - lo) * i as f32 / cmd.bins as f32;
         let bar = "#".repeat((((c + 1) as f64).ln() / maxl * 40.0) as usize);
-        println!("    {a:>10.1} {c:>10} {bar}");
+        say!("    {a:>10.1} {c:>10} {bar}");
     }
-    println!("  suggested tissue thresholds ({}):", if ct { "CT presets" } else { "from the histogram" });
+    say!("  suggested tissue thresholds ({}):", if ct { "CT presets" } else { "from the histogram" });
     for t in &tissues {
-        println!("    --tissue {:<5} threshold {}", t.name, t.threshold);
+        say!("    --tissue {:<5} threshold {}", t.name, t.threshold);
     }
     Ok(())
 }

@@ -30,9 +30,24 @@ impl Shading {
     #[inline(always)]
     pub fn shade(&self, rgb: [f32; 3], ndl: f32) -> [f32; 3] {
         let d = self.ambient + self.diffuse * ndl;
-        let s = self.specular * ndl.powi(self.shininess);
+        let s = self.specular * pow_int(ndl, self.shininess);
         [rgb[0] * d + s, rgb[1] * d + s, rgb[2] * d + s]
     }
+}
+
+/// `x^n` by repeated squaring, inline (`f32::powi` is a libcall on x86-64).
+/// Negative `n` gives 1: shininess exponents are never negative.
+#[inline(always)]
+pub fn pow_int(x: f32, n: i32) -> f32 {
+    let (mut r, mut b, mut e) = (1.0f32, x, n.max(0) as u32);
+    while e > 0 {
+        if e & 1 == 1 {
+            r *= b;
+        }
+        b *= b;
+        e >>= 1;
+    }
+    r
 }
 
 /// `|n · l|` for a voxel-space gradient `g`: `m` maps it to the eye-space z
@@ -141,6 +156,16 @@ mod tests {
         assert_eq!(acc[3], 1.0);
         composite(&mut acc, [1.0, 1.0, 1.0], 1.0);
         assert_eq!(acc, [0.5, 0.25, 0.25, 1.0]);
+    }
+
+    #[test]
+    fn pow_int_matches_powi() {
+        for n in 0..40 {
+            for x in [0.0f32, 0.3, 0.5, 0.9, 1.0] {
+                let (a, b) = (pow_int(x, n), x.powi(n));
+                assert!((a - b).abs() <= 1e-6 * b.abs().max(1e-30), "{x}^{n}: {a} vs {b}");
+            }
+        }
     }
 
     #[test]

@@ -14,6 +14,7 @@ pub mod cli;
 pub mod composite;
 pub mod depth;
 pub mod error;
+pub mod io;
 pub mod mask;
 pub mod phantom;
 pub mod presets;

@@ -238,6 +238,7 @@ pub struct BinaryMask<W: Word> {
     keep: Vec<W>,
     row_buf: Vec<W>,
     target: [Vec<i32>; 2],
+    prev_off: [Vec<i32>; 2],
 }
 
 impl<W: Word> BinaryMask<W> {
@@ -277,6 +278,7 @@ impl<W: Word> BinaryMask<W> {
             keep: vec![W::ZERO; nw],
             row_buf: vec![W::ZERO; grid[0] * nw],
             target: [vec![0; nk], vec![0; nk]],
+            prev_off: [vec![0; nk], vec![0; nk]],
         };
         m.scatter();
         m
@@ -488,7 +490,10 @@ impl<W: Word> BinaryMask<W> {
     fn step_towards(&mut self, target: &[Vec<i32>; 2]) -> u64 {
         let before = self.occupied_rect();
         let mut next = std::mem::take(&mut self.off);
-        let prev = next.clone();
+        let mut prev = std::mem::take(&mut self.prev_off);
+        for a in 0..2 {
+            prev[a].copy_from_slice(&next[a]);
+        }
         for a in 0..2 {
             for (o, &t) in next[a].iter_mut().zip(&target[a]) {
                 *o += (t - *o).signum();
@@ -497,6 +502,7 @@ impl<W: Word> BinaryMask<W> {
         let after = self.occupied(&next);
         let Some(r) = Rect::union(before, after) else {
             self.off = next;
+            self.prev_off = prev;
             return 0;
         };
         let mut touched = 0;
@@ -511,6 +517,7 @@ impl<W: Word> BinaryMask<W> {
             touched += self.shift_rows(r);
         }
         self.off = next;
+        self.prev_off = prev;
         touched
     }
 
@@ -522,34 +529,34 @@ impl<W: Word> BinaryMask<W> {
 
     /// `new[p] = old[p] & keep | old[p−1] & up | old[p+1] & down` over the rect,
     /// one grid row per task. The words of a column are contiguous, so the inner
-    /// loop runs over the `nw` words with their own shift vectors.
+    /// loop runs over the column's words with their own shift vectors; the old
+    /// values of the previous column ride along in a stack buffer.
     fn shift_columns(&mut self, r: Rect) -> u64 {
+        const BUF: usize = 64;
         let nw = self.nw;
         let gw = self.grid[0];
         let (up, down, keep) = (&self.up[..], &self.down[..], &self.keep[..]);
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
-        self.words.par_chunks_mut(gw * nw).skip(r.q0).take(r.q1 - r.q0 + 1).for_each_init(
-            || vec![W::ZERO; nw],
-            |prev, row| {
-                // the column before the rect is outside the occupied region: empty
-                prev.fill(W::ZERO);
+        self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw].par_chunks_mut(gw * nw).for_each(|row| {
+            // words [w0, w0 + BUF) of every column at a time: no heap buffer per task
+            for w0 in (0..nw).step_by(BUF) {
+                let m = BUF.min(nw - w0);
+                let mut prev = [W::ZERO; BUF];
                 if ps > 0 {
-                    prev.copy_from_slice(&row[(ps - 1) * nw..ps * nw]);
+                    // the column before the rect is outside the occupied region
+                    prev[..m].copy_from_slice(&row[(ps - 1) * nw + w0..(ps - 1) * nw + w0 + m]);
                 }
-                let zero = vec![W::ZERO; 0];
                 for p in ps..=pe {
-                    let (head, tail) = row.split_at_mut((p + 1) * nw);
-                    let cur = &mut head[p * nw..];
-                    let next: &[W] = if p + 1 < gw { &tail[..nw] } else { &zero };
-                    for w in 0..nw {
-                        let old = cur[w];
-                        let nx = next.get(w).copied().unwrap_or(W::ZERO);
-                        cur[w] = (old & keep[w]) | (prev[w] & up[w]) | (nx & down[w]);
+                    let base = p * nw + w0;
+                    for w in 0..m {
+                        let old = row[base + w];
+                        let nx = if p + 1 < gw { row[base + nw + w] } else { W::ZERO };
+                        row[base + w] = (old & keep[w0 + w]) | (prev[w] & up[w0 + w]) | (nx & down[w0 + w]);
                         prev[w] = old;
                     }
                 }
-            },
-        );
+            }
+        });
         ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
     }
 

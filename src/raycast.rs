@@ -241,7 +241,10 @@ fn render_rows(_ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate, ra
     let Some(r) = rect else { return };
     let w = out.size[0];
     let (rgba, depth) = (&mut out.rgba, &mut out.depth);
-    rgba.par_chunks_mut(w).zip(depth.par_chunks_mut(w)).enumerate().skip(r.q0).take(r.q1 - r.q0 + 1).for_each(|(q, (crow, drow))| {
+    // slice the rows first: rayon's parallel `skip` would heap-allocate a job per frame
+    let rows = r.q0 * w..(r.q1 + 1) * w;
+    rgba[rows.clone()].par_chunks_mut(w).zip(depth[rows].par_chunks_mut(w)).enumerate().for_each(|(dq, (crow, drow))| {
+        let q = r.q0 + dq;
         for p in r.p0..=r.p1 {
             let res = ray(p, q);
             crow[p] = res.rgba;

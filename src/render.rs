@@ -109,6 +109,9 @@ pub struct FrameStats {
     pub shear_words: u64,
     /// Rays cast (pixels of the valid rectangle of the intermediate image).
     pub rays: u64,
+    /// True when nothing changed since this renderer last wrote the same image,
+    /// so nothing was rendered.
+    pub skipped: bool,
 }
 
 impl FrameStats {
@@ -162,6 +165,17 @@ struct TissueSet {
     current: usize,
 }
 
+/// Everything a frame depends on besides the volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct FrameKey {
+    camera: Camera,
+    settings: Settings,
+    generation: u64,
+    tissue: Option<usize>,
+}
+
+static NEXT_STAMP: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
 /// Renders frames of one volume.
 pub struct Renderer {
     volume: Volume,
@@ -177,8 +191,11 @@ pub struct Renderer {
     codes: [Option<(u64, CellCodes)>; 3],
     masks: [Option<AxisMask>; 3],
     params: SliceParams,
+    state: ShearState,
     inter: Intermediate,
     last_fact: Option<Factorization>,
+    /// The inputs and stamp of the last frame written.
+    last_frame: Option<(FrameKey, u64)>,
     pool: rayon::ThreadPool,
 }
 
@@ -203,8 +220,10 @@ impl Renderer {
             codes: [None, None, None],
             masks: [None, None, None],
             params: SliceParams::default(),
+            state: ShearState::identity(0),
             inter: Intermediate::default(),
             last_fact: None,
+            last_frame: None,
             pool,
         })
     }
@@ -400,7 +419,22 @@ impl Renderer {
     }
 
     /// Renders one frame of `camera` into `out` (resized if needed).
+    ///
+    /// When the camera, settings and classification are those of the frame this
+    /// renderer last wrote into this same `out`, nothing is rendered and the stats
+    /// say `skipped` (the image's pixels are assumed untouched since).
     pub fn render(&mut self, camera: &Camera, out: &mut Image) -> Result<FrameStats> {
+        let key = FrameKey {
+            camera: *camera,
+            settings: self.settings,
+            generation: self.generation,
+            tissue: self.tissues.as_ref().map(|t| t.current),
+        };
+        if let Some((k, stamp)) = self.last_frame {
+            if k == key && out.stamp == stamp && out.width == camera.size[0] && out.height == camera.size[1] {
+                return Ok(FrameStats { skipped: true, axis: self.last_fact.as_ref().map_or(0, |f| f.axis), ..Default::default() });
+            }
+        }
         let f = Factorization::new(camera, self.volume.dims(), self.volume.spacing())?;
         let mut stats = FrameStats { axis: f.axis, ..Default::default() };
         stats.build_ms = self.ensure_axis(f.axis);
@@ -414,58 +448,93 @@ impl Renderer {
             }
         }
 
-        // shear
-        let t = Instant::now();
-        let state = ShearState::from_view(&f);
-        self.params.fill(&state);
-        let stack = self.stacks[f.axis].as_ref().expect("ensured");
-        let (pad, grid) = geometry(stack.cells(), stack.n[2]);
-        let rect: Option<Rect> = match self.settings.method {
-            Method::Binary => {
-                let m = self.masks[f.axis].as_mut().expect("ensured");
-                let w: ShearWork = match &mut m.mask {
-                    AnyMask::W32(m) => m.shear_to(&state),
-                    AnyMask::W64(m) => m.shear_to(&state),
-                };
-                stats.shear_steps = w.steps;
-                stats.shear_direct = w.direct;
-                stats.shear_words = w.words;
-                match &m.mask {
-                    AnyMask::W32(m) => m.occupied_rays(grid),
-                    AnyMask::W64(m) => m.occupied_rays(grid),
+        // one job on the pool per frame: shear, render and warp all run inside it
+        let pool = &self.pool;
+        let (state, params, inter) = (&mut self.state, &mut self.params, &mut self.inter);
+        let (masks, stacks, tissues, settings) = (&mut self.masks, &self.stacks, &self.tissues, self.settings);
+        let (classifier, iso_single) = (&self.classifier, self.iso);
+        pool.install(|| {
+            // shear
+            let t = Instant::now();
+            state.set_view(&f);
+            params.fill(state);
+            let stack = stacks[f.axis].as_ref().expect("ensured");
+            let (pad, grid) = geometry(stack.cells(), stack.n[2]);
+            let rect: Option<Rect> = match settings.method {
+                Method::Binary => {
+                    let m = masks[f.axis].as_mut().expect("ensured");
+                    let w: ShearWork = match &mut m.mask {
+                        AnyMask::W32(m) => m.shear_to(state),
+                        AnyMask::W64(m) => m.shear_to(state),
+                    };
+                    stats.shear_steps = w.steps;
+                    stats.shear_direct = w.direct;
+                    stats.shear_words = w.words;
+                    match &m.mask {
+                        AnyMask::W32(m) => m.occupied_rays(grid),
+                        AnyMask::W64(m) => m.occupied_rays(grid),
+                    }
                 }
+                Method::Brute => volume_rect(params, stack.cells(), pad, grid),
+            };
+            stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
+
+            // render the intermediate image
+            let t = Instant::now();
+            inter.prepare(grid);
+            let (cls, iso, matcher): (&Classifier, f32, &Matcher) = match (tissues, mode) {
+                (Some(ts), Mode::Iso) => (&ts.iso_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
+                (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
+                (None, _) => (classifier, iso_single, binary_matcher()),
+            };
+            let ctx = RayContext::new(stack, cls, params, &f, pad, mode, iso, settings.shading, settings.ert);
+            match (settings.method, masks[f.axis].as_ref().map(|m| &m.mask)) {
+                (Method::Binary, Some(AnyMask::W32(m))) => render_binary(&ctx, m, settings.search, matcher, rect, inter),
+                (Method::Binary, Some(AnyMask::W64(m))) => render_binary(&ctx, m, settings.search, matcher, rect, inter),
+                _ => render_brute(&ctx, rect, inter),
             }
-            Method::Brute => volume_rect(&self.params, stack.cells(), pad, grid),
-        };
-        stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
+            stats.rays = rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);
+            stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
 
-        // render the intermediate image
-        let t = Instant::now();
-        self.inter.prepare(grid);
-        let (cls, iso, matcher): (&Classifier, f32, &Matcher) = match (&self.tissues, mode) {
-            (Some(ts), Mode::Iso) => (&ts.iso_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
-            (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
-            (None, _) => (&self.classifier, self.iso, binary_matcher()),
-        };
-        let ctx = RayContext::new(stack, cls, &self.params, &f, pad, mode, iso, self.settings.shading, self.settings.ert);
-        let (inter, search) = (&mut self.inter, self.settings.search);
-        let mask = self.masks[f.axis].as_ref().map(|m| &m.mask);
-        self.pool.install(|| match (self.settings.method, mask) {
-            (Method::Binary, Some(AnyMask::W32(m))) => render_binary(&ctx, m, search, matcher, rect, inter),
-            (Method::Binary, Some(AnyMask::W64(m))) => render_binary(&ctx, m, search, matcher, rect, inter),
-            _ => render_brute(&ctx, rect, inter),
+            // warp
+            let t = Instant::now();
+            out.prepare(camera.size[0], camera.size[1]);
+            warp(inter, &f, [pad as f64, pad as f64], out);
+            stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
         });
-        stats.rays = rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);
-        stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
-
-        // warp
-        let t = Instant::now();
-        out.prepare(camera.size[0], camera.size[1]);
-        let inter = &self.inter;
-        self.pool.install(|| warp(inter, &f, [pad as f64, pad as f64], out));
-        stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
         self.last_fact = Some(f);
+        let stamp = NEXT_STAMP.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        out.stamp = stamp;
+        self.last_frame = Some((key, stamp));
         Ok(stats)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DMat3;
+
+    #[test]
+    fn unchanged_frames_are_skipped_and_changes_are_not() {
+        let vol = Volume::from_fn([12, 10, 14], [1.0; 3], |x, y, z| ((x + y + z) % 7) as f32 * 30.0).unwrap();
+        let tissues = crate::presets::tissues_for(&vol);
+        let mut r = Renderer::with_tissues(vol, &tissues, Settings::default()).unwrap();
+        let cam = Camera::new(DMat3::from_rotation_y(0.3), [32, 32]);
+        let mut img = Image::new(32, 32);
+        assert!(!r.render(&cam, &mut img).unwrap().skipped);
+        let first = img.clone();
+        assert!(r.render(&cam, &mut img).unwrap().skipped);
+        assert_eq!(img, first);
+        // another image, another camera, another tissue: all render
+        let mut other = Image::new(32, 32);
+        assert!(!r.render(&cam, &mut other).unwrap().skipped);
+        assert!(!r.render(&Camera::new(DMat3::from_rotation_y(0.31), [32, 32]), &mut img).unwrap().skipped);
+        r.select_tissue(tissues.len() - 1).unwrap();
+        assert!(!r.render(&cam, &mut img).unwrap().skipped);
+        assert!(r.render(&cam, &mut img).unwrap().skipped);
+        r.set_settings(Settings { mode: Mode::Blend, ..r.settings() }).unwrap();
+        assert!(!r.render(&cam, &mut img).unwrap().skipped);
     }
 }
 

@@ -33,15 +33,27 @@ pub struct ShearState {
 impl ShearState {
     /// The state with translations `trans[a][k] = s[a] · (k − kc)` of a factorized view.
     pub fn from_view(f: &Factorization) -> Self {
+        let mut s = ShearState { ends: [[0.0; 2]; 2], trans: [vec![], vec![]], floor: [vec![], vec![]] };
+        s.set_view(f);
+        s
+    }
+
+    /// Overwrites this state with that of a factorized view, reusing the arrays
+    /// (no allocation per frame once they have grown to the slice count).
+    pub fn set_view(&mut self, f: &Factorization) {
         let nk = f.n[2];
-        let mut trans = [vec![0.0; nk], vec![0.0; nk]];
+        for a in 0..2 {
+            self.trans[a].clear();
+            self.floor[a].clear();
+        }
         for k in 0..nk {
             let t = f.trans(k);
-            trans[0][k] = t[0];
-            trans[1][k] = t[1];
+            for a in 0..2 {
+                self.trans[a].push(t[a]);
+                self.floor[a].push(t[a].floor() as i32);
+            }
         }
-        let ends = [0, 1].map(|a| [trans[a][0], trans[a][nk.saturating_sub(1)]]);
-        Self::with_trans(ends, trans)
+        self.ends = [0, 1].map(|a| [self.trans[a].first().copied().unwrap_or(0.0), self.trans[a].last().copied().unwrap_or(0.0)]);
     }
 
     /// The state whose slices lie on the lines through the given end points.

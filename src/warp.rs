@@ -24,12 +24,15 @@ pub struct Image {
     /// Per row, the span `[u0, u1)` the last warp wrote; everything else in the row
     /// is transparent. Lets the next warp clear only what it no longer covers.
     spans: Vec<(u32, u32)>,
+    /// Which renderer frame last wrote this image (0: none); lets a renderer skip
+    /// a frame whose inputs did not change.
+    pub(crate) stamp: u64,
 }
 
 impl Image {
     /// A transparent image.
     pub fn new(width: usize, height: usize) -> Self {
-        Image { width, height, data: vec![[0.0; 4]; width * height], spans: vec![(0, 0); height] }
+        Image { width, height, data: vec![[0.0; 4]; width * height], spans: vec![(0, 0); height], stamp: 0 }
     }
 
     /// Resizes (and clears) when the size differs.
@@ -42,7 +45,7 @@ impl Image {
     /// An image made from pixel data (`data.len()` must be `width · height`).
     pub fn from_data(width: usize, height: usize, data: Vec<[f32; 4]>) -> Self {
         assert_eq!(data.len(), width * height, "pixel count");
-        Image { width, height, data, spans: vec![(0, width as u32); height] }
+        Image { width, height, data, spans: vec![(0, width as u32); height], stamp: 0 }
     }
 
     /// Pixel at `(x, y)`.

@@ -86,7 +86,8 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
         blend,
         shown: None,
         last_preview: None,
-        blend_shown: None,
+        blend_stats: None,
+        blend_shown: false,
         meter: Meter::default(),
         presented: None,
         busy: None,
@@ -160,8 +161,11 @@ struct App {
     shown: Option<Frame>,
     /// The last preview's statistics and whether its principal axis differed from the one before.
     last_preview: Option<(FrameStats, bool)>,
-    /// Statistics and wall milliseconds of the blended frame on screen.
-    blend_shown: Option<(FrameStats, f64)>,
+    /// Statistics and wall milliseconds of the last blended frame rendered (a
+    /// frame the renderer skipped as unchanged keeps the ones before).
+    blend_stats: Option<(FrameStats, f64)>,
+    /// Whether the frame on screen is the blended one.
+    blend_shown: bool,
     /// Presented frames during the current (or last) drag.
     meter: Meter,
     /// The frame last presented (sequence number and kind), for the log.
@@ -241,6 +245,9 @@ impl App {
     fn on_frame(&mut self, f: Frame) {
         if f.kind == Kind::Preview {
             self.busy = None;
+        }
+        // an unchanged frame the renderer skipped has no timings of its own
+        if f.kind == Kind::Preview && !f.stats.skipped {
             let switched = self.last_preview.is_some_and(|(p, _)| p.axis != f.stats.axis);
             self.last_preview = Some((f.stats, switched));
         }
@@ -253,14 +260,17 @@ impl App {
         if matches!(self.state.drag, Some(Drag::Rotate { .. })) {
             self.meter.record(Instant::now(), f.spec.camera.rotation);
         }
-        self.blend_shown = (f.kind == Kind::Blend).then_some((f.stats, f.total_ms));
+        if f.kind == Kind::Blend && !f.stats.skipped {
+            self.blend_stats = Some((f.stats, f.total_ms));
+        }
+        self.blend_shown = f.kind == Kind::Blend;
         let s = &f.stats;
         let iso = match f.spec.class {
             Class::Tissue(i) => self.state.tissues.get(i).map_or(f32::NAN, |t| t.threshold),
             Class::Custom(v) => v,
         };
         self.log(format!(
-            "frame seq={} kind={} size={}x{} tissue={} iso={iso} cell={} axis={} steps={} direct={} ms={:.2} shear={:.3} render={:.3} warp={:.3} build={:.1} total={:.1}",
+            "frame seq={} kind={} size={}x{} tissue={} iso={iso} cell={} axis={} skipped={} steps={} direct={} ms={:.2} shear={:.3} render={:.3} warp={:.3} build={:.1} total={:.1}",
             f.seq,
             f.kind.name(),
             f.width,
@@ -268,6 +278,7 @@ impl App {
             self.class_name(f.spec.class),
             f.spec.cell,
             super::state::AXES[s.axis.min(2)],
+            s.skipped,
             s.shear_steps,
             s.shear_direct,
             s.frame_ms(),
@@ -348,7 +359,7 @@ impl App {
         let hud = Hud {
             title: self.title.clone(),
             preview: self.last_preview,
-            blend: self.blend_shown,
+            blend: self.blend_stats.filter(|_| self.blend_shown),
             fps,
             degps,
             busy: self.busy.as_ref().filter(|(t, _)| t.elapsed() >= BUSY_TICK).map(|(t, s)| (s.clone(), t.elapsed().as_secs_f64())),

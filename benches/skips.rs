@@ -1,0 +1,112 @@
+//! What each skip buys, side by side in one run (head phantom 128×128×113, 512²,
+//! one thread): the mask's empty-space skipping (binary vs brute force), early
+//! ray termination (ert 0.99 vs 1.0), skipping an unchanged frame, and the limit
+//! of a shear step — its words against a memcpy of the same bytes.
+//! Run: `cargo bench --bench skips`.
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use glam::DMat3;
+use shearwarp::mask::{BinaryMask, CellCodes};
+use shearwarp::phantom;
+use shearwarp::presets::ct_tissues;
+use shearwarp::raycast::Mode;
+use shearwarp::render::{Method, Renderer, Settings};
+use shearwarp::shear::ShearState;
+use shearwarp::slices::SliceStack;
+use shearwarp::view::{Camera, rotate_eye};
+use shearwarp::warp::Image;
+
+fn cam(deg: f64) -> Camera {
+    let anterior = DMat3::from_cols_array(&[-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
+    Camera::new(rotate_eye(anterior, 1, deg), [512, 512])
+}
+
+fn renderer(s: Settings, tissue: &str) -> Renderer {
+    let vol = phantom::head([128, 128, 113]).expect("phantom");
+    let mut r = Renderer::with_tissues(vol, &ct_tissues(), Settings { threads: 1, ..s }).expect("renderer");
+    r.select_tissue_named(tissue).expect("tissue");
+    r.prepare_all_axes();
+    r
+}
+
+fn skips(c: &mut Criterion) {
+    // empty-space skipping through the mask
+    for (mode, tissue) in [(Mode::Iso, "skin"), (Mode::Blend, "bone")] {
+        let mut g = c.benchmark_group(format!("mask_skipping_{}", mode.name()));
+        for method in [Method::Binary, Method::Brute] {
+            let mut r = renderer(Settings { mode, method, ..Settings::default() }, tissue);
+            let mut img = Image::new(512, 512);
+            let mut d = 0.0;
+            g.bench_function(method.name(), |b| {
+                b.iter(|| {
+                    d += 1.0;
+                    r.render(&cam(d % 360.0), &mut img).expect("render")
+                })
+            });
+        }
+        g.finish();
+    }
+    // early ray termination
+    let mut g = c.benchmark_group("early_ray_termination_blend_skin");
+    for ert in [0.99f32, 1.0] {
+        let mut r = renderer(Settings { mode: Mode::Blend, ert, ..Settings::default() }, "skin");
+        let mut img = Image::new(512, 512);
+        let mut d = 0.0;
+        g.bench_function(format!("ert_{ert}"), |b| {
+            b.iter(|| {
+                d += 1.0;
+                r.render(&cam(d % 360.0), &mut img).expect("render")
+            })
+        });
+    }
+    g.finish();
+    // an unchanged frame renders nothing
+    let mut g = c.benchmark_group("unchanged_frame");
+    let mut r = renderer(Settings::default(), "skin");
+    let mut img = Image::new(512, 512);
+    g.bench_function("same_view_skipped", |b| b.iter(|| r.render(&cam(30.0), &mut img).expect("render")));
+    let mut other = Image::new(512, 512);
+    g.bench_function("same_view_rendered", |b| {
+        b.iter(|| {
+            // alternate the target image so the frame must be rendered
+            std::mem::swap(&mut img, &mut other);
+            r.render(&cam(30.0), &mut img).expect("render")
+        })
+    });
+    g.finish();
+    // the limit of a shear step: its words against a memcpy of the same bytes
+    let vol = phantom::head([256, 256, 225]).expect("phantom");
+    let stack = SliceStack::new(&vol, 2);
+    let codes = CellCodes::binary(&stack, |_, hi| hi >= -500.0);
+    let mut m = BinaryMask::<u64>::from_codes(&codes, 1);
+    let mut st = ShearState::identity(225);
+    st = m.rotate_step(&st, 0, 1);
+    let w = m.shear_to(&st.rotated(0, 1)).words.max(1);
+    let bytes = (w * 8) as usize;
+    let (src, mut dst) = (vec![1u8; bytes], vec![0u8; bytes]);
+    let mut g = c.benchmark_group(format!("shear_step_vs_memcpy_256_{bytes}_bytes"));
+    let (mut dir, mut pos) = (1, 2i32);
+    // one thread for both, so the comparison is per core
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    g.bench_function("shear_step", |b| {
+        b.iter(|| {
+            if pos.abs() >= 40 {
+                dir = -dir;
+            }
+            pos += dir;
+            st = pool.install(|| m.rotate_step(&st, 0, dir));
+        })
+    });
+    g.bench_function("memcpy", |b| b.iter(|| dst.copy_from_slice(black_box(&src))));
+    g.finish();
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_millis(500)).sample_size(20);
+    targets = skips
+}
+criterion_main!(benches);

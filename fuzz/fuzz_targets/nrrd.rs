@@ -1,0 +1,19 @@
+//! libFuzzer target: arbitrary bytes as a Nrrd file; the loader must return, never panic.
+#![no_main]
+
+#[path = "common.rs"]
+mod common;
+
+use libfuzzer_sys::fuzz_target;
+use shearwarp::io::{Format, LoadOptions, load};
+
+fuzz_target!(|data: &[u8]| {
+    let p = common::write("f.nrrd", data);
+    let _ = load(
+        &p,
+        &LoadOptions {
+            format: Some(Format::Nrrd),
+            raw: None,
+        },
+    );
+});

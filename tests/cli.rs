@@ -1,0 +1,120 @@
+//! The command-line tool as a user runs it: help, renders, real files, errors
+//! and their exit codes.
+
+use assert_cmd::Command;
+use predicates::prelude::*;
+
+fn sw() -> Command {
+    Command::cargo_bin("shearwarp").expect("binary")
+}
+
+#[test]
+fn help_lists_commands_and_examples() {
+    sw().arg("--help")
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("render").and(predicate::str::contains("rotate")).and(predicate::str::contains("Examples")));
+    for c in ["render", "rotate", "info"] {
+        sw().args([c, "--help"]).assert().success().stdout(predicate::str::contains("--phantom"));
+    }
+}
+
+#[test]
+fn render_writes_a_non_blank_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("head.png");
+    sw().args(["render", "--phantom-dims", "48,48,42", "--size", "96", "-o"])
+        .arg(&out)
+        .arg("--json")
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("\"coverage\""));
+    let img = image::open(&out).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (96, 96));
+    let lit = img.pixels().filter(|p| p.0.iter().any(|&c| c > 20)).count();
+    assert!(lit > 500, "only {lit} lit pixels");
+}
+
+#[test]
+fn rotate_json_has_the_promised_fields() {
+    let out = sw().args(["rotate", "--phantom-dims", "40,40,36", "--size", "64", "--degrees", "10", "--json"]).output().unwrap();
+    assert!(out.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for k in ["frames", "degrees", "shear_ms_median", "render_ms_median", "warp_ms_median", "frame_ms_median", "fps", "degrees_per_second"]
+    {
+        assert!(j[k].is_number(), "missing {k}: {j}");
+    }
+    assert!(j["frames"].as_u64().unwrap() >= 1);
+}
+
+#[test]
+fn rotate_cycles_tissues_and_writes_animations() {
+    let dir = tempfile::tempdir().unwrap();
+    let gif = dir.path().join("t.gif");
+    let apng = dir.path().join("t.png");
+    sw().args(["rotate", "--phantom-dims", "32,32,28", "--size", "48", "--degrees", "12", "--cell", "2", "--cycle-tissues", "2", "--gif"])
+        .arg(&gif)
+        .arg("--apng")
+        .arg(&apng)
+        .arg("--json")
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("\"tissue_switches\""));
+    assert!(std::fs::metadata(&gif).unwrap().len() > 100);
+    let png = std::fs::read(&apng).unwrap();
+    assert!(png.windows(4).any(|w| w == b"acTL"), "APNG has no animation control chunk");
+}
+
+#[test]
+fn bad_input_is_a_clear_error_with_exit_code_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let short = dir.path().join("short.raw");
+    std::fs::write(&short, vec![0u8; 100]).unwrap();
+    sw().args(["render", "--raw"])
+        .arg(&short)
+        .args(["--dims", "10,10,10", "--type", "u8"])
+        .assert()
+        .code(2)
+        .stderr(predicate::str::contains("short.raw"));
+    sw().args(["render", "/no/such/file.nrrd"]).assert().code(2).stderr(predicate::str::contains("/no/such/file.nrrd"));
+    sw().args(["render", "--tissue", "liver"]).assert().code(2).stderr(predicate::str::contains("unknown tissue"));
+    sw().args(["render", "--cell", "0"]).assert().code(2);
+    sw().args(["render", "--dims", "0,1,1", "--raw", "x"]).assert().code(2);
+    let garbage = dir.path().join("garbage.nrrd");
+    std::fs::write(&garbage, b"NRRD0004\ntype: short\ndimension: 3\nsizes: 100000 100000 100000\nencoding: raw\n\n").unwrap();
+    sw().arg("info").arg(&garbage).assert().code(2).stderr(predicate::str::contains("garbage.nrrd"));
+}
+
+#[test]
+fn closed_stdout_is_not_a_panic() {
+    // `shearwarp info | head -1` must not panic when head closes the pipe
+    let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("shearwarp"))
+        .args(["info", "--phantom-dims", "20,20,20", "--bins", "4000"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("panicked"), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// Every real sample scan renders (needs `SHEARWARP_DATA`; CI sets it).
+#[test]
+fn real_scans_render() {
+    let Ok(dir) = std::env::var("SHEARWARP_DATA") else {
+        eprintln!("SHEARWARP_DATA unset: real-scan CLI test skipped");
+        return;
+    };
+    let dir = std::path::PathBuf::from(dir);
+    let out = tempfile::tempdir().unwrap();
+    for (f, tissue) in
+        [("brainsmall.den", "low"), ("chest-ct-lung1.nrrd", "bone"), ("head-mri-ch2.nii.gz", "low"), ("dicom-brain-pd", "mid")]
+    {
+        let png = out.path().join(format!("{f}.png"));
+        let o = sw().arg("render").arg(dir.join(f)).args(["--tissue", tissue, "--size", "128", "--json", "-o"]).arg(&png).output().unwrap();
+        assert!(o.status.success(), "{f}: {}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert!(j["coverage"].as_f64().unwrap() > 0.02, "{f} renders almost nothing: {j}");
+    }
+}

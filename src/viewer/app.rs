@@ -43,10 +43,11 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     if !(cmd.drag_speed.is_finite() && cmd.drag_speed > 0.0) {
         return Err(anyhow::Error::new(Usage(format!("--drag-speed must be > 0, got {}", cmd.drag_speed))));
     }
-    let (vol, name) = cmd.volume.load()?;
-    let d = vol.dims();
+    // check the options before loading anything
     let settings = cmd.render.settings()?;
     let camera = cmd.render.camera()?;
+    let (vol, name) = cmd.volume.load()?;
+    let d = vol.dims();
     let tissues = presets::tissues_for(&vol);
     let range = vol.value_range();
     let preview = Renderers::new(vol.clone(), &tissues, Settings { mode: Mode::Iso, ..settings })?;

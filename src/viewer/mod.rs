@@ -72,3 +72,41 @@ pub fn run(cmd: &ViewCmd) -> anyhow::Result<()> {
         )))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use crate::cli::{Cli, Command};
+
+    #[test]
+    fn view_takes_the_volume_and_render_options() {
+        let cli = Cli::try_parse_from([
+            "shearwarp",
+            "view",
+            "--phantom",
+            "sphere",
+            "--cell",
+            "2",
+            "--mode",
+            "blend",
+            "--save-dir",
+            "shots",
+            "-v",
+        ])
+        .expect("parses");
+        let Command::View(v) = cli.command else { panic!("not the view command") };
+        assert_eq!(v.render.cell, 2);
+        assert_eq!(v.save_dir, std::path::PathBuf::from("shots"));
+        assert!(v.verbose);
+        assert_eq!(v.drag_speed, 0.5);
+    }
+
+    #[test]
+    fn bad_view_options_fail_before_any_window_opens() {
+        let cli = Cli::try_parse_from(["shearwarp", "view", "--cell", "9"]).expect("parses");
+        let Command::View(v) = cli.command else { panic!("not the view command") };
+        let err = super::run(&v).expect_err("cell 9 is out of range");
+        assert!(err.chain().any(|e| e.downcast_ref::<crate::cli::Usage>().is_some()), "{err:#}");
+    }
+}

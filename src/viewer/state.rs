@@ -516,7 +516,7 @@ impl State {
         };
         l.push(format!("cell {}, {mode}", self.cell));
         l.push(match self.class {
-            Class::Tissue(_) => format!("tissue {} (iso {})", self.class_name(), self.iso()),
+            Class::Tissue(_) => format!("tissue {} (iso {})", self.class_name(), short(self.iso())),
             Class::Custom(v) => format!("custom iso {v:.1}"),
         });
         if let Some((what, secs)) = &hud.busy {
@@ -527,6 +527,11 @@ impl State {
         }
         l
     }
+}
+
+/// A density for the overlay: whole numbers as they are, others to one decimal.
+pub fn short(v: f32) -> String {
+    if v.fract() == 0.0 { format!("{v:.0}") } else { format!("{v:.1}") }
 }
 
 /// The key help line.
@@ -730,6 +735,7 @@ mod tests {
         let d = FrameStats { shear_direct: 1, ..stats };
         let text = s.overlay_lines(&Hud { preview: Some((d, false)), ..hud }).join("\n");
         assert!(text.contains("direct shear") && text.contains("custom iso -490.0"), "{text}");
+        assert_eq!((short(29.765625), short(-500.0)), ("29.8".to_string(), "-500".to_string()));
         assert!(s.overlay_lines(&Hud::default()).iter().all(|l| l.len() <= 64));
     }
 }

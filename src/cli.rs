@@ -71,6 +71,7 @@ Examples:
   shearwarp info --phantom head                        # size, range, histogram, thresholds
   shearwarp render scan.nrrd --tissue bone -o bone.png  # NRRD, NIfTI, DICOM directory, .den, raw
   shearwarp info brain.nii.gz                          # dims, spacing, histogram, thresholds
+  shearwarp view                                       # interactive window: drag to rotate, keys 1-4 tissues
   shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
 
 /// Fast CPU volume rendering with the binary shear-warp fast rotator.
@@ -95,6 +96,9 @@ pub enum Command {
     Info(InfoCmd),
     /// Benchmark every render variant: median frame time against error versus a reference renderer.
     Bench(crate::bench::BenchCmd),
+    /// Interactive window: drag to rotate, 1-4 tissues, [ ] iso, +/- cell, Space blend, R reset, S save, Q quit.
+    #[command(after_help = EXAMPLES)]
+    View(crate::viewer::ViewCmd),
 }
 
 /// Where the volume comes from.
@@ -806,6 +810,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Rotate(c) => run_rotate(c),
         Command::Info(c) => run_info(c),
         Command::Bench(c) => crate::bench::run(c),
+        Command::View(c) => crate::viewer::run(c),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,

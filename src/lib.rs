@@ -31,6 +31,7 @@ pub mod shear;
 pub mod slices;
 pub mod truth;
 pub mod view;
+pub mod viewer;
 pub mod volume;
 pub mod warp;
 

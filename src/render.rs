@@ -531,6 +531,14 @@ impl Renderer {
         (0..3).map(|a| self.ensure_axis(a).unwrap_or(0.0)).sum()
     }
 
+    /// Builds the stack and mask of principal axis `axis` (0..3) now if they are
+    /// missing or stale, so a later view along it does not pay for it. Returns the
+    /// milliseconds spent (0 when current), or the error when the axis is beyond
+    /// the memory limits.
+    pub fn prepare_axis(&mut self, axis: usize) -> Result<f64> {
+        self.ensure_axis(axis.min(2))
+    }
+
     /// Renders one frame of `camera` into `out` (resized if needed).
     ///
     /// When the camera, settings and classification are those of the frame this

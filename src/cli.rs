@@ -242,7 +242,10 @@ pub enum WordArg {
 #[derive(ValueEnum, Clone, Copy, Debug)]
 pub enum SearchArg {
     Lut,
+    /// Hardware bit scan: lzcnt/tzcnt when the CPU has them (run-time dispatch), else bsr.
     Bitscan,
+    /// The bit scan of the plain x86-64 build (bsr/bsf), no dispatch.
+    BitscanBsr,
 }
 /// Named starting views (RAS: +x right, +y anterior, +z superior).
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -508,6 +511,7 @@ impl RenderArgs {
             search: match self.search {
                 SearchArg::Lut => Search::Lut,
                 SearchArg::Bitscan => Search::Bitscan,
+                SearchArg::BitscanBsr => Search::BitscanBsr,
             },
             ert: self.ert,
             cell: self.cell,

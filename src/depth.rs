@@ -135,8 +135,26 @@ pub static TZ8: [u8; 256] = {
 pub enum Search {
     /// The paper's binary search for the first non-zero byte plus a byte table.
     Lut,
-    /// Hardware bit scan (`leading_zeros` / `trailing_zeros`).
+    /// Hardware bit scan (`leading_zeros` / `trailing_zeros`), dispatched at run
+    /// time: the binary path's row loop runs a copy compiled for `lzcnt`/`tzcnt`
+    /// when the CPU has them ([`hw_bitscan`]), else the plain build's `bsr`/`bsf`.
     Bitscan,
+    /// The same bit scan forced to the plain x86-64 build (`bsr`/`bsf`, no
+    /// run-time dispatch): the scalar reference of the dispatched kernel.
+    BitscanBsr,
+}
+
+/// True when the CPU has `lzcnt` and `tzcnt` (BMI1), so [`Search::Bitscan`] runs
+/// its row loop compiled for them. Detected once (the std macro caches it).
+pub fn hw_bitscan() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("lzcnt") && std::arch::is_x86_feature_detected!("bmi1")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 impl Search {
@@ -145,6 +163,7 @@ impl Search {
         match s {
             "lut" => Some(Search::Lut),
             "bitscan" | "bit-scan" => Some(Search::Bitscan),
+            "bitscan-bsr" | "bsr" => Some(Search::BitscanBsr),
             _ => None,
         }
     }
@@ -153,6 +172,7 @@ impl Search {
         match self {
             Search::Lut => "lut",
             Search::Bitscan => "bitscan",
+            Search::BitscanBsr => "bitscan-bsr",
         }
     }
 }
@@ -204,7 +224,7 @@ pub fn tz_lut<W: Word>(w: W) -> u32 {
 pub fn lz<W: Word>(w: W, s: Search) -> u32 {
     match s {
         Search::Lut => lz_lut(w),
-        Search::Bitscan => w.lz(),
+        Search::Bitscan | Search::BitscanBsr => w.lz(),
     }
 }
 
@@ -213,7 +233,7 @@ pub fn lz<W: Word>(w: W, s: Search) -> u32 {
 pub fn tz<W: Word>(w: W, s: Search) -> u32 {
     match s {
         Search::Lut => tz_lut(w),
-        Search::Bitscan => w.tz(),
+        Search::Bitscan | Search::BitscanBsr => w.tz(),
     }
 }
 
@@ -356,7 +376,7 @@ impl Matcher {
                 }
                 None
             }
-            (Search::Bitscan, nb) => {
+            (Search::Bitscan | Search::BitscanBsr, nb) => {
                 let h = self.hits(w);
                 if h == W::ZERO {
                     return None;

@@ -324,6 +324,15 @@ impl<W: Word> BinaryMask<W> {
         let (sp, sq) = self.ray_column(p, q);
         self.row(sp, sq)
     }
+    /// The super column `sp` of ray `p` and how many rays `p, p + 1, …` in a row
+    /// read it before the next column starts (1..=s): lets a row of rays step
+    /// from column to column without a division per ray.
+    #[inline]
+    pub fn column_run(&self, p: usize) -> (usize, usize) {
+        let s = self.s as i64;
+        let x = p as i64 - self.vpad as i64;
+        ((x.div_euclid(s) + self.pad as i64) as usize, (s - x.rem_euclid(s)) as usize)
+    }
     /// The super column of ray `(p, q)`: `floor((p − pad)/s) + PAD`.
     #[inline(always)]
     pub fn ray_column(&self, p: usize, q: usize) -> (usize, usize) {

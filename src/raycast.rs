@@ -216,7 +216,10 @@ impl<'a> RayContext<'a> {
 
 /// Rays of `rect` of the intermediate image through the sheared mask: each ray
 /// reads its (super) column and visits only the slices whose code `m` matches,
-/// in parallel over rows; marks `rect` valid.
+/// in parallel over rows; marks `rect` valid. A row steps from super column to
+/// super column with a counter (no division per ray) and answers a ray whose
+/// column is empty without starting a walk. With [`Search::Bitscan`] on a CPU
+/// with `lzcnt`/`tzcnt` the row loop runs a copy compiled for them.
 pub fn render_binary<W: Word>(
     ctx: &RayContext,
     mask: &BinaryMask<W>,
@@ -225,18 +228,89 @@ pub fn render_binary<W: Word>(
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
-    render_rows(ctx, rect, out, |p, q| ctx.trace(p as i32, q as i32, SetBits::with_matcher(mask.ray_row(p, q), ctx.ascending, search, m)));
+    let hw = search == Search::Bitscan && crate::depth::hw_bitscan();
+    render_rows(rect, out, |q, p0, crow, drow| {
+        #[cfg(target_arch = "x86_64")]
+        if hw {
+            // SAFETY: `hw` is true only when `hw_bitscan()` detected lzcnt and
+            // bmi1 on this CPU at run time, which is all `binary_row_lzcnt`
+            // requires; its body is the safe `binary_row`.
+            unsafe { binary_row_lzcnt(ctx, mask, search, m, q, p0, crow, drow) };
+            return;
+        }
+        let _ = hw;
+        binary_row(ctx, mask, search, m, q, p0, crow, drow);
+    });
+}
+
+/// One row of [`render_binary`] (inlined into both compiled copies).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn binary_row<W: Word>(
+    ctx: &RayContext,
+    mask: &BinaryMask<W>,
+    search: Search,
+    m: &Matcher,
+    q: usize,
+    p0: usize,
+    crow: &mut [[f32; 4]],
+    drow: &mut [f32],
+) {
+    let s = mask.cell_size();
+    let (sp0, mut left) = mask.column_run(p0);
+    let (mut sp, sq) = (sp0, mask.ray_column(p0, q).1);
+    for (dp, (c, d)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
+        let row = mask.row(sp, sq);
+        let res = if row.iter().all(|&w| w == W::ZERO) {
+            MISS
+        } else {
+            ctx.trace((p0 + dp) as i32, q as i32, SetBits::with_matcher(row, ctx.ascending, search, m))
+        };
+        *c = res.rgba;
+        *d = res.depth;
+        left -= 1;
+        if left == 0 {
+            sp += 1;
+            left = s;
+        }
+    }
+}
+
+/// [`binary_row`] compiled with `lzcnt`/`tzcnt`: `leading_zeros` and
+/// `trailing_zeros` of the depth search become single instructions instead of
+/// `bsr`/`bsf` plus a zero test. Callers must have checked [`crate::depth::hw_bitscan`].
+#[cfg(target_arch = "x86_64")]
+#[allow(clippy::too_many_arguments)]
+#[target_feature(enable = "lzcnt,bmi1")]
+unsafe fn binary_row_lzcnt<W: Word>(
+    ctx: &RayContext,
+    mask: &BinaryMask<W>,
+    search: Search,
+    m: &Matcher,
+    q: usize,
+    p0: usize,
+    crow: &mut [[f32; 4]],
+    drow: &mut [f32],
+) {
+    binary_row(ctx, mask, search, m, q, p0, crow, drow)
 }
 
 /// The brute-force reference: every slice of every ray of `rect`, no mask.
 pub fn render_brute(ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate) {
     let nk = ctx.stack.n[2];
-    render_rows(ctx, rect, out, |p, q| {
-        if ctx.ascending { ctx.trace(p as i32, q as i32, 0..nk) } else { ctx.trace(p as i32, q as i32, (0..nk).rev()) }
+    render_rows(rect, out, |q, p0, crow, drow| {
+        for (dp, (c, d)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
+            let p = (p0 + dp) as i32;
+            let res = if ctx.ascending { ctx.trace(p, q as i32, 0..nk) } else { ctx.trace(p, q as i32, (0..nk).rev()) };
+            *c = res.rgba;
+            *d = res.depth;
+        }
     });
 }
 
-fn render_rows(_ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate, ray: impl Fn(usize, usize) -> RayResult + Sync) {
+/// Runs `row(q, p0, rgba, depth)` for every row `q` of `rect` in parallel, with
+/// the row's pixels `p0..=p1` of the colour and depth planes; seals `rect`.
+fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(usize, usize, &mut [[f32; 4]], &mut [f32]) + Sync) {
     out.seal(rect);
     let Some(r) = rect else { return };
     let w = out.size[0];
@@ -244,12 +318,7 @@ fn render_rows(_ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate, ra
     // slice the rows first: rayon's parallel `skip` would heap-allocate a job per frame
     let rows = r.q0 * w..(r.q1 + 1) * w;
     rgba[rows.clone()].par_chunks_mut(w).zip(depth[rows].par_chunks_mut(w)).enumerate().for_each(|(dq, (crow, drow))| {
-        let q = r.q0 + dq;
-        for p in r.p0..=r.p1 {
-            let res = ray(p, q);
-            crow[p] = res.rgba;
-            drow[p] = res.depth;
-        }
+        row(r.q0 + dq, r.p0, &mut crow[r.p0..=r.p1], &mut drow[r.p0..=r.p1]);
     });
 }
 

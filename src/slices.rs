@@ -126,30 +126,29 @@ impl SliceStack {
     }
 
     /// [`SliceStack::gradient`] for a cell whose 4×4 in-slice neighbourhood and
-    /// both neighbouring slices exist: the 20 distinct voxels are loaded once.
-    /// Bit-identical to the general path (central differences are `(hi − lo)/2`
-    /// there and `(hi − lo)·0.5` here, which IEEE arithmetic makes equal).
+    /// both neighbouring slices exist. The blend of the corners' central
+    /// differences is linear in the voxels, so it is evaluated as differences of
+    /// rows already interpolated along i: 12 short row loads (one bounds check
+    /// each), 8 lerps along i, then the j blends — about half the instructions of
+    /// four separate corner gradients. Equal to [`SliceStack::gradient_general`]
+    /// up to float rounding (a test bounds the difference).
     #[inline(always)]
     fn gradient_interior(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
         let (n0, n01) = (self.n[0], self.n[0] * self.n[1]);
         let b = ci + n0 * cj + n01 * k;
-        let d = &self.data[b - n0 - n01 - 1..b + 2 * n0 + n01 + 3];
-        // local index of voxel (ci + x, cj + y, k + z) for x, y ∈ −1..=2, z ∈ −1..=1
-        let o = n0 + n01 + 1;
-        let at = |x: isize, y: isize, z: isize| d[(o as isize + x + y * n0 as isize + z * n01 as isize) as usize];
-        let gi = |x: isize, y: isize| (at(x + 1, y, 0) - at(x - 1, y, 0)) * 0.5;
-        let gj = |x: isize, y: isize| (at(x, y + 1, 0) - at(x, y - 1, 0)) * 0.5;
-        let gk = |x: isize, y: isize| (at(x, y, 1) - at(x, y, -1)) * 0.5;
-        let blend = |g00: f32, g10: f32, g01: f32, g11: f32| {
-            let top = g00 + (g10 - g00) * wi;
-            let bot = g01 + (g11 - g01) * wi;
-            top + (bot - top) * wj
-        };
-        [
-            blend(gi(0, 0), gi(1, 0), gi(0, 1), gi(1, 1)),
-            blend(gj(0, 0), gj(1, 0), gj(0, 1), gj(1, 1)),
-            blend(gk(0, 0), gk(1, 0), gk(0, 1), gk(1, 1)),
-        ]
+        let data = &self.data;
+        // row y (−1..=2) of slice k at x = −1..=2, and rows y = 0, 1 of slices k ± 1 at x = 0, 1
+        let r4 = |o: usize| -> [f32; 4] { data[o - 1..o + 3].try_into().expect("4 voxels") };
+        let r2 = |o: usize| -> [f32; 2] { data[o..o + 2].try_into().expect("2 voxels") };
+        let (rm, r0, r1, r2_) = (r4(b - n0), r4(b), r4(b + n0), r4(b + 2 * n0));
+        let (p0, p1, m0, m1) = (r2(b + n01), r2(b + n01 + n0), r2(b - n01), r2(b - n01 + n0));
+        let lerp = |a: f32, c: f32, w: f32| a + (c - a) * w;
+        // the row interpolated at x = wi, and its central difference along i
+        let li = |r: [f32; 4]| lerp(r[1], r[2], wi);
+        let di = |r: [f32; 4]| lerp(r[2] - r[0], r[3] - r[1], wi) * 0.5;
+        let l2 = |r: [f32; 2]| lerp(r[0], r[1], wi);
+        let (lm, l0, l1, l2r) = (li(rm), li(r0), li(r1), li(r2_));
+        [lerp(di(r0), di(r1), wj), lerp((l1 - lm) * 0.5, (l2r - l0) * 0.5, wj), (lerp(l2(p0), l2(p1), wj) - lerp(l2(m0), l2(m1), wj)) * 0.5]
     }
 
     fn gradient_general(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
@@ -204,7 +203,7 @@ mod tests {
     }
 
     #[test]
-    fn interior_gradient_is_bit_identical_to_the_general_path() {
+    fn interior_gradient_equals_the_general_path_to_rounding() {
         let v =
             Volume::from_fn([9, 8, 7], [1.0; 3], |x, y, z| ((x * 7 + y * 13 + z * 29) % 17) as f32 * 1.37 - (x * y) as f32 * 0.11).unwrap();
         for axis in 0..3 {
@@ -215,7 +214,9 @@ mod tests {
                         for (wi, wj) in [(0.0, 0.0), (0.3, 0.7), (0.999, 0.5)] {
                             let a = s.gradient_interior(ci, cj, k, wi, wj);
                             let b = s.gradient_general(ci, cj, k, wi, wj);
-                            assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits));
+                            for c in 0..3 {
+                                assert!((a[c] - b[c]).abs() <= 1e-5 * (1.0 + b[c].abs()), "{a:?} vs {b:?}");
+                            }
                         }
                     }
                 }

@@ -154,6 +154,35 @@ proptest! {
         }
     }
 
+    /// The run-time dispatched bit-scan kernel (lzcnt/tzcnt when the CPU has
+    /// them), the plain build's bsr/bsf kernel and the byte-LUT search give the
+    /// same image bit for bit, for 1- and 2-bit codes and any cell size.
+    #[test]
+    fn dispatched_bitscan_equals_the_plain_kernel(
+        nx in 2usize..24, ny in 2usize..24, nz in 2usize..90, seed in any::<u64>(), tfs in any::<u64>(),
+        rx in -3.2f64..3.2, ry in -3.2f64..3.2, blend in any::<bool>(), u64w in any::<bool>(), cell in 1usize..4,
+    ) {
+        let vol = random_volume([nx, ny, nz], seed, [1.0; 3]);
+        let tf = random_tf(tfs);
+        let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, rx, ry, 0.0), [40, 40]);
+        let base = Settings {
+            mode: if blend { Mode::Blend } else { Mode::Iso },
+            word: if u64w { WordSize::U64 } else { WordSize::U32 },
+            cell,
+            threads: 1,
+            ..Settings::default()
+        };
+        let hw = render(&vol, &tf, Settings { search: Search::Bitscan, ..base }, &cam);
+        let bsr = render(&vol, &tf, Settings { search: Search::BitscanBsr, ..base }, &cam);
+        let lut = render(&vol, &tf, Settings { search: Search::Lut, ..base }, &cam);
+        let flat = |v: &[[f32; 4]]| v.iter().flatten().copied().collect::<Vec<f32>>();
+        for other in [&bsr, &lut] {
+            prop_assert!(same_bits(&flat(&hw.1), &flat(&other.1)), "intermediate images differ");
+            prop_assert!(same_bits(&hw.2, &other.2), "iso depths differ");
+            prop_assert_eq!(&hw.0, &other.0);
+        }
+    }
+
     /// Same image for 1 and N threads.
     #[test]
     fn deterministic_across_thread_counts(seed in any::<u64>(), ry in -3.2f64..3.2, blend in any::<bool>()) {
@@ -171,6 +200,14 @@ proptest! {
 
 /// No drift: thousands of incremental steps in random directions (one-bit
 /// rotation steps and multi-bit jumps) end in exactly the mask sheared directly.
+#[test]
+fn the_dispatched_kernel_is_what_runs_here() {
+    // report which copy the tests above compared on this machine
+    eprintln!("hardware lzcnt/tzcnt: {}", shearwarp::depth::hw_bitscan());
+    #[cfg(target_arch = "x86_64")]
+    assert_eq!(shearwarp::depth::hw_bitscan(), std::arch::is_x86_feature_detected!("lzcnt") && std::arch::is_x86_feature_detected!("bmi1"));
+}
+
 #[test]
 fn no_drift_after_thousands_of_random_steps() {
     let vol = random_volume([30, 26, 57], 42, [1.0; 3]);

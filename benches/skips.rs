@@ -1,7 +1,9 @@
 //! What each skip buys, side by side in one run (head phantom 128×128×113, 512²,
 //! one thread): the mask's empty-space skipping (binary vs brute force), early
 //! ray termination (ert 0.99 vs 1.0), skipping an unchanged frame, and the limit
-//! of a shear step — its words against a memcpy of the same bytes.
+//! of a shear step — its words against a memcpy of the same bytes; the RLE
+//! path's per-view tables reused when nothing changed against rebuilt; the
+//! binary path's bit-scan kernels (run-time dispatched lzcnt, plain bsr, LUT).
 //! Run: `cargo bench --bench skips`.
 
 use std::hint::black_box;
@@ -9,7 +11,11 @@ use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DMat3;
+use shearwarp::classify::Classifier;
+use shearwarp::composite::Shading;
+use shearwarp::depth::Search;
 use shearwarp::mask::{BinaryMask, CellCodes};
+use shearwarp::rle::{Preclass, ViewTables};
 use shearwarp::phantom;
 use shearwarp::presets::ct_tissues;
 use shearwarp::raycast::Mode;
@@ -76,6 +82,38 @@ fn skips(c: &mut Criterion) {
             r.render(&cam(30.0), &mut img).expect("render")
         })
     });
+    g.finish();
+    // the RLE path's per-view tables: reused when classification, spacing ratio,
+    // light and material are unchanged, rebuilt when the light moves
+    let vol = phantom::head([64, 64, 64]).expect("phantom");
+    let (lo, hi) = vol.value_range();
+    let tf = shearwarp::presets::ct_tissue("bone").expect("bone").tf;
+    let pre = Preclass::new(&Classifier::new(&tf, lo, hi), vol.spacing());
+    let mut tables = ViewTables::default();
+    let mut g = c.benchmark_group("rle_view_tables");
+    let light = [0.0f32, 0.6, 0.8];
+    g.bench_function("unchanged_reused", |b| b.iter(|| tables.update(&pre, 1.2, black_box(light), Shading::default())));
+    let mut t = 0.0f32;
+    g.bench_function("light_moved_rebuilt", |b| {
+        b.iter(|| {
+            t += 0.01;
+            tables.update(&pre, 1.2, [t.sin() * 0.6, 0.0, t.cos() * 0.6], Shading::default())
+        })
+    });
+    g.finish();
+    // the depth search kernels of the binary path, whole frames
+    let mut g = c.benchmark_group("bitscan_kernels_iso_skin");
+    for search in [Search::Bitscan, Search::BitscanBsr, Search::Lut] {
+        let mut r = renderer(Settings { search, ..Settings::default() }, "skin");
+        let mut img = Image::new(512, 512);
+        let mut d = 0.0;
+        g.bench_function(search.name(), |b| {
+            b.iter(|| {
+                d += 1.0;
+                r.render(&cam(d % 360.0), &mut img).expect("render")
+            })
+        });
+    }
     g.finish();
     // the limit of a shear step: its words against a memcpy of the same bytes
     let vol = phantom::head([256, 256, 225]).expect("phantom");

@@ -99,6 +99,8 @@ pub enum Command {
     /// Interactive window: drag to rotate, 1-4 tissues, [ ] iso, +/- cell, Space blend, R reset, S save, Q quit.
     #[command(after_help = EXAMPLES)]
     View(crate::viewer::ViewCmd),
+    /// Write the volume as an 8-bit VolPack .den file (windowed, optionally resampled): the common input of side-by-side comparisons.
+    Export(ExportCmd),
 }
 
 /// Where the volume comes from.
@@ -329,6 +331,42 @@ pub struct InfoCmd {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `shearwarp export`.
+#[derive(Args, Debug)]
+pub struct ExportCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    /// Output .den file.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Density window LO,HI mapped onto 0..=255 (clamped); default: the value range.
+    #[arg(long, value_parser = parse_window, allow_hyphen_values = true)]
+    pub window: Option<[f32; 2]>,
+    /// Resample (trilinear) to X,Y,Z voxels over the same physical box.
+    #[arg(long, value_parser = parse_dims, conflicts_with = "max_dim")]
+    pub out_dims: Option<[usize; 3]>,
+    /// Resample (trilinear) to cubic voxels, the longest physical edge N voxels long
+    /// (VolPack has no voxel spacing, so anisotropic scans need this to keep their shape).
+    #[arg(long)]
+    pub max_dim: Option<usize>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_window(s: &str) -> std::result::Result<[f32; 2], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let [lo, hi] = parts.as_slice() else { return Err(format!("expected LO,HI, got '{s}'")) };
+    let (lo, hi) = (
+        lo.parse::<f32>().map_err(|_| format!("'{lo}' is not a number"))?,
+        hi.parse::<f32>().map_err(|_| format!("'{hi}' is not a number"))?,
+    );
+    if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+        return Err(format!("the window needs finite LO < HI, got {s}"));
+    }
+    Ok([lo, hi])
 }
 
 fn parse_triple<T: std::str::FromStr>(s: &str, what: &str) -> std::result::Result<[T; 3], String> {
@@ -777,6 +815,69 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     Ok(())
 }
 
+/// Output grid of `export`: cubic voxels with the longest physical edge `n` voxels long.
+fn cubic_dims(dims: [usize; 3], spacing: [f32; 3], n: usize) -> Result<[usize; 3]> {
+    if n < 2 || n > i16::MAX as usize {
+        usage!("--max-dim must be 2..={}, got {n}", i16::MAX);
+    }
+    let ext: [f64; 3] = std::array::from_fn(|a| (dims[a].max(2) - 1) as f64 * spacing[a] as f64);
+    let longest = ext.iter().cloned().fold(0.0, f64::max);
+    let voxel = longest / (n - 1) as f64;
+    Ok(std::array::from_fn(|a| if dims[a] == 1 { 1 } else { (ext[a] / voxel).round() as usize + 1 }))
+}
+
+pub fn run_export(cmd: &ExportCmd) -> Result<()> {
+    if cmd.output.extension().and_then(|e| e.to_str()).map(|e| e.eq_ignore_ascii_case("den")) != Some(true) {
+        usage!("{}: export writes VolPack .den files; give the output a .den extension", cmd.output.display());
+    }
+    if let Some(d) = cmd.out_dims {
+        if d.iter().any(|&x| x > i16::MAX as usize) {
+            usage!("--out-dims {d:?}: a .den file holds at most {} voxels per edge", i16::MAX);
+        }
+    }
+    let (vol, name) = cmd.volume.load()?;
+    let target = match (cmd.out_dims, cmd.max_dim) {
+        (Some(d), _) => Some(d),
+        (None, Some(n)) => Some(cubic_dims(vol.dims(), vol.spacing(), n)?),
+        (None, None) => None,
+    };
+    let vol = match target {
+        Some(d) if d != vol.dims() => vol.resampled(d).map_err(|e| anyhow::Error::new(Usage(format!("{e}"))))?,
+        _ => vol,
+    };
+    let (lo, hi) = match cmd.window {
+        Some([lo, hi]) => (lo, hi),
+        None => {
+            let (lo, hi) = vol.value_range();
+            if hi > lo { (lo, hi) } else { (lo, lo + 1.0) }
+        }
+    };
+    let out = vol.window_u8(lo, hi)?;
+    let crate::volume::VoxelData::U8(bytes) = out.data() else { unreachable!("window_u8 makes u8 voxels") };
+    io::den::save_den(&cmd.output, out.dims(), bytes)?;
+    let (d, sp) = (out.dims(), vol.spacing());
+    if cmd.json {
+        say!(
+            "{}",
+            serde_json::json!({"volume": name, "output": cmd.output, "dims": d, "spacing": sp, "window": [lo, hi], "units_per_step": (hi - lo) / 255.0})
+        );
+    } else {
+        say!(
+            "{} → {}: {}×{}×{} u8, window [{lo}, {hi}] ({} units per step), voxel spacing {}×{}×{} (not stored: .den has none)",
+            name,
+            cmd.output.display(),
+            d[0],
+            d[1],
+            d[2],
+            (hi - lo) / 255.0,
+            sp[0],
+            sp[1],
+            sp[2]
+        );
+    }
+    Ok(())
+}
+
 fn write_gif(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
     use image::codecs::gif::{GifEncoder, Repeat};
     let f = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
@@ -815,6 +916,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Info(c) => run_info(c),
         Command::Bench(c) => crate::bench::run(c),
         Command::View(c) => crate::viewer::run(c),
+        Command::Export(c) => run_export(c),
     };
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -222,6 +222,56 @@ impl Volume {
     pub fn to_f32(&self) -> Vec<f32> {
         (0..self.len()).map(|i| self.data.get(i)).collect()
     }
+
+    /// Trilinear resampling onto a `dims` grid spanning the same physical box:
+    /// the corner voxels of the output sit on the corner voxels of the input
+    /// (output voxel `o` of an axis samples input coordinate `o·(n_in−1)/(n_out−1)`),
+    /// and the spacing grows or shrinks to match. Densities stay f32.
+    pub fn resampled(&self, dims: [usize; 3]) -> Result<Volume> {
+        let d = check_dims(dims.map(|d| d as u64))?;
+        // per axis: input coordinate step between output voxels
+        let step: [f64; 3] = std::array::from_fn(|a| if d[a] > 1 { (self.dims[a] - 1) as f64 / (d[a] - 1) as f64 } else { 0.0 });
+        let spacing: [f32; 3] =
+            std::array::from_fn(|a| if d[a] > 1 && self.dims[a] > 1 { (self.spacing[a] as f64 * step[a]) as f32 } else { self.spacing[a] });
+        // one axis's sample positions: lower input index and weight of the upper one
+        let taps = |a: usize| -> Vec<(usize, f32)> {
+            (0..d[a])
+                .map(|o| {
+                    let c = o as f64 * step[a];
+                    let i = (c.floor() as usize).min(self.dims[a].saturating_sub(2));
+                    let w = if self.dims[a] > 1 { (c - i as f64) as f32 } else { 0.0 };
+                    (i, w)
+                })
+                .collect()
+        };
+        let (tx, ty, tz) = (taps(0), taps(1), taps(2));
+        let [nx, ny, nz] = self.dims;
+        let at = |x: usize, y: usize, z: usize| self.data.get(x.min(nx - 1) + nx * (y.min(ny - 1) + ny * z.min(nz - 1)));
+        let mut out = Vec::with_capacity(d[0] * d[1] * d[2]);
+        for &(z, wz) in &tz {
+            for &(y, wy) in &ty {
+                for &(x, wx) in &tx {
+                    let lerp = |a: f32, b: f32, w: f32| a + (b - a) * w;
+                    let plane = |z: usize| lerp(lerp(at(x, y, z), at(x + 1, y, z), wx), lerp(at(x, y + 1, z), at(x + 1, y + 1, z), wx), wy);
+                    out.push(lerp(plane(z), plane(z + 1), wz));
+                }
+            }
+        }
+        Volume::new(d, spacing, VoxelData::F32(out))
+    }
+
+    /// Densities mapped linearly from the window `[lo, hi]` onto 0..=255
+    /// (clamped, rounded to nearest): an 8-bit copy for tools that take only
+    /// u8 voxels, such as VolPack's `.den` files. A density `v` becomes
+    /// `round(255·(v − lo)/(hi − lo))`.
+    pub fn window_u8(&self, lo: f32, hi: f32) -> Result<Volume> {
+        if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+            return Err(Error::value("window", format!("[{lo}, {hi}] (need finite lo < hi)")));
+        }
+        let scale = 255.0 / (hi as f64 - lo as f64);
+        let v = (0..self.len()).map(|i| ((self.data.get(i) as f64 - lo as f64) * scale).round().clamp(0.0, 255.0) as u8).collect();
+        Volume::new(self.dims, self.spacing, VoxelData::U8(v))
+    }
 }
 
 fn check_spacing(spacing: [f32; 3]) -> Result<()> {
@@ -260,6 +310,39 @@ mod tests {
         assert!(Volume::new([2, 2, 2], [1.0; 3], VoxelData::U8(vec![0; 7])).is_err());
         assert!(Volume::new([1, 1, 1], [0.0, 1.0, 1.0], VoxelData::U8(vec![0])).is_err());
         assert!(Volume::new([1, 1, 1], [f32::NAN, 1.0, 1.0], VoxelData::U8(vec![0])).is_err());
+    }
+
+    #[test]
+    fn resampling_keeps_corners_and_linear_fields_exactly() {
+        // a linear field is reproduced exactly by trilinear resampling
+        let v = Volume::from_fn([5, 4, 3], [1.0, 2.0, 3.0], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
+        let r = v.resampled([9, 7, 5]).unwrap();
+        assert_eq!(r.dims(), [9, 7, 5]);
+        assert_eq!(r.spacing(), [0.5, 1.0, 1.5]);
+        for z in 0..5 {
+            for y in 0..7 {
+                for x in 0..9 {
+                    let want = x as f32 * 0.5 + 10.0 * y as f32 * 0.5 + 100.0 * z as f32 * 0.5;
+                    assert!((r.get(x, y, z) - want).abs() < 1e-3, "{x},{y},{z}: {} vs {want}", r.get(x, y, z));
+                }
+            }
+        }
+        // same dims: identity; one voxel along an axis: no step, spacing kept
+        assert_eq!(v.resampled([5, 4, 3]).unwrap().to_f32(), v.to_f32());
+        let flat = Volume::from_fn([3, 1, 2], [1.0; 3], |x, _, z| (x + z) as f32).unwrap();
+        assert_eq!(flat.resampled([5, 1, 2]).unwrap().get(4, 0, 1), 3.0);
+        assert!(v.resampled([0, 2, 2]).is_err());
+    }
+
+    #[test]
+    fn windowing_to_u8_clamps_and_rounds() {
+        let v = Volume::new([5, 1, 1], [1.0; 3], VoxelData::I16(vec![-2000, -1000, 275, 1550, 3000])).unwrap();
+        let w = v.window_u8(-1000.0, 1550.0).unwrap();
+        assert_eq!(w.data().voxel_type(), VoxelType::U8);
+        assert_eq!(w.to_f32(), vec![0.0, 0.0, 128.0, 255.0, 255.0]); // 127.5 rounds up
+        for (lo, hi) in [(1.0, 1.0), (2.0, 1.0), (f32::NAN, 1.0), (0.0, f32::INFINITY)] {
+            assert!(v.window_u8(lo, hi).is_err());
+        }
     }
 
     #[test]

@@ -118,3 +118,35 @@ fn real_scans_render() {
         assert!(j["coverage"].as_f64().unwrap() > 0.02, "{f} renders almost nothing: {j}");
     }
 }
+
+#[test]
+fn export_writes_a_den_that_loads_back_windowed_and_resampled() {
+    let dir = tempfile::tempdir().unwrap();
+    let den = dir.path().join("head.den");
+    // the head phantom in HU, window of 10 HU per step, anisotropic spacing made cubic
+    let out = sw()
+        .args(["export", "--phantom-dims", "40,40,20", "--spacing", "1,1,2", "--window", "-1000,1550", "--max-dim", "40", "--json", "-o"])
+        .arg(&den)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // z: 19 gaps of 2 = 38 units, at the 1-unit voxel of x (39 gaps over 40 voxels) → 39 voxels
+    assert_eq!(j["dims"], serde_json::json!([40, 40, 39]), "{j}");
+    assert_eq!(j["units_per_step"].as_f64(), Some(10.0));
+    let vol = shearwarp::io::load(&den, &shearwarp::io::LoadOptions::default()).unwrap();
+    assert_eq!(vol.dims(), [40, 40, 39]);
+    assert_eq!(vol.data().voxel_type(), shearwarp::volume::VoxelType::U8);
+    let (lo, hi) = vol.value_range();
+    assert_eq!(lo, 0.0, "air maps to 0");
+    assert!(hi > 100.0, "bone maps high, got {hi}");
+    // the exported file renders like any .den
+    sw().args(["render", "--size", "48", "--iso", "50", "-o"]).arg(dir.path().join("d.png")).arg(&den).assert().success();
+    // bad requests: clear usage errors, no file written
+    for bad in [vec!["--window", "5,1"], vec!["--out-dims", "40000,2,2"], vec!["--max-dim", "1"], vec!["--window", "nan,1"]] {
+        let bad_out = dir.path().join("bad.den");
+        sw().arg("export").args(&bad).arg("-o").arg(&bad_out).assert().code(2).stderr(predicate::str::contains("error"));
+        assert!(!bad_out.exists());
+    }
+    sw().args(["export", "-o"]).arg(dir.path().join("x.png")).assert().code(2).stderr(predicate::str::contains(".den"));
+}

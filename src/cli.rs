@@ -202,6 +202,11 @@ pub struct RenderArgs {
     /// Iso value (overrides the preset's threshold).
     #[arg(long, allow_negative_numbers = true)]
     pub iso: Option<f32>,
+    /// Blend-mode opacity curve: density:opacity control points, sorted by density,
+    /// linear in between, constant outside; two points at one density make a step
+    /// (e.g. "24:0,28:1", or VolPack's ramp with its 0.05 cut: "62.5:0,62.5:0.05,255:0.3").
+    #[arg(long, value_parser = parse_opacity, allow_hyphen_values = true, conflicts_with = "iso")]
+    pub opacity: Option<OpacityCurve>,
     /// Early ray termination threshold in blend mode, and in both modes with
     /// --method rle / brute-rle (1 disables it).
     #[arg(long, default_value_t = 0.99)]
@@ -394,6 +399,23 @@ fn parse_spacing(s: &str) -> std::result::Result<[f32; 3], String> {
     Ok(d)
 }
 
+/// `--opacity`: (density, opacity) control points of a blend-mode transfer function.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpacityCurve(pub Vec<(f32, f32)>);
+
+fn parse_opacity(s: &str) -> std::result::Result<OpacityCurve, String> {
+    let mut pts = Vec::new();
+    for p in s.split(',').map(str::trim) {
+        let Some((d, a)) = p.split_once(':') else { return Err(format!("'{p}' is not DENSITY:OPACITY")) };
+        let d: f32 = d.trim().parse().map_err(|_| format!("'{d}' is not a density"))?;
+        let a: f32 = a.trim().parse().map_err(|_| format!("'{a}' is not an opacity"))?;
+        pts.push((d, a));
+    }
+    // the same checks as every transfer function: finite, sorted, opacities in [0, 1]
+    crate::classify::TransferFunction::new(pts.clone(), vec![(0.0, [1.0; 3])]).map_err(|e| e.to_string())?;
+    Ok(OpacityCurve(pts))
+}
+
 fn parse_rotation(s: &str) -> std::result::Result<[f64; 3], String> {
     let r: [f64; 3] = parse_triple(s, "angles")?;
     if r.iter().any(|x| !x.is_finite()) {
@@ -506,6 +528,13 @@ impl RenderArgs {
                     usage!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "));
                 }
             }
+        }
+        if let Some(OpacityCurve(pts)) = &self.opacity {
+            if settings.mode != Mode::Blend {
+                usage!("--opacity sets the blend-mode transfer function; add --mode blend (iso mode takes --iso)");
+            }
+            let rgb = [0.92, 0.9, 0.85];
+            r.set_transfer_function(&crate::classify::TransferFunction::new(pts.clone(), vec![(pts[0].0, rgb)])?);
         }
         if let Some(iso) = self.iso {
             if !iso.is_finite() {

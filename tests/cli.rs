@@ -150,3 +150,29 @@ fn export_writes_a_den_that_loads_back_windowed_and_resampled() {
     }
     sw().args(["export", "-o"]).arg(dir.path().join("x.png")).assert().code(2).stderr(predicate::str::contains(".den"));
 }
+
+#[test]
+fn opacity_curve_sets_the_blend_transfer_function() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |curve: &str, name: &str| {
+        let out = dir.path().join(name);
+        sw().args(["render", "--phantom-dims", "40,40,36", "--size", "64", "--mode", "blend", "--method", "rle"])
+            .arg(format!("--opacity={curve}"))
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .success();
+        image::open(&out).unwrap().to_rgb8()
+    };
+    // skin-and-up ramp shows the head; a curve that starts above every density shows nothing
+    let head = render("-500:0,0:0.5", "a.png");
+    assert!(head.pixels().filter(|p| p.0.iter().any(|&c| c > 20)).count() > 300);
+    let none = render("5000:0,5001:1", "b.png");
+    assert!(none.pixels().all(|p| p.0 == [0, 0, 0]));
+    // iso mode, bad curves and --iso together are usage errors
+    sw().args(["render", "--opacity", "1:0,2:1"]).assert().code(2).stderr(predicate::str::contains("--mode blend"));
+    for bad in ["5:0,1:1", "5:0,6:2", "nan:0", "1", "1:x"] {
+        sw().args(["render", "--mode", "blend"]).arg(format!("--opacity={bad}")).assert().code(2);
+    }
+    sw().args(["render", "--mode", "blend", "--opacity", "1:0", "--iso", "3"]).assert().code(2);
+}

@@ -1,7 +1,8 @@
 //! What each skip buys, side by side in one run (head phantom 128×128×113, 512²,
 //! one thread): the mask's empty-space skipping (binary vs brute force), early
 //! ray termination (ert 0.99 vs 1.0), skipping an unchanged frame, and the limit
-//! of a shear step — its words against a memcpy of the same bytes; the RLE
+//! of a shear step — its words against a memcpy of the same bytes; rays cast
+//! only inside the occupied mask's rectangle against the whole volume's; the RLE
 //! path's per-view tables reused when nothing changed against rebuilt; the
 //! binary path's bit-scan kernels (run-time dispatched lzcnt, plain bsr, LUT).
 //! Run: `cargo bench --bench skips`.
@@ -15,11 +16,11 @@ use shearwarp::classify::Classifier;
 use shearwarp::composite::Shading;
 use shearwarp::depth::Search;
 use shearwarp::mask::{BinaryMask, CellCodes};
-use shearwarp::rle::{Preclass, ViewTables};
 use shearwarp::phantom;
 use shearwarp::presets::ct_tissues;
 use shearwarp::raycast::Mode;
 use shearwarp::render::{Method, Renderer, Settings};
+use shearwarp::rle::{Preclass, ViewTables};
 use shearwarp::shear::ShearState;
 use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, rotate_eye};
@@ -82,6 +83,21 @@ fn skips(c: &mut Criterion) {
             r.render(&cam(30.0), &mut img).expect("render")
         })
     });
+    g.finish();
+    // rays only inside the occupied mask's bounding rectangle, against the whole
+    // sheared volume's rectangle (bone occupies a small part of the head)
+    let mut g = c.benchmark_group("occupied_rect_iso_bone");
+    for (name, occupied_rect) in [("occupied_rect", true), ("volume_rect", false)] {
+        let mut r = renderer(Settings { occupied_rect, ..Settings::default() }, "bone");
+        let mut img = Image::new(512, 512);
+        let mut d = 0.0;
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                d += 1.0;
+                r.render(&cam(d % 360.0), &mut img).expect("render")
+            })
+        });
+    }
     g.finish();
     // the RLE path's per-view tables: reused when classification, spacing ratio,
     // light and material are unchanged, rebuilt when the light moves

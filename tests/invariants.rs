@@ -97,6 +97,7 @@ proptest! {
         nx in 2usize..24, ny in 2usize..24, nz in 2usize..40, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2,
         blend in any::<bool>(), u64w in any::<bool>(), lut in any::<bool>(), aniso in any::<bool>(),
+        occupied_rect in any::<bool>(),
     ) {
         let sp = if aniso { [1.0, 0.7, 2.5] } else { [1.0; 3] };
         let vol = random_volume([nx, ny, nz], seed, sp);
@@ -109,7 +110,8 @@ proptest! {
             threads: 2,
             ..Settings::default()
         };
-        let (bi, bpx, bd) = render(&vol, &tf, Settings { method: Method::Binary, ..base }, &cam);
+        // rays inside the occupied mask's rectangle or over the whole volume's: same image
+        let (bi, bpx, bd) = render(&vol, &tf, Settings { method: Method::Binary, occupied_rect, ..base }, &cam);
         let (ri, rpx, rd) = render(&vol, &tf, Settings { method: Method::Brute, ..base }, &cam);
         let flat = |v: &[[f32; 4]]| v.iter().flatten().copied().collect::<Vec<f32>>();
         prop_assert!(same_bits(&flat(&bpx), &flat(&rpx)), "intermediate images differ");

@@ -126,7 +126,7 @@ fn benches(c: &mut Criterion) {
 
 criterion_group! {
     name = core;
-    config = Criterion::default().measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_millis(500)).sample_size(20);
+    config = Criterion::default().without_plots().measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_millis(500)).sample_size(20);
     targets = benches
 }
 criterion_main!(core);

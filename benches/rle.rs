@@ -95,7 +95,7 @@ fn benches(c: &mut Criterion) {
 
 criterion_group! {
     name = rle;
-    config = Criterion::default().measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_millis(500)).sample_size(10);
+    config = Criterion::default().without_plots().measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_millis(500)).sample_size(10);
     targets = benches
 }
 criterion_main!(rle);

@@ -4,7 +4,8 @@
 //! of a shear step — its words against a memcpy of the same bytes; rays cast
 //! only inside the occupied mask's rectangle against the whole volume's; the RLE
 //! path's per-view tables reused when nothing changed against rebuilt; the
-//! binary path's bit-scan kernels (run-time dispatched lzcnt, plain bsr, LUT).
+//! binary path's bit-scan kernels (run-time dispatched lzcnt, plain bsr, LUT);
+//! the binary row's prefetch groups against ray-by-ray tracing.
 //! Run: `cargo bench --bench skips`.
 
 use std::hint::black_box;
@@ -124,6 +125,25 @@ fn skips(c: &mut Criterion) {
         let mut img = Image::new(512, 512);
         let mut d = 0.0;
         g.bench_function(search.name(), |b| {
+            b.iter(|| {
+                d += 1.0;
+                r.render(&cam(d % 360.0), &mut img).expect("render")
+            })
+        });
+    }
+    g.finish();
+    // the binary row in prefetch groups (bit-scan a group of rays, prefetch the
+    // voxel rows of their first candidates, then walk) against ray by ray; on a
+    // 256×256×225 head, whose f32 slice stack (59 MB) is far beyond the caches
+    let mut g = c.benchmark_group("prefetch_iso_skin_256");
+    for (name, prefetch) in [("prefetch_groups", true), ("ray_by_ray", false)] {
+        let vol = phantom::head([256, 256, 225]).expect("phantom");
+        let mut r = Renderer::with_tissues(vol, &ct_tissues(), Settings { threads: 1, prefetch, ..Settings::default() }).expect("renderer");
+        r.select_tissue_named("skin").expect("tissue");
+        r.prepare_all_axes();
+        let mut img = Image::new(512, 512);
+        let mut d = 0.0;
+        g.bench_function(name, |b| {
             b.iter(|| {
                 d += 1.0;
                 r.render(&cam(d % 360.0), &mut img).expect("render")

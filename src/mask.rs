@@ -537,39 +537,33 @@ impl<W: Word> BinaryMask<W> {
     }
 
     /// `new[p] = old[p] & keep | old[p−1] & up | old[p+1] & down` over the rect,
-    /// one grid row per task. The words of a column are contiguous, so the inner
-    /// loop runs over the column's words with their own shift vectors; the old
-    /// values of the previous column ride along in a stack buffer.
+    /// one grid row per task. Columns of 1 to 8 words (depths up to 512 slices
+    /// in u64) run a kernel with the column length fixed at compile time
+    /// ([`shift_columns_n`]): no inner loop to mispredict, the words of a column
+    /// combined in registers. Longer columns run [`shift_columns_any`].
     fn shift_columns(&mut self, r: Rect) -> u64 {
-        const BUF: usize = 64;
         let nw = self.nw;
         let gw = self.grid[0];
         let (up, down, keep) = (&self.up[..], &self.down[..], &self.keep[..]);
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
-        self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw].par_chunks_mut(gw * nw).for_each(|row| {
-            // words [w0, w0 + BUF) of every column at a time: no heap buffer per task
-            for w0 in (0..nw).step_by(BUF) {
-                let m = BUF.min(nw - w0);
-                let mut prev = [W::ZERO; BUF];
-                if ps > 0 {
-                    // the column before the rect is outside the occupied region
-                    prev[..m].copy_from_slice(&row[(ps - 1) * nw + w0..(ps - 1) * nw + w0 + m]);
-                }
-                for p in ps..=pe {
-                    let base = p * nw + w0;
-                    for w in 0..m {
-                        let old = row[base + w];
-                        let nx = if p + 1 < gw { row[base + nw + w] } else { W::ZERO };
-                        row[base + w] = (old & keep[w0 + w]) | (prev[w] & up[w0 + w]) | (nx & down[w0 + w]);
-                        prev[w] = old;
-                    }
-                }
-            }
-        });
+        let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
+        let tasks = rows.par_chunks_mut(gw * nw);
+        match nw {
+            1 => tasks.for_each(|row| shift_columns_n::<W, 1>(row, ps, pe, up, down, keep)),
+            2 => tasks.for_each(|row| shift_columns_n::<W, 2>(row, ps, pe, up, down, keep)),
+            3 => tasks.for_each(|row| shift_columns_n::<W, 3>(row, ps, pe, up, down, keep)),
+            4 => tasks.for_each(|row| shift_columns_n::<W, 4>(row, ps, pe, up, down, keep)),
+            5 => tasks.for_each(|row| shift_columns_n::<W, 5>(row, ps, pe, up, down, keep)),
+            6 => tasks.for_each(|row| shift_columns_n::<W, 6>(row, ps, pe, up, down, keep)),
+            7 => tasks.for_each(|row| shift_columns_n::<W, 7>(row, ps, pe, up, down, keep)),
+            8 => tasks.for_each(|row| shift_columns_n::<W, 8>(row, ps, pe, up, down, keep)),
+            _ => tasks.for_each(|row| shift_columns_any(row, nw, ps, pe, up, down, keep)),
+        }
         ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
     }
 
-    /// `new[q] = old[q] & keep | old[q−1] & up | old[q+1] & down` over the rect.
+    /// `new[q] = old[q] & keep | old[q−1] & up | old[q+1] & down` over the rect;
+    /// columns of 1 to 8 words run with the column length fixed at compile time.
     fn shift_rows(&mut self, r: Rect) -> u64 {
         let nw = self.nw;
         let gw = self.grid[0];
@@ -582,26 +576,22 @@ impl<W: Word> BinaryMask<W> {
             prev.copy_from_slice(&self.words[s + ps..s + pe]);
         }
         let (up, down, keep) = (&self.up[..], &self.down[..], &self.keep[..]);
+        let zeros = [W::ZERO; 0];
         for q in r.q0..=r.q1 {
             let (head, tail) = self.words.split_at_mut((q + 1) * gw * nw);
             let row = &mut head[q * gw * nw + ps..q * gw * nw + pe];
-            if q + 1 < gh {
-                let next = &tail[ps..pe];
-                for ((cw, nw_), pw) in row.chunks_exact_mut(nw).zip(next.chunks_exact(nw)).zip(prev.chunks_exact_mut(nw)) {
-                    for w in 0..nw {
-                        let old = cw[w];
-                        cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nw_[w] & down[w]);
-                        pw[w] = old;
-                    }
-                }
-            } else {
-                for (cw, pw) in row.chunks_exact_mut(nw).zip(prev.chunks_exact_mut(nw)) {
-                    for w in 0..nw {
-                        let old = cw[w];
-                        cw[w] = (old & keep[w]) | (pw[w] & up[w]);
-                        pw[w] = old;
-                    }
-                }
+            // the row below, or nothing past the grid's last row
+            let next = if q + 1 < gh { &tail[ps..pe] } else { &zeros[..] };
+            match nw {
+                1 => shift_row_n::<W, 1>(row, next, prev, up, down, keep),
+                2 => shift_row_n::<W, 2>(row, next, prev, up, down, keep),
+                3 => shift_row_n::<W, 3>(row, next, prev, up, down, keep),
+                4 => shift_row_n::<W, 4>(row, next, prev, up, down, keep),
+                5 => shift_row_n::<W, 5>(row, next, prev, up, down, keep),
+                6 => shift_row_n::<W, 6>(row, next, prev, up, down, keep),
+                7 => shift_row_n::<W, 7>(row, next, prev, up, down, keep),
+                8 => shift_row_n::<W, 8>(row, next, prev, up, down, keep),
+                _ => shift_row_any(row, next, prev, nw, up, down, keep),
             }
         }
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
@@ -614,6 +604,95 @@ impl<W: Word> BinaryMask<W> {
         let next = state.rotated(along, dir * self.s as i32);
         self.shear_to(&next);
         next
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_columns`] for columns of `N` words:
+/// columns `ps..=pe` of `row` become `old[p] & keep | old[p−1] & up | old[p+1] & down`
+/// (the column before `ps` is read as it is, the one past the row's end as zero).
+#[inline(always)]
+fn shift_columns_n<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
+    let (up, down, keep): (&[W; N], &[W; N], &[W; N]) = (fixed(up), fixed(down), fixed(keep));
+    let gw = row.len() / N;
+    let mut prev = if ps > 0 { *fixed::<W, N>(&row[(ps - 1) * N..]) } else { [W::ZERO; N] };
+    let mut old = *fixed::<W, N>(&row[ps * N..]);
+    for p in ps..=pe {
+        let next = if p + 1 < gw { *fixed::<W, N>(&row[(p + 1) * N..]) } else { [W::ZERO; N] };
+        let out: &mut [W; N] = (&mut row[p * N..p * N + N]).try_into().expect("N words");
+        for w in 0..N {
+            out[w] = (old[w] & keep[w]) | (prev[w] & up[w]) | (next[w] & down[w]);
+        }
+        prev = old;
+        old = next;
+    }
+}
+
+/// The first `N` words of `s` as an array (the caller guarantees the length).
+#[inline(always)]
+fn fixed<W: Word, const N: usize>(s: &[W]) -> &[W; N] {
+    s[..N].try_into().expect("N words")
+}
+
+/// [`shift_columns_n`] for any column length `nw`, in blocks of 64 words per
+/// column so that the previous column's old words ride in a stack buffer.
+fn shift_columns_any<W: Word>(row: &mut [W], nw: usize, ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
+    const BUF: usize = 64;
+    let gw = row.len() / nw;
+    for w0 in (0..nw).step_by(BUF) {
+        let m = BUF.min(nw - w0);
+        let mut prev = [W::ZERO; BUF];
+        if ps > 0 {
+            prev[..m].copy_from_slice(&row[(ps - 1) * nw + w0..(ps - 1) * nw + w0 + m]);
+        }
+        for p in ps..=pe {
+            let base = p * nw + w0;
+            for w in 0..m {
+                let old = row[base + w];
+                let nx = if p + 1 < gw { row[base + nw + w] } else { W::ZERO };
+                row[base + w] = (old & keep[w0 + w]) | (prev[w] & up[w0 + w]) | (nx & down[w0 + w]);
+                prev[w] = old;
+            }
+        }
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_rows`] for columns of `N` words: `row`
+/// becomes `row & keep | prev & up | next & down` column by column, and `prev`
+/// takes the row's old words (`next` empty: the row below is all zero).
+#[inline(always)]
+fn shift_row_n<W: Word, const N: usize>(row: &mut [W], next: &[W], prev: &mut [W], up: &[W], down: &[W], keep: &[W]) {
+    let (up, down, keep): (&[W; N], &[W; N], &[W; N]) = (fixed(up), fixed(down), fixed(keep));
+    let (row, _) = row.as_chunks_mut::<N>();
+    let (prev, _) = prev.as_chunks_mut::<N>();
+    if next.is_empty() {
+        for (cw, pw) in row.iter_mut().zip(prev.iter_mut()) {
+            for w in 0..N {
+                let old = cw[w];
+                cw[w] = (old & keep[w]) | (pw[w] & up[w]);
+                pw[w] = old;
+            }
+        }
+    } else {
+        let (next, _) = next.as_chunks::<N>();
+        for ((cw, nx), pw) in row.iter_mut().zip(next).zip(prev.iter_mut()) {
+            for w in 0..N {
+                let old = cw[w];
+                cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx[w] & down[w]);
+                pw[w] = old;
+            }
+        }
+    }
+}
+
+/// [`shift_row_n`] for any column length `nw`.
+fn shift_row_any<W: Word>(row: &mut [W], next: &[W], prev: &mut [W], nw: usize, up: &[W], down: &[W], keep: &[W]) {
+    for (c, (cw, pw)) in row.chunks_exact_mut(nw).zip(prev.chunks_exact_mut(nw)).enumerate() {
+        for w in 0..nw {
+            let old = cw[w];
+            let nx = if next.is_empty() { W::ZERO } else { next[c * nw + w] };
+            cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx & down[w]);
+            pw[w] = old;
+        }
     }
 }
 

@@ -142,6 +142,14 @@ impl<'a> RayContext<'a> {
         }
     }
 
+    /// Hints the cache to fetch what a hit of ray `(p, q)` at slice `k` reads.
+    #[inline(always)]
+    pub fn prefetch(&self, p: i32, q: i32, k: usize) {
+        if let Some((ci, cj, _, _)) = self.locate(p, q, k) {
+            self.stack.prefetch_hit(ci, cj, k, self.ascending);
+        }
+    }
+
     /// Traces ray `(p, q)` over the candidate slices `ks` (front to back).
     #[inline(always)]
     pub fn trace(&self, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
@@ -218,13 +226,19 @@ impl<'a> RayContext<'a> {
 /// reads its (super) column and visits only the slices whose code `m` matches,
 /// in parallel over rows; marks `rect` valid. A row steps from super column to
 /// super column with a counter (no division per ray) and answers a ray whose
-/// column is empty without starting a walk. With [`Search::Bitscan`] on a CPU
-/// with `lzcnt`/`tzcnt` the row loop runs a copy compiled for them.
+/// column is empty without starting a walk. With `prefetch` a row runs in groups
+/// of [`PREFETCH_GROUP`] rays: first every ray's depth search and a prefetch of
+/// the voxel rows its first candidate slice reads, then the walks, so the cache
+/// misses of a group overlap instead of stalling one ray after the other. With
+/// [`Search::Bitscan`] on a CPU with `lzcnt`/`tzcnt` the row loop runs a copy
+/// compiled for them.
+#[allow(clippy::too_many_arguments)]
 pub fn render_binary<W: Word>(
     ctx: &RayContext,
     mask: &BinaryMask<W>,
     search: Search,
     m: &Matcher,
+    prefetch: bool,
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
@@ -235,13 +249,17 @@ pub fn render_binary<W: Word>(
             // SAFETY: `hw` is true only when `hw_bitscan()` detected lzcnt and
             // bmi1 on this CPU at run time, which is all `binary_row_lzcnt`
             // requires; its body is the safe `binary_row`.
-            unsafe { binary_row_lzcnt(ctx, mask, search, m, q, p0, crow, drow) };
+            unsafe { binary_row_lzcnt(ctx, mask, search, m, prefetch, q, p0, crow, drow) };
             return;
         }
         let _ = hw;
-        binary_row(ctx, mask, search, m, q, p0, crow, drow);
+        binary_row(ctx, mask, search, m, prefetch, q, p0, crow, drow);
     });
 }
+
+/// Rays per prefetch group of [`render_binary`]: enough misses in flight to
+/// cover a memory latency, few enough lines (about 12 per ray) to stay in L1/L2.
+pub const PREFETCH_GROUP: usize = 16;
 
 /// One row of [`render_binary`] (inlined into both compiled copies).
 #[allow(clippy::too_many_arguments)]
@@ -251,27 +269,48 @@ fn binary_row<W: Word>(
     mask: &BinaryMask<W>,
     search: Search,
     m: &Matcher,
+    prefetch: bool,
     q: usize,
     p0: usize,
     crow: &mut [[f32; 4]],
     drow: &mut [f32],
 ) {
     let s = mask.cell_size();
-    let (sp0, mut left) = mask.column_run(p0);
-    let (mut sp, sq) = (sp0, mask.ray_column(p0, q).1);
-    for (dp, (c, d)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
-        let row = mask.row(sp, sq);
-        let res = if row.iter().all(|&w| w == W::ZERO) {
-            MISS
-        } else {
-            ctx.trace((p0 + dp) as i32, q as i32, SetBits::with_matcher(row, ctx.ascending, search, m))
-        };
-        *c = res.rgba;
-        *d = res.depth;
-        left -= 1;
-        if left == 0 {
-            sp += 1;
-            left = s;
+    let (mut sp, mut left) = mask.column_run(p0);
+    let sq = mask.ray_column(p0, q).1;
+    let group = if prefetch { PREFETCH_GROUP } else { crow.len().max(1) };
+    for (g, (cg, dg)) in crow.chunks_mut(group).zip(drow.chunks_mut(group)).enumerate() {
+        let pg = p0 + g * group;
+        if prefetch {
+            // phase 1: the first candidate slice of every ray of the group
+            let (mut sp, mut left) = (sp, left);
+            for dp in 0..cg.len() {
+                let row = mask.row(sp, sq);
+                if let Some(k0) = SetBits::with_matcher(row, ctx.ascending, search, m).next() {
+                    ctx.prefetch((pg + dp) as i32, q as i32, k0);
+                }
+                left -= 1;
+                if left == 0 {
+                    sp += 1;
+                    left = s;
+                }
+            }
+        }
+        // phase 2: the walks
+        for (dp, (c, d)) in cg.iter_mut().zip(dg.iter_mut()).enumerate() {
+            let row = mask.row(sp, sq);
+            let res = if row.iter().all(|&w| w == W::ZERO) {
+                MISS
+            } else {
+                ctx.trace((pg + dp) as i32, q as i32, SetBits::with_matcher(row, ctx.ascending, search, m))
+            };
+            *c = res.rgba;
+            *d = res.depth;
+            left -= 1;
+            if left == 0 {
+                sp += 1;
+                left = s;
+            }
         }
     }
 }
@@ -287,12 +326,13 @@ unsafe fn binary_row_lzcnt<W: Word>(
     mask: &BinaryMask<W>,
     search: Search,
     m: &Matcher,
+    prefetch: bool,
     q: usize,
     p0: usize,
     crow: &mut [[f32; 4]],
     drow: &mut [f32],
 ) {
-    binary_row(ctx, mask, search, m, q, p0, crow, drow)
+    binary_row(ctx, mask, search, m, prefetch, q, p0, crow, drow)
 }
 
 /// The brute-force reference: every slice of every ray of `rect`, no mask.

@@ -69,7 +69,7 @@ use crate::classify::{Classifier, TABLE_NODES};
 use crate::composite::{Intermediate, Shading, composite_premultiplied};
 use crate::mask::Rect;
 use crate::raycast::SliceParams;
-use crate::slices::SliceStack;
+use crate::slices::{SliceStack, prefetch};
 use crate::view::{Factorization, permutation};
 
 /// Cells per side of the hemi-octahedral normal grid.
@@ -466,22 +466,6 @@ impl SliceRuns {
         b[2] = b[2].min(j as u32);
         b[3] = b[3].max(j as u32);
     }
-}
-
-/// Asks the cache for `v[i]` (a hint: no effect on results; nothing if `i` is out of range).
-#[inline(always)]
-fn prefetch<T>(v: &[T], i: usize) {
-    #[cfg(target_arch = "x86_64")]
-    if let Some(r) = v.get(i) {
-        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        // SAFETY: a prefetch only hints the cache hierarchy: it never faults and
-        // never reads or writes memory architecturally, so it is sound for any
-        // address; this one is a valid reference besides. Exercised by every RLE
-        // render (tests/rle.rs).
-        unsafe { _mm_prefetch::<_MM_HINT_T0>((r as *const T).cast::<i8>()) }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (v, i);
 }
 
 /// Walks the non-transparent runs of one scanline with a monotone column.

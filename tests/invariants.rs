@@ -97,7 +97,7 @@ proptest! {
         nx in 2usize..24, ny in 2usize..24, nz in 2usize..40, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2,
         blend in any::<bool>(), u64w in any::<bool>(), lut in any::<bool>(), aniso in any::<bool>(),
-        occupied_rect in any::<bool>(),
+        occupied_rect in any::<bool>(), prefetch in any::<bool>(),
     ) {
         let sp = if aniso { [1.0, 0.7, 2.5] } else { [1.0; 3] };
         let vol = random_volume([nx, ny, nz], seed, sp);
@@ -110,8 +110,9 @@ proptest! {
             threads: 2,
             ..Settings::default()
         };
-        // rays inside the occupied mask's rectangle or over the whole volume's: same image
-        let (bi, bpx, bd) = render(&vol, &tf, Settings { method: Method::Binary, occupied_rect, ..base }, &cam);
+        // rays inside the occupied mask's rectangle or over the whole volume's, in
+        // prefetch groups or ray by ray: same image
+        let (bi, bpx, bd) = render(&vol, &tf, Settings { method: Method::Binary, occupied_rect, prefetch, ..base }, &cam);
         let (ri, rpx, rd) = render(&vol, &tf, Settings { method: Method::Brute, ..base }, &cam);
         let flat = |v: &[[f32; 4]]| v.iter().flatten().copied().collect::<Vec<f32>>();
         prop_assert!(same_bits(&flat(&bpx), &flat(&rpx)), "intermediate images differ");
@@ -259,6 +260,62 @@ fn no_drift_after_thousands_of_random_steps() {
                         assert!((state.trans[a][k] - closed).abs() < 1e-9);
                     }
                 }
+            }};
+        }
+        if word64 { run!(u64) } else { run!(u32) }
+    }
+}
+
+/// The shear kernels specialised per column length (1 to 8 words) and the
+/// general one (more words): random one-bit steps about both axes and
+/// multi-bit jumps end in exactly the mask sheared directly, for every length.
+#[test]
+fn every_column_length_shears_like_the_direct_shear() {
+    // u64 columns of 1..=9 words, u32 columns of 2 and 10 words
+    let cases: [(usize, bool); 11] = [
+        (40, true),
+        (100, true),
+        (170, true),
+        (230, true),
+        (300, true),
+        (360, true),
+        (420, true),
+        (500, true),
+        (540, true),
+        (40, false),
+        (300, false),
+    ];
+    for (nz, word64) in cases {
+        let vol = random_volume([9, 7, nz], nz as u64, [1.0; 3]);
+        let st = SliceStack::new(&vol, 2);
+        let mut seed = 0xC0FFEE ^ nz as u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed >> 11
+        };
+        let lim = (nz as i64 - 1) / 2;
+        macro_rules! run {
+            ($w:ty) => {{
+                let mut m = BinaryMask::<$w>::build(&st, |_, hi| hi > 60.0);
+                let mut state = ShearState::identity(nz);
+                for step in 0..240 {
+                    if step % 40 == 39 {
+                        // a few bits at once along both axes
+                        let e = [0, 1].map(|a| (state.ends[a][1] + (rnd() % 7) as f64 - 3.0).clamp(-(lim as f64), lim as f64));
+                        state = ShearState::from_ends(nz, [0, 1].map(|a| [-e[a], e[a]]));
+                        m.shear_to(&state);
+                    } else {
+                        let along = (rnd() & 1) as usize;
+                        let dir = if rnd() % 3 == 0 { -1 } else { 1 };
+                        if (state.ends[along][1] + dir as f64).abs() > lim as f64 {
+                            continue;
+                        }
+                        state = m.rotate_step(&state, along, dir);
+                    }
+                }
+                let mut d = BinaryMask::<$w>::build(&st, |_, hi| hi > 60.0);
+                d.shear_direct(&state);
+                assert_eq!(m.words(), d.words(), "depth {nz}, {} bits", <$w>::BITS);
             }};
         }
         if word64 { run!(u64) } else { run!(u32) }

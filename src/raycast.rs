@@ -52,6 +52,16 @@ impl Mode {
 pub struct SliceParams {
     pub floor: [Vec<i32>; 2],
     pub weight: [Vec<f32>; 2],
+    /// The same numbers slice by slice, `(floor_i, floor_j, weight_i, weight_j)`:
+    /// what a ray reads at one slice, in one load.
+    pub packed: Vec<PackedSlice>,
+}
+
+/// One slice's integer offset and in-cell weight along i and j.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PackedSlice {
+    pub floor: [i32; 2],
+    pub weight: [f32; 2],
 }
 
 impl SliceParams {
@@ -63,6 +73,9 @@ impl SliceParams {
             self.weight[a].clear();
             self.weight[a].extend(st.trans[a].iter().zip(&st.floor[a]).map(|(t, &f)| (t - f as f64) as f32));
         }
+        self.packed.clear();
+        let (f, w) = (&self.floor, &self.weight);
+        self.packed.extend((0..f[0].len()).map(|k| PackedSlice { floor: [f[0][k], f[1][k]], weight: [w[0][k], w[1][k]] }));
     }
 }
 
@@ -133,20 +146,27 @@ impl<'a> RayContext<'a> {
     /// The cell and weights of ray `(p, q)` at slice `k`, or `None` outside the volume.
     #[inline(always)]
     fn locate(&self, p: i32, q: i32, k: usize) -> Option<(usize, usize, f32, f32)> {
-        let ci = p - self.pad + self.params.floor[0][k];
-        let cj = q - self.pad + self.params.floor[1][k];
+        let s = self.params.packed[k];
+        let ci = p - self.pad + s.floor[0];
+        let cj = q - self.pad + s.floor[1];
         if (ci as u32) < self.cells[0] && (cj as u32) < self.cells[1] {
-            Some((ci as usize, cj as usize, self.params.weight[0][k], self.params.weight[1][k]))
+            Some((ci as usize, cj as usize, s.weight[0], s.weight[1]))
         } else {
             None
         }
     }
 
-    /// Hints the cache to fetch what a hit of ray `(p, q)` at slice `k` reads.
+    /// Hints the cache to fetch what a hit of ray `(p, q)` at slice `k` reads,
+    /// unless its voxel shares the 16-voxel line `last` of the ray before (whose
+    /// prefetch covered it); updates `last`.
     #[inline(always)]
-    pub fn prefetch(&self, p: i32, q: i32, k: usize) {
+    pub fn prefetch(&self, p: i32, q: i32, k: usize, last: &mut usize) {
         if let Some((ci, cj, _, _)) = self.locate(p, q, k) {
-            self.stack.prefetch_hit(ci, cj, k, self.ascending);
+            let line = self.stack.index(ci, cj, k) >> 4;
+            if line != *last {
+                *last = line;
+                self.stack.prefetch_hit(ci, cj, k, self.ascending);
+            }
         }
     }
 
@@ -278,31 +298,13 @@ fn binary_row<W: Word>(
     let s = mask.cell_size();
     let (mut sp, mut left) = mask.column_run(p0);
     let sq = mask.ray_column(p0, q).1;
-    let group = if prefetch { PREFETCH_GROUP } else { crow.len().max(1) };
-    for (g, (cg, dg)) in crow.chunks_mut(group).zip(drow.chunks_mut(group)).enumerate() {
-        let pg = p0 + g * group;
-        if prefetch {
-            // phase 1: the first candidate slice of every ray of the group
-            let (mut sp, mut left) = (sp, left);
-            for dp in 0..cg.len() {
-                let row = mask.row(sp, sq);
-                if let Some(k0) = SetBits::with_matcher(row, ctx.ascending, search, m).next() {
-                    ctx.prefetch((pg + dp) as i32, q as i32, k0);
-                }
-                left -= 1;
-                if left == 0 {
-                    sp += 1;
-                    left = s;
-                }
-            }
-        }
-        // phase 2: the walks
-        for (dp, (c, d)) in cg.iter_mut().zip(dg.iter_mut()).enumerate() {
+    if !prefetch {
+        for (dp, (c, d)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
             let row = mask.row(sp, sq);
             let res = if row.iter().all(|&w| w == W::ZERO) {
                 MISS
             } else {
-                ctx.trace((pg + dp) as i32, q as i32, SetBits::with_matcher(row, ctx.ascending, search, m))
+                ctx.trace((p0 + dp) as i32, q as i32, SetBits::with_matcher(row, ctx.ascending, search, m))
             };
             *c = res.rgba;
             *d = res.depth;
@@ -311,6 +313,35 @@ fn binary_row<W: Word>(
                 sp += 1;
                 left = s;
             }
+        }
+        return;
+    }
+    // each ray's first candidate and the rest of its walk, kept between the phases
+    let mut walks: [Option<(usize, SetBits<W>)>; PREFETCH_GROUP] = std::array::from_fn(|_| None);
+    let mut last_line = usize::MAX;
+    for (g, (cg, dg)) in crow.chunks_mut(PREFETCH_GROUP).zip(drow.chunks_mut(PREFETCH_GROUP)).enumerate() {
+        let pg = p0 + g * PREFETCH_GROUP;
+        // phase 1: the first candidate slice of every ray of the group, prefetched
+        for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
+            let mut it = SetBits::with_matcher(mask.row(sp, sq), ctx.ascending, search, m);
+            *walk = it.next().map(|k0| {
+                ctx.prefetch((pg + dp) as i32, q as i32, k0, &mut last_line);
+                (k0, it)
+            });
+            left -= 1;
+            if left == 0 {
+                sp += 1;
+                left = s;
+            }
+        }
+        // phase 2: the walks, from the first candidate on
+        for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter_mut()).enumerate() {
+            let res = match walk.take() {
+                None => MISS,
+                Some((k0, rest)) => ctx.trace((pg + dp) as i32, q as i32, std::iter::once(k0).chain(rest)),
+            };
+            *c = res.rgba;
+            *d = res.depth;
         }
     }
 }

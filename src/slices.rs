@@ -74,10 +74,8 @@ impl SliceStack {
     /// Smallest and largest corner density of cell `(ci, cj)` in slice `k`.
     #[inline(always)]
     pub fn cell_range(&self, ci: usize, cj: usize, k: usize) -> (f32, f32) {
-        let b = ci + self.n[0] * (cj + self.n[1] * k);
-        let n0 = self.n[0];
-        let (a, c, d, e) = (self.data[b], self.data[b + 1], self.data[b + n0], self.data[b + n0 + 1]);
-        (a.min(c).min(d.min(e)), a.max(c).max(d.max(e)))
+        let [a, c, d, e] = self.corners(ci, cj, k);
+        (fmin(fmin(a, c), fmin(d, e)), fmax(fmax(a, c), fmax(d, e)))
     }
 
     /// Bilinear density in cell `(ci, cj)` of slice `k` at in-cell weights `(wi, wj)`.
@@ -87,29 +85,42 @@ impl SliceStack {
     /// floating-point rounding: this is what makes the masks exactly conservative.
     #[inline(always)]
     pub fn bilinear(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> f32 {
-        let n0 = self.n[0];
-        let b = ci + n0 * (cj + self.n[1] * k);
-        let (v00, v10, v01, v11) = (self.data[b], self.data[b + 1], self.data[b + n0], self.data[b + n0 + 1]);
+        let [v00, v10, v01, v11] = self.corners(ci, cj, k);
         let top = v00 + (v10 - v00) * wi;
         let bot = v01 + (v11 - v01) * wi;
         let d = top + (bot - top) * wj;
-        let lo = v00.min(v10).min(v01.min(v11));
-        let hi = v00.max(v10).max(v01.max(v11));
-        d.clamp(lo, hi)
+        let lo = fmin(fmin(v00, v10), fmin(v01, v11));
+        let hi = fmax(fmax(v00, v10), fmax(v01, v11));
+        fmin(fmax(d, lo), hi)
+    }
+
+    /// The four corner densities of cell `(ci, cj)` in slice `k`, in the order
+    /// `(i, j)`, `(i+1, j)`, `(i, j+1)`, `(i+1, j+1)`: one bounds check for all four.
+    #[inline(always)]
+    fn corners(&self, ci: usize, cj: usize, k: usize) -> [f32; 4] {
+        let n0 = self.n[0];
+        let b = ci + n0 * (cj + self.n[1] * k);
+        let s = &self.data[b..b + n0 + 2];
+        [s[0], s[1], s[n0], s[n0 + 1]]
+    }
+
+    /// Index of voxel `(i, j, k)` in [`SliceStack::data`].
+    #[inline(always)]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.n[0] * (j + self.n[1] * k)
     }
 
     /// Hints the cache to fetch every voxel row an iso hit in cell `(ci, cj)` of
     /// slice `k` reads: the 4×4 in-slice neighbourhood of slice `k` and of the
     /// slice before it in walking order (the refinement's sample and gradient),
     /// and the two rows each of the slices one beyond on either side. No effect
-    /// on results.
+    /// on results; rows outside the stack are skipped.
     #[inline(always)]
     pub fn prefetch_hit(&self, ci: usize, cj: usize, k: usize, ascending: bool) {
-        let (n0, n01) = (self.n[0], self.n[0] * self.n[1]);
-        let b = (ci + n0 * cj + n01 * k) as isize;
-        let dk = if ascending { -(n01 as isize) } else { n01 as isize };
-        let (n0, len) = (n0 as isize, self.data.len() as isize);
-        let at = |o: isize| (b + o).clamp(0, len - 1) as usize;
+        let (n0, n01) = (self.n[0] as isize, (self.n[0] * self.n[1]) as isize);
+        let b = self.index(ci, cj, k);
+        let dk = if ascending { -n01 } else { n01 };
+        let at = |o: isize| b.wrapping_add_signed(o);
         for s in [0, dk] {
             for r in -1..=2 {
                 prefetch(&self.data, at(s + r * n0 - 1));
@@ -189,6 +200,19 @@ impl SliceStack {
     }
 }
 
+/// The smaller of two densities: one `minss` (`f32::min` adds NaN handling;
+/// stacks hold finite values only, where both agree).
+#[inline(always)]
+pub(crate) fn fmin(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// The larger of two densities (see [`fmin`]).
+#[inline(always)]
+pub(crate) fn fmax(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
 /// Asks the cache for `v[i]` (a hint: no effect on results; nothing if `i` is out of range).
 #[inline(always)]
 pub(crate) fn prefetch<T>(v: &[T], i: usize) {
@@ -239,6 +263,26 @@ mod tests {
         assert!((g[0] - 0.1).abs() < 1e-5 && (g[1] - 3.0).abs() < 1e-5 && (g[2] + 2.0).abs() < 1e-5);
         let (lo, hi) = s.cell_range(1, 2, 3);
         assert!(lo <= d && d <= hi);
+    }
+
+    #[test]
+    fn prefetch_at_the_stack_edges_is_harmless_and_min_max_agree_with_std() {
+        let v = Volume::from_fn([5, 4, 3], [1.0; 3], |x, y, z| (x + y + z) as f32).unwrap();
+        let s = SliceStack::new(&v, 2);
+        // rows before the first and past the last voxel are skipped, not touched
+        for (ci, cj, k) in [(0, 0, 0), (3, 2, 2), (0, 2, 1), (3, 0, 0)] {
+            for asc in [false, true] {
+                s.prefetch_hit(ci, cj, k, asc);
+            }
+        }
+        prefetch(s.data(), usize::MAX);
+        let xs = [-3.5f32, -0.0, 0.0, 1.0, 2.5, f32::MAX, f32::MIN];
+        for a in xs {
+            for b in xs {
+                assert_eq!(fmin(a, b), a.min(b), "min {a} {b}");
+                assert_eq!(fmax(a, b), a.max(b), "max {a} {b}");
+            }
+        }
     }
 
     #[test]

@@ -429,18 +429,20 @@ impl<'a, W: Word> SetBits<'a, W> {
     }
 }
 
-impl<W: Word> Iterator for SetBits<'_, W> {
-    type Item = usize;
+impl<W: Word> SetBits<'_, W> {
+    /// The slice [`Iterator::next`] will return, without consuming it (moves
+    /// past empty words only, which does not change what follows).
     #[inline(always)]
-    fn next(&mut self) -> Option<usize> {
-        let nb = self.m.nb;
-        let slots = (W::BITS / nb) as usize;
+    pub fn peek(&mut self) -> Option<usize> {
+        self.peek_slot().map(|slot| self.w * (W::BITS / self.m.nb) as usize + slot as usize)
+    }
+
+    /// The first matching slot of the current word, stepping over words with none.
+    #[inline(always)]
+    fn peek_slot(&mut self) -> Option<u32> {
         loop {
             if let Some(slot) = self.m.first_slot(self.cur, self.ascending, self.search) {
-                // clear the visited slot (all its bits) so the next search moves on
-                let ones = W::from_u64((1u64 << nb) - 1);
-                self.cur &= !(ones << slot_shift::<W>(nb, slot));
-                return Some(self.w * slots + slot as usize);
+                return Some(slot);
             }
             if self.ascending {
                 self.w += 1;
@@ -455,6 +457,19 @@ impl<W: Word> Iterator for SetBits<'_, W> {
             }
             self.cur = self.row[self.w];
         }
+    }
+}
+
+impl<W: Word> Iterator for SetBits<'_, W> {
+    type Item = usize;
+    #[inline(always)]
+    fn next(&mut self) -> Option<usize> {
+        let nb = self.m.nb;
+        let slot = self.peek_slot()?;
+        // clear the visited slot (all its bits) so the next search moves on
+        let ones = W::from_u64((1u64 << nb) - 1);
+        self.cur &= !(ones << slot_shift::<W>(nb, slot));
+        Some(self.w * (W::BITS / nb) as usize + slot as usize)
     }
 }
 

@@ -316,17 +316,17 @@ fn binary_row<W: Word>(
         }
         return;
     }
-    // each ray's first candidate and the rest of its walk, kept between the phases
-    let mut walks: [Option<(usize, SetBits<W>)>; PREFETCH_GROUP] = std::array::from_fn(|_| None);
+    // each ray's walk, positioned at its first candidate between the phases
+    let mut walks: [Option<SetBits<W>>; PREFETCH_GROUP] = std::array::from_fn(|_| None);
     let mut last_line = usize::MAX;
     for (g, (cg, dg)) in crow.chunks_mut(PREFETCH_GROUP).zip(drow.chunks_mut(PREFETCH_GROUP)).enumerate() {
         let pg = p0 + g * PREFETCH_GROUP;
         // phase 1: the first candidate slice of every ray of the group, prefetched
         for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
             let mut it = SetBits::with_matcher(mask.row(sp, sq), ctx.ascending, search, m);
-            *walk = it.next().map(|k0| {
+            *walk = it.peek().map(|k0| {
                 ctx.prefetch((pg + dp) as i32, q as i32, k0, &mut last_line);
-                (k0, it)
+                it
             });
             left -= 1;
             if left == 0 {
@@ -338,7 +338,7 @@ fn binary_row<W: Word>(
         for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter_mut()).enumerate() {
             let res = match walk.take() {
                 None => MISS,
-                Some((k0, rest)) => ctx.trace((pg + dp) as i32, q as i32, std::iter::once(k0).chain(rest)),
+                Some(walk) => ctx.trace((pg + dp) as i32, q as i32, walk),
             };
             *c = res.rgba;
             *d = res.depth;

@@ -588,6 +588,16 @@ mod tests {
                 for s in [Search::Lut, Search::Bitscan] {
                     let got: Vec<usize> = SetBits::with_matcher(row, asc, s, &m).collect();
                     assert_eq!(got, want, "nb={nb} c={c} asc={asc} {s:?}");
+                    // peeking (even twice) before each step changes nothing
+                    let mut it = SetBits::with_matcher(row, asc, s, &m);
+                    let mut peeked = Vec::new();
+                    while let Some(k) = it.peek() {
+                        assert_eq!(it.peek(), Some(k));
+                        assert_eq!(it.next(), Some(k));
+                        peeked.push(k);
+                    }
+                    assert_eq!(it.next(), None);
+                    assert_eq!(peeked, want, "peek nb={nb} c={c} asc={asc} {s:?}");
                 }
             }
         }

@@ -399,9 +399,10 @@ fn parse_spacing(s: &str) -> std::result::Result<[f32; 3], String> {
     Ok(d)
 }
 
-/// `--opacity`: (density, opacity) control points of a blend-mode transfer function.
+/// `--opacity`: a blend-mode transfer function from (density, opacity) control
+/// points, in a constant bone-white colour.
 #[derive(Clone, Debug, PartialEq)]
-pub struct OpacityCurve(pub Vec<(f32, f32)>);
+pub struct OpacityCurve(pub crate::classify::TransferFunction);
 
 fn parse_opacity(s: &str) -> std::result::Result<OpacityCurve, String> {
     let mut pts = Vec::new();
@@ -412,8 +413,8 @@ fn parse_opacity(s: &str) -> std::result::Result<OpacityCurve, String> {
         pts.push((d, a));
     }
     // the same checks as every transfer function: finite, sorted, opacities in [0, 1]
-    crate::classify::TransferFunction::new(pts.clone(), vec![(0.0, [1.0; 3])]).map_err(|e| e.to_string())?;
-    Ok(OpacityCurve(pts))
+    let colour = vec![(pts[0].0, [0.92, 0.9, 0.85])];
+    crate::classify::TransferFunction::new(pts, colour).map(OpacityCurve).map_err(|e| e.to_string())
 }
 
 fn parse_rotation(s: &str) -> std::result::Result<[f64; 3], String> {
@@ -529,12 +530,11 @@ impl RenderArgs {
                 }
             }
         }
-        if let Some(OpacityCurve(pts)) = &self.opacity {
+        if let Some(OpacityCurve(tf)) = &self.opacity {
             if settings.mode != Mode::Blend {
                 usage!("--opacity sets the blend-mode transfer function; add --mode blend (iso mode takes --iso)");
             }
-            let rgb = [0.92, 0.9, 0.85];
-            r.set_transfer_function(&crate::classify::TransferFunction::new(pts.clone(), vec![(pts[0].0, rgb)])?);
+            r.set_transfer_function(tf);
         }
         if let Some(iso) = self.iso {
             if !iso.is_finite() {

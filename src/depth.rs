@@ -434,7 +434,13 @@ impl<W: Word> SetBits<'_, W> {
     /// past empty words only, which does not change what follows).
     #[inline(always)]
     pub fn peek(&mut self) -> Option<usize> {
-        self.peek_slot().map(|slot| self.w * (W::BITS / self.m.nb) as usize + slot as usize)
+        self.peek_slot().map(|slot| self.slice_of(slot))
+    }
+
+    /// The slice of `slot` in the current word.
+    #[inline(always)]
+    fn slice_of(&self, slot: u32) -> usize {
+        self.w * (W::BITS / self.m.nb) as usize + slot as usize
     }
 
     /// The first matching slot of the current word, stepping over words with none.
@@ -469,7 +475,7 @@ impl<W: Word> Iterator for SetBits<'_, W> {
         // clear the visited slot (all its bits) so the next search moves on
         let ones = W::from_u64((1u64 << nb) - 1);
         self.cur &= !(ones << slot_shift::<W>(nb, slot));
-        Some(self.w * (W::BITS / nb) as usize + slot as usize)
+        Some(self.slice_of(slot))
     }
 }
 

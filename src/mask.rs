@@ -241,6 +241,48 @@ pub struct BinaryMask<W: Word> {
     prev_off: [Vec<i32>; 2],
 }
 
+/// Runs `$fixed` with the constant `$n` bound to the column length `$nw` when it
+/// is 1 to 8 words (a kernel compiled for that length), else `$any`.
+macro_rules! by_column_length {
+    ($nw:expr, $n:ident => $fixed:expr, _ => $any:expr) => {
+        match $nw {
+            1 => {
+                const $n: usize = 1;
+                $fixed
+            }
+            2 => {
+                const $n: usize = 2;
+                $fixed
+            }
+            3 => {
+                const $n: usize = 3;
+                $fixed
+            }
+            4 => {
+                const $n: usize = 4;
+                $fixed
+            }
+            5 => {
+                const $n: usize = 5;
+                $fixed
+            }
+            6 => {
+                const $n: usize = 6;
+                $fixed
+            }
+            7 => {
+                const $n: usize = 7;
+                $fixed
+            }
+            8 => {
+                const $n: usize = 8;
+                $fixed
+            }
+            _ => $any,
+        }
+    };
+}
+
 impl<W: Word> BinaryMask<W> {
     /// Builds the 1-bit mask of `stack` (cell size 1): cell `(ci, cj, k)` is set
     /// when `visible(lo, hi)` for the range `[lo, hi]` of its four corner densities.
@@ -548,17 +590,8 @@ impl<W: Word> BinaryMask<W> {
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
         let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
         let tasks = rows.par_chunks_mut(gw * nw);
-        match nw {
-            1 => tasks.for_each(|row| shift_columns_n::<W, 1>(row, ps, pe, up, down, keep)),
-            2 => tasks.for_each(|row| shift_columns_n::<W, 2>(row, ps, pe, up, down, keep)),
-            3 => tasks.for_each(|row| shift_columns_n::<W, 3>(row, ps, pe, up, down, keep)),
-            4 => tasks.for_each(|row| shift_columns_n::<W, 4>(row, ps, pe, up, down, keep)),
-            5 => tasks.for_each(|row| shift_columns_n::<W, 5>(row, ps, pe, up, down, keep)),
-            6 => tasks.for_each(|row| shift_columns_n::<W, 6>(row, ps, pe, up, down, keep)),
-            7 => tasks.for_each(|row| shift_columns_n::<W, 7>(row, ps, pe, up, down, keep)),
-            8 => tasks.for_each(|row| shift_columns_n::<W, 8>(row, ps, pe, up, down, keep)),
-            _ => tasks.for_each(|row| shift_columns_any(row, nw, ps, pe, up, down, keep)),
-        }
+        by_column_length!(nw, N => tasks.for_each(|row| shift_columns_n::<W, N>(row, ps, pe, up, down, keep)),
+            _ => tasks.for_each(|row| shift_columns_any(row, nw, ps, pe, up, down, keep)));
         ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
     }
 
@@ -582,17 +615,8 @@ impl<W: Word> BinaryMask<W> {
             let row = &mut head[q * gw * nw + ps..q * gw * nw + pe];
             // the row below, or nothing past the grid's last row
             let next = if q + 1 < gh { &tail[ps..pe] } else { &zeros[..] };
-            match nw {
-                1 => shift_row_n::<W, 1>(row, next, prev, up, down, keep),
-                2 => shift_row_n::<W, 2>(row, next, prev, up, down, keep),
-                3 => shift_row_n::<W, 3>(row, next, prev, up, down, keep),
-                4 => shift_row_n::<W, 4>(row, next, prev, up, down, keep),
-                5 => shift_row_n::<W, 5>(row, next, prev, up, down, keep),
-                6 => shift_row_n::<W, 6>(row, next, prev, up, down, keep),
-                7 => shift_row_n::<W, 7>(row, next, prev, up, down, keep),
-                8 => shift_row_n::<W, 8>(row, next, prev, up, down, keep),
-                _ => shift_row_any(row, next, prev, nw, up, down, keep),
-            }
+            by_column_length!(nw, N => shift_row_n::<W, N>(row, next, prev, up, down, keep),
+                _ => shift_row_any(row, next, prev, nw, up, down, keep));
         }
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
     }
@@ -664,22 +688,13 @@ fn shift_row_n<W: Word, const N: usize>(row: &mut [W], next: &[W], prev: &mut [W
     let (up, down, keep): (&[W; N], &[W; N], &[W; N]) = (fixed(up), fixed(down), fixed(keep));
     let (row, _) = row.as_chunks_mut::<N>();
     let (prev, _) = prev.as_chunks_mut::<N>();
-    if next.is_empty() {
-        for (cw, pw) in row.iter_mut().zip(prev.iter_mut()) {
-            for w in 0..N {
-                let old = cw[w];
-                cw[w] = (old & keep[w]) | (pw[w] & up[w]);
-                pw[w] = old;
-            }
-        }
-    } else {
-        let (next, _) = next.as_chunks::<N>();
-        for ((cw, nx), pw) in row.iter_mut().zip(next).zip(prev.iter_mut()) {
-            for w in 0..N {
-                let old = cw[w];
-                cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx[w] & down[w]);
-                pw[w] = old;
-            }
+    let (next, _) = next.as_chunks::<N>();
+    for (c, (cw, pw)) in row.iter_mut().zip(prev.iter_mut()).enumerate() {
+        let nx = next.get(c).copied().unwrap_or([W::ZERO; N]);
+        for w in 0..N {
+            let old = cw[w];
+            cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx[w] & down[w]);
+            pw[w] = old;
         }
     }
 }

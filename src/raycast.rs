@@ -50,16 +50,13 @@ impl Mode {
 /// every slice along i and j (`trans = floor + weight`). Reused across frames.
 #[derive(Clone, Debug, Default)]
 pub struct SliceParams {
-    pub floor: [Vec<i32>; 2],
-    pub weight: [Vec<f32>; 2],
-    /// The same numbers slice by slice, `(floor_i, floor_j, weight_i, weight_j)`:
-    /// what a ray reads at one slice, in one load.
-    pub packed: Vec<PackedSlice>,
+    /// Slice by slice: what a ray reads at one slice, in one 16-byte load.
+    pub slices: Vec<SliceParam>,
 }
 
 /// One slice's integer offset and in-cell weight along i and j.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct PackedSlice {
+pub struct SliceParam {
     pub floor: [i32; 2],
     pub weight: [f32; 2],
 }
@@ -67,15 +64,11 @@ pub struct PackedSlice {
 impl SliceParams {
     /// Fills from a shear state (the mask and the rays use the very same numbers).
     pub fn fill(&mut self, st: &ShearState) {
-        for a in 0..2 {
-            self.floor[a].clear();
-            self.floor[a].extend_from_slice(&st.floor[a]);
-            self.weight[a].clear();
-            self.weight[a].extend(st.trans[a].iter().zip(&st.floor[a]).map(|(t, &f)| (t - f as f64) as f32));
-        }
-        self.packed.clear();
-        let (f, w) = (&self.floor, &self.weight);
-        self.packed.extend((0..f[0].len()).map(|k| PackedSlice { floor: [f[0][k], f[1][k]], weight: [w[0][k], w[1][k]] }));
+        self.slices.clear();
+        let weight = |a: usize, k: usize| (st.trans[a][k] - st.floor[a][k] as f64) as f32;
+        self.slices.extend(
+            (0..st.floor[0].len()).map(|k| SliceParam { floor: [st.floor[0][k], st.floor[1][k]], weight: [weight(0, k), weight(1, k)] }),
+        );
     }
 }
 
@@ -146,7 +139,7 @@ impl<'a> RayContext<'a> {
     /// The cell and weights of ray `(p, q)` at slice `k`, or `None` outside the volume.
     #[inline(always)]
     fn locate(&self, p: i32, q: i32, k: usize) -> Option<(usize, usize, f32, f32)> {
-        let s = self.params.packed[k];
+        let s = self.params.slices[k];
         let ci = p - self.pad + s.floor[0];
         let cj = q - self.pad + s.floor[1];
         if (ci as u32) < self.cells[0] && (cj as u32) < self.cells[1] {
@@ -246,10 +239,11 @@ impl<'a> RayContext<'a> {
 /// reads its (super) column and visits only the slices whose code `m` matches,
 /// in parallel over rows; marks `rect` valid. A row steps from super column to
 /// super column with a counter (no division per ray) and answers a ray whose
-/// column is empty without starting a walk. With `prefetch` a row runs in groups
-/// of [`PREFETCH_GROUP`] rays: first every ray's depth search and a prefetch of
-/// the voxel rows its first candidate slice reads, then the walks, so the cache
-/// misses of a group overlap instead of stalling one ray after the other. With
+/// column is empty without starting a walk. A row runs in groups of
+/// [`PREFETCH_GROUP`] rays: first every ray's depth search (and, with
+/// `prefetch`, a prefetch of the voxel rows its first candidate slice reads),
+/// then the walks, so the cache misses of a group overlap instead of stalling
+/// one ray after the other. With
 /// [`Search::Bitscan`] on a CPU with `lzcnt`/`tzcnt` the row loop runs a copy
 /// compiled for them.
 #[allow(clippy::too_many_arguments)]
@@ -298,34 +292,19 @@ fn binary_row<W: Word>(
     let s = mask.cell_size();
     let (mut sp, mut left) = mask.column_run(p0);
     let sq = mask.ray_column(p0, q).1;
-    if !prefetch {
-        for (dp, (c, d)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
-            let row = mask.row(sp, sq);
-            let res = if row.iter().all(|&w| w == W::ZERO) {
-                MISS
-            } else {
-                ctx.trace((p0 + dp) as i32, q as i32, SetBits::with_matcher(row, ctx.ascending, search, m))
-            };
-            *c = res.rgba;
-            *d = res.depth;
-            left -= 1;
-            if left == 0 {
-                sp += 1;
-                left = s;
-            }
-        }
-        return;
-    }
     // each ray's walk, positioned at its first candidate between the phases
     let mut walks: [Option<SetBits<W>>; PREFETCH_GROUP] = std::array::from_fn(|_| None);
     let mut last_line = usize::MAX;
     for (g, (cg, dg)) in crow.chunks_mut(PREFETCH_GROUP).zip(drow.chunks_mut(PREFETCH_GROUP)).enumerate() {
         let pg = p0 + g * PREFETCH_GROUP;
-        // phase 1: the first candidate slice of every ray of the group, prefetched
+        // phase 1: the first candidate slice of every ray of the group (none for
+        // an empty column), prefetched
         for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
             let mut it = SetBits::with_matcher(mask.row(sp, sq), ctx.ascending, search, m);
             *walk = it.peek().map(|k0| {
-                ctx.prefetch((pg + dp) as i32, q as i32, k0, &mut last_line);
+                if prefetch {
+                    ctx.prefetch((pg + dp) as i32, q as i32, k0, &mut last_line);
+                }
                 it
             });
             left -= 1;
@@ -396,12 +375,13 @@ fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(usize, u
 /// The rectangle of the intermediate grid that rays through the volume can reach
 /// under these slice offsets (geometry only, no mask): used by brute force.
 pub fn volume_rect(params: &SliceParams, cells: [usize; 2], pad: usize, grid: [usize; 2]) -> Option<Rect> {
-    if cells[0] == 0 || cells[1] == 0 || params.floor[0].is_empty() {
+    if cells[0] == 0 || cells[1] == 0 || params.slices.is_empty() {
         return None;
     }
     let span = |a: usize| {
-        let lo = params.floor[a].iter().map(|f| pad as i32 - f).min().unwrap_or(0).max(0) as usize;
-        let hi = params.floor[a].iter().map(|f| pad as i32 - f + cells[a] as i32 - 1).max().unwrap_or(0) as usize;
+        let floors = || params.slices.iter().map(move |s| s.floor[a]);
+        let lo = floors().map(|f| pad as i32 - f).min().unwrap_or(0).max(0) as usize;
+        let hi = floors().map(|f| pad as i32 - f + cells[a] as i32 - 1).max().unwrap_or(0) as usize;
         (lo, hi.min(grid[a] - 1))
     };
     let (p0, p1) = span(0);

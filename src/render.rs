@@ -104,9 +104,10 @@ pub struct Settings {
     /// (sheared) mask. `false` casts over the whole sheared volume's rectangle:
     /// a benchmark knob that shows what the rectangle skip buys (same image).
     pub occupied_rect: bool,
-    /// Binary path: bit-scan each group of rays first and prefetch the voxel
-    /// rows of their first candidate slices, then trace them. `false` traces
-    /// ray by ray: a benchmark knob that shows what the prefetch buys (same image).
+    /// Binary path: prefetch the voxel rows of each ray's first candidate slice
+    /// while a group of rays is bit-scanned, before the group is traced. `false`
+    /// leaves the prefetches out: a benchmark knob that shows what they buy
+    /// (same image).
     pub prefetch: bool,
 }
 

@@ -436,7 +436,7 @@ impl RleVolume {
             // voxel v touches cells v − 1 and v
             let span = [(b[0], b[1], ni), (b[2], b[3], nj)];
             for (a, &(v0, v1, n)) in span.iter().enumerate() {
-                let off = pad as i64 - params.floor[a][k] as i64;
+                let off = pad as i64 - params.slices[k].floor[a] as i64;
                 lo[a] = lo[a].min((v0 as i64 - 1).max(0) + off);
                 hi[a] = hi[a].max((v1 as i64).min(n as i64 - 2) + off);
             }
@@ -963,9 +963,10 @@ impl RleFrame<'_> {
             if bb[0] > bb[1] {
                 continue;
             }
-            let w = cell_weights(self.params.weight[0][k], self.params.weight[1][k]);
+            let sp = self.params.slices[k];
+            let w = cell_weights(sp.weight[0], sp.weight[1]);
             // cell column ci lands on pixel ci + op (row-relative: ci + off)
-            let op = self.pad - self.params.floor[0][k] as isize;
+            let op = self.pad - sp.floor[0] as isize;
             let off = op - r.p0 as isize;
             // cells of the rect that touch the slice's non-transparent box
             let ci_lo = (r.p0 as isize - op).max(bb[0] as isize - 1).max(0);
@@ -973,7 +974,7 @@ impl RleFrame<'_> {
             if ci_lo > ci_hi {
                 continue;
             }
-            let fj = self.params.floor[1][k] as isize;
+            let fj = sp.floor[1] as isize;
             for row in 0..nrows {
                 let cj = (q_first + row) as isize - self.pad + fj;
                 if cj < 0 || cj > nj as isize - 2 || cj + 1 < bb[2] as isize || cj > bb[3] as isize {
@@ -1036,8 +1037,9 @@ pub fn render_brute_preclassified(
             }
         });
         let buf = &slice_buf[..];
-        let w = cell_weights(params.weight[0][k], params.weight[1][k]);
-        let (fi, fj) = (params.floor[0][k] as isize, params.floor[1][k] as isize);
+        let sp = params.slices[k];
+        let w = cell_weights(sp.weight[0], sp.weight[1]);
+        let (fi, fj) = (sp.floor[0] as isize, sp.floor[1] as isize);
         px.par_chunks_mut(gw).enumerate().for_each(|(row, prow)| {
             let cj = (r.q0 + row) as isize - pad as isize + fj;
             if cj < 0 || cj > nj as isize - 2 {

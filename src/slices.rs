@@ -58,7 +58,7 @@ impl SliceStack {
     /// Density at voxel `(i, j, k)`.
     #[inline(always)]
     pub fn at(&self, i: usize, j: usize, k: usize) -> f32 {
-        self.data[i + self.n[0] * (j + self.n[1] * k)]
+        self.data[self.index(i, j, k)]
     }
 
     /// The raw permuted densities.
@@ -98,8 +98,7 @@ impl SliceStack {
     /// `(i, j)`, `(i+1, j)`, `(i, j+1)`, `(i+1, j+1)`: one bounds check for all four.
     #[inline(always)]
     fn corners(&self, ci: usize, cj: usize, k: usize) -> [f32; 4] {
-        let n0 = self.n[0];
-        let b = ci + n0 * (cj + self.n[1] * k);
+        let (n0, b) = (self.n[0], self.index(ci, cj, k));
         let s = &self.data[b..b + n0 + 2];
         [s[0], s[1], s[n0], s[n0 + 1]]
     }
@@ -169,7 +168,7 @@ impl SliceStack {
     #[inline(always)]
     fn gradient_interior(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
         let (n0, n01) = (self.n[0], self.n[0] * self.n[1]);
-        let b = ci + n0 * cj + n01 * k;
+        let b = self.index(ci, cj, k);
         let data = &self.data;
         // row y (−1..=2) of slice k at x = −1..=2, and rows y = 0, 1 of slices k ± 1 at x = 0, 1
         let r4 = |o: usize| -> [f32; 4] { data[o - 1..o + 3].try_into().expect("4 voxels") };

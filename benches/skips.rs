@@ -5,13 +5,14 @@
 //! only inside the occupied mask's rectangle against the whole volume's; the RLE
 //! path's per-view tables reused when nothing changed against rebuilt; the
 //! binary path's bit-scan kernels (run-time dispatched lzcnt, plain bsr, LUT);
-//! the binary row's prefetch groups against ray-by-ray tracing.
+//! the binary row's prefetches against none.
 //! Run: `cargo bench --bench skips`.
 
 use std::hint::black_box;
 use std::time::Duration;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
 use glam::DMat3;
 use shearwarp::classify::Classifier;
 use shearwarp::composite::Shading;
@@ -40,35 +41,33 @@ fn renderer(s: Settings, tissue: &str) -> Renderer {
     r
 }
 
+/// Benches `r` turning 1° per iteration (so every frame renders) into a 512² image.
+fn bench_turn(g: &mut BenchmarkGroup<'_, WallTime>, name: impl Into<String>, mut r: Renderer) {
+    let mut img = Image::new(512, 512);
+    let mut d = 0.0;
+    g.bench_function(name.into(), |b| {
+        b.iter(|| {
+            d += 1.0;
+            r.render(&cam(d % 360.0), &mut img).expect("render")
+        })
+    });
+}
+
 fn skips(c: &mut Criterion) {
     // empty-space skipping through the mask
     for (mode, tissue) in [(Mode::Iso, "skin"), (Mode::Blend, "bone")] {
         let mut g = c.benchmark_group(format!("mask_skipping_{}", mode.name()));
         for method in [Method::Binary, Method::Brute] {
-            let mut r = renderer(Settings { mode, method, ..Settings::default() }, tissue);
-            let mut img = Image::new(512, 512);
-            let mut d = 0.0;
-            g.bench_function(method.name(), |b| {
-                b.iter(|| {
-                    d += 1.0;
-                    r.render(&cam(d % 360.0), &mut img).expect("render")
-                })
-            });
+            let r = renderer(Settings { mode, method, ..Settings::default() }, tissue);
+            bench_turn(&mut g, method.name(), r);
         }
         g.finish();
     }
     // early ray termination
     let mut g = c.benchmark_group("early_ray_termination_blend_skin");
     for ert in [0.99f32, 1.0] {
-        let mut r = renderer(Settings { mode: Mode::Blend, ert, ..Settings::default() }, "skin");
-        let mut img = Image::new(512, 512);
-        let mut d = 0.0;
-        g.bench_function(format!("ert_{ert}"), |b| {
-            b.iter(|| {
-                d += 1.0;
-                r.render(&cam(d % 360.0), &mut img).expect("render")
-            })
-        });
+        let r = renderer(Settings { mode: Mode::Blend, ert, ..Settings::default() }, "skin");
+        bench_turn(&mut g, format!("ert_{ert}"), r);
     }
     g.finish();
     // an unchanged frame renders nothing
@@ -89,15 +88,8 @@ fn skips(c: &mut Criterion) {
     // sheared volume's rectangle (bone occupies a small part of the head)
     let mut g = c.benchmark_group("occupied_rect_iso_bone");
     for (name, occupied_rect) in [("occupied_rect", true), ("volume_rect", false)] {
-        let mut r = renderer(Settings { occupied_rect, ..Settings::default() }, "bone");
-        let mut img = Image::new(512, 512);
-        let mut d = 0.0;
-        g.bench_function(name, |b| {
-            b.iter(|| {
-                d += 1.0;
-                r.render(&cam(d % 360.0), &mut img).expect("render")
-            })
-        });
+        let r = renderer(Settings { occupied_rect, ..Settings::default() }, "bone");
+        bench_turn(&mut g, name, r);
     }
     g.finish();
     // the RLE path's per-view tables: reused when classification, spacing ratio,
@@ -121,34 +113,20 @@ fn skips(c: &mut Criterion) {
     // the depth search kernels of the binary path, whole frames
     let mut g = c.benchmark_group("bitscan_kernels_iso_skin");
     for search in [Search::Bitscan, Search::BitscanBsr, Search::Lut] {
-        let mut r = renderer(Settings { search, ..Settings::default() }, "skin");
-        let mut img = Image::new(512, 512);
-        let mut d = 0.0;
-        g.bench_function(search.name(), |b| {
-            b.iter(|| {
-                d += 1.0;
-                r.render(&cam(d % 360.0), &mut img).expect("render")
-            })
-        });
+        let r = renderer(Settings { search, ..Settings::default() }, "skin");
+        bench_turn(&mut g, search.name(), r);
     }
     g.finish();
-    // the binary row in prefetch groups (bit-scan a group of rays, prefetch the
-    // voxel rows of their first candidates, then walk) against ray by ray; on a
-    // 256×256×225 head, whose f32 slice stack (59 MB) is far beyond the caches
+    // the binary row's prefetches (the voxel rows of each ray's first candidate,
+    // while a group of rays is bit-scanned) against none; on a 256×256×225 head,
+    // whose f32 slice stack (59 MB) is far beyond the caches
     let mut g = c.benchmark_group("prefetch_iso_skin_256");
-    for (name, prefetch) in [("prefetch_groups", true), ("ray_by_ray", false)] {
+    for (name, prefetch) in [("prefetch", true), ("no_prefetch", false)] {
         let vol = phantom::head([256, 256, 225]).expect("phantom");
         let mut r = Renderer::with_tissues(vol, &ct_tissues(), Settings { threads: 1, prefetch, ..Settings::default() }).expect("renderer");
         r.select_tissue_named("skin").expect("tissue");
         r.prepare_all_axes();
-        let mut img = Image::new(512, 512);
-        let mut d = 0.0;
-        g.bench_function(name, |b| {
-            b.iter(|| {
-                d += 1.0;
-                r.render(&cam(d % 360.0), &mut img).expect("render")
-            })
-        });
+        bench_turn(&mut g, name, r);
     }
     g.finish();
     // the limit of a shear step: its words against a memcpy of the same bytes

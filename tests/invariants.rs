@@ -84,6 +84,14 @@ fn render(vol: &Volume, tf: &TransferFunction, s: Settings, cam: &Camera) -> (Im
     (img, px, depth)
 }
 
+/// A 64-bit linear congruential generator's high bits, from `seed`.
+fn lcg(mut seed: u64) -> impl FnMut() -> u64 {
+    move || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        seed >> 11
+    }
+}
+
 fn same_bits(a: &[f32], b: &[f32]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
@@ -110,8 +118,8 @@ proptest! {
             threads: 2,
             ..Settings::default()
         };
-        // rays inside the occupied mask's rectangle or over the whole volume's, in
-        // prefetch groups or ray by ray: same image
+        // rays inside the occupied mask's rectangle or over the whole volume's,
+        // with prefetches or without: same image
         let (bi, bpx, bd) = render(&vol, &tf, Settings { method: Method::Binary, occupied_rect, prefetch, ..base }, &cam);
         let (ri, rpx, rd) = render(&vol, &tf, Settings { method: Method::Brute, ..base }, &cam);
         let flat = |v: &[[f32; 4]]| v.iter().flatten().copied().collect::<Vec<f32>>();
@@ -216,11 +224,7 @@ fn no_drift_after_thousands_of_random_steps() {
     let vol = random_volume([30, 26, 57], 42, [1.0; 3]);
     let st = SliceStack::new(&vol, 2);
     for word64 in [false, true] {
-        let mut seed = 0x5EED_u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            seed >> 11
-        };
+        let mut rnd = lcg(0x5EED_u64);
         let nk = st.n[2];
         let lim = (nk as i64 - 1) / 2;
         let mut state = ShearState::identity(nk);
@@ -288,11 +292,7 @@ fn every_column_length_shears_like_the_direct_shear() {
     for (nz, word64) in cases {
         let vol = random_volume([9, 7, nz], nz as u64, [1.0; 3]);
         let st = SliceStack::new(&vol, 2);
-        let mut seed = 0xC0FFEE ^ nz as u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            seed >> 11
-        };
+        let mut rnd = lcg(0xC0FFEE ^ nz as u64);
         let lim = (nz as i64 - 1) / 2;
         macro_rules! run {
             ($w:ty) => {{

@@ -37,29 +37,12 @@ VP=$OUT/volpack-harness
 VTK_PY=$ROOT/scripts/vtk/harness.py
 NCPU=$(nproc)
 
-log() { printf '%s\n' "$*" >&2; }
-as_root() {
-    if [ "$(id -u)" -eq 0 ]; then "$@"
-    elif command -v sudo >/dev/null 2>&1; then sudo "$@"
-    else log "need root to run: $*"; exit 1
-    fi
-}
-apt_install() {
-    if ! as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "$@" >&2; then
-        as_root apt-get update >&2
-        as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "$@" >&2
-    fi
-}
+# shellcheck source=volpack/setup.sh
+. "$ROOT/scripts/volpack/setup.sh"
 
 # ---------------------------------------------------------------- install and build
-need=()
-dpkg -s libvolpack1-dev >/dev/null 2>&1 || need+=(libvolpack1-dev)
-command -v cc >/dev/null 2>&1 || need+=(build-essential)
-[ ${#need[@]} -eq 0 ] || { log "installing ${need[*]}"; apt_install "${need[@]}"; }
 mkdir -p "$OUT/data" "$OUT/runs" "$OUT/frames"
-if [ ! -x "$VP" ] || [ "$ROOT/scripts/volpack/harness.c" -nt "$VP" ]; then
-    cc -O2 -Wall -o "$VP" "$ROOT/scripts/volpack/harness.c" -lvolpack -lm
-fi
+volpack_harness "$VP"
 (cd "$ROOT" && cargo build --release --quiet)
 
 VTK_RUN=()
@@ -84,11 +67,7 @@ fi
 # name -> file, and the opaque threshold T in the file's 8-bit units:
 # VolPack's opaque classification is alpha = clamp((d - T)/4, 0, 1).
 declare -A DEN THR
-BRAINSMALL=""
-for c in "$ROOT/../shared/data/brainsmall.den" /work/shared/data/brainsmall.den \
-         /usr/share/doc/libvolpack1-dev/examples/brainsmall.den; do
-    [ -f "$c" ] && { BRAINSMALL=$(realpath "$c"); break; }
-done
+BRAINSMALL=$(find_brainsmall) || BRAINSMALL=""
 CHEST=""
 for c in "$ROOT/../shared/data/chest-ct-lung1.nrrd" /work/shared/data/chest-ct-lung1.nrrd; do
     [ -f "$c" ] && { CHEST=$(realpath "$c"); break; }

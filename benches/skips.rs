@@ -5,7 +5,8 @@
 //! only inside the occupied mask's rectangle against the whole volume's; the RLE
 //! path's per-view tables reused when nothing changed against rebuilt; the
 //! binary path's bit-scan kernels (run-time dispatched lzcnt, plain bsr, LUT);
-//! the binary row's prefetches against none.
+//! the binary row's prefetches against none; shading by normal code and table
+//! against the exact gradient.
 //! Run: `cargo bench --bench skips`.
 
 use std::hint::black_box;
@@ -21,7 +22,7 @@ use shearwarp::mask::{BinaryMask, CellCodes};
 use shearwarp::phantom;
 use shearwarp::presets::ct_tissues;
 use shearwarp::raycast::Mode;
-use shearwarp::render::{Method, Renderer, Settings};
+use shearwarp::render::{Method, Normals, Renderer, Settings};
 use shearwarp::rle::{Preclass, ViewTables};
 use shearwarp::shear::ShearState;
 use shearwarp::slices::SliceStack;
@@ -127,6 +128,17 @@ fn skips(c: &mut Criterion) {
         r.select_tissue_named("skin").expect("tissue");
         r.prepare_all_axes();
         bench_turn(&mut g, name, r);
+    }
+    g.finish();
+    // shading by normal code and shade table against the exact gradient at
+    // every hit, on the same 256×256×225 head (same mask, same walks)
+    let mut g = c.benchmark_group("normals_iso_skin_256");
+    for normals in [Normals::Codes, Normals::Gradient] {
+        let vol = phantom::head([256, 256, 225]).expect("phantom");
+        let mut r = Renderer::with_tissues(vol, &ct_tissues(), Settings { threads: 1, normals, ..Settings::default() }).expect("renderer");
+        r.select_tissue_named("skin").expect("tissue");
+        r.prepare_all_axes();
+        bench_turn(&mut g, normals.name(), r);
     }
     g.finish();
     // the limit of a shear step: its words against a memcpy of the same bytes

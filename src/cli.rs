@@ -18,7 +18,7 @@ use crate::io;
 use crate::phantom::Phantom;
 use crate::presets;
 use crate::raycast::Mode;
-use crate::render::{FrameStats, Method, Renderer, Settings, WordSize};
+use crate::render::{FrameStats, Method, Normals, Renderer, Settings, WordSize};
 use crate::view::{Camera, rotate_eye};
 use crate::volume::{Volume, VoxelType};
 use crate::warp::Image;
@@ -189,6 +189,11 @@ pub struct RenderArgs {
     /// First-bit search.
     #[arg(long, value_enum, default_value = "bitscan")]
     pub search: SearchArg,
+    /// Shading of the binary and brute paths: codes (each voxel's gradient
+    /// direction quantized once, VolPack's per-view shade table, four lookups
+    /// per sample) or gradient (the exact gradient at every sample: slower).
+    #[arg(long, value_enum, default_value = "codes")]
+    pub normals: NormalsArg,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -253,6 +258,14 @@ pub enum SearchArg {
     Bitscan,
     /// The bit scan of the plain x86-64 build (bsr/bsf), no dispatch.
     BitscanBsr,
+}
+/// Shading models on the command line.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum NormalsArg {
+    /// Quantized per-voxel normals and a shade table.
+    Codes,
+    /// The exact gradient at every sample.
+    Gradient,
 }
 /// Named starting views (RAS: +x right, +y anterior, +z superior).
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -579,6 +592,10 @@ impl RenderArgs {
                 SearchArg::Lut => Search::Lut,
                 SearchArg::Bitscan => Search::Bitscan,
                 SearchArg::BitscanBsr => Search::BitscanBsr,
+            },
+            normals: match self.normals {
+                NormalsArg::Codes => Normals::Codes,
+                NormalsArg::Gradient => Normals::Gradient,
             },
             ert: self.ert,
             cell: self.cell,

@@ -6,7 +6,8 @@
 //! The pipeline, one module per stage:
 //! volume ([`volume`], [`slices`], [`phantom`]) → classify ([`classify`], [`presets`])
 //! → mask ([`mask`], [`shear`], [`depth`]) → factorize view ([`view`])
-//! → composite into the intermediate image ([`raycast`], [`composite`]) → warp ([`warp`]).
+//! → composite into the intermediate image ([`raycast`], [`composite`], shaded by
+//! [`normals`]) → warp ([`warp`]).
 //! [`render`] runs the pipeline per frame; [`cli`] is the command-line tool.
 //! Accuracy: [`reference`] (true rays, trilinear, fine steps) and [`truth`]
 //! (analytic iso-surfaces) are what [`metrics`] measures the fast paths
@@ -21,6 +22,7 @@ pub mod error;
 pub mod io;
 pub mod mask;
 pub mod metrics;
+pub mod normals;
 pub mod phantom;
 pub mod presets;
 pub mod raycast;

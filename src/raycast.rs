@@ -4,8 +4,10 @@
 //! each ray of the intermediate image visits candidate slices in front-to-back
 //! order; at each it computes the exact in-slice sample position from the real
 //! (not floored) slice translation, interpolates the density bilinearly from the
-//! four voxels, classifies it, shades it (central-difference gradient, Blinn-Phong
-//! headlight) and composites it. The *only* difference between the paths is the
+//! four voxels, classifies it, shades it (Blinn-Phong headlight: by default the
+//! bilinear blend of its cell's four shade-table entries, looked up by the
+//! voxels' normal codes of [`crate::normals`]; with [`crate::render::Normals::Gradient`]
+//! the exact central-difference gradient at the sample) and composites it. The *only* difference between the paths is the
 //! candidate list: the binary path jumps from set bit to set bit of its sheared
 //! mask ([`crate::depth::SetBits`]), brute force visits every slice. Because the
 //! mask is conservative, both produce the same image sample for sample.
@@ -22,6 +24,7 @@ use crate::classify::Classifier;
 use crate::composite::{Intermediate, Shading, composite, headlight_ndl};
 use crate::depth::{Matcher, Search, SetBits, Word};
 use crate::mask::{BinaryMask, Rect};
+use crate::normals::{NormalStack, ShadeTable, apply_shade};
 use crate::shear::ShearState;
 use crate::slices::SliceStack;
 use crate::view::Factorization;
@@ -91,6 +94,9 @@ pub struct RayContext<'a> {
     cells: [u32; 2],
     grad_m: [f32; 3],
     grad_s: [f32; 3],
+    /// Table shading ([`RayContext::with_normals`]): every voxel's normal code
+    /// and the view's shade table. `None` shades from the exact gradient.
+    normals: Option<(&'a NormalStack, &'a ShadeTable)>,
 }
 
 /// What one ray produced.
@@ -133,6 +139,30 @@ impl<'a> RayContext<'a> {
             cells: [c[0] as u32, c[1] as u32],
             grad_m: f.grad_to_eye_z.map(|x| x as f32),
             grad_s: f.grad_scale.map(|x| x as f32),
+            normals: None,
+        }
+    }
+
+    /// Shades by table instead of by gradient: a sample's shade is the bilinear
+    /// blend of its cell's four corner entries of `table` (looked up by the
+    /// codes of `normals`, which must be built from this context's stack), an
+    /// iso hit's the blend at the two slices of its refinement, interpolated
+    /// like its depth.
+    pub fn with_normals(mut self, normals: &'a NormalStack, table: &'a ShadeTable) -> Self {
+        assert_eq!(normals.n, self.stack.n, "normal codes of another stack");
+        self.normals = Some((normals, table));
+        self
+    }
+
+    /// The shaded colour of `rgb` at a sample (either shading model).
+    #[inline(always)]
+    fn shade_sample(&self, rgb: [f32; 3], ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
+        match self.normals {
+            Some((ns, table)) => apply_shade(rgb, table.blend(ns.corners(self.stack.index(ci, cj, k)), wi, wj)),
+            None => {
+                let g = self.stack.gradient(ci, cj, k, wi, wj);
+                self.shading.shade(rgb, headlight_ndl(g, self.grad_m, self.grad_s))
+            }
         }
     }
 
@@ -155,10 +185,17 @@ impl<'a> RayContext<'a> {
     #[inline(always)]
     pub fn prefetch(&self, p: i32, q: i32, k: usize, last: &mut usize) {
         if let Some((ci, cj, _, _)) = self.locate(p, q, k) {
-            let line = self.stack.index(ci, cj, k) >> 4;
-            if line != *last {
-                *last = line;
-                self.stack.prefetch_hit(ci, cj, k, self.ascending);
+            let b = self.stack.index(ci, cj, k);
+            if b >> 4 != *last {
+                *last = b >> 4;
+                match self.normals {
+                    Some((ns, _)) => {
+                        self.stack.prefetch_cell(ci, cj, k, self.ascending);
+                        ns.prefetch(b);
+                        ns.prefetch(self.stack.index(ci, cj, self.prev_slice(k).unwrap_or(k)));
+                    }
+                    None => self.stack.prefetch_hit(ci, cj, k, self.ascending),
+                }
             }
         }
     }
@@ -185,9 +222,7 @@ impl<'a> RayContext<'a> {
                 continue;
             }
             let c = self.classifier.classify(d);
-            let g = self.stack.gradient(ci, cj, k, wi, wj);
-            let ndl = headlight_ndl(g, self.grad_m, self.grad_s);
-            composite(&mut acc, self.shading.shade([c.r, c.g, c.b], ndl), alpha);
+            composite(&mut acc, self.shade_sample([c.r, c.g, c.b], ci, cj, k, wi, wj), alpha);
             if acc[3] >= self.ert {
                 break;
             }
@@ -209,29 +244,45 @@ impl<'a> RayContext<'a> {
         MISS
     }
 
+    /// The slice before `k` in walking order, if any.
+    #[inline(always)]
+    fn prev_slice(&self, k: usize) -> Option<usize> {
+        if self.ascending { k.checked_sub(1) } else { Some(k + 1).filter(|&x| x < self.stack.n[2]) }
+    }
+
     /// Refines a hit at slice `k` against the previous slice in walking order and
     /// shades it.
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
     fn iso_hit(&self, p: i32, q: i32, k: usize, ci: usize, cj: usize, wi: f32, wj: f32, d: f32) -> RayResult {
-        let g = self.stack.gradient(ci, cj, k, wi, wj);
-        let prev = if self.ascending { k.checked_sub(1) } else { Some(k + 1).filter(|&x| x < self.stack.n[2]) };
-        let refined = prev.and_then(|kp| {
+        // the sample before the hit, when it is below the iso value: the surface
+        // crosses between the two slices at fraction t
+        let before = self.prev_slice(k).and_then(|kp| {
             let (pi, pj, pwi, pwj) = self.locate(p, q, kp)?;
             let dp = self.stack.bilinear(pi, pj, kp, pwi, pwj);
-            (dp < self.iso).then(|| (kp, dp, self.stack.gradient(pi, pj, kp, pwi, pwj)))
+            (dp < self.iso).then(|| (kp, ((self.iso - dp) / (d - dp)).clamp(0.0, 1.0), (pi, pj, pwi, pwj)))
         });
-        let (depth, grad) = match refined {
-            Some((kp, dp, gp)) => {
-                let t = ((self.iso - dp) / (d - dp)).clamp(0.0, 1.0);
-                let gr = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
-                (kp as f32 + (k as f32 - kp as f32) * t, gr)
+        let depth = before.map_or(k as f32, |(kp, t, _)| kp as f32 + (k as f32 - kp as f32) * t);
+        let rgb = match self.normals {
+            Some((ns, table)) => {
+                let entry = |ci, cj, k, wi, wj| table.blend(ns.corners(self.stack.index(ci, cj, k)), wi, wj);
+                let mut e = entry(ci, cj, k, wi, wj);
+                if let Some((kp, t, (pi, pj, pwi, pwj))) = before {
+                    let ep = entry(pi, pj, kp, pwi, pwj);
+                    e = [0, 1].map(|a| ep[a] + (e[a] - ep[a]) * t);
+                }
+                apply_shade(self.iso_rgb, e)
             }
-            None => (k as f32, g),
+            None => {
+                let mut g = self.stack.gradient(ci, cj, k, wi, wj);
+                if let Some((kp, t, (pi, pj, pwi, pwj))) = before {
+                    let gp = self.stack.gradient(pi, pj, kp, pwi, pwj);
+                    g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
+                }
+                self.shading.shade(self.iso_rgb, headlight_ndl(g, self.grad_m, self.grad_s))
+            }
         };
-        let ndl = headlight_ndl(grad, self.grad_m, self.grad_s);
-        let [r, gg, b] = self.shading.shade(self.iso_rgb, ndl);
-        RayResult { rgba: [r, gg, b, 1.0], depth }
+        RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }
 }
 

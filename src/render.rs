@@ -2,7 +2,7 @@
 //!
 //! Owns [`Renderer`], which holds the volume, the classification (one transfer
 //! function, or a set of tissue presets sharing one threshold-coded mask), one
-//! [`SliceStack`] and one sheared mask per principal axis (each built only when a
+//! [`SliceStack`], one [`NormalStack`] (table shading) and one sheared mask per principal axis (each built only when a
 //! view first needs it, and rebuilt only when the classification or cell size
 //! changes), the reusable intermediate image and per-slice parameters, and a rayon
 //! pool of the requested size. [`Renderer::render`] runs one frame and reports how
@@ -20,6 +20,7 @@ use crate::composite::{Intermediate, Shading};
 use crate::depth::{Matcher, Search, binary_matcher};
 use crate::error::{Error, Result};
 use crate::mask::{BinaryMask, CellCodes, MAX_CELL, Rect, ShearWork, geometry};
+use crate::normals::{NormalStack, ShadeTable, headlight_object};
 use crate::presets::Tissue;
 use crate::raycast::{Mode, RayContext, SliceParams, render_binary, render_brute, volume_rect};
 use crate::rle::{ClassKey, RleCache};
@@ -85,6 +86,29 @@ impl WordSize {
     }
 }
 
+/// How the raycast paths ([`Method::Binary`], [`Method::Brute`]) shade a sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Normals {
+    /// VolPack's shading tables ([`crate::normals`]): every voxel's gradient
+    /// direction quantized to a 14-bit code once per axis, a shade table per view,
+    /// and a sample's shade blended from its cell's four corner entries.
+    Codes,
+    /// The exact central-difference gradient at the sample, normalized and shaded
+    /// per sample (slower, no quantization).
+    Gradient,
+}
+
+impl Normals {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Normals::Codes => "codes",
+            Normals::Gradient => "gradient",
+        }
+    }
+}
+
 /// Render settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Settings {
@@ -109,6 +133,8 @@ pub struct Settings {
     /// leaves the prefetches out: a benchmark knob that shows what they buy
     /// (same image).
     pub prefetch: bool,
+    /// Raycast paths: shade by normal code and table, or by exact gradient.
+    pub normals: Normals,
 }
 
 impl Default for Settings {
@@ -124,6 +150,7 @@ impl Default for Settings {
             threads: 0,
             occupied_rect: true,
             prefetch: true,
+            normals: Normals::Codes,
         }
     }
 }
@@ -223,6 +250,11 @@ pub struct Renderer {
     /// Bumped whenever the classification changes (invalidates masks).
     generation: u64,
     stacks: [Option<SliceStack>; 3],
+    /// Per axis, every voxel's normal code (raycast paths with [`Normals::Codes`]).
+    normals: [Option<NormalStack>; 3],
+    /// The shade table of the raycast paths' table shading (kept across frames,
+    /// rebuilt when the light direction or the material changes).
+    shade: ShadeTable,
     codes: [Option<(u64, CellCodes)>; 3],
     masks: [Option<AxisMask>; 3],
     params: SliceParams,
@@ -254,6 +286,8 @@ impl Renderer {
             settings,
             generation: 0,
             stacks: [None, None, None],
+            normals: [None, None, None],
+            shade: ShadeTable::default(),
             codes: [None, None, None],
             masks: [None, None, None],
             params: SliceParams::default(),
@@ -390,6 +424,11 @@ impl Renderer {
     pub fn last_factorization(&self) -> Option<&Factorization> {
         self.last_fact.as_ref()
     }
+    /// Bytes of the per-voxel normal codes that exist now.
+    pub fn normal_bytes(&self) -> usize {
+        self.normals.iter().flatten().map(|n| n.bytes()).sum()
+    }
+
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
         self.masks.iter().flatten().map(|m| m.mask.bytes()).sum()
@@ -493,6 +532,11 @@ impl Renderer {
             let vol = &self.volume;
             self.stacks[axis] = Some(self.pool.install(|| SliceStack::new(vol, axis)));
         }
+        let raycast = matches!(self.settings.method, Method::Binary | Method::Brute);
+        if raycast && self.settings.normals == Normals::Codes && self.normals[axis].is_none() {
+            let (stack, spacing) = (self.stacks[axis].as_ref().expect("stack built above"), self.volume.spacing());
+            self.normals[axis] = Some(self.pool.install(|| NormalStack::new(stack, spacing)));
+        }
         if self.settings.method == Method::Binary {
             let key = self.mask_key();
             if self.masks[axis].as_ref().map(|m| m.key) != Some(key) {
@@ -584,6 +628,7 @@ impl Renderer {
         let pool = &self.pool;
         let (state, params, inter) = (&mut self.state, &mut self.params, &mut self.inter);
         let (masks, stacks, tissues, settings) = (&mut self.masks, &self.stacks, &self.tissues, self.settings);
+        let (normals, shade) = (&self.normals, &mut self.shade);
         let (classifier, iso_single) = (&self.classifier, self.iso);
         let (rle, min_spacing) = (&mut self.rle, self.volume.spacing().iter().fold(f32::MAX, |a, &b| a.min(b)) as f64);
         pool.install(|| {
@@ -631,7 +676,11 @@ impl Renderer {
                 (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
                 (None, _) => (classifier, iso_single, binary_matcher()),
             };
-            let ctx = RayContext::new(stack, cls, params, &f, pad, mode, iso, settings.shading, settings.ert);
+            let mut ctx = RayContext::new(stack, cls, params, &f, pad, mode, iso, settings.shading, settings.ert);
+            if let (Normals::Codes, Some(ns)) = (settings.normals, normals[f.axis].as_ref()) {
+                shade.update(headlight_object(&f), settings.shading);
+                ctx = ctx.with_normals(ns, shade);
+            }
             match (settings.method, masks[f.axis].as_ref().map(|m| &m.mask)) {
                 (Method::Rle, _) => rle.render(&f, params, pad, settings.ert, rect, inter),
                 (Method::BruteRle, _) => rle.render_brute(stack, &f, params, pad, settings.ert, rect, inter),

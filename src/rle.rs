@@ -60,7 +60,6 @@
 // "no" branch (a NaN gradient is a zero one, a NaN threshold terminates nothing).
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use rayon::prelude::*;
@@ -68,18 +67,11 @@ use rayon::prelude::*;
 use crate::classify::{Classifier, TABLE_NODES};
 use crate::composite::{Intermediate, Shading, composite_premultiplied};
 use crate::mask::Rect;
+pub use crate::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
+use crate::normals::{ShadeTable, boxed, voxel_normal};
 use crate::raycast::SliceParams;
 use crate::slices::{SliceStack, prefetch};
-use crate::view::{Factorization, permutation};
-
-/// Cells per side of the hemi-octahedral normal grid.
-pub const NORMAL_SIDE: usize = 128;
-
-/// Number of normal (shading) codes.
-pub const NORMAL_CODES: usize = NORMAL_SIDE * NORMAL_SIDE;
-
-/// The normal code of a zero gradient (shaded as facing the viewer).
-pub const ZERO_NORMAL: u16 = 0;
+use crate::view::Factorization;
 
 /// Gaps of at most this many transparent voxels between two non-transparent
 /// runs of a scanline are stored as explicit transparent voxels ("bridged"):
@@ -108,52 +100,6 @@ pub struct RleVoxel {
     pub class: u16,
     /// Hemi-octahedral code of its object-space gradient direction ([`ZERO_NORMAL`] if none).
     pub normal: u16,
-}
-
-/// The shading code of an object-space gradient `g` (any length): its direction
-/// up to sign, since shading is two-sided (`|n · l|`).
-///
-/// Hemi-octahedral: `±g` is turned to `z ≥ 0`, projected onto the octahedron
-/// `|x| + |y| + z = 1`, whose upper half (the diamond `|x| + |y| ≤ 1`) is rotated
-/// 45° onto the square `[−1, 1]²` (`a = x + y`, `b = x − y`) and quantized to
-/// [`NORMAL_SIDE`]² cells (code `u + NORMAL_SIDE·v`, corners on the square's
-/// corners). The corners `(0, 0)` and `(side − 1, side − 1)` are the opposite
-/// directions `∓x`, the same for shading; the encoder never emits the former,
-/// which is [`ZERO_NORMAL`]. The worst direction error is about 1.1°.
-pub fn encode_normal(g: [f32; 3]) -> u16 {
-    let len2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-    // the same cut-off as headlight_ndl (NaN also counts as zero)
-    if !(len2 > 1e-30) {
-        return ZERO_NORMAL;
-    }
-    let g = if g[2] < 0.0 { g.map(|c| -c) } else { g };
-    let l1 = g[0].abs() + g[1].abs() + g[2];
-    let (x, y) = (g[0] / l1, g[1] / l1);
-    let half = (NORMAL_SIDE - 1) as f32 / 2.0;
-    let q = |c: f32| ((c + 1.0) * half + 0.5).clamp(0.0, (NORMAL_SIDE - 1) as f32) as usize;
-    let code = q(x + y) + NORMAL_SIDE * q(x - y);
-    if code == ZERO_NORMAL as usize { (NORMAL_CODES - 1) as u16 } else { code as u16 }
-}
-
-/// The (unnormalized, L1-unit) direction at the centre of cell `(u, v)`.
-#[inline(always)]
-fn hemi_dir(u: f32, v: f32) -> [f32; 3] {
-    let step = 2.0 / (NORMAL_SIDE - 1) as f32;
-    let (a, b) = (u * step - 1.0, v * step - 1.0);
-    let (x, y) = (0.5 * (a + b), 0.5 * (a - b));
-    // |x| + |y| = max(|a|, |b|) ≤ 1: z ≥ 0 up to rounding at the square's edge
-    [x, y, (1.0 - x.abs() - y.abs()).max(0.0)]
-}
-
-/// The unit direction (`z ≥ 0`) of a normal code (`None` for [`ZERO_NORMAL`]).
-pub fn decode_normal(code: u16) -> Option<[f32; 3]> {
-    if code == ZERO_NORMAL {
-        return None;
-    }
-    let c = code as usize;
-    let d = hemi_dir((c % NORMAL_SIDE) as f32, (c / NORMAL_SIDE) as f32);
-    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    Some(d.map(|x| x / len))
 }
 
 /// Source of [`Preclass`] ids (tables remember which classification they were built for).
@@ -200,13 +146,7 @@ impl Preclass {
         if !(self.alpha[node] > 0.0) {
             return None;
         }
-        let g = stack.gradient_at(i, j, k);
-        let perm = permutation(stack.axis);
-        let mut w = [0f32; 3];
-        for c in 0..3 {
-            w[perm[c]] = g[c] * self.inv_spacing[perm[c]];
-        }
-        Some(RleVoxel { class: node as u16, normal: encode_normal(w) })
+        Some(RleVoxel { class: node as u16, normal: voxel_normal(stack, i, j, k, self.inv_spacing) })
     }
 
     /// The stored form of transparent voxel `(i, j, k)` inside a bridged gap:
@@ -535,31 +475,20 @@ impl<'a> Cursor<'a> {
     }
 }
 
-/// A shade-table entry `[d, s]`: `d = ambient + diffuse·ndl`,
-/// `s = specular·ndl^shininess` (8 bytes, so the table stays cache-resident).
-type ShadeEntry = [f32; 2];
-
-/// A boxed array of `N` copies of `v` (built on the heap, not the stack).
-fn boxed<T: Clone, const N: usize>(v: T) -> Box<[T; N]> {
-    // a boxed slice of exactly N elements always converts
-    vec![v; N].into_boxed_slice().try_into().unwrap_or_else(|_| unreachable!("length is N by construction"))
-}
-
 /// The per-view lookup tables of the pre-classified paths. Fixed-size arrays
 /// indexed with masks, so lookups need no bounds checks.
 #[derive(Clone, Debug)]
 pub struct ViewTables {
     /// Per class node: opacity-corrected premultiplied colour `[α'r, α'g, α'b, α']`.
     lut: Box<[[f32; 4]; TABLE_NODES]>,
-    /// Per normal code.
-    shade: Box<[ShadeEntry; NORMAL_CODES]>,
+    /// Per normal code (shared with the binary path's table shading).
+    shade: ShadeTable,
     lut_key: Option<(u64, u32)>,
-    shade_key: Option<([u32; 3], Shading)>,
 }
 
 impl Default for ViewTables {
     fn default() -> Self {
-        ViewTables { lut: boxed([0.0; 4]), shade: boxed([0.0; 2]), lut_key: None, shade_key: None }
+        ViewTables { lut: boxed([0.0; 4]), shade: ShadeTable::default(), lut_key: None }
     }
 }
 
@@ -582,28 +511,15 @@ impl ViewTables {
             self.lut_key = lut_key;
             rebuilt = true;
         }
-        let shade_key = Some((light.map(f32::to_bits), shading));
-        if self.shade_key != shade_key {
-            let [nx, ny, nz] = unit_normals();
-            const BLOCK: usize = 4096;
-            self.shade.par_chunks_mut(BLOCK).enumerate().for_each(|(c, out)| {
-                let r = c * BLOCK..c * BLOCK + out.len();
-                shade_block(out, &nx[r.clone()], &ny[r.clone()], &nz[r], light, &shading);
-            });
-            // a zero gradient faces the viewer
-            self.shade[ZERO_NORMAL as usize] = shade_entry(1.0, 1.0, &shading);
-            self.shade_key = shade_key;
-            rebuilt = true;
-        }
-        rebuilt
+        self.shade.update(light, shading) || rebuilt
     }
 
     /// Shaded, opacity-corrected, premultiplied colour of a voxel.
     #[inline(always)]
     pub fn voxel(&self, v: RleVoxel) -> [f32; 4] {
-        // classes are < TABLE_NODES and codes < NORMAL_CODES, both powers of two
+        // classes are < TABLE_NODES, a power of two
         let c = self.lut[v.class as usize & (TABLE_NODES - 1)];
-        let [d, s] = self.shade[v.normal as usize & (NORMAL_CODES - 1)];
+        let [d, s] = self.shade.get(v.normal);
         // c·[d, d, d, 1] + α'·[s, s, s, 0]: the alpha lane stays α'
         let (dd, ss) = ([d, d, d, 1.0], [s, s, s, 0.0]);
         let mut out = [0f32; 4];
@@ -621,70 +537,6 @@ impl ViewTables {
             None => [0.0; 4],
         }
     }
-}
-
-#[inline(always)]
-fn shade_entry(ndl: f32, pow: f32, sh: &Shading) -> ShadeEntry {
-    [sh.ambient + sh.diffuse * ndl, sh.specular * pow]
-}
-
-/// The unit direction of every normal code, as three coordinate arrays (built
-/// once per process: 768 KiB, view-independent; code 0 holds +z).
-fn unit_normals() -> &'static [Vec<f32>; 3] {
-    static NORMALS: OnceLock<[Vec<f32>; 3]> = OnceLock::new();
-    NORMALS.get_or_init(|| {
-        let dirs: Vec<[f32; 3]> = (0..NORMAL_CODES).map(|c| decode_normal(c as u16).unwrap_or([0.0, 0.0, 1.0])).collect();
-        [0, 1, 2].map(|a| dirs.iter().map(|d| d[a]).collect())
-    })
-}
-
-/// Lanes of the shade-table build: sixteen entries at a time stay in registers.
-const LANES: usize = 16;
-
-/// Shade-table entries for the unit normals `(nx, ny, nz)` (same lengths as
-/// `out`, a multiple of [`LANES`]): plain fixed-size loops, so they vectorize.
-#[inline(never)]
-fn shade_block(out: &mut [ShadeEntry], nx: &[f32], ny: &[f32], nz: &[f32], l: [f32; 3], sh: &Shading) {
-    let lanes = out.chunks_exact_mut(LANES).zip(nx.chunks_exact(LANES).zip(ny.chunks_exact(LANES)).zip(nz.chunks_exact(LANES)));
-    for (o, ((x, y), z)) in lanes {
-        let mut ndl = [0f32; LANES];
-        for t in 0..LANES {
-            ndl[t] = (x[t] * l[0] + y[t] * l[1] + z[t] * l[2]).abs().min(1.0);
-        }
-        // ndl^shininess by repeated squaring (the exponent is the same for every lane)
-        let mut pow = [1f32; LANES];
-        let mut base = ndl;
-        let mut e = sh.shininess.unsigned_abs();
-        while e > 0 {
-            if e & 1 == 1 {
-                for t in 0..LANES {
-                    pow[t] *= base[t];
-                }
-            }
-            e >>= 1;
-            for b in base.iter_mut() {
-                *b *= *b;
-            }
-        }
-        if sh.shininess < 0 {
-            for p in pow.iter_mut() {
-                *p = 1.0 / *p;
-            }
-        }
-        for t in 0..LANES {
-            o[t] = shade_entry(ndl[t], pow[t], sh);
-        }
-    }
-}
-
-/// The headlight direction (towards the viewer) in object space for view `f`.
-pub fn headlight_object(f: &Factorization) -> [f32; 3] {
-    // grad_to_eye_z[c] = R[2][perm[c]] · grad_scale[c]
-    let mut l = [0f32; 3];
-    for c in 0..3 {
-        l[f.perm[c]] = (f.grad_to_eye_z[c] / f.grad_scale[c]) as f32;
-    }
-    l
 }
 
 /// Weights of the cell's voxels `(ci, cj)`, `(ci + 1, cj)`, `(ci, cj + 1)`,
@@ -1167,53 +1019,6 @@ impl RleCache {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn normal_codes_keep_the_direction_within_1_2_degrees() {
-        let mut seed = 99u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f32 / (1u64 << 53) as f32 * 2.0 - 1.0
-        };
-        let mut worst = 0f32;
-        for _ in 0..100_000 {
-            let g = [rnd(), rnd(), rnd()];
-            let len = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
-            let code = encode_normal(g);
-            assert_ne!(code, ZERO_NORMAL);
-            let n = decode_normal(code).unwrap();
-            assert!(n[2] >= 0.0);
-            // the code keeps the direction up to sign
-            let cos = (n[0] * g[0] + n[1] * g[1] + n[2] * g[2]).abs() / len;
-            worst = worst.max(cos.min(1.0).acos().to_degrees());
-        }
-        assert!(worst < 1.2, "worst angle {worst}°");
-        // axes, both signs
-        for g in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 1.0, 0.0]] {
-            let n = decode_normal(encode_normal(g)).unwrap();
-            let dot: f32 = (0..3).map(|c| n[c] * g[c]).sum();
-            assert!(dot.abs() > 0.9999, "{g:?} → {n:?}");
-        }
-        assert_eq!(encode_normal([0.0; 3]), ZERO_NORMAL);
-        assert_eq!(encode_normal([f32::NAN, 0.0, 1.0]), ZERO_NORMAL);
-    }
-
-    #[test]
-    fn shade_table_matches_the_shading_model() {
-        let l = [0.36f32, -0.48, 0.8];
-        for sh in [Shading::default(), Shading { shininess: 7, ..Shading::default() }, Shading { shininess: 0, ..Shading::default() }] {
-            let [nx, ny, nz] = unit_normals();
-            let mut out = vec![[0.0; 2]; NORMAL_CODES];
-            shade_block(&mut out, nx, ny, nz, l, &sh);
-            for code in (1..NORMAL_CODES).step_by(7) {
-                let n = decode_normal(code as u16).unwrap();
-                let ndl = (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).abs().min(1.0);
-                let want = shade_entry(ndl, ndl.powi(sh.shininess), &sh);
-                let got = out[code];
-                assert!((0..2).all(|a| (got[a] - want[a]).abs() < 1e-5), "{code}: {got:?} vs {want:?}");
-            }
-        }
-    }
 
     #[test]
     fn links_compress_paths() {

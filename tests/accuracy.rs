@@ -16,7 +16,7 @@ use shearwarp::phantom::{self, SPHERE_ISO, sphere_geometry};
 use shearwarp::presets;
 use shearwarp::raycast::Mode;
 use shearwarp::reference::{Rays, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
-use shearwarp::render::{Method, Renderer, Settings, WordSize};
+use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
 use shearwarp::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_depth};
 use shearwarp::view::Camera;
 use shearwarp::volume::{Volume, VoxelData};
@@ -207,5 +207,42 @@ fn binary_iso_depth_on_the_sphere_is_within_half_a_voxel() {
         assert!((e.only_test + e.only_truth) as f64 / (e.both as f64) < 0.03, "{}: {e:?}", view.name);
         // and the reference itself is far more accurate
         assert!(re.mean < 0.05 && re.p99 < 0.2, "{}: reference {re:?}", view.name);
+    }
+}
+
+/// Table shading (per-voxel normal codes, a shade table, shades blended in the
+/// cell) against the exact gradient at every sample, over the standard views:
+/// really different images (the codes are what shades), and a mean error
+/// against the reference within a margin of the gradient's. The margin is wide
+/// on the noisy blobs, where blending the corners' shades differs most from
+/// shading the blended gradient (the price of the speed; `--normals gradient`).
+#[test]
+fn table_shading_is_about_as_accurate_as_the_exact_gradient() {
+    let size = 64;
+    let views = standard_views(base_view(ViewArg::Anterior), 2, 5);
+    let opts = ReferenceOptions { step: 0.1, ..Default::default() };
+    for (name, vol, tf) in matrix() {
+        let refr = ReferenceRenderer::new(&vol);
+        for mode in [Mode::Iso, Mode::Blend] {
+            let base = Settings { mode, threads: 2, method: Method::Binary, ..Settings::default() };
+            let mut codes = Renderer::new(vol.clone(), &tf, Settings { normals: Normals::Codes, ..base }).unwrap();
+            let mut exact = Renderer::new(vol.clone(), &tf, Settings { normals: Normals::Gradient, ..base }).unwrap();
+            let scene = Scene::from_renderer(&exact);
+            let (mut ce, mut ee) = (0.0, 0.0);
+            for view in &views {
+                let cam = Camera::new(view.rotation, [size, size]);
+                let reference = refr.render(&scene, &cam, &opts).unwrap();
+                let (mut ci, mut ei) = (Image::new(size, size), Image::new(size, size));
+                codes.render(&cam, &mut ci).unwrap();
+                exact.render(&cam, &mut ei).unwrap();
+                let between = rmse(&ci, &ei).unwrap();
+                assert!(between > 0.0 && between < 0.1, "{name} {} {}: {between}", mode.name(), view.name);
+                ce += compare(&ci, &reference.image).unwrap().rmse / views.len() as f64;
+                ee += compare(&ei, &reference.image).unwrap().rmse / views.len() as f64;
+            }
+            let margin = if name == "blobs" { 1.5 } else { 1.2 };
+            println!("{name} {}: mean RMSE codes {ce:.4}, gradient {ee:.4}", mode.name());
+            assert!(ce < ee * margin + 0.002, "{name} {}: mean RMSE codes {ce:.4}, gradient {ee:.4}", mode.name());
+        }
     }
 }

@@ -7,7 +7,7 @@ use shearwarp::classify::{Classifier, TransferFunction};
 use shearwarp::depth::{Search, bit_of};
 use shearwarp::mask::BinaryMask;
 use shearwarp::raycast::Mode;
-use shearwarp::render::{Method, Renderer, Settings, WordSize};
+use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
 use shearwarp::shear::ShearState;
 use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, Factorization, rotate_eye};
@@ -105,7 +105,7 @@ proptest! {
         nx in 2usize..24, ny in 2usize..24, nz in 2usize..40, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2,
         blend in any::<bool>(), u64w in any::<bool>(), lut in any::<bool>(), aniso in any::<bool>(),
-        occupied_rect in any::<bool>(), prefetch in any::<bool>(),
+        occupied_rect in any::<bool>(), prefetch in any::<bool>(), codes in any::<bool>(),
     ) {
         let sp = if aniso { [1.0, 0.7, 2.5] } else { [1.0; 3] };
         let vol = random_volume([nx, ny, nz], seed, sp);
@@ -116,6 +116,8 @@ proptest! {
             word: if u64w { WordSize::U64 } else { WordSize::U32 },
             search: if lut { Search::Lut } else { Search::Bitscan },
             threads: 2,
+            // either shading model: both paths shade with it
+            normals: if codes { Normals::Codes } else { Normals::Gradient },
             ..Settings::default()
         };
         // rays inside the occupied mask's rectangle or over the whole volume's,

@@ -27,6 +27,7 @@ use shearwarp::rle::{Preclass, ViewTables};
 use shearwarp::shear::ShearState;
 use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, rotate_eye};
+use shearwarp::volume::Volume;
 use shearwarp::warp::Image;
 
 fn cam(deg: f64) -> Camera {
@@ -34,8 +35,13 @@ fn cam(deg: f64) -> Camera {
     Camera::new(rotate_eye(anterior, 1, deg), [512, 512])
 }
 
+/// A one-thread renderer of the 128×128×113 head phantom at `tissue`, every axis built.
 fn renderer(s: Settings, tissue: &str) -> Renderer {
-    let vol = phantom::head([128, 128, 113]).expect("phantom");
+    renderer_of(phantom::head([128, 128, 113]).expect("phantom"), s, tissue)
+}
+
+/// [`renderer`] for volume `vol`.
+fn renderer_of(vol: Volume, s: Settings, tissue: &str) -> Renderer {
     let mut r = Renderer::with_tissues(vol, &ct_tissues(), Settings { threads: 1, ..s }).expect("renderer");
     r.select_tissue_named(tissue).expect("tissue");
     r.prepare_all_axes();
@@ -121,29 +127,21 @@ fn skips(c: &mut Criterion) {
     // the binary row's prefetches (the voxel rows of each ray's first candidate,
     // while a group of rays is bit-scanned) against none; on a 256×256×225 head,
     // whose f32 slice stack (59 MB) is far beyond the caches
+    let head256 = phantom::head([256, 256, 225]).expect("phantom");
     let mut g = c.benchmark_group("prefetch_iso_skin_256");
     for (name, prefetch) in [("prefetch", true), ("no_prefetch", false)] {
-        let vol = phantom::head([256, 256, 225]).expect("phantom");
-        let mut r = Renderer::with_tissues(vol, &ct_tissues(), Settings { threads: 1, prefetch, ..Settings::default() }).expect("renderer");
-        r.select_tissue_named("skin").expect("tissue");
-        r.prepare_all_axes();
-        bench_turn(&mut g, name, r);
+        bench_turn(&mut g, name, renderer_of(head256.clone(), Settings { prefetch, ..Settings::default() }, "skin"));
     }
     g.finish();
     // shading by normal code and shade table against the exact gradient at
     // every hit, on the same 256×256×225 head (same mask, same walks)
     let mut g = c.benchmark_group("normals_iso_skin_256");
     for normals in [Normals::Codes, Normals::Gradient] {
-        let vol = phantom::head([256, 256, 225]).expect("phantom");
-        let mut r = Renderer::with_tissues(vol, &ct_tissues(), Settings { threads: 1, normals, ..Settings::default() }).expect("renderer");
-        r.select_tissue_named("skin").expect("tissue");
-        r.prepare_all_axes();
-        bench_turn(&mut g, normals.name(), r);
+        bench_turn(&mut g, normals.name(), renderer_of(head256.clone(), Settings { normals, ..Settings::default() }, "skin"));
     }
     g.finish();
     // the limit of a shear step: its words against a memcpy of the same bytes
-    let vol = phantom::head([256, 256, 225]).expect("phantom");
-    let stack = SliceStack::new(&vol, 2);
+    let stack = SliceStack::new(&head256, 2);
     let codes = CellCodes::binary(&stack, |_, hi| hi >= -500.0);
     let mut m = BinaryMask::<u64>::from_codes(&codes, 1);
     let mut st = ShearState::identity(225);

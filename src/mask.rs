@@ -245,39 +245,14 @@ pub struct BinaryMask<W: Word> {
 /// is 1 to 8 words (a kernel compiled for that length), else `$any`.
 macro_rules! by_column_length {
     ($nw:expr, $n:ident => $fixed:expr, _ => $any:expr) => {
+        by_column_length!(@arms $nw, $n, $fixed, $any, [1 2 3 4 5 6 7 8])
+    };
+    (@arms $nw:expr, $n:ident, $fixed:expr, $any:expr, [$($len:literal)*]) => {
         match $nw {
-            1 => {
-                const $n: usize = 1;
+            $($len => {
+                const $n: usize = $len;
                 $fixed
-            }
-            2 => {
-                const $n: usize = 2;
-                $fixed
-            }
-            3 => {
-                const $n: usize = 3;
-                $fixed
-            }
-            4 => {
-                const $n: usize = 4;
-                $fixed
-            }
-            5 => {
-                const $n: usize = 5;
-                $fixed
-            }
-            6 => {
-                const $n: usize = 6;
-                $fixed
-            }
-            7 => {
-                const $n: usize = 7;
-                $fixed
-            }
-            8 => {
-                const $n: usize = 8;
-                $fixed
-            }
+            })*
             _ => $any,
         }
     };

@@ -96,8 +96,13 @@ pub(crate) fn boxed<T: Clone, const N: usize>(v: T) -> Box<[T; N]> {
 /// gradient in object space (`inv_spacing` = `1 / spacing` per object axis).
 #[inline]
 pub fn voxel_normal(stack: &SliceStack, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
-    let g = stack.gradient_at(i, j, k);
-    let perm = permutation(stack.axis);
+    object_normal(stack.gradient_at(i, j, k), permutation(stack.axis), inv_spacing)
+}
+
+/// The normal code of a voxel-space gradient `g` of a stack with axis
+/// permutation `perm`: mapped to object space, then encoded.
+#[inline(always)]
+fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
     let mut w = [0f32; 3];
     for c in 0..3 {
         w[perm[c]] = g[c] * inv_spacing[perm[c]];
@@ -134,11 +139,7 @@ impl NormalStack {
                         // differences ((hi − lo) / 2 is exactly (hi − lo) · 0.5)
                         let b = i + n0 * j + n01 * k;
                         let g = [(d[b + 1] - d[b - 1]) * 0.5, (d[b + n0] - d[b - n0]) * 0.5, (d[b + n01] - d[b - n01]) * 0.5];
-                        let mut w = [0f32; 3];
-                        for a in 0..3 {
-                            w[perm[a]] = g[a] * inv[perm[a]];
-                        }
-                        *c = encode_normal(w);
+                        *c = object_normal(g, perm, inv);
                     } else {
                         *c = voxel_normal(stack, i, j, k, inv);
                     }

@@ -24,7 +24,7 @@ use crate::classify::Classifier;
 use crate::composite::{Intermediate, Shading, composite, headlight_ndl};
 use crate::depth::{Matcher, Search, SetBits, Word};
 use crate::mask::{BinaryMask, Rect};
-use crate::normals::{NormalStack, ShadeTable, apply_shade};
+use crate::normals::{NormalStack, ShadeEntry, ShadeTable, apply_shade};
 use crate::shear::ShearState;
 use crate::slices::SliceStack;
 use crate::view::Factorization;
@@ -158,7 +158,7 @@ impl<'a> RayContext<'a> {
     #[inline(always)]
     fn shade_sample(&self, rgb: [f32; 3], ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
         match self.normals {
-            Some((ns, table)) => apply_shade(rgb, table.blend(ns.corners(self.stack.index(ci, cj, k)), wi, wj)),
+            Some((ns, table)) => apply_shade(rgb, table_entry(ns, table, self.stack, ci, cj, k, wi, wj)),
             None => {
                 let g = self.stack.gradient(ci, cj, k, wi, wj);
                 self.shading.shade(rgb, headlight_ndl(g, self.grad_m, self.grad_s))
@@ -189,10 +189,13 @@ impl<'a> RayContext<'a> {
             if b >> 4 != *last {
                 *last = b >> 4;
                 match self.normals {
+                    // the cell's densities and codes at the hit and at the refinement's slice
                     Some((ns, _)) => {
-                        self.stack.prefetch_cell(ci, cj, k, self.ascending);
-                        ns.prefetch(b);
-                        ns.prefetch(self.stack.index(ci, cj, self.prev_slice(k).unwrap_or(k)));
+                        let bp = self.prev_slice(k).map(|kp| self.stack.index(ci, cj, kp));
+                        for c in std::iter::once(b).chain(bp) {
+                            self.stack.prefetch_cell(c);
+                            ns.prefetch(c);
+                        }
                     }
                     None => self.stack.prefetch_hit(ci, cj, k, self.ascending),
                 }
@@ -265,10 +268,9 @@ impl<'a> RayContext<'a> {
         let depth = before.map_or(k as f32, |(kp, t, _)| kp as f32 + (k as f32 - kp as f32) * t);
         let rgb = match self.normals {
             Some((ns, table)) => {
-                let entry = |ci, cj, k, wi, wj| table.blend(ns.corners(self.stack.index(ci, cj, k)), wi, wj);
-                let mut e = entry(ci, cj, k, wi, wj);
+                let mut e = table_entry(ns, table, self.stack, ci, cj, k, wi, wj);
                 if let Some((kp, t, (pi, pj, pwi, pwj))) = before {
-                    let ep = entry(pi, pj, kp, pwi, pwj);
+                    let ep = table_entry(ns, table, self.stack, pi, pj, kp, pwi, pwj);
                     e = [0, 1].map(|a| ep[a] + (e[a] - ep[a]) * t);
                 }
                 apply_shade(self.iso_rgb, e)
@@ -284,6 +286,14 @@ impl<'a> RayContext<'a> {
         };
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }
+}
+
+/// The shade-table entry of a sample in cell `(ci, cj)` of slice `k` at
+/// in-cell weights `(wi, wj)`: the blend of the cell's four corner codes' entries.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn table_entry(ns: &NormalStack, table: &ShadeTable, stack: &SliceStack, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> ShadeEntry {
+    table.blend(ns.corners(stack.index(ci, cj, k)), wi, wj)
 }
 
 /// Rays of `rect` of the intermediate image through the sheared mask: each ray

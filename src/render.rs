@@ -424,11 +424,6 @@ impl Renderer {
     pub fn last_factorization(&self) -> Option<&Factorization> {
         self.last_fact.as_ref()
     }
-    /// Bytes of the per-voxel normal codes that exist now.
-    pub fn normal_bytes(&self) -> usize {
-        self.normals.iter().flatten().map(|n| n.bytes()).sum()
-    }
-
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
         self.masks.iter().flatten().map(|m| m.mask.bytes()).sum()

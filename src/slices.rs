@@ -131,17 +131,12 @@ impl SliceStack {
         }
     }
 
-    /// Hints the cache to fetch the voxel rows an iso hit in cell `(ci, cj)` of
-    /// slice `k` reads when it is shaded by table: the cell's two rows in slice
-    /// `k` and in the slice before it in walking order. No effect on results.
+    /// Hints the cache to fetch the two voxel rows of the cell whose first voxel
+    /// has index `b` (what a bilinear sample reads). No effect on results.
     #[inline(always)]
-    pub fn prefetch_cell(&self, ci: usize, cj: usize, k: usize, ascending: bool) {
-        let (n0, n01) = (self.n[0] as isize, (self.n[0] * self.n[1]) as isize);
-        let b = self.index(ci, cj, k);
-        let dk = if ascending { -n01 } else { n01 };
-        for o in [0, n0, dk, dk + n0] {
-            prefetch(&self.data, b.wrapping_add_signed(o));
-        }
+    pub fn prefetch_cell(&self, b: usize) {
+        prefetch(&self.data, b);
+        prefetch(&self.data, b.wrapping_add(self.n[0]));
     }
 
     /// Central-difference gradient at voxel `(i, j, k)` in voxel units of

@@ -1,13 +1,14 @@
 //! Criterion benches of the binary fast rotator's stages on the head phantom:
 //! mask build, one incremental shear step, and one rendered frame (iso and
 //! blend), at 128³ and 256³, comparing u32 with u64 words and the byte-LUT search
-//! with the hardware bit scan. Run: `cargo bench --bench core`.
+//! with the hardware bit scan, plus the depth search alone over random rows.
+//! Run: `cargo bench --bench core`.
 
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use glam::DMat3;
-use shearwarp::depth::Search;
+use shearwarp::depth::{Matcher, Search, SetBits};
 use shearwarp::mask::{BinaryMask, CellCodes};
 use shearwarp::phantom;
 use shearwarp::presets::{ct_tissue, ct_tissues};
@@ -23,7 +24,30 @@ fn cam(deg: f64) -> Camera {
     Camera::new(rotate_eye(anterior, 1, deg), [512, 512])
 }
 
+/// The depth search alone: every match of 4096 random 256-slice rows (4 u64
+/// words, about one slot in 8 matching), front to back, for 1-, 2- and 4-bit
+/// codes. What each ray's walk pays to find its candidate slices.
+fn depth_search(c: &mut Criterion) {
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    let rows: Vec<[u64; 4]> = (0..4096).map(|_| [0; 4].map(|_| next() & next() & next())).collect();
+    let mut g = c.benchmark_group("depth_search");
+    for nb in [1u32, 2, 4] {
+        let m = Matcher::new(nb, 1 << (nb - 1));
+        g.bench_function(BenchmarkId::new("bitscan", nb), |b| {
+            b.iter(|| rows.iter().map(|r| SetBits::with_matcher(&r[..], true, Search::Bitscan, &m).sum::<usize>()).sum::<usize>())
+        });
+    }
+    g.finish();
+}
+
 fn benches(c: &mut Criterion) {
+    depth_search(c);
     for n in [128usize, 256] {
         let vol = phantom::head([n, n, n]).expect("phantom");
         let skin = ct_tissue("skin").expect("preset");

@@ -273,6 +273,9 @@ pub fn slot_mask<W: Word>(nb: u32, k: usize) -> W {
 #[derive(Clone, Debug)]
 pub struct Matcher {
     nb: u32,
+    /// `log2(nb)`: slot arithmetic by shifts (a division by the run-time `nb`
+    /// would be a `div` per search step in the ray loops).
+    log_nb: u32,
     c: u32,
     /// The top bit of every slot (as a 64-bit pattern; truncates for u32).
     top: u64,
@@ -306,7 +309,7 @@ impl Matcher {
                 }
             }
         }
-        Matcher { nb, c, top, first, last }
+        Matcher { nb, log_nb: nb.trailing_zeros(), c, top, first, last }
     }
 
     /// The plain binary matcher (1-bit codes, set bits).
@@ -356,9 +359,9 @@ impl Matcher {
             // the paper's Depth: binary search for the first non-zero byte + byte table
             (Search::Lut, 1) => Some(if ascending { lz_lut(w) } else { W::BITS - 1 - tz_lut(w) }),
             // per-threshold byte tables: "first code ≥ c in this byte"
-            (Search::Lut, nb) => {
+            (Search::Lut, _) => {
                 let x = w.as_u64();
-                let (bytes, spb) = (W::BITS / 8, 8 / nb);
+                let (bytes, spb) = (W::BITS / 8, 8 >> self.log_nb);
                 if ascending {
                     for bi in 0..bytes {
                         let f = self.first[((x >> (W::BITS - 8 * (bi + 1))) & 0xFF) as usize] as u32;
@@ -376,12 +379,14 @@ impl Matcher {
                 }
                 None
             }
-            (Search::Bitscan | Search::BitscanBsr, nb) => {
+            (Search::Bitscan | Search::BitscanBsr, _) => {
                 let h = self.hits(w);
                 if h == W::ZERO {
                     return None;
                 }
-                Some(if ascending { h.lz() / nb } else { (W::BITS - 1 - h.tz()) / nb })
+                let bit = if ascending { h.lz() } else { W::BITS - 1 - h.tz() };
+                // slot = bit / nb, nb a power of two (1-bit rows, the common case, skip the shift)
+                Some(if self.nb == 1 { bit } else { bit >> self.log_nb })
             }
         }
     }
@@ -440,7 +445,9 @@ impl<W: Word> SetBits<'_, W> {
     /// The slice of `slot` in the current word.
     #[inline(always)]
     fn slice_of(&self, slot: u32) -> usize {
-        self.w * (W::BITS / self.m.nb) as usize + slot as usize
+        // slots per word: W::BITS / nb (a power of two)
+        let per_word = if self.m.nb == 1 { W::BITS } else { W::BITS >> self.m.log_nb };
+        self.w * per_word as usize + slot as usize
     }
 
     /// The first matching slot of the current word, stepping over words with none.

@@ -402,6 +402,10 @@ pub struct SetBits<'a, W: Word> {
     /// Remaining codes of that word.
     cur: W,
     ascending: bool,
+    /// 1-bit codes searched by bit scan (the binary mask's case): every set
+    /// bit matches, so a step is one `lzcnt`/`tzcnt` and one bit clear,
+    /// without [`Matcher::first_slot`]'s dispatch on search and width.
+    plain: bool,
     search: Search,
     m: &'a Matcher,
 }
@@ -430,7 +434,8 @@ impl<'a, W: Word> SetBits<'a, W> {
         } else {
             (row.len() - 1, row[row.len() - 1])
         };
-        SetBits { row, w, cur, ascending, search, m }
+        let plain = m.nb == 1 && search != Search::Lut;
+        SetBits { row, w, cur, ascending, plain, search, m }
     }
 }
 
@@ -454,7 +459,11 @@ impl<W: Word> SetBits<'_, W> {
     #[inline(always)]
     fn peek_slot(&mut self) -> Option<u32> {
         loop {
-            if let Some(slot) = self.m.first_slot(self.cur, self.ascending, self.search) {
+            if self.plain {
+                if self.cur != W::ZERO {
+                    return Some(if self.ascending { self.cur.lz() } else { W::BITS - 1 - self.cur.tz() });
+                }
+            } else if let Some(slot) = self.m.first_slot(self.cur, self.ascending, self.search) {
                 return Some(slot);
             }
             if self.ascending {
@@ -477,9 +486,13 @@ impl<W: Word> Iterator for SetBits<'_, W> {
     type Item = usize;
     #[inline(always)]
     fn next(&mut self) -> Option<usize> {
-        let nb = self.m.nb;
         let slot = self.peek_slot()?;
         // clear the visited slot (all its bits) so the next search moves on
+        if self.plain {
+            self.cur &= !(W::MSB >> slot);
+            return Some(self.w * W::BITS as usize + slot as usize);
+        }
+        let nb = self.m.nb;
         let ones = W::from_u64((1u64 << nb) - 1);
         self.cur &= !(ones << slot_shift::<W>(nb, slot));
         Some(self.slice_of(slot))
@@ -598,7 +611,7 @@ mod tests {
                 if !asc {
                     want.reverse();
                 }
-                for s in [Search::Lut, Search::Bitscan] {
+                for s in [Search::Lut, Search::Bitscan, Search::BitscanBsr] {
                     let got: Vec<usize> = SetBits::with_matcher(row, asc, s, &m).collect();
                     assert_eq!(got, want, "nb={nb} c={c} asc={asc} {s:?}");
                     // peeking (even twice) before each step changes nothing

@@ -273,9 +273,6 @@ pub fn slot_mask<W: Word>(nb: u32, k: usize) -> W {
 #[derive(Clone, Debug)]
 pub struct Matcher {
     nb: u32,
-    /// `log2(nb)`: slot arithmetic by shifts (a division by the run-time `nb`
-    /// would be a `div` per search step in the ray loops).
-    log_nb: u32,
     c: u32,
     /// The top bit of every slot (as a 64-bit pattern; truncates for u32).
     top: u64,
@@ -309,7 +306,7 @@ impl Matcher {
                 }
             }
         }
-        Matcher { nb, log_nb: nb.trailing_zeros(), c, top, first, last }
+        Matcher { nb, c, top, first, last }
     }
 
     /// The plain binary matcher (1-bit codes, set bits).
@@ -325,6 +322,13 @@ impl Matcher {
     /// Threshold index.
     pub fn threshold(&self) -> u32 {
         self.c
+    }
+
+    /// `log2(nb)` (nb is a power of two): slot arithmetic by shifts, since a
+    /// division by the run-time `nb` is a `div` per search step in the ray loops.
+    #[inline(always)]
+    fn log_nb(&self) -> u32 {
+        self.nb.trailing_zeros()
     }
 
     /// The top bit of every slot whose code is ≥ c (bit-plane comparator, SWAR).
@@ -361,7 +365,7 @@ impl Matcher {
             // per-threshold byte tables: "first code ≥ c in this byte"
             (Search::Lut, _) => {
                 let x = w.as_u64();
-                let (bytes, spb) = (W::BITS / 8, 8 >> self.log_nb);
+                let (bytes, spb) = (W::BITS / 8, 8 >> self.log_nb());
                 if ascending {
                     for bi in 0..bytes {
                         let f = self.first[((x >> (W::BITS - 8 * (bi + 1))) & 0xFF) as usize] as u32;
@@ -384,9 +388,7 @@ impl Matcher {
                 if h == W::ZERO {
                     return None;
                 }
-                let bit = if ascending { h.lz() } else { W::BITS - 1 - h.tz() };
-                // slot = bit / nb, nb a power of two (1-bit rows, the common case, skip the shift)
-                Some(if self.nb == 1 { bit } else { bit >> self.log_nb })
+                Some((if ascending { h.lz() } else { W::BITS - 1 - h.tz() }) >> self.log_nb())
             }
         }
     }
@@ -450,8 +452,8 @@ impl<W: Word> SetBits<'_, W> {
     /// The slice of `slot` in the current word.
     #[inline(always)]
     fn slice_of(&self, slot: u32) -> usize {
-        // slots per word: W::BITS / nb (a power of two)
-        let per_word = if self.m.nb == 1 { W::BITS } else { W::BITS >> self.m.log_nb };
+        // slots per word: W::BITS / nb
+        let per_word = if self.plain { W::BITS } else { W::BITS >> self.m.log_nb() };
         self.w * per_word as usize + slot as usize
     }
 
@@ -490,11 +492,11 @@ impl<W: Word> Iterator for SetBits<'_, W> {
         // clear the visited slot (all its bits) so the next search moves on
         if self.plain {
             self.cur &= !(W::MSB >> slot);
-            return Some(self.w * W::BITS as usize + slot as usize);
+        } else {
+            let nb = self.m.nb;
+            let ones = W::from_u64((1u64 << nb) - 1);
+            self.cur &= !(ones << slot_shift::<W>(nb, slot));
         }
-        let nb = self.m.nb;
-        let ones = W::from_u64((1u64 << nb) - 1);
-        self.cur &= !(ones << slot_shift::<W>(nb, slot));
         Some(self.slice_of(slot))
     }
 }

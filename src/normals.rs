@@ -23,7 +23,7 @@ use std::sync::OnceLock;
 use rayon::prelude::*;
 
 use crate::composite::Shading;
-use crate::slices::{SliceStack, prefetch};
+use crate::slices::{SliceStack, cell_corners, prefetch_cell};
 use crate::view::{Factorization, permutation};
 
 /// Cells per side of the hemi-octahedral normal grid.
@@ -159,17 +159,14 @@ impl NormalStack {
     /// order of [`SliceStack::bilinear`]'s corners: one bounds check for all four.
     #[inline(always)]
     pub fn corners(&self, b: usize) -> [u16; 4] {
-        let n0 = self.n[0];
-        let s = &self.codes[b..b + n0 + 2];
-        [s[0], s[1], s[n0], s[n0 + 1]]
+        cell_corners(&self.codes, b, self.n[0])
     }
 
     /// Hints the cache to fetch the codes of the cell at stack index `b` (no
     /// effect on results).
     #[inline(always)]
     pub fn prefetch(&self, b: usize) {
-        prefetch(&self.codes, b);
-        prefetch(&self.codes, b.wrapping_add(self.n[0]));
+        prefetch_cell(&self.codes, b, self.n[0]);
     }
 
     /// Bytes held.

@@ -98,9 +98,7 @@ impl SliceStack {
     /// `(i, j)`, `(i+1, j)`, `(i, j+1)`, `(i+1, j+1)`: one bounds check for all four.
     #[inline(always)]
     fn corners(&self, ci: usize, cj: usize, k: usize) -> [f32; 4] {
-        let (n0, b) = (self.n[0], self.index(ci, cj, k));
-        let s = &self.data[b..b + n0 + 2];
-        [s[0], s[1], s[n0], s[n0 + 1]]
+        cell_corners(&self.data, self.index(ci, cj, k), self.n[0])
     }
 
     /// Index of voxel `(i, j, k)` in [`SliceStack::data`].
@@ -135,8 +133,7 @@ impl SliceStack {
     /// has index `b` (what a bilinear sample reads). No effect on results.
     #[inline(always)]
     pub fn prefetch_cell(&self, b: usize) {
-        prefetch(&self.data, b);
-        prefetch(&self.data, b.wrapping_add(self.n[0]));
+        prefetch_cell(&self.data, b, self.n[0]);
     }
 
     /// Central-difference gradient at voxel `(i, j, k)` in voxel units of
@@ -218,6 +215,23 @@ pub(crate) fn fmin(a: f32, b: f32) -> f32 {
 #[inline(always)]
 pub(crate) fn fmax(a: f32, b: f32) -> f32 {
     if a > b { a } else { b }
+}
+
+/// The four voxels of the cell whose first voxel is `v[b]` in a slice layout
+/// with rows of `n0`: `b`, `b + 1`, `b + n0`, `b + n0 + 1`, one bounds check
+/// for all four. Shared by the densities and the normal codes.
+#[inline(always)]
+pub(crate) fn cell_corners<T: Copy>(v: &[T], b: usize, n0: usize) -> [T; 4] {
+    let s = &v[b..b + n0 + 2];
+    [s[0], s[1], s[n0], s[n0 + 1]]
+}
+
+/// Asks the cache for both voxel rows of the cell whose first voxel is `v[b]`
+/// (rows of `n0`): what [`cell_corners`] reads. No effect on results.
+#[inline(always)]
+pub(crate) fn prefetch_cell<T>(v: &[T], b: usize, n0: usize) {
+    prefetch(v, b);
+    prefetch(v, b.wrapping_add(n0));
 }
 
 /// Asks the cache for `v[i]` (a hint: no effect on results; nothing if `i` is out of range).

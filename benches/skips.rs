@@ -6,16 +6,17 @@
 //! path's per-view tables reused when nothing changed against rebuilt; the
 //! binary path's bit-scan kernels (run-time dispatched lzcnt, plain bsr, LUT);
 //! the binary row's prefetches against none; shading by normal code and table
-//! against the exact gradient.
+//! against the exact gradient; densities packed with the normal codes against
+//! the two arrays apart; the shear's kernels compiled for AVX2 against plain.
 //! Run: `cargo bench --bench skips`.
 
 use std::hint::black_box;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use criterion::measurement::WallTime;
-use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
+use criterion::{BenchmarkGroup, Criterion, SamplingMode, criterion_group, criterion_main};
 use glam::DMat3;
-use shearwarp::classify::Classifier;
+use shearwarp::classify::{Classifier, TransferFunction};
 use shearwarp::composite::Shading;
 use shearwarp::depth::Search;
 use shearwarp::mask::{BinaryMask, CellCodes};
@@ -27,7 +28,7 @@ use shearwarp::rle::{Preclass, ViewTables};
 use shearwarp::shear::ShearState;
 use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, rotate_eye};
-use shearwarp::volume::Volume;
+use shearwarp::volume::{Volume, VoxelData};
 use shearwarp::warp::Image;
 
 fn cam(deg: f64) -> Camera {
@@ -49,13 +50,20 @@ fn renderer_of(vol: Volume, s: Settings, tissue: &str) -> Renderer {
 }
 
 /// Benches `r` turning 1° per iteration (so every frame renders) into a 512² image.
+/// Every sample turns through the same views (flat sampling: the same number of
+/// frames per sample, each sample starting from the same view, which is
+/// rendered untimed first), so samples differ by noise, not by what they show.
 fn bench_turn(g: &mut BenchmarkGroup<'_, WallTime>, name: impl Into<String>, mut r: Renderer) {
     let mut img = Image::new(512, 512);
-    let mut d = 0.0;
+    g.sampling_mode(SamplingMode::Flat);
     g.bench_function(name.into(), |b| {
-        b.iter(|| {
-            d += 1.0;
-            r.render(&cam(d % 360.0), &mut img).expect("render")
+        b.iter_custom(|frames| {
+            r.render(&cam(0.0), &mut img).expect("render");
+            let t = Instant::now();
+            for f in 1..=frames {
+                black_box(r.render(&cam((f % 360) as f64), &mut img).expect("render"));
+            }
+            t.elapsed()
         })
     });
 }
@@ -140,12 +148,40 @@ fn skips(c: &mut Criterion) {
         bench_turn(&mut g, normals.name(), renderer_of(head256.clone(), Settings { normals, ..Settings::default() }, "skin"));
     }
     g.finish();
+    // densities and normal codes packed into one u32 per voxel (a hit reads both
+    // from the same lines) against the f32 stack and the u16 codes apart, on the
+    // same head rounded to 16-bit integers as CT scans are
+    let rounded = head256.to_f32().iter().map(|v| v.round() as i16).collect();
+    let head16 = Volume::new(head256.dims(), head256.spacing(), VoxelData::I16(rounded)).expect("volume");
+    let mut g = c.benchmark_group("packed_cells_iso_skin_256");
+    for (name, pack) in [("packed", true), ("apart", false)] {
+        bench_turn(&mut g, name, renderer_of(head16.clone(), Settings { pack, ..Settings::default() }, "skin"));
+    }
+    g.finish();
+    // the same on a real scan, when SHEARWARP_DATA holds VolPack's brainsmall.den:
+    // upsampled 2× (256×256×168, u8), iso 26, the 1-bit mask
+    if let Some(den) = std::env::var_os("SHEARWARP_DATA").map(|d| std::path::Path::new(&d).join("brainsmall.den")).filter(|p| p.exists()) {
+        let vol = shearwarp::io::den::load_den(&den).expect("brainsmall.den");
+        let up2 = vol.resampled(vol.dims().map(|n| 2 * n)).expect("upsample");
+        let tf = TransferFunction::threshold(26.0, [0.9, 0.85, 0.8]);
+        let mut g = c.benchmark_group("packed_cells_iso_brainsmall_up2");
+        for (name, pack) in [("packed", true), ("apart", false)] {
+            let mut r = Renderer::new(up2.clone(), &tf, Settings { pack, threads: 1, ..Settings::default() }).expect("renderer");
+            r.prepare_all_axes();
+            bench_turn(&mut g, name, r);
+        }
+        g.finish();
+    }
     // the limit of a shear step: its words against a memcpy of the same bytes
+    // (and the step's kernels compiled for AVX2 against the plain build's)
     let stack = SliceStack::new(&head256, 2);
     let codes = CellCodes::binary(&stack, |_, hi| hi >= -500.0);
     let mut m = BinaryMask::<u64>::from_codes(&codes, 1);
     let mut st = ShearState::identity(225);
     st = m.rotate_step(&st, 0, 1);
+    let mut plain = m.clone();
+    plain.set_simd(false);
+    let mut plain_st = st.clone();
     let w = m.shear_to(&st.rotated(0, 1)).words.max(1);
     let bytes = (w * 8) as usize;
     let (src, mut dst) = (vec![1u8; bytes], vec![0u8; bytes]);
@@ -163,6 +199,16 @@ fn skips(c: &mut Criterion) {
         })
     });
     g.bench_function("memcpy", |b| b.iter(|| dst.copy_from_slice(black_box(&src))));
+    let (mut dir, mut pos) = (1, 2i32);
+    g.bench_function("shear_step_plain", |b| {
+        b.iter(|| {
+            if pos.abs() >= 40 {
+                dir = -dir;
+            }
+            pos += dir;
+            plain_st = pool.install(|| plain.rotate_step(&plain_st, 0, dir));
+        })
+    });
     g.finish();
 }
 

@@ -239,6 +239,9 @@ pub struct BinaryMask<W: Word> {
     row_buf: Vec<W>,
     target: [Vec<i32>; 2],
     prev_off: [Vec<i32>; 2],
+    /// Shift kernels compiled for AVX2 ([`hw_avx2`]); false runs the plain
+    /// build's kernels (the scalar reference, see [`BinaryMask::set_simd`]).
+    avx2: bool,
 }
 
 /// Runs `$fixed` with the constant `$n` bound to the column length `$nw` when it
@@ -296,6 +299,7 @@ impl<W: Word> BinaryMask<W> {
             row_buf: vec![W::ZERO; grid[0] * nw],
             target: [vec![0; nk], vec![0; nk]],
             prev_off: [vec![0; nk], vec![0; nk]],
+            avx2: hw_avx2(),
         };
         m.scatter();
         m
@@ -306,6 +310,13 @@ impl<W: Word> BinaryMask<W> {
         self.s
     }
     /// Bits per code.
+    /// Chooses the shift kernels: `true` (the default on a CPU with AVX2)
+    /// runs them compiled for AVX2, `false` the plain build's. Both give the
+    /// same words; the switch exists so tests and benches can compare them.
+    pub fn set_simd(&mut self, on: bool) {
+        self.avx2 = on && hw_avx2();
+    }
+
     pub fn code_width(&self) -> u32 {
         self.nb
     }
@@ -565,7 +576,19 @@ impl<W: Word> BinaryMask<W> {
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
         let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
         let tasks = rows.par_chunks_mut(gw * nw);
-        by_column_length!(nw, N => tasks.for_each(|row| shift_columns_n::<W, N>(row, ps, pe, up, down, keep)),
+        let avx2 = self.avx2;
+        by_column_length!(nw, N => tasks.for_each(|row| {
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: `avx2` is set only when `hw_avx2()` detected AVX2
+                    // on this CPU at run time, all the kernel requires; its body
+                    // is the safe `shift_columns_n`.
+                    unsafe { shift_columns_n_avx2::<W, N>(row, ps, pe, up, down, keep) };
+                    return;
+                }
+                let _ = avx2;
+                shift_columns_n::<W, N>(row, ps, pe, up, down, keep)
+            }),
             _ => tasks.for_each(|row| shift_columns_any(row, nw, ps, pe, up, down, keep)));
         ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
     }
@@ -590,7 +613,15 @@ impl<W: Word> BinaryMask<W> {
             let row = &mut head[q * gw * nw + ps..q * gw * nw + pe];
             // the row below, or nothing past the grid's last row
             let next = if q + 1 < gh { &tail[ps..pe] } else { &zeros[..] };
-            by_column_length!(nw, N => shift_row_n::<W, N>(row, next, prev, up, down, keep),
+            by_column_length!(nw, N => {
+                    #[cfg(target_arch = "x86_64")]
+                    if self.avx2 {
+                        // SAFETY: as in `shift_columns`: AVX2 was detected at run time.
+                        unsafe { shift_row_n_avx2::<W, N>(row, next, prev, up, down, keep) };
+                        continue;
+                    }
+                    shift_row_n::<W, N>(row, next, prev, up, down, keep)
+                },
                 _ => shift_row_any(row, next, prev, nw, up, down, keep));
         }
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
@@ -664,13 +695,46 @@ fn shift_row_n<W: Word, const N: usize>(row: &mut [W], next: &[W], prev: &mut [W
     let (row, _) = row.as_chunks_mut::<N>();
     let (prev, _) = prev.as_chunks_mut::<N>();
     let (next, _) = next.as_chunks::<N>();
-    for (c, (cw, pw)) in row.iter_mut().zip(prev.iter_mut()).enumerate() {
-        let nx = next.get(c).copied().unwrap_or([W::ZERO; N]);
+    let column = |cw: &mut [W; N], pw: &mut [W; N], nx: &[W; N]| {
         for w in 0..N {
             let old = cw[w];
             cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx[w] & down[w]);
             pw[w] = old;
         }
+    };
+    if next.is_empty() {
+        // past the grid's last row: the row below reads as zero
+        row.iter_mut().zip(prev.iter_mut()).for_each(|(cw, pw)| column(cw, pw, &[W::ZERO; N]));
+    } else {
+        row.iter_mut().zip(prev.iter_mut()).zip(next).for_each(|((cw, pw), nx)| column(cw, pw, nx));
+    }
+}
+
+/// [`shift_columns_n`] compiled for AVX2: a column of up to four u64 words is
+/// one 256-bit register. Callers must have checked [`hw_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn shift_columns_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
+    shift_columns_n::<W, N>(row, ps, pe, up, down, keep)
+}
+
+/// [`shift_row_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn shift_row_n_avx2<W: Word, const N: usize>(row: &mut [W], next: &[W], prev: &mut [W], up: &[W], down: &[W], keep: &[W]) {
+    shift_row_n::<W, N>(row, next, prev, up, down, keep)
+}
+
+/// True when the CPU has AVX2, so the shear's shift kernels run their copies
+/// compiled for it. Detected once (the std macro caches it).
+pub fn hw_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }
 

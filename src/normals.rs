@@ -111,67 +111,176 @@ fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
 }
 
 /// The normal code of every voxel of one [`SliceStack`], in its `(i, j, k)`
-/// layout (index [`SliceStack::index`]): 2 bytes per voxel.
+/// layout (index [`SliceStack::index`]).
+///
+/// For a stack of integer densities spanning at most 65 535 (8- and 16-bit
+/// scans) the codes are *packed* with the densities: one u32 per voxel, the
+/// density minus an offset in the low half and the code in the high half
+/// ([`PackedCells`]). A ray then reads a cell's densities and its codes from the
+/// same two cache lines instead of two lines of each array, and the f32 stack
+/// is not touched at all. The densities come back exactly (integers below
+/// 2^24), so both layouts give the same image bit for bit. Otherwise: 2 bytes
+/// per voxel, codes only.
 #[derive(Clone, Debug)]
 pub struct NormalStack {
     /// Principal axis of the stack it was built from.
     pub axis: usize,
     /// Sizes along `(i, j, k)`.
     pub n: [usize; 3],
-    codes: Vec<u16>,
+    store: Store,
+}
+
+/// How a [`NormalStack`] holds its codes.
+#[derive(Clone, Debug)]
+enum Store {
+    /// One u16 code per voxel.
+    Codes(Vec<u16>),
+    /// One u32 per voxel: `(density − offset) | code << 16`.
+    Packed { words: Vec<u32>, offset: f32 },
 }
 
 impl NormalStack {
     /// Codes every voxel of `stack` for a volume with voxel `spacing`, in
-    /// parallel over slices (on the current rayon pool).
+    /// parallel over slices (on the current rayon pool); packed with the
+    /// densities when they allow it (see [`NormalStack`]).
     pub fn new(stack: &SliceStack, spacing: [f32; 3]) -> Self {
-        let n = stack.n;
-        let inv = spacing.map(|s| 1.0 / s);
-        let mut codes = vec![0u16; n[0] * n[1] * n[2]];
-        let perm = permutation(stack.axis);
-        let (n0, n01, d) = (n[0], n[0] * n[1], stack.data());
-        codes.par_chunks_mut(n01.max(1)).enumerate().for_each(|(k, slice)| {
-            for (j, row) in slice.chunks_mut(n0.max(1)).enumerate() {
-                let interior = j >= 1 && j + 1 < n[1] && k >= 1 && k + 1 < n[2];
-                for (i, c) in row.iter_mut().enumerate() {
-                    if interior && i >= 1 && i + 1 < n0 {
-                        // voxel_normal without the border cases: the same central
-                        // differences ((hi − lo) / 2 is exactly (hi − lo) · 0.5)
-                        let b = i + n0 * j + n01 * k;
-                        let g = [(d[b + 1] - d[b - 1]) * 0.5, (d[b + n0] - d[b - n0]) * 0.5, (d[b + n01] - d[b - n01]) * 0.5];
-                        *c = object_normal(g, perm, inv);
-                    } else {
-                        *c = voxel_normal(stack, i, j, k, inv);
-                    }
-                }
+        Self::with_packing(stack, spacing, true)
+    }
+
+    /// [`NormalStack::new`], packed only if `pack` (and the densities allow it):
+    /// `false` keeps the codes apart, the reference layout of tests and benches.
+    pub fn with_packing(stack: &SliceStack, spacing: [f32; 3], pack: bool) -> Self {
+        let codes = codes_of(stack, spacing);
+        let store = match pack.then(|| packing_offset(stack.data())).flatten() {
+            Some(offset) => {
+                let mut words = vec![0u32; codes.len()];
+                words.par_chunks_mut(PACK_CHUNK).zip(stack.data().par_chunks(PACK_CHUNK)).zip(codes.par_chunks(PACK_CHUNK)).for_each(
+                    |((w, d), c)| {
+                        for ((w, &d), &c) in w.iter_mut().zip(d).zip(c) {
+                            // exact: d − offset is an integer in 0..=65535 (checked)
+                            *w = (d - offset) as u32 | (c as u32) << 16;
+                        }
+                    },
+                );
+                Store::Packed { words, offset }
             }
-        });
-        NormalStack { axis: stack.axis, n, codes }
+            None => Store::Codes(codes),
+        };
+        NormalStack { axis: stack.axis, n: stack.n, store }
     }
 
     /// The code of the voxel at stack index `index`.
     #[inline(always)]
     pub fn at(&self, index: usize) -> u16 {
-        self.codes[index]
+        match &self.store {
+            Store::Codes(c) => c[index],
+            Store::Packed { words, .. } => (words[index] >> 16) as u16,
+        }
     }
 
     /// The codes of the cell whose first voxel has stack index `b`, in the
     /// order of [`SliceStack::bilinear`]'s corners: one bounds check for all four.
     #[inline(always)]
     pub fn corners(&self, b: usize) -> [u16; 4] {
-        cell_corners(&self.codes, b, self.n[0])
+        match &self.store {
+            Store::Codes(c) => cell_corners(c, b, self.n[0]),
+            Store::Packed { words, .. } => cell_corners(words, b, self.n[0]).map(|w| (w >> 16) as u16),
+        }
     }
 
-    /// Hints the cache to fetch the codes of the cell at stack index `b` (no
-    /// effect on results).
-    #[inline(always)]
-    pub fn prefetch(&self, b: usize) {
-        prefetch_cell(&self.codes, b, self.n[0]);
+    /// The codes apart (empty when packed).
+    pub fn codes(&self) -> &[u16] {
+        match &self.store {
+            Store::Codes(c) => c,
+            Store::Packed { .. } => &[],
+        }
+    }
+
+    /// The packed densities and codes, if this stack is packed.
+    pub fn packed(&self) -> Option<PackedCells<'_>> {
+        match &self.store {
+            Store::Codes(_) => None,
+            Store::Packed { words, offset } => Some(PackedCells { words, n0: self.n[0], offset: *offset }),
+        }
     }
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        self.codes.len() * 2
+        match &self.store {
+            Store::Codes(c) => c.len() * 2,
+            Store::Packed { words, .. } => words.len() * 4,
+        }
+    }
+}
+
+/// Voxels per task of the packing pass.
+const PACK_CHUNK: usize = 1 << 16;
+
+/// The code of every voxel of `stack`, in parallel over slices.
+fn codes_of(stack: &SliceStack, spacing: [f32; 3]) -> Vec<u16> {
+    let n = stack.n;
+    let inv = spacing.map(|s| 1.0 / s);
+    let mut codes = vec![0u16; n[0] * n[1] * n[2]];
+    let perm = permutation(stack.axis);
+    let (n0, n01, d) = (n[0], n[0] * n[1], stack.data());
+    codes.par_chunks_mut(n01.max(1)).enumerate().for_each(|(k, slice)| {
+        for (j, row) in slice.chunks_mut(n0.max(1)).enumerate() {
+            let interior = j >= 1 && j + 1 < n[1] && k >= 1 && k + 1 < n[2];
+            for (i, c) in row.iter_mut().enumerate() {
+                if interior && i >= 1 && i + 1 < n0 {
+                    // voxel_normal without the border cases: the same central
+                    // differences ((hi − lo) / 2 is exactly (hi − lo) · 0.5)
+                    let b = i + n0 * j + n01 * k;
+                    let g = [(d[b + 1] - d[b - 1]) * 0.5, (d[b + n0] - d[b - n0]) * 0.5, (d[b + n01] - d[b - n01]) * 0.5];
+                    *c = object_normal(g, perm, inv);
+                } else {
+                    *c = voxel_normal(stack, i, j, k, inv);
+                }
+            }
+        }
+    });
+    codes
+}
+
+/// The offset that packs `data` into 16 bits exactly, if there is one: every
+/// value an integer, the smallest at least −2^24 and the largest at most
+/// 65 535 above it and below 2^24 (so `(v − offset) as u16 as f32 + offset == v`).
+fn packing_offset(data: &[f32]) -> Option<f32> {
+    const EXACT: f32 = (1 << 24) as f32;
+    let (lo, hi, whole) = data
+        .par_chunks(PACK_CHUNK)
+        .map(|c| c.iter().fold((f32::INFINITY, f32::NEG_INFINITY, true), |(lo, hi, w), &v| (lo.min(v), hi.max(v), w && v == v.trunc())))
+        .reduce(|| (f32::INFINITY, f32::NEG_INFINITY, true), |a, b| (a.0.min(b.0), a.1.max(b.1), a.2 && b.2));
+    (whole && lo <= hi && lo >= -EXACT && hi < EXACT && hi - lo <= u16::MAX as f32).then_some(lo)
+}
+
+/// A packed [`NormalStack`] as a ray reads it: per voxel, `density − offset`
+/// in the low 16 bits and the normal code in the high 16.
+#[derive(Clone, Copy, Debug)]
+pub struct PackedCells<'a> {
+    words: &'a [u32],
+    n0: usize,
+    offset: f32,
+}
+
+impl PackedCells<'_> {
+    /// The four corner densities of the cell at stack index `b` (exactly the
+    /// stack's values; order of [`SliceStack::bilinear`]).
+    #[inline(always)]
+    pub fn densities(&self, b: usize) -> [f32; 4] {
+        cell_corners(self.words, b, self.n0).map(|w| (w & 0xFFFF) as f32 + self.offset)
+    }
+
+    /// The four corner codes of the cell at stack index `b`.
+    #[inline(always)]
+    pub fn codes(&self, b: usize) -> [u16; 4] {
+        cell_corners(self.words, b, self.n0).map(|w| (w >> 16) as u16)
+    }
+
+    /// Hints the cache to fetch both rows of the cell at stack index `b`.
+    #[inline(always)]
+    pub fn prefetch(&self, b: usize) {
+        prefetch_cell(self.words, b, self.n0);
     }
 }
 
@@ -374,6 +483,53 @@ mod tests {
             let b = s.index(2, 3, 1);
             assert_eq!(ns.corners(b), [ns.at(b), ns.at(b + 1), ns.at(b + s.n[0]), ns.at(b + s.n[0] + 1)]);
         }
+    }
+
+    #[test]
+    fn packed_stack_holds_every_density_exactly_and_the_same_codes() {
+        // integers around a negative offset (CT-like), spanning exactly 65 535
+        let f = |x: usize, y: usize, z: usize| ((x * 7919 + y * 104_729 + z * 1_299_709) % 4001) as f32 - 1024.0;
+        let v = Volume::from_fn([7, 6, 5], [0.5, 1.0, 2.0], |x, y, z| if (x, y, z) == (3, 3, 3) { 64_511.0 } else { f(x, y, z) }).unwrap();
+        for axis in 0..3 {
+            let s = SliceStack::new(&v, axis);
+            let ns = NormalStack::new(&s, v.spacing());
+            let apart = NormalStack::with_packing(&s, v.spacing(), false);
+            let p = ns.packed().expect("16-bit integer densities are packed");
+            assert!(apart.packed().is_none());
+            assert_eq!((ns.bytes(), apart.bytes()), (4 * 7 * 6 * 5, 2 * 7 * 6 * 5));
+            assert!(ns.codes().is_empty());
+            for k in 0..s.n[2] {
+                for j in 0..s.n[1] - 1 {
+                    for i in 0..s.n[0] - 1 {
+                        let b = s.index(i, j, k);
+                        assert_eq!(ns.at(b), apart.at(b));
+                        assert_eq!(p.codes(b), apart.corners(b));
+                        assert_eq!(ns.corners(b), apart.corners(b));
+                        let want = [s.at(i, j, k), s.at(i + 1, j, k), s.at(i, j + 1, k), s.at(i + 1, j + 1, k)];
+                        assert_eq!(p.densities(b).map(f32::to_bits), want.map(f32::to_bits), "({i}, {j}, {k})");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn only_exact_16_bit_integer_ranges_pack() {
+        assert_eq!(packing_offset(&[3.0, 0.0, 65_535.0]), Some(0.0));
+        assert_eq!(packing_offset(&[-1024.0, 3071.0]), Some(-1024.0));
+        assert_eq!(packing_offset(&[0.0, 65_536.0]), None, "17 bits");
+        assert_eq!(packing_offset(&[0.0, 0.5]), None, "not an integer");
+        assert_eq!(packing_offset(&[2.0e7, 2.0e7 + 2.0]), None, "beyond exact f32 integers");
+        assert_eq!(packing_offset(&[-2.0e7, -2.0e7 + 2.0]), None, "beyond exact f32 integers");
+        assert_eq!(packing_offset(&[1.0, f32::NAN]), None);
+        assert_eq!(packing_offset(&[f32::INFINITY]), None);
+        assert_eq!(packing_offset(&[]), None);
+        // more than one task's chunk: the reduction across chunks
+        let mut big = vec![7.0f32; 3 * PACK_CHUNK + 5];
+        big[2 * PACK_CHUNK + 1] = -9.0;
+        assert_eq!(packing_offset(&big), Some(-9.0));
+        big[PACK_CHUNK + 3] = 0.25;
+        assert_eq!(packing_offset(&big), None);
     }
 
     #[test]

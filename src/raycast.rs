@@ -7,7 +7,10 @@
 //! four voxels, classifies it, shades it (Blinn-Phong headlight: by default the
 //! bilinear blend of its cell's four shade-table entries, looked up by the
 //! voxels' normal codes of [`crate::normals`]; with [`crate::render::Normals::Gradient`]
-//! the exact central-difference gradient at the sample) and composites it. The *only* difference between the paths is the
+//! the exact central-difference gradient at the sample) and composites it. A
+//! ray reads its cells through [`Cells`]: from the f32 stack and the code array,
+//! or, for 16-bit integer scans, from the one array that packs both
+//! ([`crate::normals::NormalStack`]), with the same numbers either way. The *only* difference between the paths is the
 //! candidate list: the binary path jumps from set bit to set bit of its sheared
 //! mask ([`crate::depth::SetBits`]), brute force visits every slice. Because the
 //! mask is conservative, both produce the same image sample for sample.
@@ -24,9 +27,9 @@ use crate::classify::Classifier;
 use crate::composite::{Intermediate, Shading, composite, headlight_ndl};
 use crate::depth::{Matcher, Search, SetBits, Word};
 use crate::mask::{BinaryMask, Rect};
-use crate::normals::{NormalStack, ShadeEntry, ShadeTable, apply_shade};
+use crate::normals::{NormalStack, PackedCells, ShadeTable, apply_shade};
 use crate::shear::ShearState;
-use crate::slices::SliceStack;
+use crate::slices::{SliceStack, bilinear};
 use crate::view::Factorization;
 
 /// Rendering mode.
@@ -109,6 +112,57 @@ pub struct RayResult {
 
 const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN };
 
+/// How a ray reads one cell of slice memory at stack index `b`: its four corner
+/// densities, its four corner normal codes (table shading) and the cache hint
+/// for both. Two layouts: [`Split`] (the f32 stack and the u16 code array: two
+/// lines of each per cell) and [`PackedCells`] (both in one u32 array: two
+/// lines). The row loops are compiled once per layout, with no branch per access.
+pub trait Cells: Sync {
+    /// The corner densities `[v00, v10, v01, v11]` (exactly the stack's).
+    fn densities(&self, b: usize) -> [f32; 4];
+    /// The corner normal codes, same order (table shading only).
+    fn codes(&self, b: usize) -> [u16; 4];
+    /// Hints the cache to fetch both rows of the cell (no effect on results).
+    fn prefetch(&self, b: usize);
+}
+
+/// The stack's densities and the codes kept apart (no codes: gradient shading).
+pub struct Split<'a> {
+    stack: &'a SliceStack,
+    codes: &'a [u16],
+}
+
+impl Cells for Split<'_> {
+    #[inline(always)]
+    fn densities(&self, b: usize) -> [f32; 4] {
+        self.stack.cell_at(b)
+    }
+    #[inline(always)]
+    fn codes(&self, b: usize) -> [u16; 4] {
+        crate::slices::cell_corners(self.codes, b, self.stack.n[0])
+    }
+    #[inline(always)]
+    fn prefetch(&self, b: usize) {
+        self.stack.prefetch_cell(b);
+        crate::slices::prefetch_cell(self.codes, b, self.stack.n[0]);
+    }
+}
+
+impl Cells for PackedCells<'_> {
+    #[inline(always)]
+    fn densities(&self, b: usize) -> [f32; 4] {
+        PackedCells::densities(self, b)
+    }
+    #[inline(always)]
+    fn codes(&self, b: usize) -> [u16; 4] {
+        PackedCells::codes(self, b)
+    }
+    #[inline(always)]
+    fn prefetch(&self, b: usize) {
+        PackedCells::prefetch(self, b)
+    }
+}
+
 impl<'a> RayContext<'a> {
     /// Sets up the rays of one frame.
     #[allow(clippy::too_many_arguments)]
@@ -154,11 +208,28 @@ impl<'a> RayContext<'a> {
         self
     }
 
-    /// The shaded colour of `rgb` at a sample (either shading model).
+    /// The cells of this context kept apart (the f32 stack and the codes).
+    pub fn split(&self) -> Split<'a> {
+        Split { stack: self.stack, codes: self.normals.map_or(&[][..], |(ns, _)| ns.codes()) }
+    }
+
+    /// The packed cells of this context's normal codes, if they are packed.
+    pub fn packed(&self) -> Option<PackedCells<'a>> {
+        self.normals.and_then(|(ns, _)| ns.packed())
+    }
+
+    /// Bilinear density of a located sample.
     #[inline(always)]
-    fn shade_sample(&self, rgb: [f32; 3], ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
+    fn sample<V: Cells>(&self, v: &V, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> f32 {
+        bilinear(v.densities(self.stack.index(ci, cj, k)), wi, wj)
+    }
+
+    /// The shaded colour of `rgb` at a sample (either shading model).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn shade_sample<V: Cells>(&self, v: &V, rgb: [f32; 3], ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
         match self.normals {
-            Some((ns, table)) => apply_shade(rgb, table_entry(ns, table, self.stack, ci, cj, k, wi, wj)),
+            Some((_, table)) => apply_shade(rgb, table.blend(v.codes(self.stack.index(ci, cj, k)), wi, wj)),
             None => {
                 let g = self.stack.gradient(ci, cj, k, wi, wj);
                 self.shading.shade(rgb, headlight_ndl(g, self.grad_m, self.grad_s))
@@ -183,18 +254,17 @@ impl<'a> RayContext<'a> {
     /// unless its voxel shares the 16-voxel line `last` of the ray before (whose
     /// prefetch covered it); updates `last`.
     #[inline(always)]
-    pub fn prefetch(&self, p: i32, q: i32, k: usize, last: &mut usize) {
+    pub fn prefetch<V: Cells>(&self, v: &V, p: i32, q: i32, k: usize, last: &mut usize) {
         if let Some((ci, cj, _, _)) = self.locate(p, q, k) {
             let b = self.stack.index(ci, cj, k);
             if b >> 4 != *last {
                 *last = b >> 4;
                 match self.normals {
                     // the cell's densities and codes at the hit and at the refinement's slice
-                    Some((ns, _)) => {
+                    Some(_) => {
                         let bp = self.prev_slice(k).map(|kp| self.stack.index(ci, cj, kp));
                         for c in std::iter::once(b).chain(bp) {
-                            self.stack.prefetch_cell(c);
-                            ns.prefetch(c);
+                            v.prefetch(c);
                         }
                     }
                     None => self.stack.prefetch_hit(ci, cj, k, self.ascending),
@@ -205,27 +275,27 @@ impl<'a> RayContext<'a> {
 
     /// Traces ray `(p, q)` over the candidate slices `ks` (front to back).
     #[inline(always)]
-    pub fn trace(&self, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
+    pub fn trace<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
         match self.mode {
-            Mode::Blend => self.trace_blend(p, q, ks),
-            Mode::Iso => self.trace_iso(p, q, ks),
+            Mode::Blend => self.trace_blend(v, p, q, ks),
+            Mode::Iso => self.trace_iso(v, p, q, ks),
         }
     }
 
     #[inline(always)]
-    fn trace_blend(&self, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
+    fn trace_blend<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
         let mut acc = [0f32; 4];
         for k in ks {
             let Some((ci, cj, wi, wj)) = self.locate(p, q, k) else {
                 continue;
             };
-            let d = self.stack.bilinear(ci, cj, k, wi, wj);
+            let d = self.sample(v, ci, cj, k, wi, wj);
             let alpha = self.classifier.alpha(d);
             if alpha <= 0.0 {
                 continue;
             }
             let c = self.classifier.classify(d);
-            composite(&mut acc, self.shade_sample([c.r, c.g, c.b], ci, cj, k, wi, wj), alpha);
+            composite(&mut acc, self.shade_sample(v, [c.r, c.g, c.b], ci, cj, k, wi, wj), alpha);
             if acc[3] >= self.ert {
                 break;
             }
@@ -234,14 +304,14 @@ impl<'a> RayContext<'a> {
     }
 
     #[inline(always)]
-    fn trace_iso(&self, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
+    fn trace_iso<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
         for k in ks {
             let Some((ci, cj, wi, wj)) = self.locate(p, q, k) else {
                 continue;
             };
-            let d = self.stack.bilinear(ci, cj, k, wi, wj);
+            let d = self.sample(v, ci, cj, k, wi, wj);
             if d >= self.iso {
-                return self.iso_hit(p, q, k, ci, cj, wi, wj, d);
+                return self.iso_hit(v, p, q, k, ci, cj, wi, wj, d);
             }
         }
         MISS
@@ -257,20 +327,21 @@ impl<'a> RayContext<'a> {
     /// shades it.
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
-    fn iso_hit(&self, p: i32, q: i32, k: usize, ci: usize, cj: usize, wi: f32, wj: f32, d: f32) -> RayResult {
+    fn iso_hit<V: Cells>(&self, v: &V, p: i32, q: i32, k: usize, ci: usize, cj: usize, wi: f32, wj: f32, d: f32) -> RayResult {
         // the sample before the hit, when it is below the iso value: the surface
         // crosses between the two slices at fraction t
         let before = self.prev_slice(k).and_then(|kp| {
             let (pi, pj, pwi, pwj) = self.locate(p, q, kp)?;
-            let dp = self.stack.bilinear(pi, pj, kp, pwi, pwj);
+            let dp = self.sample(v, pi, pj, kp, pwi, pwj);
             (dp < self.iso).then(|| (kp, ((self.iso - dp) / (d - dp)).clamp(0.0, 1.0), (pi, pj, pwi, pwj)))
         });
         let depth = before.map_or(k as f32, |(kp, t, _)| kp as f32 + (k as f32 - kp as f32) * t);
         let rgb = match self.normals {
-            Some((ns, table)) => {
-                let mut e = table_entry(ns, table, self.stack, ci, cj, k, wi, wj);
+            Some((_, table)) => {
+                let entry = |ci, cj, k, wi, wj| table.blend(v.codes(self.stack.index(ci, cj, k)), wi, wj);
+                let mut e = entry(ci, cj, k, wi, wj);
                 if let Some((kp, t, (pi, pj, pwi, pwj))) = before {
-                    let ep = table_entry(ns, table, self.stack, pi, pj, kp, pwi, pwj);
+                    let ep = entry(pi, pj, kp, pwi, pwj);
                     e = [0, 1].map(|a| ep[a] + (e[a] - ep[a]) * t);
                 }
                 apply_shade(self.iso_rgb, e)
@@ -286,14 +357,6 @@ impl<'a> RayContext<'a> {
         };
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }
-}
-
-/// The shade-table entry of a sample in cell `(ci, cj)` of slice `k` at
-/// in-cell weights `(wi, wj)`: the blend of the cell's four corner codes' entries.
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn table_entry(ns: &NormalStack, table: &ShadeTable, stack: &SliceStack, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> ShadeEntry {
-    table.blend(ns.corners(stack.index(ci, cj, k)), wi, wj)
 }
 
 /// Rays of `rect` of the intermediate image through the sheared mask: each ray
@@ -317,6 +380,24 @@ pub fn render_binary<W: Word>(
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
+    match ctx.packed() {
+        Some(v) => binary_rows(ctx, &v, mask, search, m, prefetch, rect, out),
+        None => binary_rows(ctx, &ctx.split(), mask, search, m, prefetch, rect, out),
+    }
+}
+
+/// [`render_binary`] for one cell layout.
+#[allow(clippy::too_many_arguments)]
+fn binary_rows<W: Word, V: Cells>(
+    ctx: &RayContext,
+    v: &V,
+    mask: &BinaryMask<W>,
+    search: Search,
+    m: &Matcher,
+    prefetch: bool,
+    rect: Option<Rect>,
+    out: &mut Intermediate,
+) {
     let hw = search == Search::Bitscan && crate::depth::hw_bitscan();
     render_rows(rect, out, |q, p0, crow, drow| {
         #[cfg(target_arch = "x86_64")]
@@ -324,11 +405,11 @@ pub fn render_binary<W: Word>(
             // SAFETY: `hw` is true only when `hw_bitscan()` detected lzcnt and
             // bmi1 on this CPU at run time, which is all `binary_row_lzcnt`
             // requires; its body is the safe `binary_row`.
-            unsafe { binary_row_lzcnt(ctx, mask, search, m, prefetch, q, p0, crow, drow) };
+            unsafe { binary_row_lzcnt(ctx, v, mask, search, m, prefetch, q, p0, crow, drow) };
             return;
         }
         let _ = hw;
-        binary_row(ctx, mask, search, m, prefetch, q, p0, crow, drow);
+        binary_row(ctx, v, mask, search, m, prefetch, q, p0, crow, drow);
     });
 }
 
@@ -339,8 +420,9 @@ pub const PREFETCH_GROUP: usize = 16;
 /// One row of [`render_binary`] (inlined into both compiled copies).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn binary_row<W: Word>(
+fn binary_row<W: Word, V: Cells>(
     ctx: &RayContext,
+    v: &V,
     mask: &BinaryMask<W>,
     search: Search,
     m: &Matcher,
@@ -364,7 +446,7 @@ fn binary_row<W: Word>(
             let mut it = SetBits::with_matcher(mask.row(sp, sq), ctx.ascending, search, m);
             *walk = it.peek().map(|k0| {
                 if prefetch {
-                    ctx.prefetch((pg + dp) as i32, q as i32, k0, &mut last_line);
+                    ctx.prefetch(v, (pg + dp) as i32, q as i32, k0, &mut last_line);
                 }
                 it
             });
@@ -378,7 +460,7 @@ fn binary_row<W: Word>(
         for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter_mut()).enumerate() {
             let res = match walk.take() {
                 None => MISS,
-                Some(walk) => ctx.trace((pg + dp) as i32, q as i32, walk),
+                Some(walk) => ctx.trace(v, (pg + dp) as i32, q as i32, walk),
             };
             *c = res.rgba;
             *d = res.depth;
@@ -392,8 +474,9 @@ fn binary_row<W: Word>(
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "lzcnt,bmi1")]
-unsafe fn binary_row_lzcnt<W: Word>(
+unsafe fn binary_row_lzcnt<W: Word, V: Cells>(
     ctx: &RayContext,
+    v: &V,
     mask: &BinaryMask<W>,
     search: Search,
     m: &Matcher,
@@ -403,16 +486,24 @@ unsafe fn binary_row_lzcnt<W: Word>(
     crow: &mut [[f32; 4]],
     drow: &mut [f32],
 ) {
-    binary_row(ctx, mask, search, m, prefetch, q, p0, crow, drow)
+    binary_row(ctx, v, mask, search, m, prefetch, q, p0, crow, drow)
 }
 
 /// The brute-force reference: every slice of every ray of `rect`, no mask.
 pub fn render_brute(ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate) {
+    match ctx.packed() {
+        Some(v) => brute_rows(ctx, &v, rect, out),
+        None => brute_rows(ctx, &ctx.split(), rect, out),
+    }
+}
+
+/// [`render_brute`] for one cell layout.
+fn brute_rows<V: Cells>(ctx: &RayContext, v: &V, rect: Option<Rect>, out: &mut Intermediate) {
     let nk = ctx.stack.n[2];
     render_rows(rect, out, |q, p0, crow, drow| {
         for (dp, (c, d)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
             let p = (p0 + dp) as i32;
-            let res = if ctx.ascending { ctx.trace(p, q as i32, 0..nk) } else { ctx.trace(p, q as i32, (0..nk).rev()) };
+            let res = if ctx.ascending { ctx.trace(v, p, q as i32, 0..nk) } else { ctx.trace(v, p, q as i32, (0..nk).rev()) };
             *c = res.rgba;
             *d = res.depth;
         }

@@ -135,6 +135,12 @@ pub struct Settings {
     pub prefetch: bool,
     /// Raycast paths: shade by normal code and table, or by exact gradient.
     pub normals: Normals,
+    /// Raycast paths with [`Normals::Codes`]: pack each voxel's density and
+    /// normal code into one u32 when the densities are integers spanning at
+    /// most 65 535 (8- and 16-bit scans), so a ray reads both from the same
+    /// cache lines ([`crate::normals::NormalStack`]). `false` keeps them
+    /// apart: a benchmark knob that shows what packing buys (same image).
+    pub pack: bool,
 }
 
 impl Default for Settings {
@@ -151,6 +157,7 @@ impl Default for Settings {
             occupied_rect: true,
             prefetch: true,
             normals: Normals::Codes,
+            pack: true,
         }
     }
 }
@@ -364,11 +371,15 @@ impl Renderer {
         self.settings
     }
     /// Changes settings (rebuilding the thread pool if the count changed; masks
-    /// follow on the next frame if the word size or cell size changed).
+    /// follow on the next frame if the word size or cell size changed, normal
+    /// codes if the packing did).
     pub fn set_settings(&mut self, s: Settings) -> Result<()> {
         check_cell(s.cell)?;
         if s.threads != self.settings.threads {
             self.pool = build_pool(s.threads)?;
+        }
+        if s.pack != self.settings.pack {
+            self.normals = [None, None, None];
         }
         self.settings = s;
         Ok(())
@@ -529,8 +540,8 @@ impl Renderer {
         }
         let raycast = matches!(self.settings.method, Method::Binary | Method::Brute);
         if raycast && self.settings.normals == Normals::Codes && self.normals[axis].is_none() {
-            let (stack, spacing) = (self.stacks[axis].as_ref().expect("stack built above"), self.volume.spacing());
-            self.normals[axis] = Some(self.pool.install(|| NormalStack::new(stack, spacing)));
+            let (stack, spacing, pack) = (self.stacks[axis].as_ref().expect("stack built above"), self.volume.spacing(), self.settings.pack);
+            self.normals[axis] = Some(self.pool.install(|| NormalStack::with_packing(stack, spacing, pack)));
         }
         if self.settings.method == Method::Binary {
             let key = self.mask_key();

@@ -85,13 +85,14 @@ impl SliceStack {
     /// floating-point rounding: this is what makes the masks exactly conservative.
     #[inline(always)]
     pub fn bilinear(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> f32 {
-        let [v00, v10, v01, v11] = self.corners(ci, cj, k);
-        let top = v00 + (v10 - v00) * wi;
-        let bot = v01 + (v11 - v01) * wi;
-        let d = top + (bot - top) * wj;
-        let lo = fmin(fmin(v00, v10), fmin(v01, v11));
-        let hi = fmax(fmax(v00, v10), fmax(v01, v11));
-        fmin(fmax(d, lo), hi)
+        bilinear(self.corners(ci, cj, k), wi, wj)
+    }
+
+    /// The four corner densities of the cell whose first voxel has index `b`
+    /// (order of [`SliceStack::bilinear`]).
+    #[inline(always)]
+    pub fn cell_at(&self, b: usize) -> [f32; 4] {
+        cell_corners(&self.data, b, self.n[0])
     }
 
     /// The four corner densities of cell `(ci, cj)` in slice `k`, in the order
@@ -215,6 +216,18 @@ pub(crate) fn fmin(a: f32, b: f32) -> f32 {
 #[inline(always)]
 pub(crate) fn fmax(a: f32, b: f32) -> f32 {
     if a > b { a } else { b }
+}
+
+/// The bilinear interpolation of a cell's corner densities `[v00, v10, v01, v11]`
+/// at in-cell weights `(wi, wj)`, clamped to their range (see [`SliceStack::bilinear`]).
+#[inline(always)]
+pub fn bilinear([v00, v10, v01, v11]: [f32; 4], wi: f32, wj: f32) -> f32 {
+    let top = v00 + (v10 - v00) * wi;
+    let bot = v01 + (v11 - v01) * wi;
+    let d = top + (bot - top) * wj;
+    let lo = fmin(fmin(v00, v10), fmin(v01, v11));
+    let hi = fmax(fmax(v00, v10), fmax(v01, v11));
+    fmin(fmax(d, lo), hi)
 }
 
 /// The four voxels of the cell whose first voxel is `v[b]` in a slice layout

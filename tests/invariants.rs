@@ -55,6 +55,13 @@ fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
     Volume::new(dims, spacing, VoxelData::F32(data)).unwrap()
 }
 
+/// `v` as 16-bit integer scans are: every value rounded to the nearest integer
+/// and stored as u16, so the renderer packs densities with normal codes.
+fn as_u16(v: &Volume) -> Volume {
+    let data = v.to_f32().iter().map(|x| x.round() as u16).collect();
+    Volume::new(v.dims(), v.spacing(), VoxelData::U16(data)).unwrap()
+}
+
 fn random_tf(seed: u64) -> TransferFunction {
     let a = 20.0 + (seed % 80) as f32;
     match seed % 3 {
@@ -105,10 +112,12 @@ proptest! {
         nx in 2usize..24, ny in 2usize..24, nz in 2usize..40, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2,
         blend in any::<bool>(), u64w in any::<bool>(), lut in any::<bool>(), aniso in any::<bool>(),
-        occupied_rect in any::<bool>(), prefetch in any::<bool>(), codes in any::<bool>(),
+        occupied_rect in any::<bool>(), prefetch in any::<bool>(), codes in any::<bool>(), u16_data in any::<bool>(),
     ) {
         let sp = if aniso { [1.0, 0.7, 2.5] } else { [1.0; 3] };
+        // f32 densities, or 16-bit ones (densities and codes packed)
         let vol = random_volume([nx, ny, nz], seed, sp);
+        let vol = if u16_data { as_u16(&vol) } else { vol };
         let tf = random_tf(tfs);
         let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, rx, ry, rz), [48, 40]);
         let base = Settings {
@@ -128,6 +137,38 @@ proptest! {
         prop_assert!(same_bits(&flat(&bpx), &flat(&rpx)), "intermediate images differ");
         prop_assert!(same_bits(&bd, &rd), "iso depths differ");
         prop_assert!(same_bits(&flat(&bi.data), &flat(&ri.data)), "final images differ");
+    }
+
+    /// Packing densities with normal codes changes where a ray reads, not what:
+    /// the same image, intermediate and depths bit for bit as the two arrays apart.
+    #[test]
+    fn packed_cells_equal_split_cells(
+        nx in 2usize..24, ny in 2usize..24, nz in 2usize..40, seed in any::<u64>(), tfs in any::<u64>(),
+        rx in -3.2f64..3.2, ry in -3.2f64..3.2, blend in any::<bool>(), brute in any::<bool>(), offset in -3000i32..3000,
+    ) {
+        // integer densities, some negative (CT-like): packed with an offset
+        let vol = random_volume([nx, ny, nz], seed, [1.0, 0.8, 1.3]);
+        let vol = Volume::new(vol.dims(), vol.spacing(), VoxelData::I16(vol.to_f32().iter().map(|x| (x.round() as i32 + offset) as i16).collect())).unwrap();
+        let tf = random_tf(tfs);
+        let o = offset as f32;
+        let tf = TransferFunction::new(
+            tf.opacity.iter().map(|&(d, a)| (d + o, a)).collect(),
+            tf.color.iter().map(|&(d, c)| (d + o, c)).collect(),
+        ).unwrap();
+        let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, rx, ry, 0.3), [48, 40]);
+        let base = Settings {
+            method: if brute { Method::Brute } else { Method::Binary },
+            mode: if blend { Mode::Blend } else { Mode::Iso },
+            threads: 2,
+            normals: Normals::Codes,
+            ..Settings::default()
+        };
+        let (pi, ppx, pd) = render(&vol, &tf, Settings { pack: true, ..base }, &cam);
+        let (si, spx, sd) = render(&vol, &tf, Settings { pack: false, ..base }, &cam);
+        let flat = |v: &[[f32; 4]]| v.iter().flatten().copied().collect::<Vec<f32>>();
+        prop_assert!(same_bits(&flat(&ppx), &flat(&spx)), "intermediate images differ");
+        prop_assert!(same_bits(&pd, &sd), "iso depths differ");
+        prop_assert!(same_bits(&flat(&pi.data), &flat(&si.data)), "final images differ");
     }
 
     /// Conservative mask: no sample with non-zero opacity lies in a cell whose bit is 0.
@@ -219,6 +260,9 @@ fn the_dispatched_kernel_is_what_runs_here() {
     eprintln!("hardware lzcnt/tzcnt: {}", shearwarp::depth::hw_bitscan());
     #[cfg(target_arch = "x86_64")]
     assert_eq!(shearwarp::depth::hw_bitscan(), std::arch::is_x86_feature_detected!("lzcnt") && std::arch::is_x86_feature_detected!("bmi1"));
+    eprintln!("AVX2 shear kernels: {}", shearwarp::mask::hw_avx2());
+    #[cfg(target_arch = "x86_64")]
+    assert_eq!(shearwarp::mask::hw_avx2(), std::arch::is_x86_feature_detected!("avx2"));
 }
 
 #[test]
@@ -274,7 +318,8 @@ fn no_drift_after_thousands_of_random_steps() {
 
 /// The shear kernels specialised per column length (1 to 8 words) and the
 /// general one (more words): random one-bit steps about both axes and
-/// multi-bit jumps end in exactly the mask sheared directly, for every length.
+/// multi-bit jumps end in exactly the mask sheared directly, for every length,
+/// with the kernels compiled for AVX2 (where the CPU has it) and the plain ones.
 #[test]
 fn every_column_length_shears_like_the_direct_shear() {
     // u64 columns of 1..=9 words, u32 columns of 2 and 10 words
@@ -299,6 +344,8 @@ fn every_column_length_shears_like_the_direct_shear() {
         macro_rules! run {
             ($w:ty) => {{
                 let mut m = BinaryMask::<$w>::build(&st, |_, hi| hi > 60.0);
+                let mut plain = m.clone();
+                plain.set_simd(false);
                 let mut state = ShearState::identity(nz);
                 for step in 0..240 {
                     if step % 40 == 39 {
@@ -306,18 +353,24 @@ fn every_column_length_shears_like_the_direct_shear() {
                         let e = [0, 1].map(|a| (state.ends[a][1] + (rnd() % 7) as f64 - 3.0).clamp(-(lim as f64), lim as f64));
                         state = ShearState::from_ends(nz, [0, 1].map(|a| [-e[a], e[a]]));
                         m.shear_to(&state);
+                        plain.shear_to(&state);
                     } else {
                         let along = (rnd() & 1) as usize;
                         let dir = if rnd() % 3 == 0 { -1 } else { 1 };
                         if (state.ends[along][1] + dir as f64).abs() > lim as f64 {
                             continue;
                         }
+                        plain.rotate_step(&state, along, dir);
                         state = m.rotate_step(&state, along, dir);
+                    }
+                    if step % 10 == 0 {
+                        assert_eq!(m.words(), plain.words(), "AVX2 and plain kernels, depth {nz}, step {step}");
                     }
                 }
                 let mut d = BinaryMask::<$w>::build(&st, |_, hi| hi > 60.0);
                 d.shear_direct(&state);
                 assert_eq!(m.words(), d.words(), "depth {nz}, {} bits", <$w>::BITS);
+                assert_eq!(plain.words(), d.words(), "plain kernels, depth {nz}, {} bits", <$w>::BITS);
             }};
         }
         if word64 { run!(u64) } else { run!(u32) }

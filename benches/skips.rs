@@ -210,6 +210,28 @@ fn skips(c: &mut Criterion) {
         })
     });
     g.finish();
+    // two steps in one pass (each slice moves −2..=2) against two single steps,
+    // for the 1-bit mask and the tissue presets' 4-bit codes (16 words a column)
+    let tissue = CellCodes::thresholds(&stack, &[-500.0, -100.0, 40.0, 300.0]).expect("codes");
+    for (bits, codes) in [(1, &codes), (tissue.nb, &tissue)] {
+        let mut g = c.benchmark_group(format!("shear_two_steps_256_{bits}bit"));
+        for (name, fused) in [("fused", true), ("single", false)] {
+            let mut m = BinaryMask::<u64>::from_codes(codes, 1);
+            m.set_fused(fused);
+            let (mut st, mut dir, mut pos) = (ShearState::identity(225), 2, 0i32);
+            g.bench_function(name, |b| {
+                b.iter(|| {
+                    if pos.abs() >= 40 {
+                        dir = -dir;
+                    }
+                    pos += dir;
+                    st = st.rotated(0, dir);
+                    pool.install(|| m.shear_to(&st))
+                })
+            });
+        }
+        g.finish();
+    }
 }
 
 criterion_group! {

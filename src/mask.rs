@@ -27,18 +27,33 @@
 //! by incremental one-bit steps (per-bit shift vectors: each slice moves −1, 0
 //! or +1, the split between directions may fall anywhere inside a word) when the
 //! target is at most a few bits away, else by a direct shear (clear and re-scatter
-//! from the unsheared cell bits). Either way only the occupied rectangle of the
+//! from the unsheared cell bits). Two incremental steps are fused into one pass
+//! over the words where the target is two or more bits away (each slice moves
+//! −2..=+2, five shift vectors): the same words, half the memory traffic. Either way only the occupied rectangle of the
 //! grid is touched.
 
 use rayon::prelude::*;
 
 use crate::depth::{Word, code_width_for, slot_shift};
 use crate::error::{Error, Result};
-use crate::shear::{ShearState, shift_vectors};
+use crate::shear::{ShearState, shift_vectors, shift_vectors2};
 use crate::slices::SliceStack;
 
 /// Steps above this count are done as one direct shear instead.
 pub const MAX_INCREMENTAL_STEPS: u32 = 6;
+
+/// Longest column (words per depth row) with shift kernels compiled for its
+/// length; longer columns run the general kernels, one step per pass.
+pub const MAX_FIXED_COLUMN: usize = 16;
+
+/// Longest column (words per depth row) whose incremental steps are fused two
+/// to a pass. Measured (`cargo bench --bench skips -- shear_two_steps`): two
+/// steps of the 256×256×225 head's mask take 242 µs fused against 330 µs
+/// single at 4 words (1-bit codes), but 2.6 ms against 1.3 ms at 15 words
+/// (4-bit codes), where the five-column window no longer fits in registers.
+pub const MAX_FUSED_COLUMN: usize = 4;
+// the fused kernels are compiled for the lengths [1 2 3 4] (`shift_columns2`, `shift_rows2`)
+const _: () = assert!(MAX_FUSED_COLUMN == 4);
 
 /// Largest super-cell size.
 pub const MAX_CELL: usize = 8;
@@ -242,13 +257,22 @@ pub struct BinaryMask<W: Word> {
     /// Shift kernels compiled for AVX2 ([`hw_avx2`]); false runs the plain
     /// build's kernels (the scalar reference, see [`BinaryMask::set_simd`]).
     avx2: bool,
+    /// Fuse two incremental steps into one pass where possible ([`BinaryMask::set_fused`]).
+    fused: bool,
+    /// Scratch of a fused step: the shift vectors of the moves +2, +1, 0, −1, −2.
+    moves: [Vec<W>; 5],
+    /// Scratch of a fused step along j: old row q − 2, and a row of zeros.
+    row_buf2: Vec<W>,
+    zero_row: Vec<W>,
 }
 
 /// Runs `$fixed` with the constant `$n` bound to the column length `$nw` when it
-/// is 1 to 8 words (a kernel compiled for that length), else `$any`.
+/// is 1 to [`MAX_FIXED_COLUMN`] words (a kernel compiled for that length), else
+/// `$any`. Sixteen u64 words hold 1024 one-bit slices, or 256 slices of the
+/// tissue presets' 4-bit codes.
 macro_rules! by_column_length {
     ($nw:expr, $n:ident => $fixed:expr, _ => $any:expr) => {
-        by_column_length!(@arms $nw, $n, $fixed, $any, [1 2 3 4 5 6 7 8])
+        by_column_length!(@arms $nw, $n, $fixed, $any, [1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16])
     };
     (@arms $nw:expr, $n:ident, $fixed:expr, $any:expr, [$($len:literal)*]) => {
         match $nw {
@@ -300,6 +324,10 @@ impl<W: Word> BinaryMask<W> {
             target: [vec![0; nk], vec![0; nk]],
             prev_off: [vec![0; nk], vec![0; nk]],
             avx2: hw_avx2(),
+            fused: true,
+            moves: std::array::from_fn(|_| vec![W::ZERO; nw]),
+            row_buf2: vec![W::ZERO; grid[0] * nw],
+            zero_row: vec![W::ZERO; grid[0] * nw],
         };
         m.scatter();
         m
@@ -315,6 +343,13 @@ impl<W: Word> BinaryMask<W> {
     /// same words; the switch exists so tests and benches can compare them.
     pub fn set_simd(&mut self, on: bool) {
         self.avx2 = on && hw_avx2();
+    }
+
+    /// `true` (the default) fuses two incremental steps into one pass over the
+    /// words wherever the target is two or more bits away; `false` makes every
+    /// step a pass of its own. The same words either way (tests compare them).
+    pub fn set_fused(&mut self, on: bool) {
+        self.fused = on;
     }
 
     pub fn code_width(&self) -> u32 {
@@ -453,9 +488,12 @@ impl<W: Word> BinaryMask<W> {
             ShearWork::default()
         } else if dist <= MAX_INCREMENTAL_STEPS {
             let mut w = ShearWork::default();
-            for _ in 0..dist {
-                w.words += self.step_towards(&target);
-                w.steps += 1;
+            let mut left = dist;
+            while left > 0 {
+                let by = if self.fused && left >= 2 && self.nw <= MAX_FUSED_COLUMN { 2 } else { 1 };
+                w.words += self.step_towards(&target, by as i32);
+                w.steps += by;
+                left -= by;
             }
             w
         } else {
@@ -522,9 +560,10 @@ impl<W: Word> BinaryMask<W> {
         });
     }
 
-    /// One incremental step: every slice moves at most one super column along i
-    /// and one super row along j towards `target`. Returns the words touched.
-    fn step_towards(&mut self, target: &[Vec<i32>; 2]) -> u64 {
+    /// One incremental step (`by` = 1), or two fused into one pass (`by` = 2):
+    /// every slice moves at most `by` super columns along i and `by` super rows
+    /// along j towards `target`. Returns the words touched.
+    fn step_towards(&mut self, target: &[Vec<i32>; 2], by: i32) -> u64 {
         let before = self.occupied_rect();
         let mut next = std::mem::take(&mut self.off);
         let mut prev = std::mem::take(&mut self.prev_off);
@@ -533,7 +572,7 @@ impl<W: Word> BinaryMask<W> {
         }
         for a in 0..2 {
             for (o, &t) in next[a].iter_mut().zip(&target[a]) {
-                *o += (t - *o).signum();
+                *o += (t - *o).clamp(-by, by);
             }
         }
         let after = self.occupied(&next);
@@ -543,6 +582,16 @@ impl<W: Word> BinaryMask<W> {
             return 0;
         };
         let mut touched = 0;
+        if by == 2 {
+            for a in 0..2 {
+                if shift_vectors2(self.nb, &prev[a], &next[a], &mut self.moves) > 0 {
+                    touched += if a == 0 { self.shift_columns2(r) } else { self.shift_rows2(r) };
+                }
+            }
+            self.off = next;
+            self.prev_off = prev;
+            return touched;
+        }
         // along i (columns p)
         if shift_vectors(self.nb, &prev[0], &next[0], &mut self.up, &mut self.down) > 0 {
             self.set_keep();
@@ -565,8 +614,8 @@ impl<W: Word> BinaryMask<W> {
     }
 
     /// `new[p] = old[p] & keep | old[p−1] & up | old[p+1] & down` over the rect,
-    /// one grid row per task. Columns of 1 to 8 words (depths up to 512 slices
-    /// in u64) run a kernel with the column length fixed at compile time
+    /// one grid row per task. Columns of 1 to 16 words (depths up to 1024 slices
+    /// in u64, 256 of 4-bit codes) run a kernel with the column length fixed at compile time
     /// ([`shift_columns_n`]): no inner loop to mispredict, the words of a column
     /// combined in registers. Longer columns run [`shift_columns_any`].
     fn shift_columns(&mut self, r: Rect) -> u64 {
@@ -594,7 +643,7 @@ impl<W: Word> BinaryMask<W> {
     }
 
     /// `new[q] = old[q] & keep | old[q−1] & up | old[q+1] & down` over the rect;
-    /// columns of 1 to 8 words run with the column length fixed at compile time.
+    /// columns of 1 to 16 words run with the column length fixed at compile time.
     fn shift_rows(&mut self, r: Rect) -> u64 {
         let nw = self.nw;
         let gw = self.grid[0];
@@ -623,6 +672,71 @@ impl<W: Word> BinaryMask<W> {
                     shift_row_n::<W, N>(row, next, prev, up, down, keep)
                 },
                 _ => shift_row_any(row, next, prev, nw, up, down, keep));
+        }
+        ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
+    }
+
+    /// Two steps along i in one pass: `new[p] = OR_d old[p − d] & moves[2 − d]`
+    /// for d = +2..=−2 over the rect, one grid row per task; columns of 1 to
+    /// [`MAX_FUSED_COLUMN`] words only (longer ones take two single steps: see `shear_to`).
+    fn shift_columns2(&mut self, r: Rect) -> u64 {
+        let nw = self.nw;
+        let gw = self.grid[0];
+        let (ps, pe) = (r.p0, r.p1.min(gw - 1));
+        let moves = &self.moves;
+        let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
+        let tasks = rows.par_chunks_mut(gw * nw);
+        let avx2 = self.avx2;
+        by_column_length!(@arms nw, N, tasks.for_each(|row| {
+                let m = moves.each_ref().map(|v| fixed::<W, N>(v));
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: `avx2` is set only when `hw_avx2()` detected AVX2
+                    // on this CPU at run time, all the kernel requires; its body
+                    // is the safe `shift_columns2_n`.
+                    unsafe { shift_columns2_n_avx2::<W, N>(row, ps, pe, m) };
+                    return;
+                }
+                let _ = avx2;
+                shift_columns2_n::<W, N>(row, ps, pe, m)
+            }),
+            unreachable!("fused steps only for columns of 1 to 4 words"), [1 2 3 4]);
+        ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
+    }
+
+    /// Two steps along j in one pass: `new[q] = OR_d old[q − d] & moves[2 − d]`.
+    fn shift_rows2(&mut self, r: Rect) -> u64 {
+        let nw = self.nw;
+        let gw = self.grid[0];
+        let gh = self.grid[1];
+        let (ps, pe) = (r.p0 * nw, (r.p1 + 1).min(gw) * nw);
+        let (prev1, prev2) = (&mut self.row_buf[..pe - ps], &mut self.row_buf2[..pe - ps]);
+        for (buf, back) in [(&mut *prev1, 1), (&mut *prev2, 2)] {
+            match r.q0.checked_sub(back) {
+                Some(q) => buf.copy_from_slice(&self.words[q * gw * nw + ps..q * gw * nw + pe]),
+                None => buf.fill(W::ZERO),
+            }
+        }
+        let m = &self.moves;
+        let zeros = &self.zero_row[..pe - ps];
+        let row_len = gw * nw;
+        for q in r.q0..=r.q1 {
+            let (head, tail) = self.words.split_at_mut((q + 1) * row_len);
+            let row = &mut head[q * row_len + ps..q * row_len + pe];
+            // the two rows below, or zeros past the grid's last row
+            let next1 = if q + 1 < gh { &tail[ps..pe] } else { zeros };
+            let next2 = if q + 2 < gh { &tail[row_len + ps..row_len + pe] } else { zeros };
+            by_column_length!(@arms nw, N, {
+                    let m = m.each_ref().map(|v| fixed::<W, N>(v));
+                    #[cfg(target_arch = "x86_64")]
+                    if self.avx2 {
+                        // SAFETY: as in `shift_columns`: AVX2 was detected at run time.
+                        unsafe { shift_row2_n_avx2::<W, N>(row, next1, next2, prev1, prev2, m) };
+                        continue;
+                    }
+                    shift_row2_n::<W, N>(row, next1, next2, prev1, prev2, m)
+                },
+                unreachable!("fused steps only for columns of 1 to 4 words"), [1 2 3 4]);
         }
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
     }
@@ -708,6 +822,59 @@ fn shift_row_n<W: Word, const N: usize>(row: &mut [W], next: &[W], prev: &mut [W
     } else {
         row.iter_mut().zip(prev.iter_mut()).zip(next).for_each(|((cw, pw), nx)| column(cw, pw, nx));
     }
+}
+
+/// One grid row of [`BinaryMask::shift_columns2`] for columns of `N` words:
+/// columns `ps..=pe` become `OR_j old[p − 2 + j] & m[j]` (columns before `ps`
+/// are read as they are, those past the row's end as zero). The five old
+/// columns around `p` ride in a window, so a column is written after it is read.
+#[inline(always)]
+fn shift_columns2_n<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, m: [&[W; N]; 5]) {
+    let gw = row.len() / N;
+    let col = |row: &[W], p: usize| if p < gw { *fixed::<W, N>(&row[p * N..]) } else { [W::ZERO; N] };
+    // ps − 2 and ps − 1 wrap to huge indices (read as zero) at the grid's edge
+    let mut win = [col(row, ps.wrapping_sub(2)), col(row, ps.wrapping_sub(1)), col(row, ps), col(row, ps + 1), col(row, ps + 2)];
+    for p in ps..=pe {
+        let out: &mut [W; N] = (&mut row[p * N..p * N + N]).try_into().expect("N words");
+        for w in 0..N {
+            out[w] = (win[0][w] & m[0][w]) | (win[1][w] & m[1][w]) | (win[2][w] & m[2][w]) | (win[3][w] & m[3][w]) | (win[4][w] & m[4][w]);
+        }
+        win = [win[1], win[2], win[3], win[4], col(row, p + 3)];
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_rows2`] for columns of `N` words: `row`
+/// becomes `prev2 & m[0] | prev1 & m[1] | row & m[2] | next1 & m[3] | next2 & m[4]`
+/// column by column; `prev2` takes `prev1` and `prev1` the row's old words.
+#[inline(always)]
+fn shift_row2_n<W: Word, const N: usize>(row: &mut [W], next1: &[W], next2: &[W], prev1: &mut [W], prev2: &mut [W], m: [&[W; N]; 5]) {
+    let (row, _) = row.as_chunks_mut::<N>();
+    let (prev1, _) = prev1.as_chunks_mut::<N>();
+    let (prev2, _) = prev2.as_chunks_mut::<N>();
+    let (next1, _) = next1.as_chunks::<N>();
+    let (next2, _) = next2.as_chunks::<N>();
+    for ((((cw, p1), p2), n1), n2) in row.iter_mut().zip(prev1.iter_mut()).zip(prev2.iter_mut()).zip(next1).zip(next2) {
+        for w in 0..N {
+            let old = cw[w];
+            cw[w] = (p2[w] & m[0][w]) | (p1[w] & m[1][w]) | (old & m[2][w]) | (n1[w] & m[3][w]) | (n2[w] & m[4][w]);
+            p2[w] = p1[w];
+            p1[w] = old;
+        }
+    }
+}
+
+/// [`shift_columns2_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn shift_columns2_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, m: [&[W; N]; 5]) {
+    shift_columns2_n::<W, N>(row, ps, pe, m)
+}
+
+/// [`shift_row2_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn shift_row2_n_avx2<W: Word, const N: usize>(row: &mut [W], next1: &[W], next2: &[W], prev1: &mut [W], prev2: &mut [W], m: [&[W; N]; 5]) {
+    shift_row2_n::<W, N>(row, next1, next2, prev1, prev2, m)
 }
 
 /// [`shift_columns_n`] compiled for AVX2: a column of up to four u64 words is

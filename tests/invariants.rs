@@ -319,11 +319,16 @@ fn no_drift_after_thousands_of_random_steps() {
 /// The shear kernels specialised per column length (1 to 8 words) and the
 /// general one (more words): random one-bit steps about both axes and
 /// multi-bit jumps end in exactly the mask sheared directly, for every length,
-/// with the kernels compiled for AVX2 (where the CPU has it) and the plain ones.
+/// with the kernels compiled for AVX2 (where the CPU has it) and the plain ones,
+/// and with multi-bit jumps made of fused two-step passes or of single steps.
 #[test]
 fn every_column_length_shears_like_the_direct_shear() {
-    // u64 columns of 1..=9 words, u32 columns of 2 and 10 words
-    let cases: [(usize, bool); 11] = [
+    // u64 columns of 1..=9, 12, 16 and 17 words, u32 columns of 2, 10 and 17 words
+    let cases: [(usize, bool); 15] = [
+        (700, true),
+        (1000, true),
+        (1050, true),
+        (530, false),
         (40, true),
         (100, true),
         (170, true),
@@ -346,6 +351,8 @@ fn every_column_length_shears_like_the_direct_shear() {
                 let mut m = BinaryMask::<$w>::build(&st, |_, hi| hi > 60.0);
                 let mut plain = m.clone();
                 plain.set_simd(false);
+                let mut single = m.clone();
+                single.set_fused(false);
                 let mut state = ShearState::identity(nz);
                 for step in 0..240 {
                     if step % 40 == 39 {
@@ -354,6 +361,7 @@ fn every_column_length_shears_like_the_direct_shear() {
                         state = ShearState::from_ends(nz, [0, 1].map(|a| [-e[a], e[a]]));
                         m.shear_to(&state);
                         plain.shear_to(&state);
+                        single.shear_to(&state);
                     } else {
                         let along = (rnd() & 1) as usize;
                         let dir = if rnd() % 3 == 0 { -1 } else { 1 };
@@ -361,10 +369,12 @@ fn every_column_length_shears_like_the_direct_shear() {
                             continue;
                         }
                         plain.rotate_step(&state, along, dir);
+                        single.rotate_step(&state, along, dir);
                         state = m.rotate_step(&state, along, dir);
                     }
                     if step % 10 == 0 {
                         assert_eq!(m.words(), plain.words(), "AVX2 and plain kernels, depth {nz}, step {step}");
+                        assert_eq!(m.words(), single.words(), "fused and single steps, depth {nz}, step {step}");
                     }
                 }
                 let mut d = BinaryMask::<$w>::build(&st, |_, hi| hi > 60.0);

@@ -873,7 +873,14 @@ unsafe fn shift_columns2_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usiz
 /// [`shift_row2_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn shift_row2_n_avx2<W: Word, const N: usize>(row: &mut [W], next1: &[W], next2: &[W], prev1: &mut [W], prev2: &mut [W], m: [&[W; N]; 5]) {
+unsafe fn shift_row2_n_avx2<W: Word, const N: usize>(
+    row: &mut [W],
+    next1: &[W],
+    next2: &[W],
+    prev1: &mut [W],
+    prev2: &mut [W],
+    m: [&[W; N]; 5],
+) {
     shift_row2_n::<W, N>(row, next1, next2, prev1, prev2, m)
 }
 

@@ -270,8 +270,7 @@ impl<'a> RayContext<'a> {
                         let n01 = self.stack.n[0] * self.stack.n[1];
                         // the slices before and after k in walking order (an index
                         // past either end wraps or overruns: the prefetch skips it)
-                        let (before, after) =
-                            if self.ascending { (b.wrapping_sub(n01), b + n01) } else { (b + n01, b.wrapping_sub(n01)) };
+                        let (before, after) = if self.ascending { (b.wrapping_sub(n01), b + n01) } else { (b + n01, b.wrapping_sub(n01)) };
                         for c in [b, before, after] {
                             v.prefetch(c);
                         }

@@ -540,7 +540,8 @@ impl Renderer {
         }
         let raycast = matches!(self.settings.method, Method::Binary | Method::Brute);
         if raycast && self.settings.normals == Normals::Codes && self.normals[axis].is_none() {
-            let (stack, spacing, pack) = (self.stacks[axis].as_ref().expect("stack built above"), self.volume.spacing(), self.settings.pack);
+            let (stack, spacing, pack) =
+                (self.stacks[axis].as_ref().expect("stack built above"), self.volume.spacing(), self.settings.pack);
             self.normals[axis] = Some(self.pool.install(|| NormalStack::with_packing(stack, spacing, pack)));
         }
         if self.settings.method == Method::Binary {

@@ -181,34 +181,29 @@ fn skips(c: &mut Criterion) {
     st = m.rotate_step(&st, 0, 1);
     let mut plain = m.clone();
     plain.set_simd(false);
-    let mut plain_st = st.clone();
+    let plain_st = st.clone();
     let w = m.shear_to(&st.rotated(0, 1)).words.max(1);
     let bytes = (w * 8) as usize;
     let (src, mut dst) = (vec![1u8; bytes], vec![0u8; bytes]);
     let mut g = c.benchmark_group(format!("shear_step_vs_memcpy_256_{bytes}_bytes"));
-    let (mut dir, mut pos) = (1, 2i32);
     // one thread for both, so the comparison is per core
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
-    g.bench_function("shear_step", |b| {
-        b.iter(|| {
-            if pos.abs() >= 40 {
-                dir = -dir;
-            }
-            pos += dir;
-            st = pool.install(|| m.rotate_step(&st, 0, dir));
-        })
-    });
+    // one-bit steps back and forth within ±40 bits, so the state stays valid
+    let steps = |g: &mut BenchmarkGroup<'_, WallTime>, name: &str, m: &mut BinaryMask<u64>, mut st: ShearState| {
+        let (mut dir, mut pos) = (1, 2i32);
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                if pos.abs() >= 40 {
+                    dir = -dir;
+                }
+                pos += dir;
+                st = pool.install(|| m.rotate_step(&st, 0, dir));
+            })
+        });
+    };
+    steps(&mut g, "shear_step", &mut m, st);
     g.bench_function("memcpy", |b| b.iter(|| dst.copy_from_slice(black_box(&src))));
-    let (mut dir, mut pos) = (1, 2i32);
-    g.bench_function("shear_step_plain", |b| {
-        b.iter(|| {
-            if pos.abs() >= 40 {
-                dir = -dir;
-            }
-            pos += dir;
-            plain_st = pool.install(|| plain.rotate_step(&plain_st, 0, dir));
-        })
-    });
+    steps(&mut g, "shear_step_plain", &mut plain, plain_st);
     g.finish();
     // two steps in one pass (each slice moves −2..=2) against two single steps,
     // for the 1-bit mask and the tissue presets' 4-bit codes (16 words a column)

@@ -29,8 +29,8 @@
 //! target is at most a few bits away, else by a direct shear (clear and re-scatter
 //! from the unsheared cell bits). Two incremental steps are fused into one pass
 //! over the words where the target is two or more bits away (each slice moves
-//! −2..=+2, five shift vectors): the same words, half the memory traffic. Either way only the occupied rectangle of the
-//! grid is touched.
+//! −2..=+2, five shift vectors): the same words, half the memory traffic.
+//! Either way only the occupied rectangle of the grid is touched.
 
 use rayon::prelude::*;
 
@@ -337,7 +337,6 @@ impl<W: Word> BinaryMask<W> {
     pub fn cell_size(&self) -> usize {
         self.s
     }
-    /// Bits per code.
     /// Chooses the shift kernels: `true` (the default on a CPU with AVX2)
     /// runs them compiled for AVX2, `false` the plain build's. Both give the
     /// same words; the switch exists so tests and benches can compare them.
@@ -352,6 +351,7 @@ impl<W: Word> BinaryMask<W> {
         self.fused = on;
     }
 
+    /// Bits per code.
     pub fn code_width(&self) -> u32 {
         self.nb
     }
@@ -614,9 +614,9 @@ impl<W: Word> BinaryMask<W> {
     }
 
     /// `new[p] = old[p] & keep | old[p−1] & up | old[p+1] & down` over the rect,
-    /// one grid row per task. Columns of 1 to 16 words (depths up to 1024 slices
-    /// in u64, 256 of 4-bit codes) run a kernel with the column length fixed at compile time
-    /// ([`shift_columns_n`]): no inner loop to mispredict, the words of a column
+    /// one grid row per task. Columns of 1 to 16 words (depths up to 1024
+    /// slices in u64, 256 of 4-bit codes) run a kernel with the column length
+    /// fixed at compile time ([`shift_columns_n`]): no inner loop to mispredict, the words of a column
     /// combined in registers. Longer columns run [`shift_columns_any`].
     fn shift_columns(&mut self, r: Rect) -> u64 {
         let nw = self.nw;

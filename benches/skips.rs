@@ -7,7 +7,8 @@
 //! binary path's bit-scan kernels (run-time dispatched lzcnt, plain bsr, LUT);
 //! the binary row's prefetches against none; shading by normal code and table
 //! against the exact gradient; densities packed with the normal codes against
-//! the two arrays apart; the shear's kernels compiled for AVX2 against plain.
+//! the two arrays apart; the shear's kernels compiled for AVX2 against plain;
+//! a frame for a window warped to 8 bits against warped to f32 and rounded.
 //! Run: `cargo bench --bench skips`.
 
 use std::hint::black_box;
@@ -29,7 +30,7 @@ use shearwarp::shear::ShearState;
 use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, rotate_eye};
 use shearwarp::volume::{Volume, VoxelData};
-use shearwarp::warp::Image;
+use shearwarp::warp::{Image, Image8, Target, to8};
 
 fn cam(deg: f64) -> Camera {
     let anterior = DMat3::from_cols_array(&[-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
@@ -53,8 +54,18 @@ fn renderer_of(vol: Volume, s: Settings, tissue: &str) -> Renderer {
 /// Every sample turns through the same views (flat sampling: the same number of
 /// frames per sample, each sample starting from the same view, which is
 /// rendered untimed first), so samples differ by noise, not by what they show.
-fn bench_turn(g: &mut BenchmarkGroup<'_, WallTime>, name: impl Into<String>, mut r: Renderer) {
-    let mut img = Image::new(512, 512);
+fn bench_turn(g: &mut BenchmarkGroup<'_, WallTime>, name: impl Into<String>, r: Renderer) {
+    bench_turn_into(g, name, r, Image::new(512, 512), |_| ());
+}
+
+/// [`bench_turn`] into image `img` (f32 or 8-bit), with `show(img)` after every frame.
+fn bench_turn_into<T: Target>(
+    g: &mut BenchmarkGroup<'_, WallTime>,
+    name: impl Into<String>,
+    mut r: Renderer,
+    mut img: T,
+    mut show: impl FnMut(&T),
+) {
     g.sampling_mode(SamplingMode::Flat);
     g.bench_function(name.into(), |b| {
         b.iter_custom(|frames| {
@@ -62,6 +73,7 @@ fn bench_turn(g: &mut BenchmarkGroup<'_, WallTime>, name: impl Into<String>, mut
             let t = Instant::now();
             for f in 1..=frames {
                 black_box(r.render(&cam((f % 360) as f64), &mut img).expect("render"));
+                show(&img);
             }
             t.elapsed()
         })
@@ -69,6 +81,27 @@ fn bench_turn(g: &mut BenchmarkGroup<'_, WallTime>, name: impl Into<String>, mut
 }
 
 fn skips(c: &mut Criterion) {
+    // a frame for a window (0RGB words, as `shearwarp view` hands softbuffer):
+    // the f32 warp and a rounding pass over the whole image, against the warp
+    // rounding to 8 bits as it writes and a byte shuffle
+    let mut g = c.benchmark_group("display_frame_iso_skin");
+    let mut words: Vec<u32> = Vec::with_capacity(512 * 512);
+    let to_words = |img: &Image, out: &mut Vec<u32>| {
+        out.clear();
+        out.extend(img.data.iter().map(|p| (to8(p[0]) as u32) << 16 | (to8(p[1]) as u32) << 8 | to8(p[2]) as u32));
+    };
+    bench_turn_into(&mut g, "f32_then_round", renderer(Settings::default(), "skin"), Image::new(512, 512), |img| {
+        to_words(img, &mut words);
+        black_box(&words);
+    });
+    let mut words8: Vec<u32> = Vec::with_capacity(512 * 512);
+    bench_turn_into(&mut g, "warp_to_u8", renderer(Settings::default(), "skin"), Image8::new(512, 512), |img| {
+        // what `viewer::worker::to_0rgb` does (the viewer is an optional feature)
+        words8.clear();
+        words8.extend(img.data.iter().map(|p| (p[0] as u32) << 16 | (p[1] as u32) << 8 | p[2] as u32));
+        black_box(&words8);
+    });
+    g.finish();
     // empty-space skipping through the mask
     for (mode, tissue) in [(Mode::Iso, "skin"), (Mode::Blend, "bone")] {
         let mut g = c.benchmark_group(format!("mask_skipping_{}", mode.name()));

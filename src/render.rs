@@ -28,7 +28,7 @@ use crate::shear::ShearState;
 use crate::slices::SliceStack;
 use crate::view::{Camera, Factorization};
 use crate::volume::Volume;
-use crate::warp::{Image, warp};
+use crate::warp::Target;
 
 /// Largest sheared mask, in bytes, a renderer builds for one axis. It is
 /// allocated zeroed (address space; only the occupied part is ever touched).
@@ -606,7 +606,10 @@ impl Renderer {
     /// When the camera, settings and classification are those of the frame this
     /// renderer last wrote into this same `out`, nothing is rendered and the stats
     /// say `skipped` (the image's pixels are assumed untouched since).
-    pub fn render(&mut self, camera: &Camera, out: &mut Image) -> Result<FrameStats> {
+    ///
+    /// `out` is a [`crate::warp::Image`] (f32) or a [`crate::warp::Image8`]
+    /// (the same pixels rounded to 8 bits, as a display wants them).
+    pub fn render<T: Target>(&mut self, camera: &Camera, out: &mut T) -> Result<FrameStats> {
         let key = FrameKey {
             camera: *camera,
             settings: self.settings,
@@ -614,7 +617,7 @@ impl Renderer {
             tissue: self.tissues.as_ref().map(|t| t.current),
         };
         if let Some((k, stamp)) = self.last_frame {
-            if k == key && out.stamp == stamp && out.width == camera.size[0] && out.height == camera.size[1] {
+            if k == key && out.stamp() == stamp && out.size() == camera.size {
                 return Ok(FrameStats { skipped: true, axis: self.last_fact.as_ref().map_or(0, |f| f.axis), ..Default::default() });
             }
         }
@@ -700,13 +703,13 @@ impl Renderer {
 
             // warp
             let t = Instant::now();
-            out.prepare(camera.size[0], camera.size[1]);
-            warp(inter, &f, [pad as f64, pad as f64], out);
+            out.resize(camera.size[0], camera.size[1]);
+            out.warp_from(inter, &f, [pad as f64, pad as f64]);
             stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
         });
         self.last_fact = Some(f);
         let stamp = NEXT_STAMP.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        out.stamp = stamp;
+        out.set_stamp(stamp);
         self.last_frame = Some((key, stamp));
         Ok(stats)
     }
@@ -715,6 +718,7 @@ impl Renderer {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::warp::Image;
     use glam::DMat3;
 
     #[test]

@@ -1,11 +1,14 @@
 //! Stage 7 — the warp: intermediate image to final image.
 //!
-//! Owns the final [`Image`] (premultiplied RGBA f32, row 0 at the top) and the
-//! bilinear affine [`warp`] shared by every shear-warp path: each output pixel is
-//! mapped back through the inverse of the factorization's 2-D warp into the
-//! intermediate image and resampled bilinearly. Only the output span of each row
-//! whose preimage meets the intermediate image's valid rectangle is resampled;
-//! the rest is cleared.
+//! Owns the final images — [`Image`] (premultiplied RGBA f32, row 0 at the
+//! top: the exact result every test and metric compares) and [`Image8`] (the
+//! same pixels rounded to 8 bits: what a window, a GIF or a PNG receives) —
+//! and the bilinear affine warp shared by every shear-warp path: each output
+//! pixel is mapped back through the inverse of the factorization's 2-D warp
+//! into the intermediate image and resampled bilinearly. Only the output span
+//! of each row whose preimage meets the intermediate image's valid rectangle is
+//! resampled; the rest is cleared. One generic row loop ([`Texel`]) writes
+//! either format; [`Target`] is what [`crate::render::Renderer::render`] draws into.
 
 use glam::Vec4;
 use rayon::prelude::*;
@@ -73,14 +76,117 @@ impl Image {
     }
 }
 
+impl Image {
+    /// Every pixel rounded to 8 bits by [`to8`] (what [`warp8`] writes).
+    pub fn to_rgba8(&self) -> Vec<[u8; 4]> {
+        self.data.iter().map(|c| c.map(to8)).collect()
+    }
+}
+
+/// A rendered image rounded to 8 bits: premultiplied RGBA (over black when
+/// displayed), row 0 at the top, written by [`warp8`]. What a window, a GIF or
+/// a PNG receives, without a conversion pass over an f32 image. Two images are
+/// equal when their sizes and pixels are.
+#[derive(Clone, Debug)]
+pub struct Image8 {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<[u8; 4]>,
+    /// As [`Image`]'s: per row, the span the last warp wrote.
+    spans: Vec<(u32, u32)>,
+    /// As [`Image`]'s: which renderer frame last wrote this image (0: none).
+    pub(crate) stamp: u64,
+}
+
+impl Image8 {
+    /// A transparent image.
+    pub fn new(width: usize, height: usize) -> Self {
+        Image8 { width, height, data: vec![[0; 4]; width * height], spans: vec![(0, 0); height], stamp: 0 }
+    }
+
+    /// Resizes (and clears) when the size differs.
+    pub fn prepare(&mut self, width: usize, height: usize) {
+        if self.width != width || self.height != height {
+            *self = Image8::new(width, height);
+        }
+    }
+
+    /// Pixel at `(x, y)`.
+    pub fn at(&self, x: usize, y: usize) -> [u8; 4] {
+        self.data[y * self.width + x]
+    }
+
+    /// RGB over a black background (equal to [`Image::to_rgb8`] of the f32 image).
+    pub fn to_rgb8(&self) -> image::RgbImage {
+        let mut out = image::RgbImage::new(self.width as u32, self.height as u32);
+        for (px, c) in out.pixels_mut().zip(&self.data) {
+            *px = image::Rgb([c[0], c[1], c[2]]);
+        }
+        out
+    }
+
+    /// Writes a PNG.
+    pub fn save_png(&self, path: &std::path::Path) -> Result<()> {
+        self.to_rgb8().save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::file(path, format!("cannot write PNG: {e}")))
+    }
+}
+
+/// An image a renderer draws frames into: its size, the stamp of the frame
+/// that last wrote it (so an unchanged frame can be skipped), and the warp that
+/// fills it from an intermediate image.
+pub trait Target: Send {
+    /// `[width, height]`.
+    fn size(&self) -> [usize; 2];
+    /// Resizes (and clears) when the size differs.
+    fn resize(&mut self, width: usize, height: usize);
+    /// Which renderer frame last wrote this image (0: none).
+    fn stamp(&self) -> u64;
+    /// Records the frame that wrote it.
+    fn set_stamp(&mut self, stamp: u64);
+    /// Warps `inter` (factorization `f`, intermediate pixel `origin` of sheared `(0, 0)`) into it.
+    fn warp_from(&mut self, inter: &Intermediate, f: &Factorization, origin: [f64; 2]);
+}
+
+/// [`Target`] for an image type with the fields and `prepare` of [`Image`].
+macro_rules! target {
+    ($ty:ty, $warp:ident) => {
+        impl Target for $ty {
+            fn size(&self) -> [usize; 2] {
+                [self.width, self.height]
+            }
+            fn resize(&mut self, width: usize, height: usize) {
+                self.prepare(width, height);
+            }
+            fn stamp(&self) -> u64 {
+                self.stamp
+            }
+            fn set_stamp(&mut self, stamp: u64) {
+                self.stamp = stamp;
+            }
+            fn warp_from(&mut self, inter: &Intermediate, f: &Factorization, origin: [f64; 2]) {
+                $warp(inter, f, origin, self);
+            }
+        }
+    };
+}
+target!(Image, warp);
+target!(Image8, warp8);
+
+impl PartialEq for Image8 {
+    fn eq(&self, o: &Self) -> bool {
+        self.width == o.width && self.height == o.height && self.data == o.data
+    }
+}
+
 impl PartialEq for Image {
     fn eq(&self, o: &Self) -> bool {
         self.width == o.width && self.height == o.height && self.data == o.data
     }
 }
 
-#[inline]
-fn to8(c: f32) -> u8 {
+/// One channel in [0, 1] rounded to 8 bits (clamped; NaN gives 0).
+#[inline(always)]
+pub fn to8(c: f32) -> u8 {
     (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
@@ -93,17 +199,75 @@ fn clip_span(lo: f64, hi: f64, a: f64, b: f64, lo_b: f64, hi_b: f64) -> (f64, f6
     (lo.max(x0.min(x1)), hi.min(x0.max(x1)))
 }
 
+/// A pixel format the warp writes, made from the bilinear result (premultiplied
+/// RGBA in f32).
+pub trait Texel: Copy + Send + Sync {
+    /// Transparent black.
+    const CLEAR: Self;
+    /// The pixel of a premultiplied RGBA value.
+    fn from_rgba(v: Vec4) -> Self;
+}
+
+impl Texel for [f32; 4] {
+    const CLEAR: Self = [0.0; 4];
+    #[inline(always)]
+    fn from_rgba(v: Vec4) -> Self {
+        v.to_array()
+    }
+}
+
+impl Texel for [u8; 4] {
+    const CLEAR: Self = [0; 4];
+    /// [`to8`] of every channel, bit for bit (tested at NaN, ±∞ and every
+    /// rounding boundary): one clamp, multiply-add, truncation and two packs
+    /// for all four channels.
+    #[inline(always)]
+    fn from_rgba(v: Vec4) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            let x: __m128 = v.into();
+            // SAFETY: SSE and SSE2 belong to the x86-64 baseline, enabled in every
+            // build for this architecture, which is all these register-only
+            // intrinsics need (no memory is read or written). Exercised by
+            // `texel_u8_is_to8` and every 8-bit warp.
+            unsafe {
+                // maxps returns its second operand (0) when the first is NaN, as
+                // `NaN as u8` is 0; the product and sum are to8's, in its order
+                let c = _mm_min_ps(_mm_max_ps(x, _mm_setzero_ps()), _mm_set1_ps(1.0));
+                let i = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(c, _mm_set1_ps(255.0)), _mm_set1_ps(0.5)));
+                // every lane in 0..=255: the saturating packs are exact
+                let b = _mm_packus_epi16(_mm_packs_epi32(i, i), _mm_setzero_si128());
+                (_mm_cvtsi128_si32(b) as u32).to_le_bytes()
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        v.to_array().map(to8)
+    }
+}
+
 /// Warps `inter` into `out` (already sized): output pixel `(u, v)` takes the
 /// bilinear sample of `inter` at the intermediate position of the sheared point
 /// `inverse_warp(u, v)` plus `origin` (the intermediate pixel of sheared `(0, 0)`).
 pub fn warp(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut Image) {
+    warp_rows(inter, f, origin, out.width, &mut out.data, &mut out.spans);
+}
+
+/// [`warp`] into an 8-bit image: the same samples, each channel rounded by
+/// [`to8`] (equal to [`Image::to_rgba8`] of the f32 warp, bit for bit).
+pub fn warp8(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut Image8) {
+    warp_rows(inter, f, origin, out.width, &mut out.data, &mut out.spans);
+}
+
+/// The warp's row loop for any pixel format: `data` holds rows of `w` pixels,
+/// `spans` the span each row's last warp wrote.
+fn warp_rows<T: Texel>(inter: &Intermediate, f: &Factorization, origin: [f64; 2], w: usize, data: &mut [T], spans: &mut [(u32, u32)]) {
     let (inv, it) = f.inverse_warp();
-    let w = out.width;
     let valid = inter.valid;
-    out.data.par_chunks_mut(w).zip(out.spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
+    data.par_chunks_mut(w).zip(spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
         let (old0, old1) = (span.0 as usize, span.1 as usize);
         let Some(r) = valid else {
-            row[old0..old1].fill([0.0; 4]);
+            row[old0..old1].fill(T::CLEAR);
             *span = (0, 0);
             return;
         };
@@ -117,8 +281,8 @@ pub fn warp(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut
         let (u0, u1) = if u0 < u1 { (u0, u1) } else { (0, 0) };
         // clear only what the last frame wrote and this one does not
         if old0 < old1 {
-            row[old0..old1.min(u0).max(old0)].fill([0.0; 4]);
-            row[u1.max(old0).min(old1)..old1].fill([0.0; 4]);
+            row[old0..old1.min(u0).max(old0)].fill(T::CLEAR);
+            row[u1.max(old0).min(old1)..old1].fill(T::CLEAR);
         }
         *span = (u0 as u32, u1 as u32);
         if u0 == u1 {
@@ -144,9 +308,33 @@ pub fn warp(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut
             // all four channels at once in one SSE register (glam's Vec4)
             let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
             let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);
-            *px = t.lerp(b, fy).to_array();
+            *px = T::from_rgba(t.lerp(b, fy));
             p += dp;
             q += dq;
         }
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every value the 8-bit texel can meet: NaN, ±∞, out of range, and both
+    /// sides of every rounding boundary `(k + 0.5)/255` and of every `k/255`.
+    #[test]
+    fn texel_u8_is_to8() {
+        let mut xs = vec![f32::NAN, -f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0, 0.0, 1.0, 2.0, -1.0, f32::MAX, f32::MIN, 1e-30];
+        for k in 0..=256 {
+            for c in [(k as f32 + 0.5) / 255.0, k as f32 / 255.0] {
+                xs.extend([c, f32::from_bits(c.to_bits() + 1), f32::from_bits(c.to_bits().saturating_sub(1))]);
+            }
+        }
+        for (i, &x) in xs.iter().enumerate() {
+            // each value in every lane, beside others
+            let y = xs[(i * 7 + 3) % xs.len()];
+            for v in [[x, y, x, y], [y, x, y, x], [x; 4]] {
+                assert_eq!(<[u8; 4]>::from_rgba(Vec4::from_array(v)), v.map(to8), "{v:?}");
+            }
+        }
+    }
 }

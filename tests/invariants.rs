@@ -12,7 +12,7 @@ use shearwarp::shear::ShearState;
 use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, Factorization, rotate_eye};
 use shearwarp::volume::{Volume, VoxelData};
-use shearwarp::warp::Image;
+use shearwarp::warp::{Image, Image8};
 
 /// A random volume of blobs and noise with internal empty regions.
 fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
@@ -105,6 +105,31 @@ fn same_bits(a: &[f32], b: &[f32]) -> bool {
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(cases(48)))]
+
+    /// The 8-bit warp writes the f32 warp's pixels rounded, bit for bit, frame
+    /// after frame into the same images (so its span clearing is the f32 one's).
+    #[test]
+    fn eight_bit_frames_are_the_rounded_f32_frames(
+        nx in 2usize..20, ny in 2usize..20, nz in 2usize..24, seed in any::<u64>(), tfs in any::<u64>(),
+        rx in -3.2f64..3.2, ry in -3.2f64..3.2, step in -1.0f64..1.0, blend in any::<bool>(), rle in any::<bool>(),
+    ) {
+        let vol = random_volume([nx, ny, nz], seed, [1.0, 0.8, 1.5]);
+        let s = Settings {
+            mode: if blend { Mode::Blend } else { Mode::Iso },
+            method: if rle { Method::Rle } else { Method::Binary },
+            threads: 2,
+            ..Settings::default()
+        };
+        let mut r = Renderer::new(vol, &random_tf(tfs), s).unwrap();
+        let (mut img, mut img8) = (Image::new(37, 29), Image8::new(37, 29));
+        for f in 0..4 {
+            let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, rx + f as f64 * step, ry, 0.3), [37, 29]);
+            r.render(&cam, &mut img).unwrap();
+            r.render(&cam, &mut img8).unwrap();
+            prop_assert_eq!(&img8.data, &img.to_rgba8(), "frame {}", f);
+            prop_assert_eq!(img8.to_rgb8(), img.to_rgb8());
+        }
+    }
 
     /// Lossless skipping: the accelerated image equals brute force sample for sample.
     #[test]

@@ -20,7 +20,7 @@ use crate::presets::{self, Tissue};
 use crate::raycast::Mode;
 use crate::render::{FrameStats, Renderer, Settings};
 use crate::volume::Volume;
-use crate::warp::Image;
+use crate::warp::{Image8, Target};
 
 /// A finished frame.
 #[derive(Clone, Debug)]
@@ -131,7 +131,7 @@ impl Renderers {
     }
 
     /// Renders `spec` into `img`.
-    pub fn render(&mut self, spec: &Spec, img: &mut Image) -> crate::Result<FrameStats> {
+    pub fn render<T: Target>(&mut self, spec: &Spec, img: &mut T) -> crate::Result<FrameStats> {
         let r = self.select(spec.class, spec.cell)?;
         let st = r.render(&spec.camera, img)?;
         self.stale[st.axis] = false;
@@ -152,11 +152,10 @@ impl Renderers {
     }
 }
 
-/// `0RGB` pixels of `img` over black (the rounding of [`Image::to_rgb8`]).
-pub fn to_0rgb(img: &Image, out: &mut Vec<u32>) {
-    let to8 = |c: f32| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u32;
+/// `0RGB` pixels of `img` over black.
+pub fn to_0rgb(img: &Image8, out: &mut Vec<u32>) {
     out.clear();
-    out.extend(img.data.iter().map(|p| to8(p[0]) << 16 | to8(p[1]) << 8 | to8(p[2])));
+    out.extend(img.data.iter().map(|p| (p[0] as u32) << 16 | (p[1] as u32) << 8 | p[2] as u32));
 }
 
 #[derive(Default)]
@@ -184,7 +183,8 @@ impl Worker {
                     reply(Reply::Busy { kind, seq: 0, what: "building masks".into() });
                     renderers.prepare();
                 }
-                let mut img = Image::new(1, 1);
+                // rounded to 8 bits by the warp: what the window shows
+                let mut img = Image8::new(1, 1);
                 let mut last: Option<Spec> = None;
                 loop {
                     let next = {
@@ -300,7 +300,7 @@ mod tests {
     #[test]
     fn switching_renderers_rebuilds_only_when_needed() {
         let (mut r, spec) = setup(Mode::Iso);
-        let mut img = Image::new(1, 1);
+        let mut img = crate::warp::Image::new(1, 1);
         let names: Vec<&str> = r.tissue_list().iter().map(|t| t.name).collect();
         assert_eq!(names, ["skin", "fat", "soft", "bone"]);
         assert!(!r.needs_rebuild(Class::Tissue(3), 1), "tissue switch is O(1)");

@@ -7,8 +7,9 @@
 //! pixel is mapped back through the inverse of the factorization's 2-D warp
 //! into the intermediate image and resampled bilinearly. Only the output span
 //! of each row whose preimage meets the intermediate image's valid rectangle is
-//! resampled; the rest is cleared. One generic row loop ([`Texel`]) writes
-//! either format; [`Target`] is what [`crate::render::Renderer::render`] draws into.
+//! resampled; the rest is cleared. One [`Canvas`] type and one row loop, generic
+//! over the pixel ([`Texel`]), serve both formats; [`Target`] is what
+//! [`crate::render::Renderer::render`] draws into.
 
 use glam::Vec4;
 use rayon::prelude::*;
@@ -17,13 +18,14 @@ use crate::composite::Intermediate;
 use crate::error::{Error, Result};
 use crate::view::Factorization;
 
-/// A rendered image: premultiplied RGBA in [0, 1] (over black when displayed).
-/// Two images are equal when their sizes and pixels are.
+/// A rendered image of pixels `T` ([`Texel`]), row 0 at the top: [`Image`]
+/// (f32) or [`Image8`] (8-bit). Two images are equal when their sizes and
+/// pixels are.
 #[derive(Clone, Debug)]
-pub struct Image {
+pub struct Canvas<T> {
     pub width: usize,
     pub height: usize,
-    pub data: Vec<[f32; 4]>,
+    pub data: Vec<T>,
     /// Per row, the span `[u0, u1)` the last warp wrote; everything else in the row
     /// is transparent. Lets the next warp clear only what it no longer covers.
     spans: Vec<(u32, u32)>,
@@ -32,35 +34,39 @@ pub struct Image {
     pub(crate) stamp: u64,
 }
 
-impl Image {
+/// A rendered image: premultiplied RGBA in [0, 1] (over black when displayed),
+/// exactly as the warp computed it: what tests and metrics compare.
+pub type Image = Canvas<[f32; 4]>;
+
+/// A rendered image rounded to 8 bits: premultiplied RGBA (over black when
+/// displayed), each channel rounded by [`to8`] as the warp writes it (the same
+/// bytes as rounding an [`Image`]). What a window, a GIF or a PNG receives,
+/// without a conversion pass over an f32 image.
+pub type Image8 = Canvas<[u8; 4]>;
+
+impl<T: Texel> Canvas<T> {
     /// A transparent image.
     pub fn new(width: usize, height: usize) -> Self {
-        Image { width, height, data: vec![[0.0; 4]; width * height], spans: vec![(0, 0); height], stamp: 0 }
+        Canvas { width, height, data: vec![T::CLEAR; width * height], spans: vec![(0, 0); height], stamp: 0 }
     }
 
     /// Resizes (and clears) when the size differs.
     pub fn prepare(&mut self, width: usize, height: usize) {
         if self.width != width || self.height != height {
-            *self = Image::new(width, height);
+            *self = Canvas::new(width, height);
         }
     }
 
-    /// An image made from pixel data (`data.len()` must be `width · height`).
-    pub fn from_data(width: usize, height: usize, data: Vec<[f32; 4]>) -> Self {
-        assert_eq!(data.len(), width * height, "pixel count");
-        Image { width, height, data, spans: vec![(0, width as u32); height], stamp: 0 }
-    }
-
     /// Pixel at `(x, y)`.
-    pub fn at(&self, x: usize, y: usize) -> [f32; 4] {
+    pub fn at(&self, x: usize, y: usize) -> T {
         self.data[y * self.width + x]
     }
 
-    /// 8-bit RGB over a black background.
+    /// 8-bit RGB over a black background (the same for an [`Image`] and its [`Image8`]).
     pub fn to_rgb8(&self) -> image::RgbImage {
         let mut out = image::RgbImage::new(self.width as u32, self.height as u32);
         for (px, c) in out.pixels_mut().zip(&self.data) {
-            *px = image::Rgb([to8(c[0]), to8(c[1]), to8(c[2])]);
+            *px = image::Rgb(c.rgb8());
         }
         out
     }
@@ -72,62 +78,26 @@ impl Image {
 
     /// Fraction of pixels with any coverage.
     pub fn coverage(&self) -> f64 {
-        self.data.iter().filter(|c| c[3] > 0.0).count() as f64 / self.data.len().max(1) as f64
+        self.data.iter().filter(|c| c.covered()).count() as f64 / self.data.len().max(1) as f64
     }
 }
 
 impl Image {
-    /// Every pixel rounded to 8 bits by [`to8`] (what [`warp8`] writes).
+    /// An image made from pixel data (`data.len()` must be `width · height`).
+    pub fn from_data(width: usize, height: usize, data: Vec<[f32; 4]>) -> Self {
+        assert_eq!(data.len(), width * height, "pixel count");
+        Canvas { width, height, data, spans: vec![(0, width as u32); height], stamp: 0 }
+    }
+
+    /// Every pixel rounded to 8 bits by [`to8`] (what the warp writes into an [`Image8`]).
     pub fn to_rgba8(&self) -> Vec<[u8; 4]> {
         self.data.iter().map(|c| c.map(to8)).collect()
     }
 }
 
-/// A rendered image rounded to 8 bits: premultiplied RGBA (over black when
-/// displayed), row 0 at the top, written by [`warp8`]. What a window, a GIF or
-/// a PNG receives, without a conversion pass over an f32 image. Two images are
-/// equal when their sizes and pixels are.
-#[derive(Clone, Debug)]
-pub struct Image8 {
-    pub width: usize,
-    pub height: usize,
-    pub data: Vec<[u8; 4]>,
-    /// As [`Image`]'s: per row, the span the last warp wrote.
-    spans: Vec<(u32, u32)>,
-    /// As [`Image`]'s: which renderer frame last wrote this image (0: none).
-    pub(crate) stamp: u64,
-}
-
-impl Image8 {
-    /// A transparent image.
-    pub fn new(width: usize, height: usize) -> Self {
-        Image8 { width, height, data: vec![[0; 4]; width * height], spans: vec![(0, 0); height], stamp: 0 }
-    }
-
-    /// Resizes (and clears) when the size differs.
-    pub fn prepare(&mut self, width: usize, height: usize) {
-        if self.width != width || self.height != height {
-            *self = Image8::new(width, height);
-        }
-    }
-
-    /// Pixel at `(x, y)`.
-    pub fn at(&self, x: usize, y: usize) -> [u8; 4] {
-        self.data[y * self.width + x]
-    }
-
-    /// RGB over a black background (equal to [`Image::to_rgb8`] of the f32 image).
-    pub fn to_rgb8(&self) -> image::RgbImage {
-        let mut out = image::RgbImage::new(self.width as u32, self.height as u32);
-        for (px, c) in out.pixels_mut().zip(&self.data) {
-            *px = image::Rgb([c[0], c[1], c[2]]);
-        }
-        out
-    }
-
-    /// Writes a PNG.
-    pub fn save_png(&self, path: &std::path::Path) -> Result<()> {
-        self.to_rgb8().save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::file(path, format!("cannot write PNG: {e}")))
+impl<T: PartialEq> PartialEq for Canvas<T> {
+    fn eq(&self, o: &Self) -> bool {
+        self.width == o.width && self.height == o.height && self.data == o.data
     }
 }
 
@@ -147,40 +117,21 @@ pub trait Target: Send {
     fn warp_from(&mut self, inter: &Intermediate, f: &Factorization, origin: [f64; 2]);
 }
 
-/// [`Target`] for an image type with the fields and `prepare` of [`Image`].
-macro_rules! target {
-    ($ty:ty, $warp:ident) => {
-        impl Target for $ty {
-            fn size(&self) -> [usize; 2] {
-                [self.width, self.height]
-            }
-            fn resize(&mut self, width: usize, height: usize) {
-                self.prepare(width, height);
-            }
-            fn stamp(&self) -> u64 {
-                self.stamp
-            }
-            fn set_stamp(&mut self, stamp: u64) {
-                self.stamp = stamp;
-            }
-            fn warp_from(&mut self, inter: &Intermediate, f: &Factorization, origin: [f64; 2]) {
-                $warp(inter, f, origin, self);
-            }
-        }
-    };
-}
-target!(Image, warp);
-target!(Image8, warp8);
-
-impl PartialEq for Image8 {
-    fn eq(&self, o: &Self) -> bool {
-        self.width == o.width && self.height == o.height && self.data == o.data
+impl<T: Texel> Target for Canvas<T> {
+    fn size(&self) -> [usize; 2] {
+        [self.width, self.height]
     }
-}
-
-impl PartialEq for Image {
-    fn eq(&self, o: &Self) -> bool {
-        self.width == o.width && self.height == o.height && self.data == o.data
+    fn resize(&mut self, width: usize, height: usize) {
+        self.prepare(width, height);
+    }
+    fn stamp(&self) -> u64 {
+        self.stamp
+    }
+    fn set_stamp(&mut self, stamp: u64) {
+        self.stamp = stamp;
+    }
+    fn warp_from(&mut self, inter: &Intermediate, f: &Factorization, origin: [f64; 2]) {
+        warp(inter, f, origin, self);
     }
 }
 
@@ -206,6 +157,10 @@ pub trait Texel: Copy + Send + Sync {
     const CLEAR: Self;
     /// The pixel of a premultiplied RGBA value.
     fn from_rgba(v: Vec4) -> Self;
+    /// 8-bit RGB over black.
+    fn rgb8(self) -> [u8; 3];
+    /// Whether the pixel has any coverage.
+    fn covered(self) -> bool;
 }
 
 impl Texel for [f32; 4] {
@@ -213,6 +168,12 @@ impl Texel for [f32; 4] {
     #[inline(always)]
     fn from_rgba(v: Vec4) -> Self {
         v.to_array()
+    }
+    fn rgb8(self) -> [u8; 3] {
+        [to8(self[0]), to8(self[1]), to8(self[2])]
+    }
+    fn covered(self) -> bool {
+        self[3] > 0.0
     }
 }
 
@@ -244,18 +205,20 @@ impl Texel for [u8; 4] {
         #[cfg(not(target_arch = "x86_64"))]
         v.to_array().map(to8)
     }
+    fn rgb8(self) -> [u8; 3] {
+        [self[0], self[1], self[2]]
+    }
+    fn covered(self) -> bool {
+        self[3] > 0
+    }
 }
 
 /// Warps `inter` into `out` (already sized): output pixel `(u, v)` takes the
 /// bilinear sample of `inter` at the intermediate position of the sheared point
-/// `inverse_warp(u, v)` plus `origin` (the intermediate pixel of sheared `(0, 0)`).
-pub fn warp(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut Image) {
-    warp_rows(inter, f, origin, out.width, &mut out.data, &mut out.spans);
-}
-
-/// [`warp`] into an 8-bit image: the same samples, each channel rounded by
-/// [`to8`] (equal to [`Image::to_rgba8`] of the f32 warp, bit for bit).
-pub fn warp8(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut Image8) {
+/// `inverse_warp(u, v)` plus `origin` (the intermediate pixel of sheared `(0, 0)`),
+/// stored as `T` (into an [`Image8`]: each channel rounded by [`to8`], the same
+/// bytes as [`Image::to_rgba8`] of the f32 warp).
+pub fn warp<T: Texel>(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut Canvas<T>) {
     warp_rows(inter, f, origin, out.width, &mut out.data, &mut out.spans);
 }
 

@@ -30,7 +30,7 @@ use shearwarp::shear::ShearState;
 use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, rotate_eye};
 use shearwarp::volume::{Volume, VoxelData};
-use shearwarp::warp::{Image, Image8, Target, to8};
+use shearwarp::warp::{Canvas, Image, Image8, Texel};
 
 fn cam(deg: f64) -> Camera {
     let anterior = DMat3::from_cols_array(&[-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
@@ -59,12 +59,12 @@ fn bench_turn(g: &mut BenchmarkGroup<'_, WallTime>, name: impl Into<String>, r: 
 }
 
 /// [`bench_turn`] into image `img` (f32 or 8-bit), with `show(img)` after every frame.
-fn bench_turn_into<T: Target>(
+fn bench_turn_into<T: Texel>(
     g: &mut BenchmarkGroup<'_, WallTime>,
     name: impl Into<String>,
     mut r: Renderer,
-    mut img: T,
-    mut show: impl FnMut(&T),
+    mut img: Canvas<T>,
+    mut show: impl FnMut(&Canvas<T>),
 ) {
     g.sampling_mode(SamplingMode::Flat);
     g.bench_function(name.into(), |b| {
@@ -86,20 +86,13 @@ fn skips(c: &mut Criterion) {
     // rounding to 8 bits as it writes and a byte shuffle
     let mut g = c.benchmark_group("display_frame_iso_skin");
     let mut words: Vec<u32> = Vec::with_capacity(512 * 512);
-    let to_words = |img: &Image, out: &mut Vec<u32>| {
-        out.clear();
-        out.extend(img.data.iter().map(|p| (to8(p[0]) as u32) << 16 | (to8(p[1]) as u32) << 8 | to8(p[2]) as u32));
-    };
     bench_turn_into(&mut g, "f32_then_round", renderer(Settings::default(), "skin"), Image::new(512, 512), |img| {
-        to_words(img, &mut words);
+        img.to_0rgb(&mut words);
         black_box(&words);
     });
-    let mut words8: Vec<u32> = Vec::with_capacity(512 * 512);
     bench_turn_into(&mut g, "warp_to_u8", renderer(Settings::default(), "skin"), Image8::new(512, 512), |img| {
-        // what `viewer::worker::to_0rgb` does (the viewer is an optional feature)
-        words8.clear();
-        words8.extend(img.data.iter().map(|p| (p[0] as u32) << 16 | (p[1] as u32) << 8 | p[2] as u32));
-        black_box(&words8);
+        img.to_0rgb(&mut words);
+        black_box(&words);
     });
     g.finish();
     // empty-space skipping through the mask

@@ -28,7 +28,7 @@ use crate::shear::ShearState;
 use crate::slices::SliceStack;
 use crate::view::{Camera, Factorization};
 use crate::volume::Volume;
-use crate::warp::Target;
+use crate::warp::{Canvas, Texel, warp};
 
 /// Largest sheared mask, in bytes, a renderer builds for one axis. It is
 /// allocated zeroed (address space; only the occupied part is ever touched).
@@ -609,7 +609,7 @@ impl Renderer {
     ///
     /// `out` is a [`crate::warp::Image`] (f32) or a [`crate::warp::Image8`]
     /// (the same pixels rounded to 8 bits, as a display wants them).
-    pub fn render<T: Target>(&mut self, camera: &Camera, out: &mut T) -> Result<FrameStats> {
+    pub fn render<T: Texel>(&mut self, camera: &Camera, out: &mut Canvas<T>) -> Result<FrameStats> {
         let key = FrameKey {
             camera: *camera,
             settings: self.settings,
@@ -617,7 +617,7 @@ impl Renderer {
             tissue: self.tissues.as_ref().map(|t| t.current),
         };
         if let Some((k, stamp)) = self.last_frame {
-            if k == key && out.stamp() == stamp && out.size() == camera.size {
+            if k == key && out.stamp == stamp && out.width == camera.size[0] && out.height == camera.size[1] {
                 return Ok(FrameStats { skipped: true, axis: self.last_fact.as_ref().map_or(0, |f| f.axis), ..Default::default() });
             }
         }
@@ -703,13 +703,13 @@ impl Renderer {
 
             // warp
             let t = Instant::now();
-            out.resize(camera.size[0], camera.size[1]);
-            out.warp_from(inter, &f, [pad as f64, pad as f64]);
+            out.prepare(camera.size[0], camera.size[1]);
+            warp(inter, &f, [pad as f64, pad as f64], out);
             stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
         });
         self.last_fact = Some(f);
         let stamp = NEXT_STAMP.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        out.set_stamp(stamp);
+        out.stamp = stamp;
         self.last_frame = Some((key, stamp));
         Ok(stats)
     }

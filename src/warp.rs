@@ -7,9 +7,9 @@
 //! pixel is mapped back through the inverse of the factorization's 2-D warp
 //! into the intermediate image and resampled bilinearly. Only the output span
 //! of each row whose preimage meets the intermediate image's valid rectangle is
-//! resampled; the rest is cleared. One [`Canvas`] type and one row loop, generic
-//! over the pixel ([`Texel`]), serve both formats; [`Target`] is what
-//! [`crate::render::Renderer::render`] draws into.
+//! resampled; the rest is cleared. One [`Canvas`] type and one warp, generic over
+//! the pixel ([`Texel`]), serve both formats, and
+//! [`crate::render::Renderer::render`] draws into either.
 
 use glam::Vec4;
 use rayon::prelude::*;
@@ -80,6 +80,16 @@ impl<T: Texel> Canvas<T> {
     pub fn coverage(&self) -> f64 {
         self.data.iter().filter(|c| c.covered()).count() as f64 / self.data.len().max(1) as f64
     }
+
+    /// `0RGB` words over black, as a window's framebuffer takes them: a byte
+    /// shuffle for an [`Image8`], a rounding pass for an [`Image`].
+    pub fn to_0rgb(&self, out: &mut Vec<u32>) {
+        out.clear();
+        out.extend(self.data.iter().map(|c| {
+            let [r, g, b] = c.rgb8();
+            (r as u32) << 16 | (g as u32) << 8 | b as u32
+        }));
+    }
 }
 
 impl Image {
@@ -98,40 +108,6 @@ impl Image {
 impl<T: PartialEq> PartialEq for Canvas<T> {
     fn eq(&self, o: &Self) -> bool {
         self.width == o.width && self.height == o.height && self.data == o.data
-    }
-}
-
-/// An image a renderer draws frames into: its size, the stamp of the frame
-/// that last wrote it (so an unchanged frame can be skipped), and the warp that
-/// fills it from an intermediate image.
-pub trait Target: Send {
-    /// `[width, height]`.
-    fn size(&self) -> [usize; 2];
-    /// Resizes (and clears) when the size differs.
-    fn resize(&mut self, width: usize, height: usize);
-    /// Which renderer frame last wrote this image (0: none).
-    fn stamp(&self) -> u64;
-    /// Records the frame that wrote it.
-    fn set_stamp(&mut self, stamp: u64);
-    /// Warps `inter` (factorization `f`, intermediate pixel `origin` of sheared `(0, 0)`) into it.
-    fn warp_from(&mut self, inter: &Intermediate, f: &Factorization, origin: [f64; 2]);
-}
-
-impl<T: Texel> Target for Canvas<T> {
-    fn size(&self) -> [usize; 2] {
-        [self.width, self.height]
-    }
-    fn resize(&mut self, width: usize, height: usize) {
-        self.prepare(width, height);
-    }
-    fn stamp(&self) -> u64 {
-        self.stamp
-    }
-    fn set_stamp(&mut self, stamp: u64) {
-        self.stamp = stamp;
-    }
-    fn warp_from(&mut self, inter: &Intermediate, f: &Factorization, origin: [f64; 2]) {
-        warp(inter, f, origin, self);
     }
 }
 
@@ -219,15 +195,10 @@ impl Texel for [u8; 4] {
 /// stored as `T` (into an [`Image8`]: each channel rounded by [`to8`], the same
 /// bytes as [`Image::to_rgba8`] of the f32 warp).
 pub fn warp<T: Texel>(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut Canvas<T>) {
-    warp_rows(inter, f, origin, out.width, &mut out.data, &mut out.spans);
-}
-
-/// The warp's row loop for any pixel format: `data` holds rows of `w` pixels,
-/// `spans` the span each row's last warp wrote.
-fn warp_rows<T: Texel>(inter: &Intermediate, f: &Factorization, origin: [f64; 2], w: usize, data: &mut [T], spans: &mut [(u32, u32)]) {
     let (inv, it) = f.inverse_warp();
+    let w = out.width;
     let valid = inter.valid;
-    data.par_chunks_mut(w).zip(spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
+    out.data.par_chunks_mut(w).zip(out.spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
         let (old0, old1) = (span.0 as usize, span.1 as usize);
         let Some(r) = valid else {
             row[old0..old1].fill(T::CLEAR);

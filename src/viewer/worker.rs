@@ -20,7 +20,7 @@ use crate::presets::{self, Tissue};
 use crate::raycast::Mode;
 use crate::render::{FrameStats, Renderer, Settings};
 use crate::volume::Volume;
-use crate::warp::{Image8, Target};
+use crate::warp::{Canvas, Image8, Texel};
 
 /// A finished frame.
 #[derive(Clone, Debug)]
@@ -131,7 +131,7 @@ impl Renderers {
     }
 
     /// Renders `spec` into `img`.
-    pub fn render<T: Target>(&mut self, spec: &Spec, img: &mut T) -> crate::Result<FrameStats> {
+    pub fn render<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> crate::Result<FrameStats> {
         let r = self.select(spec.class, spec.cell)?;
         let st = r.render(&spec.camera, img)?;
         self.stale[st.axis] = false;
@@ -150,12 +150,6 @@ impl Renderers {
         }
         true
     }
-}
-
-/// `0RGB` pixels of `img` over black.
-pub fn to_0rgb(img: &Image8, out: &mut Vec<u32>) {
-    out.clear();
-    out.extend(img.data.iter().map(|p| (p[0] as u32) << 16 | (p[1] as u32) << 8 | p[2] as u32));
 }
 
 #[derive(Default)]
@@ -220,7 +214,7 @@ impl Worker {
                     match renderers.render(&spec, &mut img) {
                         Ok(stats) => {
                             let mut pixels = Vec::with_capacity(img.data.len());
-                            to_0rgb(&img, &mut pixels);
+                            img.to_0rgb(&mut pixels);
                             let total_ms = t.elapsed().as_secs_f64() * 1e3;
                             let (width, height) = (img.width, img.height);
                             reply(Reply::Frame(Box::new(Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, spec })));
@@ -278,6 +272,7 @@ mod tests {
     use super::*;
     use crate::phantom::Phantom;
     use crate::view::Camera;
+    use crate::warp::Image;
 
     fn setup(mode: Mode) -> (Renderers, Spec) {
         let vol = Phantom::Head.build([40, 40, 36]).unwrap();
@@ -300,7 +295,7 @@ mod tests {
     #[test]
     fn switching_renderers_rebuilds_only_when_needed() {
         let (mut r, spec) = setup(Mode::Iso);
-        let mut img = crate::warp::Image::new(1, 1);
+        let mut img = Image::new(1, 1);
         let names: Vec<&str> = r.tissue_list().iter().map(|t| t.name).collect();
         assert_eq!(names, ["skin", "fat", "soft", "bone"]);
         assert!(!r.needs_rebuild(Class::Tissue(3), 1), "tissue switch is O(1)");

@@ -8,14 +8,14 @@ use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use glam::DMat3;
-use shearwarp::depth::{Matcher, Search, SetBits};
-use shearwarp::mask::{BinaryMask, CellCodes};
-use shearwarp::phantom;
-use shearwarp::presets::{ct_tissue, ct_tissues};
-use shearwarp::raycast::Mode;
+use shearwarp::classify::presets::{ct_tissue, ct_tissues};
+use shearwarp::composite::Mode;
+use shearwarp::data::phantom;
+use shearwarp::data::slices::SliceStack;
+use shearwarp::encode::depth::{Matcher, Search, SetBits};
+use shearwarp::encode::mask::{BinaryMask, CellCodes};
+use shearwarp::encode::shear::ShearState;
 use shearwarp::render::{Method, Renderer, Settings, WordSize};
-use shearwarp::shear::ShearState;
-use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, rotate_eye};
 use shearwarp::warp::Image;
 

@@ -17,19 +17,19 @@ use std::time::{Duration, Instant};
 use criterion::measurement::WallTime;
 use criterion::{BenchmarkGroup, Criterion, SamplingMode, criterion_group, criterion_main};
 use glam::DMat3;
+use shearwarp::classify::presets::ct_tissues;
+use shearwarp::classify::shading::Shading;
 use shearwarp::classify::{Classifier, TransferFunction};
-use shearwarp::composite::Shading;
-use shearwarp::depth::Search;
-use shearwarp::mask::{BinaryMask, CellCodes};
-use shearwarp::phantom;
-use shearwarp::presets::ct_tissues;
-use shearwarp::raycast::Mode;
+use shearwarp::composite::Mode;
+use shearwarp::data::phantom;
+use shearwarp::data::slices::SliceStack;
+use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::encode::depth::Search;
+use shearwarp::encode::mask::{BinaryMask, CellCodes};
+use shearwarp::encode::rle::{Preclass, ViewTables};
+use shearwarp::encode::shear::ShearState;
 use shearwarp::render::{Method, Normals, Renderer, Settings};
-use shearwarp::rle::{Preclass, ViewTables};
-use shearwarp::shear::ShearState;
-use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, rotate_eye};
-use shearwarp::volume::{Volume, VoxelData};
 use shearwarp::warp::{Canvas, Image, Image8, Texel};
 
 fn cam(deg: f64) -> Camera {
@@ -137,7 +137,7 @@ fn skips(c: &mut Criterion) {
     // light and material are unchanged, rebuilt when the light moves
     let vol = phantom::head([64, 64, 64]).expect("phantom");
     let (lo, hi) = vol.value_range();
-    let tf = shearwarp::presets::ct_tissue("bone").expect("bone").tf;
+    let tf = shearwarp::classify::presets::ct_tissue("bone").expect("bone").tf;
     let pre = Preclass::new(&Classifier::new(&tf, lo, hi), vol.spacing());
     let mut tables = ViewTables::default();
     let mut g = c.benchmark_group("rle_view_tables");
@@ -187,7 +187,7 @@ fn skips(c: &mut Criterion) {
     // the same on a real scan, when SHEARWARP_DATA holds VolPack's brainsmall.den:
     // upsampled 2× (256×256×168, u8), iso 26, the 1-bit mask
     if let Some(den) = std::env::var_os("SHEARWARP_DATA").map(|d| std::path::Path::new(&d).join("brainsmall.den")).filter(|p| p.exists()) {
-        let vol = shearwarp::io::den::load_den(&den).expect("brainsmall.den");
+        let vol = shearwarp::data::io::den::load_den(&den).expect("brainsmall.den");
         let up2 = vol.resampled(vol.dims().map(|n| 2 * n)).expect("upsample");
         let tf = TransferFunction::threshold(26.0, [0.9, 0.85, 0.8]);
         let mut g = c.benchmark_group("packed_cells_iso_brainsmall_up2");

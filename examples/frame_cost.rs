@@ -4,9 +4,9 @@
 //! 1° apart single-threaded, so the counts of the frame stages are repeatable.
 
 use glam::DMat3;
-use shearwarp::phantom;
-use shearwarp::presets::ct_tissues;
-use shearwarp::raycast::Mode;
+use shearwarp::classify::presets::ct_tissues;
+use shearwarp::composite::Mode;
+use shearwarp::data::phantom;
 use shearwarp::render::{Renderer, Settings};
 use shearwarp::view::{Camera, rotate_eye};
 use shearwarp::warp::Image;

@@ -18,8 +18,8 @@ use std::path::Path;
 
 use glam::DMat3;
 use shearwarp::classify::TransferFunction;
-use shearwarp::io::{LoadOptions, load};
-use shearwarp::raycast::Mode;
+use shearwarp::composite::Mode;
+use shearwarp::data::io::{LoadOptions, load};
 use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::{Camera, rotate_eye};
 use shearwarp::warp::Image;

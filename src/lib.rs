@@ -1,41 +1,39 @@
 //! # shearwarp
 //!
 //! Fast, accurate CPU volume rendering built around the bit-packed binary
-//! shear-warp fast rotator (Csébfalvi 1999).
+//! shear-warp fast rotator (Csébfalvi 1999), with Lacroute's run-length-encoded
+//! shear-warp beside it.
 //!
-//! The pipeline, one module per stage:
-//! volume ([`volume`], [`slices`], [`phantom`]) → classify ([`classify`], [`presets`])
-//! → mask ([`mask`], [`shear`], [`depth`]) → factorize view ([`view`])
-//! → composite into the intermediate image ([`raycast`], [`composite`], shaded by
-//! [`normals`]) → warp ([`warp`]).
-//! [`render`] runs the pipeline per frame; [`cli`] is the command-line tool.
-//! Accuracy: [`reference`] (true rays, trilinear, fine steps) and [`truth`]
-//! (analytic iso-surfaces) are what [`metrics`] measures the fast paths
-//! against; [`bench`] runs the speed/accuracy matrix (`shearwarp bench`).
+//! The library is the renderer; the command-line tool, the bench runner and the
+//! viewer live in the binary (feature `cli`). The folders follow one frame:
+//!
+//! data ([`data`]: volume, loaders, phantoms, slice stacks, normal codes)
+//! → classify ([`classify`]: transfer functions, presets, shading)
+//! → encode ([`encode`]: cell mask, shear, depth search, RLE)
+//! → view ([`view`]: camera, factorization, frame plan)
+//! → composite ([`composite`]: ray and slice traversals into the intermediate image)
+//! → warp ([`warp`]: the intermediate image to the final one).
+//! [`render`] runs that pipeline per frame; [`kernels`] holds the one CPU
+//! level every SIMD kernel is chosen by. [`accuracy`] (reference renderer,
+//! analytic truth, metrics) is what the fast paths are measured against.
+//!
+//! The everyday API is re-exported here: load or build a [`Volume`], make a
+//! [`Renderer`] with [`Settings`], and render a [`Camera`] into an [`Image`].
 
-pub mod bench;
+pub mod accuracy;
 pub mod classify;
-pub mod cli;
 pub mod composite;
-pub mod depth;
+pub mod data;
+pub mod encode;
 pub mod error;
-pub mod io;
-pub mod mask;
-pub mod metrics;
-pub mod normals;
-pub mod phantom;
-pub mod presets;
-pub mod raycast;
-pub mod reference;
+pub mod kernels;
 pub mod render;
-pub mod rle;
-pub mod shear;
-pub mod slices;
-pub mod truth;
 pub mod view;
-pub mod viewer;
-pub mod volume;
 pub mod warp;
 
+pub use composite::Mode;
+pub use data::volume::{Volume, VoxelData, VoxelType};
 pub use error::{Error, Result};
-pub use volume::{Volume, VoxelData, VoxelType};
+pub use render::{FrameStats, Method, Renderer, Settings};
+pub use view::{Camera, NamedView};
+pub use warp::{Image, Image8};

@@ -1,4 +1,7 @@
-//! The `shearwarp` command-line tool; see [`shearwarp::cli`].
+//! The `shearwarp` command-line tool: `render`, `rotate`, `info`, `export`,
+//! `bench` and (feature `viewer`) `view`. See [`app`].
+mod app;
+
 fn main() -> std::process::ExitCode {
-    shearwarp::cli::main()
+    app::cli::main()
 }

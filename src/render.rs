@@ -15,19 +15,21 @@
 
 use std::time::Instant;
 
+use crate::classify::presets::Tissue;
+use crate::classify::shading::Shading;
 use crate::classify::{Classifier, TransferFunction};
-use crate::composite::{Intermediate, Shading};
-use crate::depth::{Matcher, Search, binary_matcher};
+use crate::composite::Intermediate;
+use crate::composite::Mode;
+use crate::composite::raycast::{RayContext, SliceParams, render_binary, render_brute, volume_rect};
+use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
+use crate::data::slices::SliceStack;
+use crate::data::volume::Volume;
+use crate::encode::depth::{Matcher, Search, binary_matcher};
+use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, Rect, ShearWork, geometry};
+use crate::encode::rle::{ClassKey, RleCache};
+use crate::encode::shear::ShearState;
 use crate::error::{Error, Result};
-use crate::mask::{BinaryMask, CellCodes, MAX_CELL, Rect, ShearWork, geometry};
-use crate::normals::{NormalStack, ShadeTable, headlight_object};
-use crate::presets::Tissue;
-use crate::raycast::{Mode, RayContext, SliceParams, render_binary, render_brute, volume_rect};
-use crate::rle::{ClassKey, RleCache};
-use crate::shear::ShearState;
-use crate::slices::SliceStack;
 use crate::view::{Camera, Factorization};
-use crate::volume::Volume;
 use crate::warp::{Canvas, Texel, warp};
 
 /// Largest sheared mask, in bytes, a renderer builds for one axis. It is
@@ -39,12 +41,13 @@ pub const MAX_INTERMEDIATE_PIXELS: u64 = 1 << 29;
 /// Which render path.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Method {
     /// The bit-packed binary shear-warp fast rotator.
     Binary,
     /// Unaccelerated reference: every slice of every ray, same sample positions.
     Brute,
-    /// Lacroute's run-length-encoded, pre-classified shear-warp ([`crate::rle`]):
+    /// Lacroute's run-length-encoded, pre-classified shear-warp ([`crate::encode::rle`]):
     /// voxels are classified and shaded before interpolation, transparent voxels
     /// skipped run by run, opaque pixels through skip links, and every pixel stops
     /// at opacity [`Settings::ert`] — in iso mode too, where the transfer function
@@ -71,6 +74,7 @@ impl Method {
 /// Word width of the packed mask.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum WordSize {
     U32,
     U64,
@@ -89,8 +93,9 @@ impl WordSize {
 /// How the raycast paths ([`Method::Binary`], [`Method::Brute`]) shade a sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Normals {
-    /// VolPack's shading tables ([`crate::normals`]): every voxel's gradient
+    /// VolPack's shading tables ([`crate::data::normals`]): every voxel's gradient
     /// direction quantized to a 14-bit code once per axis, a shade table per view,
     /// and a sample's shade blended from its cell's four corner entries.
     Codes,
@@ -138,7 +143,7 @@ pub struct Settings {
     /// Raycast paths with [`Normals::Codes`]: pack each voxel's density and
     /// normal code into one u32 when the densities are integers spanning at
     /// most 65 535 (8- and 16-bit scans), so a ray reads both from the same
-    /// cache lines ([`crate::normals::NormalStack`]). `false` keeps them
+    /// cache lines ([`crate::data::normals::NormalStack`]). `false` keeps them
     /// apart: a benchmark knob that shows what packing buys (same image).
     pub pack: bool,
 }
@@ -327,7 +332,7 @@ impl Renderer {
                 }
             }
         }
-        let nb = crate::depth::code_width_for(ts.len()).ok_or_else(|| Error::value("tissues", "at most 15 presets"))?;
+        let nb = crate::encode::depth::code_width_for(ts.len()).ok_or_else(|| Error::value("tissues", "at most 15 presets"))?;
         let (lo, hi) = r.range;
         r.tissues = Some(TissueSet {
             iso_cls: ts.iter().map(|t| Classifier::new(&t.iso_tf(), lo, hi)).collect(),
@@ -514,7 +519,7 @@ impl Renderer {
         if self.settings.method == Method::Binary {
             // an upper bound of what BinaryMask::from_codes allocates
             let s = self.settings.cell as u64;
-            let nb = self.tissues.as_ref().and_then(|t| crate::depth::code_width_for(t.thresholds.len())).unwrap_or(1) as u64;
+            let nb = self.tissues.as_ref().and_then(|t| crate::encode::depth::code_width_for(t.thresholds.len())).unwrap_or(1) as u64;
             let bits = match self.settings.word {
                 WordSize::U32 => 32u64,
                 WordSize::U64 => 64,
@@ -724,7 +729,7 @@ mod tests {
     #[test]
     fn unchanged_frames_are_skipped_and_changes_are_not() {
         let vol = Volume::from_fn([12, 10, 14], [1.0; 3], |x, y, z| ((x + y + z) % 7) as f32 * 30.0).unwrap();
-        let tissues = crate::presets::tissues_for(&vol);
+        let tissues = crate::classify::presets::tissues_for(&vol);
         let mut r = Renderer::with_tissues(vol, &tissues, Settings::default()).unwrap();
         let cam = Camera::new(DMat3::from_rotation_y(0.3), [32, 32]);
         let mut img = Image::new(32, 32);

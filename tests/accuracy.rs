@@ -7,19 +7,19 @@
 //! * the binary iso preview finds the sphere phantom's surface within half a voxel.
 
 use glam::{DMat3, DVec3};
-use shearwarp::bench::standard_views;
+use shearwarp::accuracy::metrics::{compare, depth_error, rmse};
+use shearwarp::accuracy::reference::{Rays, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
+use shearwarp::accuracy::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_depth};
 use shearwarp::classify::TransferFunction;
-use shearwarp::cli::{ViewArg, base_view};
-use shearwarp::depth::Search;
-use shearwarp::metrics::{compare, depth_error, rmse};
-use shearwarp::phantom::{self, SPHERE_ISO, sphere_geometry};
-use shearwarp::presets;
-use shearwarp::raycast::Mode;
-use shearwarp::reference::{Rays, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
+use shearwarp::classify::presets;
+use shearwarp::composite::Mode;
+use shearwarp::data::phantom::{self, SPHERE_ISO, sphere_geometry};
+use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::encode::depth::Search;
 use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
-use shearwarp::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_depth};
 use shearwarp::view::Camera;
-use shearwarp::volume::{Volume, VoxelData};
+use shearwarp::view::NamedView;
+use shearwarp::view::standard_views;
 use shearwarp::warp::Image;
 
 /// Blobs plus sparse noise, anisotropic spacing.
@@ -69,7 +69,7 @@ fn bits(img: &Image) -> Vec<u32> {
 #[test]
 fn cell_size_one_has_exactly_the_error_of_brute_force() {
     let size = 48;
-    let views = standard_views(base_view(ViewArg::Anterior), 2, 5);
+    let views = standard_views(NamedView::Anterior.rotation(), 2, 5);
     let opts = ReferenceOptions { step: 0.1, ..Default::default() };
     let mut checked = 0;
     for (name, vol, tf) in matrix() {
@@ -118,7 +118,7 @@ fn cell_size_one_has_exactly_the_error_of_brute_force() {
 #[test]
 fn reference_converges_as_its_step_shrinks() {
     let size = 64;
-    let cam = Camera::new(standard_views(base_view(ViewArg::Anterior), 1, 3)[7].rotation, [size, size]);
+    let cam = Camera::new(standard_views(NamedView::Anterior.rotation(), 1, 3)[7].rotation, [size, size]);
     for (name, vol, tf) in matrix().into_iter().filter(|m| m.0 == "marschner-lobb" || m.0 == "head") {
         let r = Renderer::new(vol.clone(), &tf, Settings { mode: Mode::Blend, ..Settings::default() }).unwrap();
         let scene = Scene::from_renderer(&r);
@@ -163,8 +163,8 @@ fn binary_iso_depth_on_the_sphere_is_within_half_a_voxel() {
     let scene = Scene::from_renderer(&r);
     let size = 128;
     let mut img = Image::new(size, size);
-    let mut views = standard_views(base_view(ViewArg::Anterior), 3, 11);
-    views.push(shearwarp::bench::View { name: "identity".into(), rotation: DMat3::IDENTITY });
+    let mut views = standard_views(NamedView::Anterior.rotation(), 3, 11);
+    views.push(shearwarp::view::View { name: "identity".into(), rotation: DMat3::IDENTITY });
     for view in &views {
         let cam = Camera::new(view.rotation, [size, size]);
         r.render(&cam, &mut img).unwrap();
@@ -219,7 +219,7 @@ fn binary_iso_depth_on_the_sphere_is_within_half_a_voxel() {
 #[test]
 fn table_shading_is_about_as_accurate_as_the_exact_gradient() {
     let size = 64;
-    let views = standard_views(base_view(ViewArg::Anterior), 2, 5);
+    let views = standard_views(NamedView::Anterior.rotation(), 2, 5);
     let opts = ReferenceOptions { step: 0.1, ..Default::default() };
     for (name, vol, tf) in matrix() {
         let refr = ReferenceRenderer::new(&vol);

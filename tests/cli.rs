@@ -134,9 +134,9 @@ fn export_writes_a_den_that_loads_back_windowed_and_resampled() {
     // z: 19 gaps of 2 = 38 units, at the 1-unit voxel of x (39 gaps over 40 voxels) → 39 voxels
     assert_eq!(j["dims"], serde_json::json!([40, 40, 39]), "{j}");
     assert_eq!(j["units_per_step"].as_f64(), Some(10.0));
-    let vol = shearwarp::io::load(&den, &shearwarp::io::LoadOptions::default()).unwrap();
+    let vol = shearwarp::data::io::load(&den, &shearwarp::data::io::LoadOptions::default()).unwrap();
     assert_eq!(vol.dims(), [40, 40, 39]);
-    assert_eq!(vol.data().voxel_type(), shearwarp::volume::VoxelType::U8);
+    assert_eq!(vol.data().voxel_type(), shearwarp::data::volume::VoxelType::U8);
     let (lo, hi) = vol.value_range();
     assert_eq!(lo, 0.0, "air maps to 0");
     assert!(hi > 100.0, "bone maps high, got {hi}");

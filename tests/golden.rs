@@ -17,9 +17,9 @@ use std::path::{Path, PathBuf};
 
 use glam::{DMat3, DVec3};
 use shearwarp::classify::TransferFunction;
+use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
 use shearwarp::view::Camera;
-use shearwarp::volume::{Volume, VoxelData};
 use shearwarp::warp::Image;
 
 const SIZE: usize = 40;
@@ -100,7 +100,7 @@ fn crop(v: &Volume, max: [usize; 3]) -> Volume {
 }
 
 fn scenes() -> Vec<(String, Volume)> {
-    use shearwarp::phantom::Phantom;
+    use shearwarp::data::phantom::Phantom;
     let mut s = vec![
         ("head".to_string(), Phantom::Head.build([40, 44, 36]).unwrap()),
         ("sphere".to_string(), Phantom::Sphere.build([24, 28, 20]).unwrap()),
@@ -116,7 +116,7 @@ fn scenes() -> Vec<(String, Volume)> {
         ] {
             let p = dir.join(file);
             if p.exists() {
-                let v = shearwarp::io::load(&p, &Default::default()).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                let v = shearwarp::data::io::load(&p, &Default::default()).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
                 s.push((name.to_string(), crop(&v, max)));
             }
         }
@@ -127,8 +127,8 @@ fn scenes() -> Vec<(String, Volume)> {
 /// The settings variants: every method in both modes, plus the binary path's
 /// knobs that change which code runs (cell size, word, search, shading).
 fn variants() -> Vec<(String, Settings)> {
-    use shearwarp::depth::Search;
-    use shearwarp::raycast::Mode;
+    use shearwarp::composite::Mode;
+    use shearwarp::encode::depth::Search;
     let base = Settings { threads: 2, ..Settings::default() };
     let mut v = vec![];
     for mode in [Mode::Iso, Mode::Blend] {
@@ -150,7 +150,7 @@ fn render_all() -> BTreeMap<String, u64> {
     let mut out = BTreeMap::new();
     let views = views();
     for (sname, vol) in scenes() {
-        let tissues = shearwarp::presets::tissues_for(&vol);
+        let tissues = shearwarp::classify::presets::tissues_for(&vol);
         let (lo, hi) = vol.value_range();
         let iso = lo + 0.4 * (hi - lo);
         for (vname, s) in variants() {
@@ -164,7 +164,7 @@ fn render_all() -> BTreeMap<String, u64> {
             let tf = TransferFunction::ramp(iso, iso + 0.2 * (hi - lo), 0.6, [0.9, 0.8, 0.7]);
             let mut r = Renderer::new(vol.clone(), &tf, s).unwrap();
             r.set_iso(iso).unwrap();
-            if s.mode == shearwarp::raycast::Mode::Blend {
+            if s.mode == shearwarp::composite::Mode::Blend {
                 r.set_transfer_function(&tf);
             }
             classes.push(("custom".into(), r));

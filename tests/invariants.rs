@@ -4,14 +4,14 @@
 use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
 use shearwarp::classify::{Classifier, TransferFunction};
-use shearwarp::depth::{Search, bit_of};
-use shearwarp::mask::BinaryMask;
-use shearwarp::raycast::Mode;
+use shearwarp::composite::Mode;
+use shearwarp::data::slices::SliceStack;
+use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::encode::depth::{Search, bit_of};
+use shearwarp::encode::mask::BinaryMask;
+use shearwarp::encode::shear::ShearState;
 use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
-use shearwarp::shear::ShearState;
-use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, Factorization, rotate_eye};
-use shearwarp::volume::{Volume, VoxelData};
 use shearwarp::warp::{Image, Image8};
 
 /// A random volume of blobs and noise with internal empty regions.
@@ -282,12 +282,15 @@ proptest! {
 #[test]
 fn the_dispatched_kernel_is_what_runs_here() {
     // report which copy the tests above compared on this machine
-    eprintln!("hardware lzcnt/tzcnt: {}", shearwarp::depth::hw_bitscan());
+    eprintln!("hardware lzcnt/tzcnt: {}", shearwarp::encode::depth::hw_bitscan());
     #[cfg(target_arch = "x86_64")]
-    assert_eq!(shearwarp::depth::hw_bitscan(), std::arch::is_x86_feature_detected!("lzcnt") && std::arch::is_x86_feature_detected!("bmi1"));
-    eprintln!("AVX2 shear kernels: {}", shearwarp::mask::hw_avx2());
+    assert_eq!(
+        shearwarp::encode::depth::hw_bitscan(),
+        std::arch::is_x86_feature_detected!("lzcnt") && std::arch::is_x86_feature_detected!("bmi1")
+    );
+    eprintln!("AVX2 shear kernels: {}", shearwarp::encode::mask::hw_avx2());
     #[cfg(target_arch = "x86_64")]
-    assert_eq!(shearwarp::mask::hw_avx2(), std::arch::is_x86_feature_detected!("avx2"));
+    assert_eq!(shearwarp::encode::mask::hw_avx2(), std::arch::is_x86_feature_detected!("avx2"));
 }
 
 #[test]

@@ -24,8 +24,8 @@ use flate2::write::GzEncoder;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 use shearwarp::Volume;
-use shearwarp::io::{Format, LoadOptions, RawSpec, load};
-use shearwarp::volume::VoxelType;
+use shearwarp::data::io::{Format, LoadOptions, RawSpec, load};
+use shearwarp::data::volume::VoxelType;
 
 /// Longest time one input may take (`IO_FUZZ_MAX_MS` overrides).
 fn max_case() -> Duration {
@@ -474,7 +474,7 @@ fn dicom_seeds() -> Vec<Vec<u8>> {
 fn den_seeds() -> Vec<Vec<u8>> {
     let dir = scratch();
     let p = dir.path().join("s.den");
-    shearwarp::io::den::save_den(&p, [5, 4, 3], &voxel_bytes(60, 1, false)).unwrap();
+    shearwarp::data::io::den::save_den(&p, [5, 4, 3], &voxel_bytes(60, 1, false)).unwrap();
     let le = std::fs::read(&p).unwrap();
     let mut be = le.clone();
     for i in (0..58).step_by(2) {

@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use shearwarp::io::{Format, LoadOptions, load, save_raw};
+use shearwarp::data::io::{Format, LoadOptions, load, save_raw};
 use shearwarp::{Volume, VoxelType};
 
 fn data_dir(test: &str) -> Option<PathBuf> {

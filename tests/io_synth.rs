@@ -14,7 +14,7 @@ use dicom_dictionary_std::{tags, uids};
 use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
 use flate2::Compression;
 use flate2::write::GzEncoder;
-use shearwarp::io::{Format, LoadOptions, RawSpec, den, load, save_raw};
+use shearwarp::data::io::{Format, LoadOptions, RawSpec, den, load, save_raw};
 use shearwarp::{Error, Volume, VoxelData, VoxelType};
 
 fn opts() -> LoadOptions {

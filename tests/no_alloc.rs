@@ -7,11 +7,11 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use glam::DMat3;
-use shearwarp::presets::tissues_for;
-use shearwarp::raycast::Mode;
+use shearwarp::classify::presets::tissues_for;
+use shearwarp::composite::Mode;
+use shearwarp::data::volume::Volume;
 use shearwarp::render::{Renderer, Settings};
 use shearwarp::view::{Camera, rotate_eye};
-use shearwarp::volume::Volume;
 use shearwarp::warp::Image;
 
 struct Counting;

@@ -5,15 +5,15 @@
 
 use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
+use shearwarp::classify::presets::{Tissue, ct_tissues};
 use shearwarp::classify::{Classifier, TransferFunction};
-use shearwarp::phantom;
-use shearwarp::presets::{Tissue, ct_tissues};
-use shearwarp::raycast::Mode;
+use shearwarp::composite::Mode;
+use shearwarp::data::phantom;
+use shearwarp::data::slices::SliceStack;
+use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::encode::rle::{BRIDGE_NORMAL, Preclass, RleVolume};
 use shearwarp::render::{Method, Renderer, Settings};
-use shearwarp::rle::{BRIDGE_NORMAL, Preclass, RleVolume};
-use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, rotate_eye};
-use shearwarp::volume::{Volume, VoxelData};
 use shearwarp::warp::Image;
 
 /// Largest difference allowed per channel between the RLE path and its

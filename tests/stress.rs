@@ -7,21 +7,22 @@
 
 use glam::{DMat3, EulerRot};
 use predicates::prelude::PredicateBooleanExt;
-use shearwarp::bench::{diagonal_view, standard_views};
+use shearwarp::Error;
+use shearwarp::accuracy::metrics::{ImageError, compare, rmse};
+use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
 use shearwarp::classify::TransferFunction;
-use shearwarp::cli::{ViewArg, base_view, load_raw};
-use shearwarp::depth::Search;
-use shearwarp::mask::{BinaryMask, CellCodes};
-use shearwarp::metrics::{ImageError, compare, rmse};
-use shearwarp::raycast::Mode;
-use shearwarp::reference::{ReferenceOptions, ReferenceRenderer, Scene};
+use shearwarp::composite::Mode;
+use shearwarp::data::phantom;
+use shearwarp::data::slices::SliceStack;
+use shearwarp::data::volume::{Volume, VoxelData, VoxelType};
+use shearwarp::encode::depth::Search;
+use shearwarp::encode::mask::{BinaryMask, CellCodes};
+use shearwarp::encode::shear::ShearState;
 use shearwarp::render::{Method, Renderer, Settings, WordSize};
-use shearwarp::shear::ShearState;
-use shearwarp::slices::SliceStack;
+use shearwarp::view::NamedView;
 use shearwarp::view::{Camera, rotate_eye};
-use shearwarp::volume::{Volume, VoxelData, VoxelType};
+use shearwarp::view::{diagonal_view, standard_views};
 use shearwarp::warp::Image;
-use shearwarp::{Error, phantom};
 
 /// Blobs and sparse noise in `[0, ~250]`, with empty space inside.
 fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
@@ -269,7 +270,7 @@ fn million_random_shear_steps_match_a_direct_shear() {
 #[test]
 fn exact_ties_render_and_match_brute_force() {
     let vol = random_volume([22, 22, 22], 17, [1.0; 3]);
-    let base = base_view(ViewArg::Anterior);
+    let base = NamedView::Anterior.rotation();
     let mut views: Vec<(String, DMat3)> = Vec::new();
     for eps in [0.0, 1e-12, -1e-12] {
         views.push((format!("45°{eps:+e} about y"), rotate_eye(base, 1, 45.0 + eps)));
@@ -532,7 +533,7 @@ fn non_finite_voxels_are_rejected_by_the_raw_loader() {
         let path = dir.path().join(format!("bad{i}.raw"));
         std::fs::write(&path, bytes).unwrap();
         let e = load_raw(&path, [4, 3, 2], VoxelType::F32, big).unwrap_err();
-        let ours = e.chain().find_map(|c| c.downcast_ref::<Error>()).unwrap_or_else(|| panic!("not a shearwarp error: {e:#}"));
+        let ours = &e;
         // Volume::new says NonFinite; the loaders re-wrap it as a File error naming the file
         match ours {
             Error::NonFinite { index: 7, .. } => {}
@@ -624,7 +625,7 @@ fn ten_million_small_increments_match_the_closed_form_rotation() {
 #[test]
 fn a_frame_does_not_depend_on_the_frames_before_it() {
     let vol = random_volume([24, 20, 26], 31, [1.0, 1.0, 1.5]);
-    let views = standard_views(base_view(ViewArg::Anterior), 3, 9);
+    let views = standard_views(NamedView::Anterior.rotation(), 3, 9);
     for mode in [Mode::Iso, Mode::Blend] {
         for method in [Method::Binary, Method::Brute] {
             let s = Settings { mode, method, ..Settings::default() };
@@ -641,4 +642,12 @@ fn a_frame_does_not_depend_on_the_frames_before_it() {
             }
         }
     }
+}
+
+/// Reads a headerless voxel file of exactly `dims` voxels of type `t`.
+fn load_raw(path: &std::path::Path, dims: [usize; 3], t: VoxelType, big_endian: bool) -> shearwarp::Result<shearwarp::Volume> {
+    use shearwarp::data::io;
+    let mut spec = io::RawSpec::new(dims, t);
+    spec.big_endian = big_endian;
+    io::load(path, &io::LoadOptions { format: Some(io::Format::Raw), raw: Some(spec) })
 }

@@ -5,15 +5,15 @@
 use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
 use shearwarp::classify::TransferFunction;
-use shearwarp::depth::{Matcher, Search, SetBits};
-use shearwarp::mask::{BinaryMask, CellCodes};
-use shearwarp::presets::Tissue;
-use shearwarp::raycast::Mode;
+use shearwarp::classify::presets::Tissue;
+use shearwarp::composite::Mode;
+use shearwarp::data::slices::SliceStack;
+use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::encode::depth::{Matcher, Search, SetBits};
+use shearwarp::encode::mask::{BinaryMask, CellCodes};
+use shearwarp::encode::shear::ShearState;
 use shearwarp::render::{Method, Renderer, Settings, WordSize};
-use shearwarp::shear::ShearState;
-use shearwarp::slices::SliceStack;
 use shearwarp::view::{Camera, Factorization, rotate_eye};
-use shearwarp::volume::{Volume, VoxelData};
 use shearwarp::warp::Image;
 
 fn random_volume(dims: [usize; 3], seed: u64) -> Volume {

@@ -6,7 +6,7 @@
 mod common;
 
 use libfuzzer_sys::fuzz_target;
-use shearwarp::io::{Format, LoadOptions, load};
+use shearwarp::data::io::{Format, LoadOptions, load};
 
 fuzz_target!(|data: &[u8]| {
     let p = common::write("a.dcm", data);

@@ -1,0 +1,237 @@
+//! Analytic ground truth: where the iso-surface of a phantom really is.
+//!
+//! For the phantoms whose iso-surface is known in closed form or as a
+//! continuous function, this module gives the depth of the first iso hit along
+//! every viewing ray of a [`Camera`] — in the convention of
+//! [`crate::accuracy::reference`] (world units along the view from the plane through the
+//! volume centre, NaN where the ray misses), so fast paths, the reference and
+//! the truth compare pixel for pixel:
+//!
+//! * [`sphere_depth`]: the exact ray–sphere intersection with the sphere of
+//!   [`sphere_geometry`] (the [`SPHERE_ISO`](crate::data::phantom::SPHERE_ISO) surface of
+//!   [`crate::data::phantom::sphere`]);
+//! * [`marschner_lobb_depth`]: the first crossing of
+//!   [`marschner_lobb_value`] = iso along the ray, bracketed by a march whose
+//!   steps a Lipschitz bound of the signal proves cannot jump over a crossing
+//!   (never finer than a tiny floor step), and refined by bisection.
+//!
+//! Both are restricted to the rendered domain, the box of voxel centres: a ray
+//! that enters the box already inside the surface hits at its entry, as the
+//! renderers do.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::accuracy::reference::Rays;
+use crate::data::phantom::{marschner_lobb_value, sphere_geometry};
+use crate::error::{Error, Result};
+use crate::view::Camera;
+
+/// Default floor of the bracketing step of [`marschner_lobb_depth`], in the
+/// signal's normalised units (the cube is `[−1, 1]³`; 41³ samples it every
+/// 0.05): only a crossing thinner than this along the ray can be missed.
+pub const ML_BRACKET_STEP: f64 = 1e-4;
+
+/// A Lipschitz bound of [`marschner_lobb_value`] in normalised units:
+/// `|∂ρ/∂r| ≤ α·2π f_M·(π/2) / (2(1 + α)) = 6π²/10 ≈ 5.922` (with `|∇r| = 1`)
+/// and `|∂ρ/∂z| ≤ (π/2) / (2(1 + α)) ≈ 0.628`, so `|∇ρ| ≤ 5.955`; rounded up.
+pub const ML_LIPSCHITZ: f64 = 6.0;
+
+/// Bisection iterations (the bracket shrinks far below 1e-12).
+const BISECTIONS: u32 = 64;
+
+/// Exact first-hit depth of the sphere phantom's iso-surface per pixel.
+///
+/// `dims` and `spacing` are the volume's: the sphere lives in voxel space
+/// (centre and radius from [`sphere_geometry`]), so with an anisotropic spacing
+/// it is an ellipsoid in the world, exactly as the sampled volume is.
+pub fn sphere_depth(dims: [usize; 3], spacing: [f32; 3], camera: &Camera) -> Result<Vec<f64>> {
+    let rays = Rays::new(camera, dims, spacing)?;
+    let (c, radius) = sphere_geometry(dims);
+    let c = DVec3::from_array(c);
+    let d = rays.direction();
+    Ok(per_pixel(&rays, |o| {
+        let (t0, t1) = rays.clip(o)?;
+        // |o + t·d − c|² = R²
+        let oc = o - c;
+        let (a, b, cc) = (d.dot(d), 2.0 * d.dot(oc), oc.dot(oc) - radius * radius);
+        let disc = b * b - 4.0 * a * cc;
+        if disc < 0.0 {
+            return None;
+        }
+        // the numerically stable pair of roots
+        let q = -0.5 * (b + b.signum() * disc.sqrt());
+        let (r0, r1) = if q == 0.0 { (0.0, 0.0) } else { (q / a, cc / q) };
+        let (near, far) = (r0.min(r1), r0.max(r1));
+        let t = near.max(t0);
+        (t <= far.min(t1)).then_some(t)
+    }))
+}
+
+/// First-hit depth of the Marschner–Lobb iso-surface `ρ = iso` per pixel, for
+/// the grid of [`crate::data::phantom::marschner_lobb`] at `dims` (voxel `i` of an
+/// axis of `n` at `−1 + 2i/(n−1)`): marched in steps of `|ρ − iso| / L` (the
+/// Lipschitz bound [`ML_LIPSCHITZ`] proves no crossing lies within), never
+/// shorter than `step` normalised units ([`ML_BRACKET_STEP`] is a good
+/// choice), and refined by bisection.
+pub fn marschner_lobb_depth(dims: [usize; 3], spacing: [f32; 3], camera: &Camera, iso: f64, step: f64) -> Result<Vec<f64>> {
+    if !(step.is_finite() && step > 1e-6) {
+        return Err(Error::value("bracketing step", format!("{step} (must be > 1e-6)")));
+    }
+    if !iso.is_finite() {
+        return Err(Error::value("iso value", format!("{iso}")));
+    }
+    let scale = DVec3::from_array(dims.map(|n| if n <= 1 { 0.0 } else { 2.0 / (n - 1) as f64 }));
+    let norm = move |v: DVec3| v * scale - DVec3::from_array(dims.map(|n| if n <= 1 { 0.0 } else { 1.0 }));
+    let rays = Rays::new(camera, dims, spacing)?;
+    // normalised units per world unit along the ray
+    let speed = (rays.direction() * scale).length();
+    let dt = if speed > 0.0 { step / speed } else { f64::INFINITY };
+    let f = move |v: DVec3| {
+        let p = norm(v);
+        marschner_lobb_value(p.x, p.y, p.z)
+    };
+    Ok(first_crossing(&rays, f, iso, dt, ML_LIPSCHITZ * speed))
+}
+
+/// First `t` along each pixel's ray (inside the box of voxel centres) where
+/// `f(voxel) ≥ iso`: the entry point if already there, else the first sample of
+/// a march that reaches iso, refined by bisection. `lipschitz` bounds `|df/dt|`
+/// along the ray (world units): each step is `max(dt, (iso − f) / lipschitz)`,
+/// so only a crossing shorter than `dt` can be stepped over (pass 0 for plain
+/// steps of `dt`).
+pub fn first_crossing(rays: &Rays, f: impl Fn(DVec3) -> f64 + Sync, iso: f64, dt: f64, lipschitz: f64) -> Vec<f64> {
+    let d = rays.direction();
+    per_pixel(rays, |o| {
+        let (t0, t1) = rays.clip(o)?;
+        let mut fa = f(o + t0 * d);
+        if fa >= iso {
+            return Some(t0);
+        }
+        if !dt.is_finite() {
+            return None;
+        }
+        let mut ta = t0;
+        loop {
+            let safe = if lipschitz > 0.0 { (iso - fa) / lipschitz } else { 0.0 };
+            let tb = (ta + dt.max(safe)).min(t1);
+            let fb = f(o + tb * d);
+            if fb >= iso {
+                let (mut lo, mut hi) = (ta, tb);
+                for _ in 0..BISECTIONS {
+                    let m = 0.5 * (lo + hi);
+                    if m <= lo || m >= hi {
+                        break;
+                    }
+                    if f(o + m * d) >= iso {
+                        hi = m;
+                    } else {
+                        lo = m;
+                    }
+                }
+                return Some(hi);
+            }
+            if tb >= t1 {
+                return None;
+            }
+            (ta, fa) = (tb, fb);
+        }
+    })
+}
+
+/// Evaluates `hit(origin)` for every pixel's ray in parallel over rows.
+fn per_pixel(rays: &Rays, hit: impl Fn(DVec3) -> Option<f64> + Sync) -> Vec<f64> {
+    let [w, h] = rays.size();
+    let mut out = vec![f64::NAN; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
+        for (u, o) in row.iter_mut().enumerate() {
+            *o = hit(rays.origin(u as f64, v as f64)).unwrap_or(f64::NAN);
+        }
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::view::rotate_eye;
+    use glam::DMat3;
+
+    #[test]
+    fn sphere_hit_at_the_centre_pixel_is_the_radius() {
+        let dims = [41, 41, 41];
+        let cam = Camera { rotation: rotate_eye(DMat3::IDENTITY, 1, 33.0), zoom: Some(1.0), size: [41, 41] };
+        let d = sphere_depth(dims, [1.0; 3], &cam).unwrap();
+        let (_, r) = sphere_geometry(dims);
+        // the centre pixel looks through the sphere's centre: the front is R nearer than the centre
+        assert!((d[20 * 41 + 20] + r).abs() < 1e-12, "{}", d[20 * 41 + 20]);
+        // a corner pixel misses
+        assert!(d[0].is_nan());
+        // pixel (20 + 10, 20): offset 10 from the axis, depth −sqrt(R² − 100)
+        assert!((d[20 * 41 + 30] + (r * r - 100.0).sqrt()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn root_finding_agrees_with_the_closed_form_sphere() {
+        let dims = [30, 34, 38];
+        let cam = Camera { rotation: DMat3::from_euler(glam::EulerRot::XYZ, 0.3, 0.7, -0.2), zoom: None, size: [48, 40] };
+        let exact = sphere_depth(dims, [1.0; 3], &cam).unwrap();
+        let (c, r) = sphere_geometry(dims);
+        let c = DVec3::from_array(c);
+        let rays = Rays::new(&cam, dims, [1.0; 3]).unwrap();
+        // inside ⇔ r − |p − c| ≥ 0
+        let found = first_crossing(&rays, |p| r - (p - c).length(), 0.0, 0.05, 0.0);
+        // with the Lipschitz bound of a distance (1 per voxel, spacing 1) and a tiny floor
+        let fast = first_crossing(&rays, |p| r - (p - c).length(), 0.0, 1e-6, 1.0);
+        for (a, (b, c)) in exact.iter().zip(found.iter().zip(&fast)) {
+            assert_eq!(a.is_nan(), b.is_nan());
+            assert_eq!(a.is_nan(), c.is_nan());
+            if a.is_finite() {
+                assert!((a - b).abs() < 1e-9 && (a - c).abs() < 1e-9, "{a} vs {b}, {c}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_marschner_lobb_lipschitz_bound_holds() {
+        // the steepest places: where the radial phase changes fastest (r = 1) and z = 0
+        let mut worst = 0f64;
+        let h = 1e-6;
+        for i in 0..2000 {
+            let t = i as f64 / 2000.0;
+            let (r, phi, z) = (0.5 + 0.5 * t, t * 7.0, (t * 13.0).sin() * 0.3);
+            let (x, y) = (r * phi.cos(), r * phi.sin());
+            let g = DVec3::new(
+                marschner_lobb_value(x + h, y, z) - marschner_lobb_value(x - h, y, z),
+                marschner_lobb_value(x, y + h, z) - marschner_lobb_value(x, y - h, z),
+                marschner_lobb_value(x, y, z + h) - marschner_lobb_value(x, y, z - h),
+            ) / (2.0 * h);
+            worst = worst.max(g.length());
+        }
+        assert!(worst <= ML_LIPSCHITZ && worst > 5.5, "{worst}");
+    }
+
+    #[test]
+    fn marschner_lobb_hits_lie_on_the_surface_or_the_box() {
+        let dims = [41, 41, 41];
+        let cam = Camera { rotation: rotate_eye(rotate_eye(DMat3::IDENTITY, 0, -60.0), 1, 20.0), zoom: None, size: [64, 64] };
+        let d = marschner_lobb_depth(dims, [1.0; 3], &cam, 0.5, ML_BRACKET_STEP).unwrap();
+        let rays = Rays::new(&cam, dims, [1.0; 3]).unwrap();
+        let mut on_surface = 0;
+        for v in 0..64 {
+            for u in 0..64 {
+                let t = d[v * 64 + u];
+                if t.is_nan() {
+                    continue;
+                }
+                let o = rays.origin(u as f64, v as f64);
+                let p = (o + t * rays.direction()) / 20.0 - 1.0;
+                let val = marschner_lobb_value(p.x, p.y, p.z);
+                let (t0, _) = rays.clip(o).unwrap();
+                assert!(val >= 0.5 - 1e-9 && ((val - 0.5).abs() < 1e-9 || (t - t0).abs() < 1e-12), "pixel ({u},{v}): {val}");
+                on_surface += ((val - 0.5).abs() < 1e-9) as usize;
+            }
+        }
+        assert!(on_surface > 500, "{on_surface}");
+    }
+}

@@ -1,0 +1,874 @@
+//! `shearwarp bench`: speed against accuracy, for every render variant.
+//!
+//! Runs a matrix of render variants ([`registry`]: named [`Settings`]) over one
+//! volume and a set of views ([`standard_views`]), and for each measures
+//!
+//! * the **median frame time** (shear + render + warp, [`FrameStats::frame_ms`])
+//!   of several repetitions after untimed warm-up frames, with every axis's
+//!   stack and mask prebuilt by [`Renderer::prepare_all_axes`], repeated in
+//!   several rounds over the whole matrix so that a change in machine load
+//!   biases no variant; the first frame of each view also reports its *cold*
+//!   shear (moving the mask from the previous state), which the repeated
+//!   frames of a still view do not pay;
+//! * the **error against the reference** ([`shearwarp::accuracy::reference`], same camera,
+//!   pixel for pixel): RMSE, PSNR, maximum absolute error, SSIM and the
+//!   silhouette error of [`shearwarp::accuracy::metrics`];
+//! * in iso mode, the **iso depth error** in voxels against the analytic truth
+//!   ([`shearwarp::accuracy::truth`]) when the volume is the sphere phantom at
+//!   [`SPHERE_ISO`] or the Marschner–Lobb phantom, else against the reference's
+//!   depth.
+//!
+//! Results go out as Markdown tables (one row per variant, aggregated over the
+//! views), CSV and JSON (one record per variant and view), and a plot of time
+//! against error with the Pareto front of each mode marked.
+//!
+//! New render options join the benchmark by adding a [`Variant`] to
+//! [`registry`]; nothing else in the harness needs to change.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+
+use crate::app::cli::{Usage, VolumeArgs};
+use shearwarp::accuracy::metrics::{DepthError, ImageError, compare, depth_error};
+use shearwarp::accuracy::reference::{ReferenceImage, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
+use shearwarp::accuracy::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_depth};
+use shearwarp::classify::presets;
+use shearwarp::composite::Mode;
+use shearwarp::data::phantom::{ML_ISO, Phantom, SPHERE_ISO};
+use shearwarp::data::volume::Volume;
+use shearwarp::encode::depth::Search;
+use shearwarp::render::{FrameStats, Method, Renderer, Settings, WordSize};
+use shearwarp::view::{Camera, NamedView, View, standard_views};
+use shearwarp::warp::Image;
+
+/// `shearwarp bench`.
+#[derive(Args, Debug)]
+pub struct BenchCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    /// Output image size N (N×N pixels).
+    #[arg(long, default_value_t = 256)]
+    pub size: usize,
+    /// Modes to benchmark, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "iso,blend")]
+    pub modes: Vec<Mode>,
+    /// Tissue preset (as for `render`; default: the first of the volume's presets).
+    #[arg(long)]
+    pub tissue: Option<String>,
+    /// Iso value (default: 100 for the sphere phantom, 0.5 for Marschner–Lobb, else the tissue's threshold).
+    #[arg(long, allow_negative_numbers = true)]
+    pub iso: Option<f32>,
+    /// Timed repetitions per view and round (the median over all rounds is reported).
+    #[arg(long, default_value_t = 3)]
+    pub reps: usize,
+    /// Rounds over the whole matrix: spreads each variant's frames over the run,
+    /// so a change in machine load biases no variant.
+    #[arg(long, default_value_t = 3)]
+    pub rounds: usize,
+    /// Untimed warm-up frames per view (at least 1; the first one records the cold shear).
+    #[arg(long, default_value_t = 1)]
+    pub warmup: usize,
+    /// Seeded random views in addition to the fixed ones.
+    #[arg(long, default_value_t = 2)]
+    pub random_views: usize,
+    /// Seed of the random views.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Reference step along each ray, in voxels of the smallest spacing.
+    #[arg(long, default_value_t = shearwarp::accuracy::reference::DEFAULT_STEP)]
+    pub ref_step: f64,
+    /// Only these variants (comma-separated): a variant's exact name selects
+    /// just that variant; any other string selects every variant containing it.
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
+    /// Early ray termination threshold of the fast paths in blend mode.
+    #[arg(long, default_value_t = 0.99)]
+    pub ert: f32,
+    /// Worker threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Write one CSV row per variant and view.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Print JSON (records and summary) instead of the Markdown tables.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a plot of frame time against RMSE (.svg or .png; repeat for both).
+    #[arg(long)]
+    pub plot: Vec<PathBuf>,
+    /// Also print one Markdown row per variant and view.
+    #[arg(long)]
+    pub per_view: bool,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// A named render variant of the benchmark matrix.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variant {
+    pub name: String,
+    pub settings: Settings,
+}
+
+/// Every variant benchmarked for the mode and shared settings of `base`:
+/// the binary fast rotator with cell sizes 1–4, u32 and u64 words, LUT and
+/// bit-scan search; in blend mode also without early ray termination; and
+/// brute force; Lacroute's RLE path and its pre-classified brute-force
+/// reference. Register new render options here.
+pub fn registry(base: Settings) -> Vec<Variant> {
+    let mut v = Vec::new();
+    for cell in 1..=4 {
+        for word in [WordSize::U32, WordSize::U64] {
+            for search in [Search::Lut, Search::Bitscan] {
+                v.push(Variant {
+                    name: format!("binary-c{cell}-{}-{}", word.name(), search.name()),
+                    settings: Settings { method: Method::Binary, cell, word, search, ..base },
+                });
+            }
+        }
+    }
+    if base.mode == Mode::Blend && base.ert < 1.0 {
+        // what early ray termination costs in accuracy and buys in time
+        v.push(Variant { name: "binary-c1-u64-bitscan-noert".into(), settings: Settings { method: Method::Binary, ert: 1.0, ..base } });
+    }
+    v.push(Variant { name: "brute".into(), settings: Settings { method: Method::Brute, cell: 1, ..base } });
+    v.push(Variant { name: "rle".into(), settings: Settings { method: Method::Rle, cell: 1, ..base } });
+    v.push(Variant { name: "brute-rle".into(), settings: Settings { method: Method::BruteRle, cell: 1, ..base } });
+    v
+}
+
+/// One variant at one view.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Record {
+    pub mode: &'static str,
+    pub variant: String,
+    pub view: String,
+    /// Principal axis of the view (0 = x).
+    pub axis: usize,
+    /// Medians over the timed repetitions.
+    pub frame_ms: f64,
+    pub shear_ms: f64,
+    pub render_ms: f64,
+    pub warp_ms: f64,
+    /// Shear time of the view's first frame (from the previous view's state).
+    pub cold_shear_ms: f64,
+    pub error: ImageError,
+    /// `analytic` or `reference` (iso mode only).
+    pub depth_truth: Option<&'static str>,
+    pub depth: Option<DepthError>,
+}
+
+/// One variant aggregated over the views.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Summary {
+    pub mode: &'static str,
+    pub variant: String,
+    /// Median over the views of the per-view median frame time.
+    pub frame_ms: f64,
+    /// Median over the views of the cold shear.
+    pub cold_shear_ms: f64,
+    pub rmse_mean: f64,
+    pub psnr_worst: f64,
+    pub max_abs: f64,
+    pub ssim_mean: f64,
+    pub silhouette_max: f64,
+    /// Depth error over all pixels hit in both, pooled over views (mean), and the worst view's 99th percentile.
+    pub depth_mean_vox: Option<f64>,
+    pub depth_p99_vox: Option<f64>,
+    /// On the Pareto front of (frame time, mean RMSE) within its mode.
+    pub pareto: bool,
+}
+
+/// Measurements of one variant at one view, over the rounds.
+#[derive(Default)]
+struct Acc {
+    frames: Vec<FrameStats>,
+    cold: Vec<f64>,
+    axis: usize,
+    error: Option<ImageError>,
+    depth: Option<(&'static str, DepthError)>,
+}
+
+/// The reference of one mode and view.
+struct RefFrame {
+    image: ReferenceImage,
+    /// The depth the fast paths are compared with, and what it is.
+    truth: Option<(Vec<f64>, &'static str)>,
+}
+
+fn usage(msg: String) -> anyhow::Error {
+    anyhow::Error::new(Usage(msg))
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+}
+
+impl BenchCmd {
+    fn check(&self) -> Result<()> {
+        if self.size == 0 || self.size > 8192 {
+            return Err(usage(format!("--size must be 1..=8192, got {}", self.size)));
+        }
+        if self.reps == 0 || self.reps > 10_000 {
+            return Err(usage(format!("--reps must be 1..=10000, got {}", self.reps)));
+        }
+        if self.rounds == 0 || self.rounds > 1000 {
+            return Err(usage(format!("--rounds must be 1..=1000, got {}", self.rounds)));
+        }
+        if self.warmup == 0 || self.warmup > 10_000 {
+            return Err(usage(format!("--warmup must be 1..=10000, got {}", self.warmup)));
+        }
+        if self.random_views > 10_000 {
+            return Err(usage(format!("--random-views must be at most 10000, got {}", self.random_views)));
+        }
+        if self.modes.is_empty() {
+            return Err(usage("--modes needs at least one of iso, blend".into()));
+        }
+        if !(self.ert > 0.0 && self.ert <= 1.0) {
+            return Err(usage(format!("--ert must be in (0, 1], got {}", self.ert)));
+        }
+        if let Some(iso) = self.iso {
+            if !iso.is_finite() {
+                return Err(usage("--iso must be a finite number".into()));
+            }
+        }
+        ReferenceOptions { step: self.ref_step, ..Default::default() }.check().map_err(|e| usage(format!("--ref-step: {e}")))?;
+        for p in &self.plot {
+            plot_format(p)?;
+        }
+        Ok(())
+    }
+
+    /// The phantom the volume was built from (None for files).
+    fn phantom(&self) -> Option<Phantom> {
+        if self.volume.file.is_some() || self.volume.raw.is_some() || self.volume.den.is_some() {
+            return None;
+        }
+        Some(match self.volume.phantom {
+            Phantom::Head => Phantom::Head,
+            Phantom::Sphere => Phantom::Sphere,
+            Phantom::MarschnerLobb => Phantom::MarschnerLobb,
+        })
+    }
+
+    /// A renderer for `mode` with the benchmark's classification.
+    fn renderer(&self, vol: Volume, mode: Mode) -> Result<Renderer> {
+        let base = Settings { mode, ert: self.ert, threads: self.threads, ..Settings::default() };
+        let tissues = presets::tissues_for(&vol);
+        let hi = vol.value_range().1;
+        let mut r = Renderer::with_tissues(vol, &tissues, base)?;
+        if let Some(name) = self.tissue.as_deref().filter(|n| *n != "auto") {
+            if r.select_tissue_named(name).is_err() {
+                let names: Vec<&str> = tissues.iter().map(|t| t.name).collect();
+                return Err(usage(format!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "))));
+            }
+        }
+        let iso = self.iso.or(match self.phantom() {
+            Some(Phantom::Sphere) => Some(SPHERE_ISO),
+            Some(Phantom::MarschnerLobb) => Some(ML_ISO),
+            _ => None,
+        });
+        if let Some(iso) = iso {
+            match mode {
+                Mode::Blend => r.set_transfer_function(&presets::generic(iso, hi).tf),
+                Mode::Iso => r.set_iso(iso)?,
+            }
+        }
+        Ok(r)
+    }
+}
+
+/// Output format of a plot path.
+fn plot_format(p: &Path) -> Result<&'static str> {
+    match p.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+        Some("svg") => Ok("svg"),
+        Some("png") => Ok("png"),
+        _ => Err(usage(format!("--plot {}: the file name must end in .svg or .png", p.display()))),
+    }
+}
+
+fn progress(len: u64, quiet: bool) -> indicatif::ProgressBar {
+    if quiet || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new(len);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("{msg:32} [{bar:30}] {pos}/{len} eta {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    pb
+}
+
+/// Everything one run measured.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Report {
+    pub volume: String,
+    pub dims: [usize; 3],
+    pub spacing: [f32; 3],
+    pub size: usize,
+    pub threads: usize,
+    pub reps: usize,
+    pub rounds: usize,
+    pub warmup: usize,
+    pub reference_step: f64,
+    pub views: Vec<String>,
+    /// Per mode: the classification used (`tissue` name and iso value).
+    pub classification: Vec<(String, String, f32)>,
+    /// Per mode and view: reference render time (ms) and its depth error against the analytic truth.
+    pub reference: Vec<ReferenceRecord>,
+    pub records: Vec<Record>,
+    pub summary: Vec<Summary>,
+}
+
+/// The reference's own cost and accuracy at one view.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ReferenceRecord {
+    pub mode: &'static str,
+    pub view: String,
+    pub ms: f64,
+    pub samples: u64,
+    /// Depth error of the reference against the analytic truth (when there is one).
+    pub depth: Option<DepthError>,
+    pub truth_ms: f64,
+}
+
+/// Runs `shearwarp bench`.
+pub fn run(cmd: &BenchCmd) -> Result<()> {
+    cmd.check()?;
+    let (vol, name) = cmd.volume.load()?;
+    let report = measure(cmd, vol, name)?;
+    if let Some(p) = &cmd.csv {
+        std::fs::write(p, to_csv(&report)).with_context(|| format!("{}: cannot write", p.display()))?;
+    }
+    for p in &cmd.plot {
+        write_plot(p, &report)?;
+    }
+    if cmd.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", to_markdown(&report, cmd.per_view));
+    }
+    Ok(())
+}
+
+/// Runs the matrix and returns the report (no output).
+pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
+    let dims = vol.dims();
+    let spacing = vol.spacing();
+    let unit = spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
+    let phantom = cmd.phantom();
+    let views = standard_views(NamedView::Anterior.rotation(), cmd.random_views, cmd.seed);
+    let modes: Vec<Mode> = {
+        let mut m: Vec<Mode> = cmd
+            .modes
+            .iter()
+            .map(|m| match m {
+                Mode::Iso => Mode::Iso,
+                Mode::Blend => Mode::Blend,
+            })
+            .collect();
+        m.dedup();
+        m
+    };
+    let refr = ReferenceRenderer::new(&vol);
+    let ropts = ReferenceOptions { step: cmd.ref_step, threads: cmd.threads, ..Default::default() };
+    let camera = |v: &View| Camera { rotation: v.rotation, zoom: None, size: [cmd.size, cmd.size] };
+
+    let per_mode: Vec<(Mode, Vec<Variant>)> = modes
+        .iter()
+        .map(|&mode| {
+            let base = Settings { mode, ert: cmd.ert, threads: cmd.threads, ..Settings::default() };
+            let all = registry(base);
+            let exact = |o: &str| all.iter().any(|v| v.name == o);
+            let picked = |v: &Variant| cmd.only.iter().any(|o| if exact(o) { v.name == *o } else { v.name.contains(o.as_str()) });
+            let vs: Vec<Variant> = all.iter().filter(|v| cmd.only.is_empty() || picked(v)).cloned().collect();
+            (mode, vs)
+        })
+        .collect();
+    if per_mode.iter().all(|(_, v)| v.is_empty()) {
+        let names: Vec<String> = registry(Settings::default()).into_iter().map(|v| v.name).collect();
+        return Err(usage(format!("--only {:?} matches no variant (variants: {})", cmd.only, names.join(", "))));
+    }
+    let total: usize = per_mode.iter().map(|(_, v)| views.len() * (1 + cmd.rounds * v.len())).sum();
+    let pb = progress(total as u64, cmd.quiet);
+
+    let mut report = Report {
+        volume: name,
+        dims,
+        spacing,
+        size: cmd.size,
+        threads: if cmd.threads == 0 { rayon::current_num_threads() } else { cmd.threads },
+        reps: cmd.reps,
+        rounds: cmd.rounds,
+        warmup: cmd.warmup,
+        reference_step: cmd.ref_step,
+        views: views.iter().map(|v| v.name.clone()).collect(),
+        classification: vec![],
+        reference: vec![],
+        records: vec![],
+        summary: vec![],
+    };
+    let mut vol = Some(vol);
+    for (mode, variants) in &per_mode {
+        let mode = *mode;
+        // the last mode may take the volume itself
+        let v = if per_mode.last().map(|l| l.0) == Some(mode) { vol.take().context("volume")? } else { vol.clone().context("volume")? };
+        let mut r = cmd.renderer(v, mode)?;
+        report.classification.push((mode.name().into(), r.classification_name().into(), r.iso()));
+        let scene = Scene::from_renderer(&r);
+        let iso = r.iso();
+        // references (and truth) per view
+        let mut refs: Vec<RefFrame> = Vec::with_capacity(views.len());
+        for view in &views {
+            pb.set_message(format!("{} reference {}", mode.name(), view.name));
+            let cam = camera(view);
+            let t = Instant::now();
+            let image = refr.render(&scene, &cam, &ropts)?;
+            let ms = t.elapsed().as_secs_f64() * 1e3;
+            let t = Instant::now();
+            let analytic = match (mode, phantom) {
+                (Mode::Iso, Some(Phantom::Sphere)) if iso == SPHERE_ISO => Some(sphere_depth(dims, spacing, &cam)?),
+                (Mode::Iso, Some(Phantom::MarschnerLobb)) => Some(marschner_lobb_depth(dims, spacing, &cam, iso as f64, ML_BRACKET_STEP)?),
+                _ => None,
+            };
+            let truth_ms = t.elapsed().as_secs_f64() * 1e3;
+            let ref_depth = analytic.as_ref().map(|a| depth_error(&image.depth, a, unit)).transpose()?;
+            report.reference.push(ReferenceRecord {
+                mode: mode.name(),
+                view: view.name.clone(),
+                ms,
+                samples: image.samples,
+                depth: ref_depth,
+                truth_ms,
+            });
+            let truth = match (mode, analytic) {
+                (Mode::Iso, Some(a)) => Some((a, "analytic")),
+                (Mode::Iso, None) => Some((image.depth.clone(), "reference")),
+                _ => None,
+            };
+            refs.push(RefFrame { image, truth });
+            pb.inc(1);
+        }
+        // frames alternate between two images: a renderer skips a frame identical to
+        // the one it last wrote into the same image, and every timed frame must be real
+        let mut imgs = [Image::new(cmd.size, cmd.size), Image::new(cmd.size, cmd.size)];
+        let mut flip = 0usize;
+        let nv = views.len();
+        let mut acc: Vec<Acc> = (0..variants.len() * nv).map(|_| Acc::default()).collect();
+        for round in 0..cmd.rounds {
+            for (vi, variant) in variants.iter().enumerate() {
+                r.set_settings(variant.settings)?;
+                r.prepare_all_axes();
+                for (wi, (view, rf)) in views.iter().zip(&refs).enumerate() {
+                    pb.set_message(format!("{} {} {}", mode.name(), variant.name, view.name));
+                    let a = &mut acc[vi * nv + wi];
+                    let cam = camera(view);
+                    let cold = frame(&mut r, &cam, &mut imgs, &mut flip)?;
+                    a.cold.push(cold.shear_ms);
+                    a.axis = cold.axis;
+                    for _ in 1..cmd.warmup {
+                        frame(&mut r, &cam, &mut imgs, &mut flip)?;
+                    }
+                    for _ in 0..cmd.reps {
+                        a.frames.push(frame(&mut r, &cam, &mut imgs, &mut flip)?);
+                    }
+                    if round == 0 {
+                        // every render of a view is the same image: measure the error once
+                        let img = &imgs[flip];
+                        a.error = Some(compare(img, &rf.image.image)?);
+                        if let Some((t, what)) = &rf.truth {
+                            a.depth = Some((*what, depth_error(&fast_path_depth(&r, &cam)?, t, unit)?));
+                        }
+                    }
+                    pb.inc(1);
+                }
+            }
+        }
+        for (vi, variant) in variants.iter().enumerate() {
+            for (wi, view) in views.iter().enumerate() {
+                let a = &mut acc[vi * nv + wi];
+                let col = |g: fn(&FrameStats) -> f64| median(&mut a.frames.iter().map(g).collect::<Vec<_>>());
+                report.records.push(Record {
+                    mode: mode.name(),
+                    variant: variant.name.clone(),
+                    view: view.name.clone(),
+                    axis: a.axis,
+                    frame_ms: col(|s| s.frame_ms()),
+                    shear_ms: col(|s| s.shear_ms),
+                    render_ms: col(|s| s.render_ms),
+                    warp_ms: col(|s| s.warp_ms),
+                    cold_shear_ms: median(&mut a.cold),
+                    error: a.error.context("error measured in round 0")?,
+                    depth_truth: a.depth.map(|d| d.0),
+                    depth: a.depth.map(|d| d.1),
+                });
+            }
+        }
+    }
+    pb.finish_and_clear();
+    report.summary = summarize(&report.records);
+    Ok(report)
+}
+
+/// One real frame into the other of two images (see [`measure`]), returning its stats.
+fn frame(r: &mut Renderer, cam: &Camera, imgs: &mut [Image; 2], flip: &mut usize) -> Result<FrameStats> {
+    *flip ^= 1;
+    let st = r.render(cam, &mut imgs[*flip])?;
+    anyhow::ensure!(!st.skipped, "the renderer skipped a benchmark frame");
+    Ok(st)
+}
+
+/// Aggregates the records per mode and variant and marks each mode's Pareto front.
+pub fn summarize(records: &[Record]) -> Vec<Summary> {
+    let mut keys: Vec<(&'static str, String)> = Vec::new();
+    for r in records {
+        if !keys.iter().any(|k| k.0 == r.mode && k.1 == r.variant) {
+            keys.push((r.mode, r.variant.clone()));
+        }
+    }
+    let mut out: Vec<Summary> = keys
+        .into_iter()
+        .map(|(mode, variant)| {
+            let rs: Vec<&Record> = records.iter().filter(|r| r.mode == mode && r.variant == variant).collect();
+            let n = rs.len() as f64;
+            let depths: Vec<&DepthError> = rs.iter().filter_map(|r| r.depth.as_ref()).filter(|d| d.both > 0).collect();
+            let hits: usize = depths.iter().map(|d| d.both).sum();
+            Summary {
+                mode,
+                variant,
+                frame_ms: median(&mut rs.iter().map(|r| r.frame_ms).collect::<Vec<_>>()),
+                cold_shear_ms: median(&mut rs.iter().map(|r| r.cold_shear_ms).collect::<Vec<_>>()),
+                rmse_mean: rs.iter().map(|r| r.error.rmse).sum::<f64>() / n,
+                psnr_worst: rs.iter().map(|r| r.error.psnr).fold(f64::INFINITY, f64::min),
+                max_abs: rs.iter().map(|r| r.error.max_abs).fold(0.0, f64::max),
+                ssim_mean: rs.iter().map(|r| r.error.ssim).sum::<f64>() / n,
+                silhouette_max: rs.iter().map(|r| r.error.silhouette).fold(0.0, f64::max),
+                depth_mean_vox: (hits > 0).then(|| depths.iter().map(|d| d.mean * d.both as f64).sum::<f64>() / hits as f64),
+                depth_p99_vox: (hits > 0).then(|| depths.iter().map(|d| d.p99).fold(0.0, f64::max)),
+                pareto: false,
+            }
+        })
+        .collect();
+    // Pareto front per mode: no other variant is at least as fast and at least as accurate, and better in one
+    let marks: Vec<bool> = out
+        .iter()
+        .map(|a| {
+            !out.iter().any(|b| {
+                b.mode == a.mode
+                    && b.frame_ms <= a.frame_ms
+                    && b.rmse_mean <= a.rmse_mean
+                    && (b.frame_ms < a.frame_ms || b.rmse_mean < a.rmse_mean)
+            })
+        })
+        .collect();
+    for (s, m) in out.iter_mut().zip(marks) {
+        s.pareto = m;
+    }
+    out
+}
+
+fn fmt_psnr(p: f64) -> String {
+    if p.is_infinite() { "∞".into() } else { format!("{p:.2}") }
+}
+
+fn fmt_opt(x: Option<f64>, prec: usize) -> String {
+    match x {
+        Some(v) if v.is_finite() => format!("{v:.prec$}"),
+        _ => "—".into(),
+    }
+}
+
+/// The report as Markdown: a header, one table per mode (a row per variant,
+/// aggregated over the views) and the reference's own cost and accuracy.
+pub fn to_markdown(rep: &Report, per_view: bool) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let d = rep.dims;
+    let _ = writeln!(
+        s,
+        "# shearwarp bench: {} {}×{}×{} (spacing {:?}), {}×{} px, {} threads\n",
+        rep.volume, d[0], d[1], d[2], rep.spacing, rep.size, rep.size, rep.threads
+    );
+    let _ = writeln!(
+        s,
+        "Views: {}. Frame time = median of {} rounds × {} timed frames per view, each round after {} warm-up frame(s) \
+         (shear + render + warp, masks prebuilt), then the median over views; cold shear = the first frame's shear from the previous view. \
+         Errors against the reference (true rays, trilinear, step {} voxel, f64), displayed RGB in [0, 1].\n",
+        rep.views.join(", "),
+        rep.rounds,
+        rep.reps,
+        rep.warmup,
+        rep.reference_step
+    );
+    for (mode, tissue, iso) in &rep.classification {
+        let rows: Vec<&Summary> = rep.summary.iter().filter(|x| x.mode == mode).collect();
+        let depth_what = rep.records.iter().find(|r| r.mode == mode).and_then(|r| r.depth_truth);
+        let _ = writeln!(s, "## {mode} (tissue {tissue}, iso {iso})\n");
+        let dcol = match depth_what {
+            Some(w) => format!(" depth err vs {w} (vox): mean | p99 (worst view) |"),
+            None => String::new(),
+        };
+        let _ = writeln!(
+            s,
+            "| variant | frame ms | cold shear ms | RMSE (mean) | PSNR dB (worst) | max abs | SSIM (mean) | silhouette (max) |{dcol} Pareto |"
+        );
+        let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|{}---|", if depth_what.is_some() { "---:|---:|" } else { "" });
+        for x in rows {
+            let dc = if depth_what.is_some() {
+                format!(" {} | {} |", fmt_opt(x.depth_mean_vox, 3), fmt_opt(x.depth_p99_vox, 3))
+            } else {
+                String::new()
+            };
+            let _ = writeln!(
+                s,
+                "| {} | {:.3} | {:.3} | {:.5} | {} | {:.4} | {:.5} | {:.5} |{dc} {} |",
+                x.variant,
+                x.frame_ms,
+                x.cold_shear_ms,
+                x.rmse_mean,
+                fmt_psnr(x.psnr_worst),
+                x.max_abs,
+                x.ssim_mean,
+                x.silhouette_max,
+                if x.pareto { "★" } else { "" }
+            );
+        }
+        let refs: Vec<&ReferenceRecord> = rep.reference.iter().filter(|r| r.mode == mode).collect();
+        if !refs.is_empty() {
+            let ms = median(&mut refs.iter().map(|r| r.ms).collect::<Vec<_>>());
+            let _ = write!(s, "\nReference: median {ms:.0} ms per view");
+            let depths: Vec<&DepthError> = refs.iter().filter_map(|r| r.depth.as_ref()).filter(|d| d.both > 0).collect();
+            if !depths.is_empty() {
+                let hits: usize = depths.iter().map(|d| d.both).sum();
+                let mean = depths.iter().map(|d| d.mean * d.both as f64).sum::<f64>() / hits as f64;
+                let p99 = depths.iter().map(|d| d.p99).fold(0.0, f64::max);
+                let _ = write!(s, "; its depth error vs analytic: mean {mean:.4} vox, p99 (worst view) {p99:.4} vox");
+            }
+            let _ = writeln!(s, ".\n");
+        }
+        if per_view {
+            let _ = writeln!(
+                s,
+                "| variant | view | axis | frame ms | cold shear ms | RMSE | PSNR dB | SSIM | silhouette | depth mean | depth p99 |"
+            );
+            let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+            for r in rep.records.iter().filter(|r| r.mode == mode) {
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {} | {:.3} | {:.3} | {:.5} | {} | {:.5} | {:.5} | {} | {} |",
+                    r.variant,
+                    r.view,
+                    ["x", "y", "z"][r.axis.min(2)],
+                    r.frame_ms,
+                    r.cold_shear_ms,
+                    r.error.rmse,
+                    fmt_psnr(r.error.psnr),
+                    r.error.ssim,
+                    r.error.silhouette,
+                    fmt_opt(r.depth.map(|d| d.mean), 3),
+                    fmt_opt(r.depth.map(|d| d.p99), 3)
+                );
+            }
+            let _ = writeln!(s);
+        }
+    }
+    s
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
+}
+
+/// One CSV row per variant and view (header first).
+pub fn to_csv(rep: &Report) -> String {
+    let mut s = String::from(
+        "volume,dims,mode,variant,view,axis,frame_ms,shear_ms,render_ms,warp_ms,cold_shear_ms,rmse,psnr,max_abs,ssim,silhouette,\
+         depth_truth,depth_mean_vox,depth_p99_vox,depth_max_vox,depth_both,depth_only_test,depth_only_truth\n",
+    );
+    let d = rep.dims;
+    for r in &rep.records {
+        let dep = |f: fn(&DepthError) -> f64| r.depth.map(|x| f(&x)).filter(|v| v.is_finite()).map(|v| v.to_string()).unwrap_or_default();
+        let cnt = |f: fn(&DepthError) -> usize| r.depth.map(|x| f(&x).to_string()).unwrap_or_default();
+        let fields = [
+            csv_field(&rep.volume),
+            format!("{}x{}x{}", d[0], d[1], d[2]),
+            r.mode.to_string(),
+            csv_field(&r.variant),
+            csv_field(&r.view),
+            r.axis.to_string(),
+            r.frame_ms.to_string(),
+            r.shear_ms.to_string(),
+            r.render_ms.to_string(),
+            r.warp_ms.to_string(),
+            r.cold_shear_ms.to_string(),
+            r.error.rmse.to_string(),
+            if r.error.psnr.is_infinite() { "inf".into() } else { r.error.psnr.to_string() },
+            r.error.max_abs.to_string(),
+            r.error.ssim.to_string(),
+            r.error.silhouette.to_string(),
+            r.depth_truth.unwrap_or("").to_string(),
+            dep(|x| x.mean),
+            dep(|x| x.p99),
+            dep(|x| x.max),
+            cnt(|x| x.both),
+            cnt(|x| x.only_test),
+            cnt(|x| x.only_truth),
+        ];
+        s.push_str(&fields.join(","));
+        s.push('\n');
+    }
+    s
+}
+
+/// Writes the time-against-error plot (log-log, one colour per mode, each
+/// mode's Pareto front joined and labelled) as SVG or PNG by the extension.
+pub fn write_plot(path: &Path, rep: &Report) -> Result<()> {
+    use plotters::prelude::*;
+    // plotters lays out text with ab_glyph; give it a font without fontconfig
+    plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
+        .map_err(|_| anyhow::anyhow!("cannot load the embedded DejaVu Sans font"))?;
+    if rep.summary.is_empty() {
+        return Err(anyhow::anyhow!("nothing to plot"));
+    }
+    let size = (1000u32, 640u32);
+    match plot_format(path)? {
+        "svg" => draw_plot(SVGBackend::new(path, size).into_drawing_area(), rep)
+            .with_context(|| format!("{}: cannot draw the plot", path.display()))?,
+        _ => {
+            let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
+            draw_plot(BitMapBackend::with_buffer(&mut buf, size).into_drawing_area(), rep).context("cannot draw the plot")?;
+            let img = image::RgbImage::from_raw(size.0, size.1, buf).context("plot buffer size")?;
+            img.save_with_format(path, image::ImageFormat::Png).with_context(|| format!("{}: cannot write PNG", path.display()))?;
+        }
+    }
+    Ok(())
+}
+
+/// A number with about three significant digits, without trailing zeros.
+fn fmt_sig(v: f64) -> String {
+    let p = if v >= 100.0 {
+        0
+    } else if v >= 10.0 {
+        1
+    } else if v >= 1.0 {
+        2
+    } else {
+        (3.0 - v.abs().max(1e-12).log10().floor()) as usize - 1
+    };
+    let s = format!("{v:.p$}");
+    if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s }
+}
+
+fn draw_plot<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
+    rep: &Report,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    use plotters::prelude::*;
+    // RMSE 0 cannot sit on a log axis; no real fast path reaches it
+    const FLOOR: f64 = 1e-7;
+    let pts: Vec<(&Summary, f64, f64)> = rep.summary.iter().map(|s| (s, s.frame_ms.max(1e-6), s.rmse_mean.max(FLOOR))).collect();
+    let (x0, x1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let (y0, y1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.2), b.max(p.2)));
+    let d = rep.dims;
+    let title = format!("{} {}×{}×{}, {} px: frame time vs RMSE", rep.volume, d[0], d[1], d[2], rep.size);
+    // both axes are logarithmic: plot log10 on linear axes (whose ticks plotters
+    // spaces well at any range) and label them with the values
+    let widen = |lo: f64, hi: f64, pad: f64| {
+        let (lo, hi) = (lo.log10() - pad, hi.log10() + pad);
+        let extra = (0.6 - (hi - lo)).max(0.0) / 2.0;
+        (lo - extra, hi + extra)
+    };
+    let (x0, x1) = widen(x0, x1, 0.2);
+    let (y0, y1) = widen(y0, y1, 0.25);
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(&title, ("sans-serif", 22))
+        .margin(18)
+        .x_label_area_size(48)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x0..x1, y0..y1)?;
+    chart
+        .configure_mesh()
+        .x_desc("median frame time (ms, log scale)")
+        .y_desc("mean RMSE vs reference (log scale)")
+        .label_style(("sans-serif", 14))
+        .x_labels(8)
+        .y_labels(8)
+        .x_label_formatter(&|x| fmt_sig(10f64.powf(*x)))
+        .y_label_formatter(&|y| format!("{:.1e}", 10f64.powf(*y)))
+        .draw()?;
+    let pts: Vec<(&Summary, f64, f64)> = pts.iter().map(|p| (p.0, p.1.log10(), p.2.log10())).collect();
+    // labels of points in the right part of the plot go to their left
+    let label_dx = |x: f64, text: &str| if (x - x0) / (x1 - x0) > 0.6 { -(text.chars().count() as i32) * 7 - 12 } else { 10 };
+    for (i, (mode, _, _)) in rep.classification.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let mine: Vec<&(&Summary, f64, f64)> = pts.iter().filter(|p| p.0.mode == mode).collect();
+        chart
+            .draw_series(mine.iter().map(|p| Circle::new((p.1, p.2), 4, color.filled())))?
+            .label(format!("{mode} (ringed: Pareto front)"))
+            .legend(move |(x, y)| Circle::new((x, y), 5, color.filled()));
+        let mut front: Vec<&&(&Summary, f64, f64)> = mine.iter().filter(|p| p.0.pareto).collect();
+        front.sort_by(|a, b| a.1.total_cmp(&b.1));
+        chart.draw_series(LineSeries::new(front.iter().map(|p| (p.1, p.2)), color.stroke_width(2)))?;
+        chart.draw_series(front.iter().map(|p| {
+            EmptyElement::at((p.1, p.2))
+                + Circle::new((0, 0), 9, color.stroke_width(2))
+                + Text::new(p.0.variant.clone(), (label_dx(p.1, &p.0.variant), -16), ("sans-serif", 13).into_font().color(&BLACK))
+        }))?;
+    }
+    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font(("sans-serif", 14)).draw()?;
+    root.present()?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn registry_covers_the_matrix() {
+        let v = registry(Settings::default());
+        assert_eq!(v.len(), 4 * 2 * 2 + 3);
+        let b = registry(Settings { mode: Mode::Blend, ..Settings::default() });
+        assert_eq!(b.len(), 4 * 2 * 2 + 4);
+        assert!(b.iter().any(|x| x.settings.ert == 1.0 && x.name.ends_with("noert")));
+        let names: std::collections::BTreeSet<&str> = v.iter().map(|x| x.name.as_str()).collect();
+        assert_eq!(names.len(), v.len(), "names are unique");
+        assert!(names.contains("binary-c1-u64-bitscan") && names.contains("binary-c4-u32-lut") && names.contains("brute"));
+        assert!(names.contains("rle") && names.contains("brute-rle"));
+    }
+
+    #[test]
+    fn pareto_front() {
+        let rec = |variant: &str, t: f64, e: f64| Record {
+            mode: "iso",
+            variant: variant.into(),
+            view: "0°".into(),
+            axis: 2,
+            frame_ms: t,
+            shear_ms: 0.0,
+            render_ms: t,
+            warp_ms: 0.0,
+            cold_shear_ms: 0.0,
+            error: ImageError { rmse: e, psnr: shearwarp::accuracy::metrics::psnr(e), max_abs: e, ssim: 1.0, silhouette: 0.0 },
+            depth_truth: None,
+            depth: None,
+        };
+        let s = summarize(&[rec("fast", 1.0, 0.1), rec("slow-good", 5.0, 0.01), rec("dominated", 6.0, 0.05), rec("tie", 1.0, 0.1)]);
+        let front: Vec<&str> = s.iter().filter(|x| x.pareto).map(|x| x.variant.as_str()).collect();
+        assert_eq!(front, ["fast", "slow-good", "tie"]);
+    }
+}

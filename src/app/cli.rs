@@ -1,0 +1,824 @@
+//! Stage 8 — the command-line interface (`shearwarp render | rotate`).
+//!
+//! Owns argument parsing (clap), turning arguments into a volume, a transfer
+//! function, a camera and render settings, the frame loop of `rotate`, the
+//! reports (readable or `--json`), and writing PNG / GIF / APNG output. Every
+//! error reaches the user as one line naming the problem, with exit code 2 for
+//! bad usage or input and 1 for failures while running.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use shearwarp::classify::presets;
+use shearwarp::composite::Mode;
+use shearwarp::data::io;
+use shearwarp::data::phantom::Phantom;
+use shearwarp::data::volume::{Volume, VoxelType};
+use shearwarp::encode::depth::Search;
+use shearwarp::render::{FrameStats, Method, Normals, Renderer, Settings, WordSize};
+use shearwarp::view::{Camera, NamedView, one_bit_step_deg, rotate_eye};
+use shearwarp::warp::Image;
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+/// A problem with the arguments or the input (exit code 2), as opposed to a
+/// failure while running (exit code 1).
+#[derive(Debug)]
+pub struct Usage(pub String);
+
+impl std::fmt::Display for Usage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Usage {}
+
+/// Prints a line to stdout; a closed pipe (`shearwarp … | head`) ends the
+/// program quietly instead of panicking like `println!`.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        if let Err(e) = writeln!(out, $($t)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            return Err(anyhow::Error::new(e).context("cannot write to standard output"));
+        }
+    }};
+}
+
+/// Returns a [`Usage`] error from the current function.
+macro_rules! usage {
+    ($($t:tt)*) => {
+        return Err(anyhow::Error::new(Usage(format!($($t)*))))
+    };
+}
+
+const EXAMPLES: &str = "\
+Examples:
+  shearwarp render -o head.png                         # built-in CT head, skin iso-surface
+  shearwarp render --tissue bone --rotate 0,30,0 -o bone.png
+  shearwarp render --mode blend --tissue soft -o soft.png
+  shearwarp rotate --degrees 360 --json                # benchmark a full turn
+  shearwarp rotate --degrees 90 --gif turn.gif
+  shearwarp rotate --cell 2 --cycle-tissues 30 --json  # super cells, switch tissues every 30 frames
+  shearwarp info --phantom head                        # size, range, histogram, thresholds
+  shearwarp render scan.nrrd --tissue bone -o bone.png  # NRRD, NIfTI, DICOM directory, .den, raw
+  shearwarp info brain.nii.gz                          # dims, spacing, histogram, thresholds
+  shearwarp view                                       # interactive window: drag to rotate, keys 1-4 tissues
+  shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
+
+/// Fast CPU volume rendering with the binary shear-warp fast rotator.
+#[derive(Parser, Debug)]
+#[command(name = "shearwarp", version, about, after_help = EXAMPLES)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render one view to a PNG.
+    #[command(after_help = EXAMPLES)]
+    Render(RenderCmd),
+    /// Rotate about an axis with the incremental shear, timing every frame.
+    #[command(after_help = EXAMPLES)]
+    Rotate(RotateCmd),
+    /// Describe a volume: size, type, spacing, value range, histogram, suggested thresholds.
+    #[command(after_help = EXAMPLES)]
+    Info(InfoCmd),
+    /// Benchmark every render variant: median frame time against error versus a reference renderer.
+    Bench(crate::app::bench::BenchCmd),
+    /// Interactive window: drag to rotate, 1-4 tissues, [ ] iso, +/- cell, Space blend, R reset, S save, Q quit.
+    #[command(after_help = EXAMPLES)]
+    View(crate::app::viewer::ViewCmd),
+    /// Write the volume as an 8-bit VolPack .den file (windowed, optionally resampled): the common input of side-by-side comparisons.
+    Export(ExportCmd),
+}
+
+/// Where the volume comes from.
+#[derive(Args, Debug, Clone)]
+pub struct VolumeArgs {
+    /// Volume file: .nrrd/.nhdr, .nii/.nii.gz, .den, .raw (with --dims/--type or a JSON
+    /// sidecar), or a directory (or one .dcm file) of a DICOM series. Without it, a phantom.
+    #[arg(value_name = "FILE")]
+    pub file: Option<PathBuf>,
+    /// File format (default: from the extension or the content).
+    #[arg(long, value_enum)]
+    pub format: Option<io::Format>,
+    /// Built-in phantom (used when no file is given).
+    #[arg(long, value_enum, default_value = "head")]
+    pub phantom: Phantom,
+    /// Phantom size X,Y,Z (default: head 128,128,113; sphere 128³; marschner-lobb 41³).
+    #[arg(long, value_parser = parse_dims)]
+    pub phantom_dims: Option<[usize; 3]>,
+    /// Raw voxel file (same as FILE with --format raw; needs --dims and --type unless it has a JSON sidecar).
+    #[arg(long, value_name = "FILE", conflicts_with = "file")]
+    pub raw: Option<PathBuf>,
+    /// VolPack .den file (same as FILE with --format den).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["file", "raw"])]
+    pub den: Option<PathBuf>,
+    /// Raw file dimensions X,Y,Z.
+    #[arg(long, value_parser = parse_dims)]
+    pub dims: Option<[usize; 3]>,
+    /// Raw voxel type.
+    #[arg(long = "type", value_enum)]
+    pub voxel_type: Option<VoxelType>,
+    /// Raw data is big-endian.
+    #[arg(long)]
+    pub big_endian: bool,
+    /// Bytes to skip at the start of a raw file.
+    #[arg(long, default_value_t = 0)]
+    pub header_bytes: u64,
+    /// Voxel spacing X,Y,Z (overrides the file's).
+    #[arg(long, value_parser = parse_spacing)]
+    pub spacing: Option<[f32; 3]>,
+}
+
+/// Render settings shared by every command.
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    /// Output image size N (N×N pixels).
+    #[arg(long, default_value_t = 512)]
+    pub size: usize,
+    /// Render path: binary (bit-packed mask + post-classified raycaster), rle
+    /// (run-length-encoded pre-classified shear-warp), brute or brute-rle (their
+    /// unaccelerated references).
+    #[arg(long, value_enum, default_value = "binary")]
+    pub method: Method,
+    /// Iso-surface preview or full alpha blending.
+    #[arg(long, value_enum, default_value = "iso")]
+    pub mode: Mode,
+    /// Mask word width.
+    #[arg(long, value_enum, default_value = "u64")]
+    pub word: WordSize,
+    /// First-bit search.
+    #[arg(long, value_enum, default_value = "bitscan")]
+    pub search: Search,
+    /// Shading of the binary and brute paths: codes (each voxel's gradient
+    /// direction quantized once, VolPack's per-view shade table, four lookups
+    /// per sample) or gradient (the exact gradient at every sample: slower).
+    #[arg(long, value_enum, default_value = "codes")]
+    pub normals: Normals,
+    /// Worker threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Tissue preset: skin, fat, soft, bone (CT in Hounsfield units); low, mid,
+    /// high (other volumes, from the histogram); or auto (the first).
+    #[arg(long)]
+    pub tissue: Option<String>,
+    /// Super-cell size S (1..=8): the mask shrinks by S², a shear step moves S voxels.
+    #[arg(long, default_value_t = 1)]
+    pub cell: usize,
+    /// Iso value (overrides the preset's threshold).
+    #[arg(long, allow_negative_numbers = true)]
+    pub iso: Option<f32>,
+    /// Blend-mode opacity curve: density:opacity control points, sorted by density,
+    /// linear in between, constant outside; two points at one density make a step
+    /// (e.g. "24:0,28:1", or VolPack's ramp with its 0.05 cut: "62.5:0,62.5:0.05,255:0.3").
+    #[arg(long, value_parser = parse_opacity, allow_hyphen_values = true, conflicts_with = "iso")]
+    pub opacity: Option<OpacityCurve>,
+    /// Early ray termination threshold in blend mode, and in both modes with
+    /// --method rle / brute-rle (1 disables it).
+    #[arg(long, default_value_t = 0.99)]
+    pub ert: f32,
+    /// Pixels per world unit (default: fit the bounding diagonal).
+    #[arg(long)]
+    pub zoom: Option<f64>,
+    /// Starting view: anterior (face), posterior, left, right, superior, inferior.
+    #[arg(long, value_enum, default_value = "anterior")]
+    pub view: NamedView,
+    /// Extra rotation RX,RY,RZ in degrees about the eye's x, y, z axes (after --view).
+    #[arg(long, value_parser = parse_rotation, allow_hyphen_values = true)]
+    pub rotate: Option<[f64; 3]>,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// `shearwarp render`.
+#[derive(Args, Debug)]
+pub struct RenderCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    #[command(flatten)]
+    pub render: RenderArgs,
+    /// Output PNG.
+    #[arg(long, short, default_value = "shearwarp.png")]
+    pub output: PathBuf,
+    /// Print the frame's statistics as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Eye axes to rotate about.
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum AxisArg {
+    /// Horizontal screen axis.
+    X,
+    /// Vertical screen axis.
+    Y,
+    /// Viewing axis.
+    Z,
+}
+
+/// `shearwarp rotate`.
+#[derive(Args, Debug)]
+pub struct RotateCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    #[command(flatten)]
+    pub render: RenderArgs,
+    /// Eye axis to rotate about.
+    #[arg(long, value_enum, default_value = "y")]
+    pub axis: AxisArg,
+    /// Total rotation in degrees.
+    #[arg(long, default_value_t = 360.0)]
+    pub degrees: f64,
+    /// Degrees per frame, or "auto": the angle that moves the outermost slice by
+    /// one voxel (one bit of the mask) per frame.
+    #[arg(long, default_value = "auto")]
+    pub step_deg: String,
+    /// Write every frame as PNG into this directory.
+    #[arg(long)]
+    pub frames_dir: Option<PathBuf>,
+    /// Write an animated GIF.
+    #[arg(long)]
+    pub gif: Option<PathBuf>,
+    /// Write an animated PNG.
+    #[arg(long)]
+    pub apng: Option<PathBuf>,
+    /// Print one JSON object with the timing summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Switch to the next tissue preset every N frames (0 = never).
+    #[arg(long, default_value_t = 0)]
+    pub cycle_tissues: usize,
+}
+
+/// `shearwarp info`.
+#[derive(Args, Debug)]
+pub struct InfoCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    /// Histogram bins to print.
+    #[arg(long, default_value_t = 16)]
+    pub bins: usize,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `shearwarp export`.
+#[derive(Args, Debug)]
+pub struct ExportCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    /// Output .den file.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Density window LO,HI mapped onto 0..=255 (clamped); default: the value range.
+    #[arg(long, value_parser = parse_window, allow_hyphen_values = true)]
+    pub window: Option<[f32; 2]>,
+    /// Resample (trilinear) to X,Y,Z voxels over the same physical box.
+    #[arg(long, value_parser = parse_dims, conflicts_with = "max_dim")]
+    pub out_dims: Option<[usize; 3]>,
+    /// Resample (trilinear) to cubic voxels, the longest physical edge N voxels long
+    /// (VolPack has no voxel spacing, so anisotropic scans need this to keep their shape).
+    #[arg(long)]
+    pub max_dim: Option<usize>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_window(s: &str) -> std::result::Result<[f32; 2], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let [lo, hi] = parts.as_slice() else { return Err(format!("expected LO,HI, got '{s}'")) };
+    let (lo, hi) = (
+        lo.parse::<f32>().map_err(|_| format!("'{lo}' is not a number"))?,
+        hi.parse::<f32>().map_err(|_| format!("'{hi}' is not a number"))?,
+    );
+    if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+        return Err(format!("the window needs finite LO < HI, got {s}"));
+    }
+    Ok([lo, hi])
+}
+
+fn parse_triple<T: std::str::FromStr>(s: &str, what: &str) -> std::result::Result<[T; 3], String> {
+    let parts: Vec<&str> = s.split([',', 'x', 'X']).map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!("expected three {what} separated by commas, got '{s}'"));
+    }
+    let mut out = Vec::with_capacity(3);
+    for p in parts {
+        out.push(p.parse::<T>().map_err(|_| format!("'{p}' is not a valid {what}"))?);
+    }
+    out.try_into().map_err(|_| "three values".to_string())
+}
+
+fn parse_dims(s: &str) -> std::result::Result<[usize; 3], String> {
+    let d: [usize; 3] = parse_triple(s, "whole numbers")?;
+    shearwarp::data::volume::check_dims(d.map(|x| x as u64)).map_err(|e| e.to_string())
+}
+
+fn parse_spacing(s: &str) -> std::result::Result<[f32; 3], String> {
+    let d: [f32; 3] = parse_triple(s, "numbers")?;
+    if d.iter().any(|x| !x.is_finite() || *x <= 0.0) {
+        return Err(format!("spacing must be finite and > 0, got {s}"));
+    }
+    Ok(d)
+}
+
+/// `--opacity`: a blend-mode transfer function from (density, opacity) control
+/// points, in a constant bone-white colour.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpacityCurve(pub shearwarp::classify::TransferFunction);
+
+fn parse_opacity(s: &str) -> std::result::Result<OpacityCurve, String> {
+    let mut pts = Vec::new();
+    for p in s.split(',').map(str::trim) {
+        let Some((d, a)) = p.split_once(':') else { return Err(format!("'{p}' is not DENSITY:OPACITY")) };
+        let d: f32 = d.trim().parse().map_err(|_| format!("'{d}' is not a density"))?;
+        let a: f32 = a.trim().parse().map_err(|_| format!("'{a}' is not an opacity"))?;
+        pts.push((d, a));
+    }
+    // the same checks as every transfer function: finite, sorted, opacities in [0, 1]
+    let colour = vec![(pts[0].0, [0.92, 0.9, 0.85])];
+    shearwarp::classify::TransferFunction::new(pts, colour).map(OpacityCurve).map_err(|e| e.to_string())
+}
+
+fn parse_rotation(s: &str) -> std::result::Result<[f64; 3], String> {
+    let r: [f64; 3] = parse_triple(s, "angles")?;
+    if r.iter().any(|x| !x.is_finite()) {
+        return Err(format!("angles must be finite, got {s}"));
+    }
+    Ok(r)
+}
+
+impl VolumeArgs {
+    /// Loads or builds the volume and names it for reports. Any failure is a
+    /// [`Usage`] error: the input is what is wrong.
+    pub fn load(&self) -> Result<(Volume, String)> {
+        self.load_inner().map_err(|e| anyhow::Error::new(Usage(format!("{e:#}"))))
+    }
+
+    fn load_inner(&self) -> Result<(Volume, String)> {
+        let (path, format) = match (&self.file, &self.raw, &self.den) {
+            (Some(p), _, _) => (Some(p), self.format),
+            (_, Some(p), _) => (Some(p), Some(io::Format::Raw)),
+            (_, _, Some(p)) => (Some(p), Some(io::Format::Den)),
+            _ => (None, None),
+        };
+        let mut vol = match path {
+            Some(path) => {
+                let raw = match (self.dims, self.voxel_type) {
+                    (Some(dims), Some(t)) => {
+                        let mut spec = io::RawSpec::new(dims, t);
+                        spec.big_endian = self.big_endian;
+                        spec.header_bytes = self.header_bytes;
+                        Some(spec)
+                    }
+                    (None, None) => None,
+                    _ => usage!("raw files need both --dims X,Y,Z and --type (or a JSON sidecar)"),
+                };
+                let spinner = spinner(&format!("loading {}", path.display()));
+                let v = io::load(path, &io::LoadOptions { format, raw })?;
+                spinner.finish_and_clear();
+                v
+            }
+            None => {
+                let p = self.phantom;
+                let dims = self.phantom_dims.unwrap_or_else(|| p.default_dims());
+                p.build(dims)?
+            }
+        };
+        if let Some(sp) = self.spacing {
+            vol.set_spacing(sp)?;
+        }
+        let name = match path {
+            Some(p) => p.display().to_string(),
+            None => format!("{} phantom", self.phantom.name()),
+        };
+        Ok((vol, name))
+    }
+}
+
+impl RenderArgs {
+    /// A renderer for `vol` set up from these arguments: the volume's tissue
+    /// presets (CT in Hounsfield units, else from the histogram) share one
+    /// threshold-coded mask, so `--tissue` and `--cycle-tissues` switch in O(1);
+    /// `--iso` makes a custom threshold instead.
+    pub fn renderer(&self, vol: Volume) -> Result<Renderer> {
+        let settings = self.settings()?;
+        let tissues = presets::tissues_for(&vol);
+        let hi = vol.value_range().1;
+        let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
+        match self.tissue.as_deref() {
+            None | Some("auto") => {}
+            Some(name) => {
+                if r.select_tissue_named(name).is_err() {
+                    let names: Vec<&str> = tissues.iter().map(|t| t.name).collect();
+                    usage!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "));
+                }
+            }
+        }
+        if let Some(OpacityCurve(tf)) = &self.opacity {
+            if settings.mode != Mode::Blend {
+                usage!("--opacity sets the blend-mode transfer function; add --mode blend (iso mode takes --iso)");
+            }
+            r.set_transfer_function(tf);
+        }
+        if let Some(iso) = self.iso {
+            if !iso.is_finite() {
+                usage!("--iso must be a finite number");
+            }
+            if settings.mode == Mode::Blend {
+                r.set_transfer_function(&presets::generic(iso, hi).tf);
+            } else {
+                r.set_iso(iso)?;
+            }
+        }
+        Ok(r)
+    }
+
+    /// Render settings.
+    pub fn settings(&self) -> Result<Settings> {
+        if !(1..=shearwarp::encode::mask::MAX_CELL).contains(&self.cell) {
+            usage!("--cell must be 1..={}, got {}", shearwarp::encode::mask::MAX_CELL, self.cell);
+        }
+        if !(self.ert > 0.0 && self.ert <= 1.0) {
+            usage!("--ert must be in (0, 1], got {}", self.ert);
+        }
+        if self.size == 0 || self.size > 16384 {
+            usage!("--size must be 1..=16384, got {}", self.size);
+        }
+        Ok(Settings {
+            method: self.method,
+            mode: self.mode,
+            word: self.word,
+            search: self.search,
+            normals: self.normals,
+            ert: self.ert,
+            cell: self.cell,
+            threads: self.threads,
+            ..Settings::default()
+        })
+    }
+
+    /// The starting camera.
+    pub fn camera(&self) -> Result<Camera> {
+        let mut r = self.view.rotation();
+        if let Some([rx, ry, rz]) = self.rotate {
+            r = rotate_eye(rotate_eye(rotate_eye(r, 0, rx), 1, ry), 2, rz);
+        }
+        if let Some(z) = self.zoom {
+            if !(z.is_finite() && z > 0.0) {
+                usage!("--zoom must be finite and > 0, got {z}");
+            }
+        }
+        Ok(Camera { rotation: r, zoom: self.zoom, size: [self.size, self.size] })
+    }
+}
+
+/// A spinner on stderr while something of unknown length runs (hidden when
+/// stderr is not a terminal).
+fn spinner(msg: &str) -> indicatif::ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new_spinner();
+    pb.set_message(msg.to_string());
+    pb.enable_steady_tick(std::time::Duration::from_millis(100));
+    pb
+}
+
+fn progress(len: u64, quiet: bool, msg: &str) -> indicatif::ProgressBar {
+    if quiet || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new(len);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {per_sec} eta {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    pb.set_message(msg.to_string());
+    pb
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+}
+
+/// Runs `shearwarp render`.
+pub fn run_render(cmd: &RenderCmd) -> Result<()> {
+    let (vol, name) = cmd.volume.load()?;
+    let dims = vol.dims();
+    let mut r = cmd.render.renderer(vol)?;
+    let cam = cmd.render.camera()?;
+    let mut img = Image::new(cam.size[0], cam.size[1]);
+    let stats = r.render(&cam, &mut img)?;
+    img.save_png(&cmd.output)?;
+    if cmd.json {
+        let s = r.settings();
+        let j = serde_json::json!({
+            "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
+            "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
+            "size": cam.size[0], "output": cmd.output, "build_ms": stats.build_ms, "shear_ms": stats.shear_ms,
+            "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
+            "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(),
+        });
+        say!("{j}");
+    } else {
+        eprintln!(
+            "{name} {}×{}×{} → {} ({}×{}, {} {}, tissue {}): build {:.1} ms, shear {:.2} ms, render {:.2} ms, warp {:.2} ms",
+            dims[0],
+            dims[1],
+            dims[2],
+            cmd.output.display(),
+            cam.size[0],
+            cam.size[1],
+            r.settings().method.name(),
+            r.settings().mode.name(),
+            r.classification_name(),
+            stats.build_ms,
+            stats.shear_ms,
+            stats.render_ms,
+            stats.warp_ms
+        );
+    }
+    Ok(())
+}
+
+/// Runs `shearwarp rotate`.
+pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
+    let (vol, name) = cmd.volume.load()?;
+    let dims = vol.dims();
+    let step = match cmd.step_deg.as_str() {
+        "auto" => one_bit_step_deg(vol.dims()) * cmd.render.cell as f64,
+        s => s
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite() && *x > 0.0)
+            .with_context(|| format!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'"))?,
+    };
+    if !(cmd.degrees.is_finite() && cmd.degrees > 0.0) {
+        usage!("--degrees must be a positive number, got {}", cmd.degrees);
+    }
+    let frames = ((cmd.degrees / step).round() as usize).max(1);
+    if frames > 1_000_000 {
+        usage!("{frames} frames is too many (raise --step-deg)");
+    }
+    let mut r = cmd.render.renderer(vol)?;
+    let cam0 = cmd.render.camera()?;
+    if cmd.cycle_tissues > 0 && r.tissues().is_none_or(|(t, _)| t.len() < 2) {
+        usage!("--cycle-tissues needs tissue presets (it cannot be combined with --iso)");
+    }
+    let mut switch_ns: Vec<f64> = Vec::new();
+    let build_ms = r.prepare_all_axes();
+    if let Some(d) = &cmd.frames_dir {
+        std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create directory", d.display()))?;
+    }
+    let keep_frames = cmd.gif.is_some() || cmd.apng.is_some();
+    let mut kept: Vec<image::RgbImage> = Vec::new();
+    let axis = match cmd.axis {
+        AxisArg::X => 0,
+        AxisArg::Y => 1,
+        AxisArg::Z => 2,
+    };
+    let pb = progress(frames as u64, cmd.render.quiet || cmd.json, "rotating");
+    let mut img = Image::new(cam0.size[0], cam0.size[1]);
+    let mut all: Vec<FrameStats> = Vec::with_capacity(frames);
+    for f in 0..frames {
+        if cmd.cycle_tissues > 0 && f > 0 && f % cmd.cycle_tissues == 0 {
+            let n = r.tissues().map_or(1, |(t, _)| t.len());
+            let next = (r.tissues().map_or(0, |(_, c)| c) + 1) % n;
+            let t = std::time::Instant::now();
+            r.select_tissue(next)?;
+            switch_ns.push(t.elapsed().as_secs_f64() * 1e9);
+        }
+        let mut cam = cam0;
+        cam.rotation = rotate_eye(cam0.rotation, axis, f as f64 * step);
+        let st = r.render(&cam, &mut img)?;
+        all.push(st);
+        if let Some(d) = &cmd.frames_dir {
+            img.save_png(&d.join(format!("frame_{f:05}.png")))?;
+        }
+        if keep_frames {
+            kept.push(img.to_rgb8());
+        }
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let col = |g: fn(&FrameStats) -> f64| median(&mut all.iter().map(g).collect::<Vec<_>>());
+    let (shear, render, warp, frame) = (col(|s| s.shear_ms), col(|s| s.render_ms), col(|s| s.warp_ms), col(|s| s.frame_ms()));
+    let fps = if frame > 0.0 { 1000.0 / frame } else { f64::INFINITY };
+    if let Some(p) = &cmd.gif {
+        write_gif(p, &kept)?;
+    }
+    if let Some(p) = &cmd.apng {
+        write_apng(p, &kept)?;
+    }
+    let s = r.settings();
+    if cmd.json {
+        let j = serde_json::json!({
+            "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
+            "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
+            "tissue_switches": switch_ns.len(), "tissue_switch_ns_median": median(&mut switch_ns),
+            "threads": if s.threads == 0 { rayon::current_num_threads() } else { s.threads },
+            "size": cam0.size[0], "axis": AXES[axis],
+            "frames": frames, "degrees": frames as f64 * step, "step_deg": step, "build_ms": build_ms,
+            "shear_ms_median": shear, "render_ms_median": render, "warp_ms_median": warp, "frame_ms_median": frame,
+            "fps": fps, "degrees_per_second": fps * step, "mask_bytes": r.mask_bytes(), "rle_bytes": r.rle_bytes(),
+            "rle_axis_bytes": r.rle_axis_bytes(),
+        });
+        say!("{j}");
+    } else {
+        say!(
+            "{name} {}×{}×{}, {}×{}, {} {} ({} words, {} search, cell {}), tissue {} (iso {}):",
+            dims[0],
+            dims[1],
+            dims[2],
+            cam0.size[0],
+            cam0.size[1],
+            s.method.name(),
+            s.mode.name(),
+            s.word.name(),
+            s.search.name(),
+            s.cell,
+            r.classification_name(),
+            r.iso()
+        );
+        if !switch_ns.is_empty() {
+            say!("  {} tissue switches, median {:.0} ns each", switch_ns.len(), median(&mut switch_ns));
+        }
+        say!("  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms", frames as f64 * step);
+        say!("  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms");
+        say!("  {fps:.1} frames/s, {:.1} degrees/s", fps * step);
+    }
+    Ok(())
+}
+
+/// Runs `shearwarp info`.
+pub fn run_info(cmd: &InfoCmd) -> Result<()> {
+    if cmd.bins == 0 || cmd.bins > 4096 {
+        usage!("--bins must be 1..=4096, got {}", cmd.bins);
+    }
+    let (vol, name) = cmd.volume.load()?;
+    let (lo, hi) = vol.value_range();
+    let hist = vol.histogram(cmd.bins);
+    let tissues = presets::tissues_for(&vol);
+    let ct = presets::looks_like_ct(&vol);
+    if cmd.json {
+        let j = serde_json::json!({
+            "volume": name, "dims": vol.dims(), "type": vol.data().voxel_type().name(), "spacing": vol.spacing(),
+            "min": lo, "max": hi, "histogram": hist, "ct_hounsfield": ct,
+            "tissues": tissues.iter().map(|t| serde_json::json!({"name": t.name, "threshold": t.threshold})).collect::<Vec<_>>(),
+        });
+        say!("{j}");
+        return Ok(());
+    }
+    let d = vol.dims();
+    let sp = vol.spacing();
+    say!("{name}");
+    say!("  dims      {} × {} × {} ({} voxels, {})", d[0], d[1], d[2], vol.len(), vol.data().voxel_type().name());
+    say!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
+    say!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
+    say!("  histogram ({} bins, log scale):", cmd.bins);
+    let maxl = hist.iter().map(|&c| ((c + 1) as f64).ln()).fold(0.0, f64::max).max(1e-9);
+    for (i, &c) in hist.iter().enumerate() {
+        let a = lo + (hi - lo) * i as f32 / cmd.bins as f32;
+        let bar = "#".repeat((((c + 1) as f64).ln() / maxl * 40.0) as usize);
+        say!("    {a:>10.1} {c:>10} {bar}");
+    }
+    say!("  suggested tissue thresholds ({}):", if ct { "CT presets" } else { "from the histogram" });
+    for t in &tissues {
+        say!("    --tissue {:<5} threshold {}", t.name, t.threshold);
+    }
+    Ok(())
+}
+
+/// Output grid of `export`: cubic voxels with the longest physical edge `n` voxels long.
+fn cubic_dims(dims: [usize; 3], spacing: [f32; 3], n: usize) -> Result<[usize; 3]> {
+    if n < 2 || n > i16::MAX as usize {
+        usage!("--max-dim must be 2..={}, got {n}", i16::MAX);
+    }
+    let ext: [f64; 3] = std::array::from_fn(|a| (dims[a].max(2) - 1) as f64 * spacing[a] as f64);
+    let longest = ext.iter().cloned().fold(0.0, f64::max);
+    let voxel = longest / (n - 1) as f64;
+    Ok(std::array::from_fn(|a| if dims[a] == 1 { 1 } else { (ext[a] / voxel).round() as usize + 1 }))
+}
+
+pub fn run_export(cmd: &ExportCmd) -> Result<()> {
+    if cmd.output.extension().and_then(|e| e.to_str()).map(|e| e.eq_ignore_ascii_case("den")) != Some(true) {
+        usage!("{}: export writes VolPack .den files; give the output a .den extension", cmd.output.display());
+    }
+    if let Some(d) = cmd.out_dims {
+        if d.iter().any(|&x| x > i16::MAX as usize) {
+            usage!("--out-dims {d:?}: a .den file holds at most {} voxels per edge", i16::MAX);
+        }
+    }
+    let (vol, name) = cmd.volume.load()?;
+    let target = match (cmd.out_dims, cmd.max_dim) {
+        (Some(d), _) => Some(d),
+        (None, Some(n)) => Some(cubic_dims(vol.dims(), vol.spacing(), n)?),
+        (None, None) => None,
+    };
+    let vol = match target {
+        Some(d) if d != vol.dims() => vol.resampled(d).map_err(|e| anyhow::Error::new(Usage(format!("{e}"))))?,
+        _ => vol,
+    };
+    let (lo, hi) = match cmd.window {
+        Some([lo, hi]) => (lo, hi),
+        None => {
+            let (lo, hi) = vol.value_range();
+            if hi > lo { (lo, hi) } else { (lo, lo + 1.0) }
+        }
+    };
+    let out = vol.window_u8(lo, hi)?;
+    let shearwarp::data::volume::VoxelData::U8(bytes) = out.data() else { unreachable!("window_u8 makes u8 voxels") };
+    io::den::save_den(&cmd.output, out.dims(), bytes)?;
+    let (d, sp) = (out.dims(), vol.spacing());
+    if cmd.json {
+        say!(
+            "{}",
+            serde_json::json!({"volume": name, "output": cmd.output, "dims": d, "spacing": sp, "window": [lo, hi], "units_per_step": (hi - lo) / 255.0})
+        );
+    } else {
+        say!(
+            "{} → {}: {}×{}×{} u8, window [{lo}, {hi}] ({} units per step), voxel spacing {}×{}×{} (not stored: .den has none)",
+            name,
+            cmd.output.display(),
+            d[0],
+            d[1],
+            d[2],
+            (hi - lo) / 255.0,
+            sp[0],
+            sp[1],
+            sp[2]
+        );
+    }
+    Ok(())
+}
+
+fn write_gif(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
+    use image::codecs::gif::{GifEncoder, Repeat};
+    let f = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
+    let mut enc = GifEncoder::new_with_speed(std::io::BufWriter::new(f), 10);
+    enc.set_repeat(Repeat::Infinite)?;
+    for fr in frames {
+        let rgba = image::DynamicImage::ImageRgb8(fr.clone()).to_rgba8();
+        enc.encode_frame(image::Frame::from_parts(rgba, 0, 0, image::Delay::from_numer_denom_ms(40, 1)))
+            .with_context(|| format!("{}: cannot write GIF frame", path.display()))?;
+    }
+    Ok(())
+}
+
+fn write_apng(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
+    let Some(first) = frames.first() else { usage!("no frames to write") };
+    let f = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(f), first.width(), first.height());
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_animated(frames.len() as u32, 0)?;
+    enc.set_frame_delay(1, 25)?;
+    let mut w = enc.write_header()?;
+    for fr in frames {
+        w.write_image_data(fr.as_raw())?;
+    }
+    w.finish()?;
+    Ok(())
+}
+
+/// Entry point of the binary: parses arguments, runs, maps errors to exit codes.
+pub fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let res = match &cli.command {
+        Command::Render(c) => run_render(c),
+        Command::Rotate(c) => run_rotate(c),
+        Command::Info(c) => run_info(c),
+        Command::Bench(c) => crate::app::bench::run(c),
+        Command::View(c) => crate::app::viewer::run(c),
+        Command::Export(c) => run_export(c),
+    };
+    match res {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            // bad arguments and bad input are usage errors (2); failures while running are 1
+            let input = e.chain().any(|c| c.downcast_ref::<Usage>().is_some() || c.downcast_ref::<shearwarp::Error>().is_some());
+            std::process::ExitCode::from(if input { 2 } else { 1 })
+        }
+    }
+}

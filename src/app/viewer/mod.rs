@@ -1,0 +1,112 @@
+//! `shearwarp view` — an interactive window over the renderer (cargo feature `viewer`).
+//!
+//! The viewer is structured as input → state → render → present:
+//! - `app` (winit + softbuffer) owns the window and its software framebuffer,
+//!   turns window events into [`state::Input`]s, hands render requests to the
+//!   workers and presents their frames with the overlay. It blocks on events:
+//!   an idle window costs no CPU.
+//! - [`state`] holds everything the user changes — camera, tissue or custom iso
+//!   value, display mode, super-cell size, the drag in progress, which renders
+//!   are pending — and decides what each input changes and which renders to
+//!   request. It knows nothing about windows, so it is unit-tested directly.
+//! - [`worker`] runs the renders off the UI thread, each worker with its own
+//!   [`shearwarp::render::Renderer`]s: the *preview* worker renders iso previews of
+//!   the latest request only (drag events coalesce; the renderer's incremental
+//!   one-bit shears or a direct shear catch up), the *blend* worker renders the
+//!   full alpha-blended frame in the background once the view is still. Mask
+//!   rebuilds (a custom iso value, another cell size) run there too, so the
+//!   window stays responsive and shows them as progress.
+//! - [`overlay`] draws the statistics, the clickable tissue buttons and the iso
+//!   slider into the framebuffer with an embedded 8×8 bitmap font (no system
+//!   fonts).
+//!
+//! The core renderer stays in the library; nothing here changes how a frame is
+//! computed.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use crate::app::cli::{RenderArgs, VolumeArgs};
+
+#[cfg(feature = "viewer")]
+mod app;
+#[cfg(feature = "viewer")]
+pub mod overlay;
+#[cfg(feature = "viewer")]
+pub mod state;
+#[cfg(feature = "viewer")]
+pub mod worker;
+
+/// `shearwarp view`.
+#[derive(Args, Debug)]
+pub struct ViewCmd {
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    /// Render settings; `--size` is the initial window size, `--mode blend`
+    /// starts in the alpha-blended display.
+    #[command(flatten)]
+    pub render: RenderArgs,
+    /// Directory for the PNGs saved with the S key.
+    #[arg(long, default_value = ".")]
+    pub save_dir: PathBuf,
+    /// Degrees of rotation per pixel of mouse drag.
+    #[arg(long, default_value_t = 0.5)]
+    pub drag_speed: f64,
+    /// Log every presented frame, the control layout and state changes to stderr.
+    #[arg(long, short)]
+    pub verbose: bool,
+}
+
+/// Runs `shearwarp view`.
+pub fn run(cmd: &ViewCmd) -> anyhow::Result<()> {
+    #[cfg(feature = "viewer")]
+    {
+        app::run(cmd)
+    }
+    #[cfg(not(feature = "viewer"))]
+    {
+        let _ = cmd;
+        Err(anyhow::Error::new(crate::app::cli::Usage(
+            "this shearwarp was built without the `viewer` feature; rebuild with `cargo build --release --features viewer`".into(),
+        )))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use crate::app::cli::{Cli, Command};
+
+    #[test]
+    fn view_takes_the_volume_and_render_options() {
+        let cli = Cli::try_parse_from([
+            "shearwarp",
+            "view",
+            "--phantom",
+            "sphere",
+            "--cell",
+            "2",
+            "--mode",
+            "blend",
+            "--save-dir",
+            "shots",
+            "-v",
+        ])
+        .expect("parses");
+        let Command::View(v) = cli.command else { panic!("not the view command") };
+        assert_eq!(v.render.cell, 2);
+        assert_eq!(v.save_dir, std::path::PathBuf::from("shots"));
+        assert!(v.verbose);
+        assert_eq!(v.drag_speed, 0.5);
+    }
+
+    #[test]
+    fn bad_view_options_fail_before_any_window_opens() {
+        let cli = Cli::try_parse_from(["shearwarp", "view", "--cell", "9"]).expect("parses");
+        let Command::View(v) = cli.command else { panic!("not the view command") };
+        let err = super::run(&v).expect_err("cell 9 is out of range");
+        assert!(err.chain().any(|e| e.downcast_ref::<crate::app::cli::Usage>().is_some()), "{err:#}");
+    }
+}

@@ -1,0 +1,362 @@
+//! Render threads of the viewer.
+//!
+//! Owns [`Renderers`] (the renderers one worker switches between: the tissue
+//! set, whose presets share one threshold-coded mask so a switch is O(1), and a
+//! custom-iso renderer made on first use, whose mask is rebuilt when the value
+//! changes) and [`Worker`] (a thread with a one-slot mailbox: a new request
+//! replaces one that has not started, so requests coalesce and the worker always
+//! renders the latest state). Finished frames go to a callback as `0RGB` pixels,
+//! with the renderer's statistics. Before a step that rebuilds a mask the worker
+//! reports [`Reply::Busy`], so the window can show it; after a rebuild it builds
+//! the other principal axes' masks while no request waits, so a later axis
+//! switch does not stall a drag.
+
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use super::state::{Class, Kind, Spec};
+use shearwarp::classify::presets::{self, Tissue};
+use shearwarp::composite::Mode;
+use shearwarp::data::volume::Volume;
+use shearwarp::render::{FrameStats, Renderer, Settings};
+use shearwarp::warp::{Canvas, Image8, Texel};
+
+/// A finished frame.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub seq: u64,
+    pub kind: Kind,
+    pub width: usize,
+    pub height: usize,
+    /// `0RGB` pixels over black, row 0 at the top.
+    pub pixels: Vec<u32>,
+    pub stats: FrameStats,
+    /// Wall time of the request, including any mask rebuild.
+    pub total_ms: f64,
+    pub spec: Spec,
+}
+
+/// What a worker reports.
+#[derive(Clone, Debug)]
+pub enum Reply {
+    /// A slow step (a mask rebuild) started for request `seq`.
+    Busy {
+        kind: Kind,
+        seq: u64,
+        what: String,
+    },
+    Frame(Box<Frame>),
+    /// A request failed.
+    Failed {
+        kind: Kind,
+        seq: u64,
+        error: String,
+    },
+}
+
+/// The renderers of one worker.
+pub struct Renderers {
+    tissues: Renderer,
+    custom: Option<Renderer>,
+    mode: Mode,
+    hi: f32,
+    /// Cell size each renderer's masks were last set to.
+    cells: [usize; 2],
+    /// Principal axes whose masks may be stale after the last rebuild.
+    stale: [bool; 3],
+}
+
+impl Renderers {
+    /// Renderers for `volume` with `tissues` (as [`presets::tissues_for`] gives),
+    /// rendering in `settings.mode`.
+    pub fn new(volume: Volume, tissues: &[Tissue], settings: Settings) -> shearwarp::Result<Self> {
+        let hi = volume.value_range().1;
+        let r = Renderer::with_tissues(volume, tissues, settings)?;
+        Ok(Renderers { tissues: r, custom: None, mode: settings.mode, hi, cells: [settings.cell; 2], stale: [true; 3] })
+    }
+
+    /// The tissue presets, sorted by threshold as [`Renderer::with_tissues`] keeps them.
+    pub fn tissue_list(&self) -> Vec<Tissue> {
+        self.tissues.tissues().map(|(t, _)| t.to_vec()).unwrap_or_default()
+    }
+
+    /// Whether rendering `class` at `cell` must rebuild a mask first.
+    pub fn needs_rebuild(&self, class: Class, cell: usize) -> bool {
+        match class {
+            Class::Tissue(_) => self.cells[0] != cell,
+            Class::Custom(v) => self.custom.as_ref().is_none_or(|r| r.iso() != v) || self.cells[1] != cell,
+        }
+    }
+
+    /// Builds the masks of every principal axis of the tissue renderer (at start).
+    pub fn prepare(&mut self) -> f64 {
+        self.stale = [false; 3];
+        self.tissues.prepare_all_axes()
+    }
+
+    /// The renderer for `class` at `cell`, switched to it.
+    pub fn select(&mut self, class: Class, cell: usize) -> shearwarp::Result<&mut Renderer> {
+        if self.needs_rebuild(class, cell) {
+            self.stale = [true; 3];
+        }
+        let (r, slot) = match class {
+            Class::Tissue(i) => {
+                self.tissues.select_tissue(i)?;
+                (&mut self.tissues, 0)
+            }
+            Class::Custom(v) => {
+                let tf = presets::generic(v, self.hi).tf;
+                match &mut self.custom {
+                    Some(r) => {
+                        if r.iso() != v {
+                            r.set_transfer_function(&tf);
+                        }
+                    }
+                    None => {
+                        let s = Settings { cell, ..self.tissues.settings() };
+                        self.custom = Some(Renderer::new(self.tissues.volume().clone(), &tf, s)?);
+                        self.cells[1] = cell;
+                    }
+                }
+                (self.custom.as_mut().expect("made above"), 1)
+            }
+        };
+        if self.cells[slot] != cell {
+            r.set_settings(Settings { cell, ..r.settings() })?;
+            self.cells[slot] = cell;
+        }
+        debug_assert_eq!(r.settings().mode, self.mode);
+        Ok(r)
+    }
+
+    /// Renders `spec` into `img`.
+    pub fn render<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats> {
+        let r = self.select(spec.class, spec.cell)?;
+        let st = r.render(&spec.camera, img)?;
+        self.stale[st.axis] = false;
+        Ok(st)
+    }
+
+    /// Builds the mask of one stale principal axis of the current renderer, if
+    /// any is left; returns whether it did.
+    fn prepare_one(&mut self, class: Class, cell: usize) -> bool {
+        let Some(axis) = self.stale.iter().position(|&s| s) else { return false };
+        self.stale[axis] = false;
+        if let Ok(r) = self.select(class, cell) {
+            // an axis beyond the memory limits is left for the frame that needs
+            // it, which reports the error
+            let _ = r.prepare_axis(axis);
+        }
+        true
+    }
+}
+
+#[derive(Default)]
+struct Mailbox {
+    job: Option<Spec>,
+    quit: bool,
+}
+
+/// A render thread with a one-slot mailbox.
+pub struct Worker {
+    mail: Arc<(Mutex<Mailbox>, Condvar)>,
+    /// The render thread (joined only by tests; a dropped worker tells it to quit and detaches it).
+    #[cfg_attr(not(test), allow(dead_code))]
+    handle: Option<JoinHandle<()>>,
+}
+
+impl Worker {
+    /// Starts a worker that renders with `renderers` and reports through `reply`.
+    /// With `prepare`, it first builds every axis's masks (reported as busy).
+    pub fn spawn(kind: Kind, mut renderers: Renderers, prepare: bool, reply: impl Fn(Reply) + Send + 'static) -> Self {
+        let mail: Arc<(Mutex<Mailbox>, Condvar)> = Arc::default();
+        let m = mail.clone();
+        let handle = std::thread::Builder::new()
+            .name(format!("shearwarp-{}", kind.name()))
+            .spawn(move || {
+                if prepare {
+                    reply(Reply::Busy { kind, seq: 0, what: "building masks".into() });
+                    renderers.prepare();
+                }
+                // rounded to 8 bits by the warp: what the window shows
+                let mut img = Image8::new(1, 1);
+                let mut last: Option<Spec> = None;
+                loop {
+                    let next = {
+                        let (lock, cv) = &*m;
+                        let mut g = lock.lock().unwrap_or_else(|e| e.into_inner());
+                        loop {
+                            if g.quit {
+                                return;
+                            }
+                            if let Some(s) = g.job.take() {
+                                break Some(s);
+                            }
+                            if last.is_some() && renderers.stale.contains(&true) {
+                                break None;
+                            }
+                            g = cv.wait(g).unwrap_or_else(|e| e.into_inner());
+                        }
+                    };
+                    let Some(spec) = next else {
+                        // idle: build the other axes' masks, one per turn, before sleeping
+                        let l = last.expect("checked above");
+                        renderers.prepare_one(l.class, l.cell);
+                        continue;
+                    };
+                    let t = Instant::now();
+                    if renderers.needs_rebuild(spec.class, spec.cell) {
+                        let what = match spec.class {
+                            Class::Custom(v) => format!("rebuilding mask for iso {v:.1}, cell {}", spec.cell),
+                            Class::Tissue(_) => format!("rebuilding mask for cell {}", spec.cell),
+                        };
+                        reply(Reply::Busy { kind, seq: spec.seq, what });
+                    }
+                    match renderers.render(&spec, &mut img) {
+                        Ok(stats) => {
+                            let mut pixels = Vec::with_capacity(img.data.len());
+                            img.to_0rgb(&mut pixels);
+                            let total_ms = t.elapsed().as_secs_f64() * 1e3;
+                            let (width, height) = (img.width, img.height);
+                            reply(Reply::Frame(Box::new(Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, spec })));
+                        }
+                        Err(e) => reply(Reply::Failed { kind, seq: spec.seq, error: e.to_string() }),
+                    }
+                    last = Some(spec);
+                }
+            })
+            .expect("spawn a render thread");
+        Worker { mail, handle: Some(handle) }
+    }
+
+    /// Asks for `spec`, replacing a request that has not started.
+    pub fn post(&self, spec: Spec) {
+        let (lock, cv) = &*self.mail;
+        lock.lock().unwrap_or_else(|e| e.into_inner()).job = Some(spec);
+        cv.notify_one();
+    }
+
+    /// Drops a request that has not started (one in progress still reports; its
+    /// sequence number tells the caller to discard it).
+    pub fn cancel(&self) {
+        let (lock, _) = &*self.mail;
+        lock.lock().unwrap_or_else(|e| e.into_inner()).job = None;
+    }
+
+    /// Stops the thread after its current render and waits for it.
+    #[cfg(test)]
+    pub fn stop(mut self) {
+        self.signal_quit();
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+
+    fn signal_quit(&self) {
+        let (lock, cv) = &*self.mail;
+        lock.lock().unwrap_or_else(|e| e.into_inner()).quit = true;
+        cv.notify_one();
+    }
+}
+
+impl Drop for Worker {
+    /// Tells the thread to stop without waiting for a render in progress.
+    fn drop(&mut self) {
+        self.signal_quit();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::mpsc;
+    use std::time::Duration;
+
+    use super::*;
+    use shearwarp::data::phantom::Phantom;
+    use shearwarp::view::Camera;
+    use shearwarp::warp::Image;
+
+    fn setup(mode: Mode) -> (Renderers, Spec) {
+        let vol = Phantom::Head.build([40, 40, 36]).unwrap();
+        let tissues = presets::tissues_for(&vol);
+        let r = Renderers::new(vol, &tissues, Settings { mode, threads: 1, ..Settings::default() }).unwrap();
+        let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
+        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1 })
+    }
+
+    fn frame(rx: &mpsc::Receiver<Reply>) -> Frame {
+        loop {
+            match rx.recv_timeout(Duration::from_secs(60)).expect("a reply") {
+                Reply::Frame(f) => return *f,
+                Reply::Failed { error, .. } => panic!("{error}"),
+                Reply::Busy { .. } => {}
+            }
+        }
+    }
+
+    #[test]
+    fn switching_renderers_rebuilds_only_when_needed() {
+        let (mut r, spec) = setup(Mode::Iso);
+        let mut img = Image::new(1, 1);
+        let names: Vec<&str> = r.tissue_list().iter().map(|t| t.name).collect();
+        assert_eq!(names, ["skin", "fat", "soft", "bone"]);
+        assert!(!r.needs_rebuild(Class::Tissue(3), 1), "tissue switch is O(1)");
+        assert!(r.needs_rebuild(Class::Tissue(0), 2), "cell size");
+        assert!(r.needs_rebuild(Class::Custom(100.0), 1), "first custom iso");
+        r.render(&spec, &mut img).unwrap();
+        let skin = img.clone();
+        r.render(&Spec { class: Class::Custom(100.0), ..spec }, &mut img).unwrap();
+        assert!(!r.needs_rebuild(Class::Custom(100.0), 1));
+        assert!(r.needs_rebuild(Class::Custom(120.0), 1));
+        // back to the preset: no rebuild, the same picture as before
+        assert!(!r.needs_rebuild(Class::Tissue(0), 1));
+        r.render(&spec, &mut img).unwrap();
+        assert_eq!(img, skin);
+        // super cells are lossless: same picture at cell 3
+        r.render(&Spec { cell: 3, ..spec }, &mut img).unwrap();
+        assert_eq!(img, skin);
+    }
+
+    #[test]
+    fn worker_renders_latest_request_and_reports_rebuilds() {
+        let (r, spec) = setup(Mode::Iso);
+        let (tx, rx) = mpsc::channel();
+        let w = Worker::spawn(Kind::Preview, r, true, move |m| {
+            let _ = tx.send(m);
+        });
+        w.post(spec);
+        let f = frame(&rx);
+        assert_eq!((f.seq, f.kind, f.width, f.height), (1, Kind::Preview, 64, 48));
+        assert_eq!(f.pixels.len(), 64 * 48);
+        let lit = f.pixels.iter().filter(|&&p| p != 0).count();
+        assert!(lit > 100 && lit < 64 * 48, "the head is visible: {lit} lit pixels");
+        w.post(Spec { seq: 2, class: Class::Custom(300.0), ..spec });
+        let mut busy = false;
+        let f = loop {
+            match rx.recv_timeout(Duration::from_secs(60)).unwrap() {
+                Reply::Busy { seq: 2, what, .. } => busy = what.contains("iso 300"),
+                Reply::Frame(f) => break *f,
+                m => panic!("{m:?}"),
+            }
+        };
+        assert!(busy, "the rebuild was reported first");
+        assert_eq!(f.seq, 2);
+        w.stop();
+    }
+
+    #[test]
+    fn blend_worker_draws_translucent_tissue() {
+        let (r, spec) = setup(Mode::Blend);
+        let (tx, rx) = mpsc::channel();
+        let w = Worker::spawn(Kind::Blend, r, false, move |m| {
+            let _ = tx.send(m);
+        });
+        w.post(spec);
+        let f = frame(&rx);
+        assert_eq!(f.kind, Kind::Blend);
+        assert!(f.pixels.iter().any(|&p| p != 0));
+        w.cancel();
+        w.stop();
+    }
+}

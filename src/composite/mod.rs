@@ -1,0 +1,143 @@
+//! Stage 6 — the intermediate image and the compositing arithmetic.
+//!
+//! Owns [`Intermediate`] (the base-plane image every shear-warp path renders into:
+//! premultiplied RGBA plus the iso hit depth per pixel, and the rectangle that was
+//! written this frame), the shading model ([`Shading`]: Blinn-Phong with a
+//! headlight, two-sided) and front-to-back compositing ([`composite`]). Binary,
+//! RLE and brute-force paths all call these same functions, so their images can be
+//! compared sample for sample.
+
+pub mod raycast;
+
+pub use crate::classify::shading::Shading;
+use crate::encode::mask::Rect;
+
+/// Rendering mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Mode {
+    /// Iso-surface preview: the first sample at or above the iso value, shaded, opaque.
+    Iso,
+    /// Full alpha blending through the transfer function.
+    Blend,
+}
+
+impl Mode {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Iso => "iso",
+            Mode::Blend => "blend",
+        }
+    }
+}
+
+/// Front-to-back "over": adds a sample of colour `rgb` and opacity `alpha` behind
+/// the premultiplied accumulation `acc`.
+#[inline(always)]
+pub fn composite(acc: &mut [f32; 4], rgb: [f32; 3], alpha: f32) {
+    let t = (1.0 - acc[3]) * alpha;
+    acc[0] += t * rgb[0];
+    acc[1] += t * rgb[1];
+    acc[2] += t * rgb[2];
+    acc[3] += t;
+}
+
+/// Front-to-back "over" of an already premultiplied sample `s = [α·r, α·g, α·b, α]`
+/// (the pre-classified paths blend premultiplied voxels, then composite the blend).
+#[inline(always)]
+pub fn composite_premultiplied(acc: &mut [f32; 4], s: [f32; 4]) {
+    let t = 1.0 - acc[3];
+    acc[0] += t * s[0];
+    acc[1] += t * s[1];
+    acc[2] += t * s[2];
+    acc[3] += t * s[3];
+}
+
+/// The intermediate (base-plane) image.
+#[derive(Clone, Debug, Default)]
+pub struct Intermediate {
+    /// Size `[width, height]`.
+    pub size: [usize; 2],
+    /// Premultiplied RGBA, row-major.
+    pub rgba: Vec<[f32; 4]>,
+    /// Fractional slice index of the iso hit (NaN where no hit; iso mode only).
+    pub depth: Vec<f32>,
+    /// Pixels outside this rectangle are transparent; inside, every pixel was written.
+    pub valid: Option<Rect>,
+}
+
+impl Intermediate {
+    /// Resizes for a grid of `size` (reusing the allocation when it is big enough).
+    pub fn prepare(&mut self, size: [usize; 2]) {
+        let n = size[0] * size[1];
+        if self.size != size {
+            self.size = size;
+            self.rgba.clear();
+            self.rgba.resize(n, [0.0; 4]);
+            self.depth.clear();
+            self.depth.resize(n, f32::NAN);
+        }
+        self.valid = None;
+    }
+
+    /// Marks `rect` as this frame's valid rectangle and clears the one-pixel ring
+    /// around it, so a bilinear tap anywhere in `[p0 − 1, p1 + 1] × [q0 − 1, q1 + 1]`
+    /// reads either a rendered pixel or transparent black (never a stale one).
+    pub fn seal(&mut self, rect: Option<Rect>) {
+        self.valid = rect;
+        let Some(r) = rect else { return };
+        let [w, h] = self.size;
+        let (x0, x1) = (r.p0.saturating_sub(1), (r.p1 + 1).min(w - 1));
+        for q in [r.q0.wrapping_sub(1), r.q1 + 1] {
+            if q < h {
+                self.rgba[q * w + x0..=q * w + x1].fill([0.0; 4]);
+            }
+        }
+        for q in r.q0..=r.q1 {
+            if r.p0 > 0 {
+                self.rgba[q * w + r.p0 - 1] = [0.0; 4];
+            }
+            if r.p1 + 1 < w {
+                self.rgba[q * w + r.p1 + 1] = [0.0; 4];
+            }
+        }
+    }
+
+    /// Pixel `(p, q)`, transparent outside the valid rectangle.
+    #[inline(always)]
+    pub fn get(&self, p: isize, q: isize) -> [f32; 4] {
+        match self.valid {
+            Some(r) if p >= r.p0 as isize && p <= r.p1 as isize && q >= r.q0 as isize && q <= r.q1 as isize => {
+                self.rgba[q as usize * self.size[0] + p as usize]
+            }
+            _ => [0.0; 4],
+        }
+    }
+
+    /// Iso depth at `(p, q)` (NaN outside the valid rectangle or without a hit).
+    pub fn depth_at(&self, p: usize, q: usize) -> f32 {
+        match self.valid {
+            Some(r) if p >= r.p0 && p <= r.p1 && q >= r.q0 && q <= r.q1 => self.depth[q * self.size[0] + p],
+            _ => f32::NAN,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn compositing_is_over() {
+        let mut acc = [0.0; 4];
+        composite(&mut acc, [1.0, 0.0, 0.0], 0.5);
+        composite(&mut acc, [0.0, 1.0, 0.0], 0.5);
+        assert_eq!(acc, [0.5, 0.25, 0.0, 0.75]);
+        composite(&mut acc, [0.0, 0.0, 1.0], 1.0);
+        assert_eq!(acc[3], 1.0);
+        composite(&mut acc, [1.0, 1.0, 1.0], 1.0);
+        assert_eq!(acc, [0.5, 0.25, 0.25, 1.0]);
+    }
+}

@@ -1,0 +1,14 @@
+//! Stage 1 — data: what a frame samples, before any classification.
+//!
+//! Owns the volume ([`volume`]: voxels of their own type, spacing, size limits),
+//! the file loaders ([`io`]: NRRD, NIfTI, DICOM, .den, raw), the built-in
+//! phantoms ([`phantom`]), the per-axis slice stacks ([`slices`]: densities laid
+//! out along one principal axis, with the shared bilinear sample and gradient)
+//! and the per-axis normal codes ([`normals`]: VolPack's 14-bit quantized
+//! gradients, alone or packed with the densities).
+
+pub mod io;
+pub mod normals;
+pub mod phantom;
+pub mod slices;
+pub mod volume;

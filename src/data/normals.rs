@@ -1,0 +1,539 @@
+//! Stage 2b — shading by normal code (VolPack's shading tables).
+//!
+//! Owns the quantized normals and the per-view shade table that the
+//! table-shaded paths share, so a voxel shades the same on all of them:
+//!
+//! - [`encode_normal`] / [`decode_normal`]: the 14-bit hemi-octahedral code of a
+//!   gradient direction, up to sign (the headlight shading is two-sided).
+//! - [`voxel_normal`]: the code of one voxel of a [`SliceStack`]: its
+//!   central-difference gradient ([`SliceStack::gradient_at`]) mapped to object
+//!   (world) space with the voxel spacing. The RLE encoding stores it per
+//!   non-transparent voxel; [`NormalStack`] stores it for every voxel of one
+//!   principal axis, laid out like the stack, for the binary path and its
+//!   brute-force reference.
+//! - [`ShadeTable`]: `[ambient + diffuse·|n·l|, specular·|n·l|^shininess]` for
+//!   every code under the headlight ([`headlight_object`]), rebuilt only when the
+//!   light direction or the material changes. A sample shades as
+//!   `rgb·d + s` from the bilinear blend `[d, s]` of its cell's four corner
+//!   entries ([`ShadeTable::blend`]): four code loads and four table loads
+//!   instead of a gradient, a normalization and a power per sample.
+
+use std::sync::OnceLock;
+
+use rayon::prelude::*;
+
+pub use crate::classify::shading::apply_shade;
+use crate::classify::shading::{ShadeEntry, Shading};
+use crate::data::slices::{SliceStack, cell_corners, prefetch_cell};
+use crate::view::{Factorization, permutation};
+
+/// Cells per side of the hemi-octahedral normal grid.
+pub const NORMAL_SIDE: usize = 128;
+
+/// Number of normal (shading) codes.
+pub const NORMAL_CODES: usize = NORMAL_SIDE * NORMAL_SIDE;
+
+/// The normal code of a zero gradient (shaded as facing the viewer).
+pub const ZERO_NORMAL: u16 = 0;
+
+/// The shading code of an object-space gradient `g` (any length): its direction
+/// up to sign, since shading is two-sided (`|n · l|`).
+///
+/// Hemi-octahedral: `±g` is turned to `z ≥ 0`, projected onto the octahedron
+/// `|x| + |y| + z = 1`, whose upper half (the diamond `|x| + |y| ≤ 1`) is rotated
+/// 45° onto the square `[−1, 1]²` (`a = x + y`, `b = x − y`) and quantized to
+/// [`NORMAL_SIDE`]² cells (code `u + NORMAL_SIDE·v`, corners on the square's
+/// corners). The corners `(0, 0)` and `(side − 1, side − 1)` are the opposite
+/// directions `∓x`, the same for shading; the encoder never emits the former,
+/// which is [`ZERO_NORMAL`]. The worst direction error is about 1.1°.
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN counts as a zero gradient
+pub fn encode_normal(g: [f32; 3]) -> u16 {
+    let len2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+    // the same cut-off as headlight_ndl (NaN also counts as zero)
+    if !(len2 > 1e-30) {
+        return ZERO_NORMAL;
+    }
+    let g = if g[2] < 0.0 { g.map(|c| -c) } else { g };
+    let l1 = g[0].abs() + g[1].abs() + g[2];
+    let (x, y) = (g[0] / l1, g[1] / l1);
+    let half = (NORMAL_SIDE - 1) as f32 / 2.0;
+    let q = |c: f32| ((c + 1.0) * half + 0.5).clamp(0.0, (NORMAL_SIDE - 1) as f32) as usize;
+    let code = q(x + y) + NORMAL_SIDE * q(x - y);
+    if code == ZERO_NORMAL as usize { (NORMAL_CODES - 1) as u16 } else { code as u16 }
+}
+
+/// The (unnormalized, L1-unit) direction at the centre of cell `(u, v)`.
+#[inline(always)]
+fn hemi_dir(u: f32, v: f32) -> [f32; 3] {
+    let step = 2.0 / (NORMAL_SIDE - 1) as f32;
+    let (a, b) = (u * step - 1.0, v * step - 1.0);
+    let (x, y) = (0.5 * (a + b), 0.5 * (a - b));
+    // |x| + |y| = max(|a|, |b|) ≤ 1: z ≥ 0 up to rounding at the square's edge
+    [x, y, (1.0 - x.abs() - y.abs()).max(0.0)]
+}
+
+/// The unit direction (`z ≥ 0`) of a normal code (`None` for [`ZERO_NORMAL`]).
+pub fn decode_normal(code: u16) -> Option<[f32; 3]> {
+    if code == ZERO_NORMAL {
+        return None;
+    }
+    let c = code as usize;
+    let d = hemi_dir((c % NORMAL_SIDE) as f32, (c / NORMAL_SIDE) as f32);
+    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    Some(d.map(|x| x / len))
+}
+
+/// A boxed array of `N` copies of `v` (built on the heap, not the stack).
+pub(crate) fn boxed<T: Clone, const N: usize>(v: T) -> Box<[T; N]> {
+    // a boxed slice of exactly N elements always converts
+    vec![v; N].into_boxed_slice().try_into().unwrap_or_else(|_| unreachable!("length is N by construction"))
+}
+
+/// The normal code of voxel `(i, j, k)` of `stack`: its central-difference
+/// gradient in object space (`inv_spacing` = `1 / spacing` per object axis).
+#[inline]
+pub fn voxel_normal(stack: &SliceStack, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
+    object_normal(stack.gradient_at(i, j, k), permutation(stack.axis), inv_spacing)
+}
+
+/// The normal code of a voxel-space gradient `g` of a stack with axis
+/// permutation `perm`: mapped to object space, then encoded.
+#[inline(always)]
+fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
+    let mut w = [0f32; 3];
+    for c in 0..3 {
+        w[perm[c]] = g[c] * inv_spacing[perm[c]];
+    }
+    encode_normal(w)
+}
+
+/// The normal code of every voxel of one [`SliceStack`], in its `(i, j, k)`
+/// layout (index [`SliceStack::index`]).
+///
+/// For a stack of integer densities spanning at most 65 535 (8- and 16-bit
+/// scans) the codes are *packed* with the densities: one u32 per voxel, the
+/// density minus an offset in the low half and the code in the high half
+/// ([`PackedCells`]). A ray then reads a cell's densities and its codes from the
+/// same two cache lines instead of two lines of each array, and the f32 stack
+/// is not touched at all. The densities come back exactly (integers below
+/// 2^24), so both layouts give the same image bit for bit. Otherwise: 2 bytes
+/// per voxel, codes only.
+#[derive(Clone, Debug)]
+pub struct NormalStack {
+    /// Principal axis of the stack it was built from.
+    pub axis: usize,
+    /// Sizes along `(i, j, k)`.
+    pub n: [usize; 3],
+    store: Store,
+}
+
+/// How a [`NormalStack`] holds its codes.
+#[derive(Clone, Debug)]
+enum Store {
+    /// One u16 code per voxel.
+    Codes(Vec<u16>),
+    /// One u32 per voxel: `(density − offset) | code << 16`.
+    Packed { words: Vec<u32>, offset: f32 },
+}
+
+impl NormalStack {
+    /// Codes every voxel of `stack` for a volume with voxel `spacing`, in
+    /// parallel over slices (on the current rayon pool); packed with the
+    /// densities when they allow it (see [`NormalStack`]).
+    pub fn new(stack: &SliceStack, spacing: [f32; 3]) -> Self {
+        Self::with_packing(stack, spacing, true)
+    }
+
+    /// [`NormalStack::new`], packed only if `pack` (and the densities allow it):
+    /// `false` keeps the codes apart, the reference layout of tests and benches.
+    pub fn with_packing(stack: &SliceStack, spacing: [f32; 3], pack: bool) -> Self {
+        let codes = codes_of(stack, spacing);
+        let store = match pack.then(|| packing_offset(stack.data())).flatten() {
+            Some(offset) => {
+                let mut words = vec![0u32; codes.len()];
+                words.par_chunks_mut(PACK_CHUNK).zip(stack.data().par_chunks(PACK_CHUNK)).zip(codes.par_chunks(PACK_CHUNK)).for_each(
+                    |((w, d), c)| {
+                        for ((w, &d), &c) in w.iter_mut().zip(d).zip(c) {
+                            // exact: d − offset is an integer in 0..=65535 (checked)
+                            *w = (d - offset) as u32 | (c as u32) << 16;
+                        }
+                    },
+                );
+                Store::Packed { words, offset }
+            }
+            None => Store::Codes(codes),
+        };
+        NormalStack { axis: stack.axis, n: stack.n, store }
+    }
+
+    /// The code of the voxel at stack index `index`.
+    #[inline(always)]
+    pub fn at(&self, index: usize) -> u16 {
+        match &self.store {
+            Store::Codes(c) => c[index],
+            Store::Packed { words, .. } => (words[index] >> 16) as u16,
+        }
+    }
+
+    /// The codes of the cell whose first voxel has stack index `b`, in the
+    /// order of [`SliceStack::bilinear`]'s corners: one bounds check for all four.
+    #[inline(always)]
+    pub fn corners(&self, b: usize) -> [u16; 4] {
+        match &self.store {
+            Store::Codes(c) => cell_corners(c, b, self.n[0]),
+            Store::Packed { words, .. } => cell_corners(words, b, self.n[0]).map(|w| (w >> 16) as u16),
+        }
+    }
+
+    /// The codes apart (empty when packed).
+    pub fn codes(&self) -> &[u16] {
+        match &self.store {
+            Store::Codes(c) => c,
+            Store::Packed { .. } => &[],
+        }
+    }
+
+    /// The packed densities and codes, if this stack is packed.
+    pub fn packed(&self) -> Option<PackedCells<'_>> {
+        match &self.store {
+            Store::Codes(_) => None,
+            Store::Packed { words, offset } => Some(PackedCells { words, n0: self.n[0], offset: *offset }),
+        }
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        match &self.store {
+            Store::Codes(c) => c.len() * 2,
+            Store::Packed { words, .. } => words.len() * 4,
+        }
+    }
+}
+
+/// Voxels per task of the packing pass.
+const PACK_CHUNK: usize = 1 << 16;
+
+/// The code of every voxel of `stack`, in parallel over slices.
+fn codes_of(stack: &SliceStack, spacing: [f32; 3]) -> Vec<u16> {
+    let n = stack.n;
+    let inv = spacing.map(|s| 1.0 / s);
+    let mut codes = vec![0u16; n[0] * n[1] * n[2]];
+    let perm = permutation(stack.axis);
+    let (n0, n01, d) = (n[0], n[0] * n[1], stack.data());
+    codes.par_chunks_mut(n01.max(1)).enumerate().for_each(|(k, slice)| {
+        for (j, row) in slice.chunks_mut(n0.max(1)).enumerate() {
+            let interior = j >= 1 && j + 1 < n[1] && k >= 1 && k + 1 < n[2];
+            for (i, c) in row.iter_mut().enumerate() {
+                if interior && i >= 1 && i + 1 < n0 {
+                    // voxel_normal without the border cases: the same central
+                    // differences ((hi − lo) / 2 is exactly (hi − lo) · 0.5)
+                    let b = i + n0 * j + n01 * k;
+                    let g = [(d[b + 1] - d[b - 1]) * 0.5, (d[b + n0] - d[b - n0]) * 0.5, (d[b + n01] - d[b - n01]) * 0.5];
+                    *c = object_normal(g, perm, inv);
+                } else {
+                    *c = voxel_normal(stack, i, j, k, inv);
+                }
+            }
+        }
+    });
+    codes
+}
+
+/// The offset that packs `data` into 16 bits exactly, if there is one: every
+/// value an integer, the smallest at least −2^24 and the largest at most
+/// 65 535 above it and below 2^24 (so `(v − offset) as u16 as f32 + offset == v`).
+fn packing_offset(data: &[f32]) -> Option<f32> {
+    const EXACT: f32 = (1 << 24) as f32;
+    let (lo, hi, whole) = data
+        .par_chunks(PACK_CHUNK)
+        .map(|c| c.iter().fold((f32::INFINITY, f32::NEG_INFINITY, true), |(lo, hi, w), &v| (lo.min(v), hi.max(v), w && v == v.trunc())))
+        .reduce(|| (f32::INFINITY, f32::NEG_INFINITY, true), |a, b| (a.0.min(b.0), a.1.max(b.1), a.2 && b.2));
+    (whole && lo <= hi && lo >= -EXACT && hi < EXACT && hi - lo <= u16::MAX as f32).then_some(lo)
+}
+
+/// A packed [`NormalStack`] as a ray reads it: per voxel, `density − offset`
+/// in the low 16 bits and the normal code in the high 16.
+#[derive(Clone, Copy, Debug)]
+pub struct PackedCells<'a> {
+    words: &'a [u32],
+    n0: usize,
+    offset: f32,
+}
+
+impl PackedCells<'_> {
+    /// The four corner densities of the cell at stack index `b` (exactly the
+    /// stack's values; order of [`SliceStack::bilinear`]).
+    #[inline(always)]
+    pub fn densities(&self, b: usize) -> [f32; 4] {
+        cell_corners(self.words, b, self.n0).map(|w| (w & 0xFFFF) as f32 + self.offset)
+    }
+
+    /// The four corner codes of the cell at stack index `b`.
+    #[inline(always)]
+    pub fn codes(&self, b: usize) -> [u16; 4] {
+        cell_corners(self.words, b, self.n0).map(|w| (w >> 16) as u16)
+    }
+
+    /// Hints the cache to fetch both rows of the cell at stack index `b`.
+    #[inline(always)]
+    pub fn prefetch(&self, b: usize) {
+        prefetch_cell(self.words, b, self.n0);
+    }
+}
+
+/// The per-view shade table: one [`ShadeEntry`] per normal code. A fixed-size
+/// array indexed with a mask, so a lookup needs no bounds check.
+#[derive(Clone, Debug)]
+pub struct ShadeTable {
+    shade: Box<[ShadeEntry; NORMAL_CODES]>,
+    key: Option<([u32; 3], Shading)>,
+}
+
+impl Default for ShadeTable {
+    fn default() -> Self {
+        ShadeTable { shade: boxed([0.0; 2]), key: None }
+    }
+}
+
+impl ShadeTable {
+    /// Brings the table up to date for the object-space headlight direction
+    /// `light` and material `shading`; returns true if it was rebuilt.
+    pub fn update(&mut self, light: [f32; 3], shading: Shading) -> bool {
+        let key = Some((light.map(f32::to_bits), shading));
+        if self.key == key {
+            return false;
+        }
+        let [nx, ny, nz] = unit_normals();
+        const BLOCK: usize = 4096;
+        self.shade.par_chunks_mut(BLOCK).enumerate().for_each(|(c, out)| {
+            let r = c * BLOCK..c * BLOCK + out.len();
+            shade_block(out, &nx[r.clone()], &ny[r.clone()], &nz[r], light, &shading);
+        });
+        // a zero gradient faces the viewer
+        self.shade[ZERO_NORMAL as usize] = shading.entry(1.0, 1.0);
+        self.key = key;
+        true
+    }
+
+    /// The entry of `code` (codes above the table, such as the RLE path's
+    /// bridge marker, index a real entry).
+    #[inline(always)]
+    pub fn get(&self, code: u16) -> ShadeEntry {
+        self.shade[code as usize & (NORMAL_CODES - 1)]
+    }
+
+    /// The bilinear blend of the entries of a cell's four corner codes (order of
+    /// [`NormalStack::corners`]) at in-cell weights `(wi, wj)`.
+    #[inline(always)]
+    pub fn blend(&self, codes: [u16; 4], wi: f32, wj: f32) -> ShadeEntry {
+        let [e00, e10, e01, e11] = codes.map(|c| self.get(c));
+        let mut out = [0f32; 2];
+        for a in 0..2 {
+            let top = e00[a] + (e10[a] - e00[a]) * wi;
+            let bot = e01[a] + (e11[a] - e01[a]) * wi;
+            out[a] = top + (bot - top) * wj;
+        }
+        out
+    }
+}
+
+/// The unit direction of every normal code, as three coordinate arrays (built
+/// once per process: 768 KiB, view-independent; code 0 holds +z).
+fn unit_normals() -> &'static [Vec<f32>; 3] {
+    static NORMALS: OnceLock<[Vec<f32>; 3]> = OnceLock::new();
+    NORMALS.get_or_init(|| {
+        let dirs: Vec<[f32; 3]> = (0..NORMAL_CODES).map(|c| decode_normal(c as u16).unwrap_or([0.0, 0.0, 1.0])).collect();
+        [0, 1, 2].map(|a| dirs.iter().map(|d| d[a]).collect())
+    })
+}
+
+/// Lanes of the shade-table build: sixteen entries at a time stay in registers.
+const LANES: usize = 16;
+
+/// Shade-table entries for the unit normals `(nx, ny, nz)` (same lengths as
+/// `out`, a multiple of [`LANES`]): plain fixed-size loops, so they vectorize.
+#[inline(never)]
+fn shade_block(out: &mut [ShadeEntry], nx: &[f32], ny: &[f32], nz: &[f32], l: [f32; 3], sh: &Shading) {
+    let lanes = out.chunks_exact_mut(LANES).zip(nx.chunks_exact(LANES).zip(ny.chunks_exact(LANES)).zip(nz.chunks_exact(LANES)));
+    for (o, ((x, y), z)) in lanes {
+        let mut ndl = [0f32; LANES];
+        for t in 0..LANES {
+            ndl[t] = (x[t] * l[0] + y[t] * l[1] + z[t] * l[2]).abs().min(1.0);
+        }
+        // ndl^shininess by repeated squaring (the exponent is the same for every lane)
+        let mut pow = [1f32; LANES];
+        let mut base = ndl;
+        let mut e = sh.exponent();
+        while e > 0 {
+            if e & 1 == 1 {
+                for t in 0..LANES {
+                    pow[t] *= base[t];
+                }
+            }
+            e >>= 1;
+            for b in base.iter_mut() {
+                *b *= *b;
+            }
+        }
+        for t in 0..LANES {
+            o[t] = sh.entry(ndl[t], pow[t]);
+        }
+    }
+}
+
+/// The headlight direction (towards the viewer) in object space for view `f`.
+pub fn headlight_object(f: &Factorization) -> [f32; 3] {
+    // grad_to_eye_z[c] = R[2][perm[c]] · grad_scale[c]
+    let mut l = [0f32; 3];
+    for c in 0..3 {
+        l[f.perm[c]] = (f.grad_to_eye_z[c] / f.grad_scale[c]) as f32;
+    }
+    l
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::volume::Volume;
+
+    #[test]
+    fn normal_codes_keep_the_direction_within_1_2_degrees() {
+        let mut seed = 99u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f32 / (1u64 << 53) as f32 * 2.0 - 1.0
+        };
+        let mut worst = 0f32;
+        for _ in 0..100_000 {
+            let g = [rnd(), rnd(), rnd()];
+            let len = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+            let code = encode_normal(g);
+            assert_ne!(code, ZERO_NORMAL);
+            let n = decode_normal(code).unwrap();
+            assert!(n[2] >= 0.0);
+            // the code keeps the direction up to sign
+            let cos = (n[0] * g[0] + n[1] * g[1] + n[2] * g[2]).abs() / len;
+            worst = worst.max(cos.min(1.0).acos().to_degrees());
+        }
+        assert!(worst < 1.2, "worst angle {worst}°");
+        // axes, both signs
+        for g in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 1.0, 0.0]] {
+            let n = decode_normal(encode_normal(g)).unwrap();
+            let dot: f32 = (0..3).map(|c| n[c] * g[c]).sum();
+            assert!(dot.abs() > 0.9999, "{g:?} → {n:?}");
+        }
+        assert_eq!(encode_normal([0.0; 3]), ZERO_NORMAL);
+        assert_eq!(encode_normal([f32::NAN, 0.0, 1.0]), ZERO_NORMAL);
+    }
+
+    #[test]
+    fn shade_table_matches_the_shading_model() {
+        let l = [0.36f32, -0.48, 0.8];
+        for sh in [Shading::default(), Shading { shininess: 7, ..Shading::default() }, Shading { shininess: 0, ..Shading::default() }] {
+            let [nx, ny, nz] = unit_normals();
+            let mut out = vec![[0.0; 2]; NORMAL_CODES];
+            shade_block(&mut out, nx, ny, nz, l, &sh);
+            for code in (1..NORMAL_CODES).step_by(7) {
+                let n = decode_normal(code as u16).unwrap();
+                let ndl = (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).abs().min(1.0);
+                let want = sh.entry(ndl, ndl.powi(sh.shininess));
+                let got = out[code];
+                assert!((0..2).all(|a| (got[a] - want[a]).abs() < 1e-5), "{code}: {got:?} vs {want:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn normal_stack_codes_every_voxel_like_voxel_normal() {
+        let v =
+            Volume::from_fn([7, 6, 5], [0.5, 1.0, 2.0], |x, y, z| ((x * 7 + y * 13 + z * 29) % 11) as f32 - (x * z) as f32 * 0.3).unwrap();
+        for axis in 0..3 {
+            let s = SliceStack::new(&v, axis);
+            let ns = NormalStack::new(&s, v.spacing());
+            assert_eq!(ns.bytes(), 2 * 7 * 6 * 5);
+            let inv = v.spacing().map(|x| 1.0 / x);
+            for k in 0..s.n[2] {
+                for j in 0..s.n[1] {
+                    for i in 0..s.n[0] {
+                        assert_eq!(ns.at(s.index(i, j, k)), voxel_normal(&s, i, j, k, inv));
+                    }
+                }
+            }
+            let b = s.index(2, 3, 1);
+            assert_eq!(ns.corners(b), [ns.at(b), ns.at(b + 1), ns.at(b + s.n[0]), ns.at(b + s.n[0] + 1)]);
+        }
+    }
+
+    #[test]
+    fn packed_stack_holds_every_density_exactly_and_the_same_codes() {
+        // integers around a negative offset (CT-like), spanning exactly 65 535
+        let f = |x: usize, y: usize, z: usize| ((x * 7919 + y * 104_729 + z * 1_299_709) % 4001) as f32 - 1024.0;
+        let v = Volume::from_fn([7, 6, 5], [0.5, 1.0, 2.0], |x, y, z| if (x, y, z) == (3, 3, 3) { 64_511.0 } else { f(x, y, z) }).unwrap();
+        for axis in 0..3 {
+            let s = SliceStack::new(&v, axis);
+            let ns = NormalStack::new(&s, v.spacing());
+            let apart = NormalStack::with_packing(&s, v.spacing(), false);
+            let p = ns.packed().expect("16-bit integer densities are packed");
+            assert!(apart.packed().is_none());
+            assert_eq!((ns.bytes(), apart.bytes()), (4 * 7 * 6 * 5, 2 * 7 * 6 * 5));
+            assert!(ns.codes().is_empty());
+            for k in 0..s.n[2] {
+                for j in 0..s.n[1] - 1 {
+                    for i in 0..s.n[0] - 1 {
+                        let b = s.index(i, j, k);
+                        assert_eq!(ns.at(b), apart.at(b));
+                        assert_eq!(p.codes(b), apart.corners(b));
+                        assert_eq!(ns.corners(b), apart.corners(b));
+                        let want = [s.at(i, j, k), s.at(i + 1, j, k), s.at(i, j + 1, k), s.at(i + 1, j + 1, k)];
+                        assert_eq!(p.densities(b).map(f32::to_bits), want.map(f32::to_bits), "({i}, {j}, {k})");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn only_exact_16_bit_integer_ranges_pack() {
+        assert_eq!(packing_offset(&[3.0, 0.0, 65_535.0]), Some(0.0));
+        assert_eq!(packing_offset(&[-1024.0, 3071.0]), Some(-1024.0));
+        assert_eq!(packing_offset(&[0.0, 65_536.0]), None, "17 bits");
+        assert_eq!(packing_offset(&[0.0, 0.5]), None, "not an integer");
+        assert_eq!(packing_offset(&[2.0e7, 2.0e7 + 2.0]), None, "beyond exact f32 integers");
+        assert_eq!(packing_offset(&[-2.0e7, -2.0e7 + 2.0]), None, "beyond exact f32 integers");
+        assert_eq!(packing_offset(&[1.0, f32::NAN]), None);
+        assert_eq!(packing_offset(&[f32::INFINITY]), None);
+        assert_eq!(packing_offset(&[]), None);
+        // more than one task's chunk: the reduction across chunks
+        let mut big = vec![7.0f32; 3 * PACK_CHUNK + 5];
+        big[2 * PACK_CHUNK + 1] = -9.0;
+        assert_eq!(packing_offset(&big), Some(-9.0));
+        big[PACK_CHUNK + 3] = 0.25;
+        assert_eq!(packing_offset(&big), None);
+    }
+
+    #[test]
+    fn shade_table_blend_is_bilinear_and_applies_like_the_shading_model() {
+        let sh = Shading::default();
+        let mut t = ShadeTable::default();
+        assert!(t.update([0.0, 0.6, 0.8], sh));
+        assert!(!t.update([0.0, 0.6, 0.8], sh), "same light and material: no rebuild");
+        let codes = [encode_normal([0.0, 0.0, 1.0]), encode_normal([1.0, 0.0, 0.0]), encode_normal([0.0, 1.0, 0.0]), ZERO_NORMAL];
+        for (i, &c) in codes.iter().enumerate() {
+            let (wi, wj) = ((i & 1) as f32, (i >> 1) as f32);
+            let (e, want) = (t.blend(codes, wi, wj), t.get(c));
+            assert!((0..2).all(|a| (e[a] - want[a]).abs() < 1e-6), "corner {i}: {e:?} vs {want:?}");
+        }
+        let e = t.blend(codes, 0.25, 0.5);
+        let want = [0, 1].map(|a| {
+            let g = codes.map(|c| t.get(c)[a]);
+            0.5 * (0.75 * g[0] + 0.25 * g[1]) + 0.5 * (0.75 * g[2] + 0.25 * g[3])
+        });
+        assert!((0..2).all(|a| (e[a] - want[a]).abs() < 1e-6), "{e:?} vs {want:?}");
+        // the entry of a normal along the light is the shading model's at ndl = 1
+        let up = t.get(encode_normal([0.0, 0.6, 0.8]));
+        let rgb = [0.9, 0.5, 0.2];
+        let (a, b) = (apply_shade(rgb, up), sh.shade(rgb, 1.0));
+        assert!((0..3).all(|c| (a[c] - b[c]).abs() < 1e-3), "{a:?} vs {b:?}");
+        assert_eq!(t.get(u16::MAX), t.get(NORMAL_CODES as u16 - 1));
+    }
+}

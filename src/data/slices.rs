@@ -1,0 +1,343 @@
+//! Stage 1b — the volume seen along one principal axis.
+//!
+//! Owns [`SliceStack`]: the densities re-laid out as f32 in permuted `(i, j, k)`
+//! order (i fastest) so that every slice a shear-warp path walks is contiguous,
+//! plus the per-sample primitives every path shares: the bilinear density sample
+//! inside one slice, its cell corners' range, and the central-difference gradient.
+//! A stack for an axis is built only when a view first needs it.
+
+use rayon::prelude::*;
+
+use crate::data::volume::Volume;
+use crate::view::permutation;
+
+/// Densities permuted for principal axis `axis`.
+#[derive(Clone, Debug)]
+pub struct SliceStack {
+    /// Principal axis (0 = x, 1 = y, 2 = z).
+    pub axis: usize,
+    /// Sizes along `(i, j, k)`.
+    pub n: [usize; 3],
+    data: Vec<f32>,
+}
+
+/// One bilinear sample inside a slice: the interpolated density and the
+/// location it came from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Interpolated density, clamped to the cell's corner range.
+    pub density: f32,
+    /// Cell index `(ci, cj)` and slice `k`.
+    pub cell: [usize; 3],
+    /// In-cell weights `(wi, wj)` in [0, 1).
+    pub w: [f32; 2],
+}
+
+impl SliceStack {
+    /// Permutes `vol` for principal axis `axis`.
+    pub fn new(vol: &Volume, axis: usize) -> Self {
+        let perm = permutation(axis);
+        let d = vol.dims();
+        let n = [d[perm[0]], d[perm[1]], d[perm[2]]];
+        let mut data = vec![0f32; n[0] * n[1] * n[2]];
+        let stride = [1usize, d[0], d[0] * d[1]];
+        let (si, sj, sk) = (stride[perm[0]], stride[perm[1]], stride[perm[2]]);
+        let src = vol.data();
+        data.par_chunks_mut(n[0] * n[1].max(1)).enumerate().for_each(|(k, slice)| {
+            for j in 0..n[1] {
+                let row = &mut slice[j * n[0]..(j + 1) * n[0]];
+                let base = k * sk + j * sj;
+                for (i, out) in row.iter_mut().enumerate() {
+                    *out = src.get(base + i * si);
+                }
+            }
+        });
+        SliceStack { axis, n, data }
+    }
+
+    /// Density at voxel `(i, j, k)`.
+    #[inline(always)]
+    pub fn at(&self, i: usize, j: usize, k: usize) -> f32 {
+        self.data[self.index(i, j, k)]
+    }
+
+    /// The raw permuted densities.
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+
+    /// Number of cells along i and j (`n − 1`, 0 for a flat axis).
+    pub fn cells(&self) -> [usize; 2] {
+        [self.n[0].saturating_sub(1), self.n[1].saturating_sub(1)]
+    }
+
+    /// Smallest and largest corner density of cell `(ci, cj)` in slice `k`.
+    #[inline(always)]
+    pub fn cell_range(&self, ci: usize, cj: usize, k: usize) -> (f32, f32) {
+        let [a, c, d, e] = self.corners(ci, cj, k);
+        (fmin(fmin(a, c), fmin(d, e)), fmax(fmax(a, c), fmax(d, e)))
+    }
+
+    /// Bilinear density in cell `(ci, cj)` of slice `k` at in-cell weights `(wi, wj)`.
+    ///
+    /// The result is clamped to the range of the four corners, so a cell whose
+    /// corners are all transparent can never produce a visible sample through
+    /// floating-point rounding: this is what makes the masks exactly conservative.
+    #[inline(always)]
+    pub fn bilinear(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> f32 {
+        bilinear(self.corners(ci, cj, k), wi, wj)
+    }
+
+    /// The four corner densities of the cell whose first voxel has index `b`
+    /// (order of [`SliceStack::bilinear`]).
+    #[inline(always)]
+    pub fn cell_at(&self, b: usize) -> [f32; 4] {
+        cell_corners(&self.data, b, self.n[0])
+    }
+
+    /// The four corner densities of cell `(ci, cj)` in slice `k`, in the order
+    /// `(i, j)`, `(i+1, j)`, `(i, j+1)`, `(i+1, j+1)`: one bounds check for all four.
+    #[inline(always)]
+    fn corners(&self, ci: usize, cj: usize, k: usize) -> [f32; 4] {
+        cell_corners(&self.data, self.index(ci, cj, k), self.n[0])
+    }
+
+    /// Index of voxel `(i, j, k)` in [`SliceStack::data`].
+    #[inline(always)]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.n[0] * (j + self.n[1] * k)
+    }
+
+    /// Hints the cache to fetch every voxel row an iso hit in cell `(ci, cj)` of
+    /// slice `k` reads: the 4×4 in-slice neighbourhood of slice `k` and of the
+    /// slice before it in walking order (the refinement's sample and gradient),
+    /// and the two rows each of the slices one beyond on either side. No effect
+    /// on results; rows outside the stack are skipped.
+    #[inline(always)]
+    pub fn prefetch_hit(&self, ci: usize, cj: usize, k: usize, ascending: bool) {
+        let (n0, n01) = (self.n[0] as isize, (self.n[0] * self.n[1]) as isize);
+        let b = self.index(ci, cj, k);
+        let dk = if ascending { -n01 } else { n01 };
+        let at = |o: isize| b.wrapping_add_signed(o);
+        for s in [0, dk] {
+            for r in -1..=2 {
+                prefetch(&self.data, at(s + r * n0 - 1));
+            }
+        }
+        for s in [-dk, 2 * dk] {
+            prefetch(&self.data, at(s));
+            prefetch(&self.data, at(s + n0));
+        }
+    }
+
+    /// Hints the cache to fetch the two voxel rows of the cell whose first voxel
+    /// has index `b` (what a bilinear sample reads). No effect on results.
+    #[inline(always)]
+    pub fn prefetch_cell(&self, b: usize) {
+        prefetch_cell(&self.data, b, self.n[0]);
+    }
+
+    /// Central-difference gradient at voxel `(i, j, k)` in voxel units of
+    /// `(i, j, k)` (one-sided at the borders, zero along a flat axis).
+    #[inline(always)]
+    pub fn gradient_at(&self, i: usize, j: usize, k: usize) -> [f32; 3] {
+        let n = self.n;
+        let d = |lo: f32, hi: f32, span: f32| if span > 0.0 { (hi - lo) / span } else { 0.0 };
+        let (i0, i1) = (i.saturating_sub(1), (i + 1).min(n[0] - 1));
+        let (j0, j1) = (j.saturating_sub(1), (j + 1).min(n[1] - 1));
+        let (k0, k1) = (k.saturating_sub(1), (k + 1).min(n[2] - 1));
+        [
+            d(self.at(i0, j, k), self.at(i1, j, k), (i1 - i0) as f32),
+            d(self.at(i, j0, k), self.at(i, j1, k), (j1 - j0) as f32),
+            d(self.at(i, j, k0), self.at(i, j, k1), (k1 - k0) as f32),
+        ]
+    }
+
+    /// Gradient at an in-slice sample: the bilinear blend of the corners' gradients.
+    #[inline]
+    pub fn gradient(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
+        let n = self.n;
+        if ci >= 1 && cj >= 1 && k >= 1 && ci + 2 < n[0] && cj + 2 < n[1] && k + 1 < n[2] {
+            self.gradient_interior(ci, cj, k, wi, wj)
+        } else {
+            self.gradient_general(ci, cj, k, wi, wj)
+        }
+    }
+
+    /// [`SliceStack::gradient`] for a cell whose 4×4 in-slice neighbourhood and
+    /// both neighbouring slices exist. The blend of the corners' central
+    /// differences is linear in the voxels, so it is evaluated as differences of
+    /// rows already interpolated along i: 12 short row loads (one bounds check
+    /// each), 8 lerps along i, then the j blends — about half the instructions of
+    /// four separate corner gradients. Equal to [`SliceStack::gradient_general`]
+    /// up to float rounding (a test bounds the difference).
+    #[inline(always)]
+    fn gradient_interior(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
+        let (n0, n01) = (self.n[0], self.n[0] * self.n[1]);
+        let b = self.index(ci, cj, k);
+        let data = &self.data;
+        // row y (−1..=2) of slice k at x = −1..=2, and rows y = 0, 1 of slices k ± 1 at x = 0, 1
+        let r4 = |o: usize| -> [f32; 4] { data[o - 1..o + 3].try_into().expect("4 voxels") };
+        let r2 = |o: usize| -> [f32; 2] { data[o..o + 2].try_into().expect("2 voxels") };
+        let (rm, r0, r1, r2_) = (r4(b - n0), r4(b), r4(b + n0), r4(b + 2 * n0));
+        let (p0, p1, m0, m1) = (r2(b + n01), r2(b + n01 + n0), r2(b - n01), r2(b - n01 + n0));
+        let lerp = |a: f32, c: f32, w: f32| a + (c - a) * w;
+        // the row interpolated at x = wi, and its central difference along i
+        let li = |r: [f32; 4]| lerp(r[1], r[2], wi);
+        let di = |r: [f32; 4]| lerp(r[2] - r[0], r[3] - r[1], wi) * 0.5;
+        let l2 = |r: [f32; 2]| lerp(r[0], r[1], wi);
+        let (lm, l0, l1, l2r) = (li(rm), li(r0), li(r1), li(r2_));
+        [lerp(di(r0), di(r1), wj), lerp((l1 - lm) * 0.5, (l2r - l0) * 0.5, wj), (lerp(l2(p0), l2(p1), wj) - lerp(l2(m0), l2(m1), wj)) * 0.5]
+    }
+
+    fn gradient_general(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
+        let g00 = self.gradient_at(ci, cj, k);
+        let g10 = self.gradient_at(ci + 1, cj, k);
+        let g01 = self.gradient_at(ci, cj + 1, k);
+        let g11 = self.gradient_at(ci + 1, cj + 1, k);
+        let mut g = [0f32; 3];
+        for c in 0..3 {
+            let top = g00[c] + (g10[c] - g00[c]) * wi;
+            let bot = g01[c] + (g11[c] - g01[c]) * wi;
+            g[c] = top + (bot - top) * wj;
+        }
+        g
+    }
+}
+
+/// The smaller of two densities: one `minss` (`f32::min` adds NaN handling;
+/// stacks hold finite values only, where both agree).
+#[inline(always)]
+pub(crate) fn fmin(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// The larger of two densities (see [`fmin`]).
+#[inline(always)]
+pub(crate) fn fmax(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// The bilinear interpolation of a cell's corner densities `[v00, v10, v01, v11]`
+/// at in-cell weights `(wi, wj)`, clamped to their range (see [`SliceStack::bilinear`]).
+#[inline(always)]
+pub fn bilinear([v00, v10, v01, v11]: [f32; 4], wi: f32, wj: f32) -> f32 {
+    let top = v00 + (v10 - v00) * wi;
+    let bot = v01 + (v11 - v01) * wi;
+    let d = top + (bot - top) * wj;
+    let lo = fmin(fmin(v00, v10), fmin(v01, v11));
+    let hi = fmax(fmax(v00, v10), fmax(v01, v11));
+    fmin(fmax(d, lo), hi)
+}
+
+/// The four voxels of the cell whose first voxel is `v[b]` in a slice layout
+/// with rows of `n0`: `b`, `b + 1`, `b + n0`, `b + n0 + 1`, one bounds check
+/// for all four. Shared by the densities and the normal codes.
+#[inline(always)]
+pub(crate) fn cell_corners<T: Copy>(v: &[T], b: usize, n0: usize) -> [T; 4] {
+    let s = &v[b..b + n0 + 2];
+    [s[0], s[1], s[n0], s[n0 + 1]]
+}
+
+/// Asks the cache for both voxel rows of the cell whose first voxel is `v[b]`
+/// (rows of `n0`): what [`cell_corners`] reads. No effect on results.
+#[inline(always)]
+pub(crate) fn prefetch_cell<T>(v: &[T], b: usize, n0: usize) {
+    prefetch(v, b);
+    prefetch(v, b.wrapping_add(n0));
+}
+
+/// Asks the cache for `v[i]` (a hint: no effect on results; nothing if `i` is out of range).
+#[inline(always)]
+pub(crate) fn prefetch<T>(v: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(r) = v.get(i) {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: a prefetch only hints the cache hierarchy: it never faults and
+        // never reads or writes memory architecturally, so it is sound for any
+        // address; this one is a valid reference besides. Exercised by every RLE
+        // render (tests/rle.rs) and every binary render (tests/invariants.rs).
+        unsafe { _mm_prefetch::<_MM_HINT_T0>((r as *const T).cast::<i8>()) }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (v, i);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn permutation_matches_volume() {
+        let v = Volume::from_fn([3, 4, 5], [1.0; 3], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
+        for axis in 0..3 {
+            let s = SliceStack::new(&v, axis);
+            let p = permutation(axis);
+            for k in 0..s.n[2] {
+                for j in 0..s.n[1] {
+                    for i in 0..s.n[0] {
+                        let mut xyz = [0; 3];
+                        xyz[p[0]] = i;
+                        xyz[p[1]] = j;
+                        xyz[p[2]] = k;
+                        assert_eq!(s.at(i, j, k), v.get(xyz[0], xyz[1], xyz[2]));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bilinear_stays_in_the_corner_range_and_gradient_is_exact_for_linear() {
+        let v = Volume::from_fn([5, 5, 5], [1.0; 3], |x, y, z| 0.1 * x as f32 + 3.0 * y as f32 - 2.0 * z as f32).unwrap();
+        let s = SliceStack::new(&v, 2);
+        let d = s.bilinear(1, 2, 3, 0.25, 0.5);
+        assert!((d - (0.125 + 7.5 - 6.0)).abs() < 1e-5);
+        let g = s.gradient(1, 1, 2, 0.3, 0.7);
+        assert!((g[0] - 0.1).abs() < 1e-5 && (g[1] - 3.0).abs() < 1e-5 && (g[2] + 2.0).abs() < 1e-5);
+        let (lo, hi) = s.cell_range(1, 2, 3);
+        assert!(lo <= d && d <= hi);
+    }
+
+    #[test]
+    fn prefetch_at_the_stack_edges_is_harmless_and_min_max_agree_with_std() {
+        let v = Volume::from_fn([5, 4, 3], [1.0; 3], |x, y, z| (x + y + z) as f32).unwrap();
+        let s = SliceStack::new(&v, 2);
+        // rows before the first and past the last voxel are skipped, not touched
+        for (ci, cj, k) in [(0, 0, 0), (3, 2, 2), (0, 2, 1), (3, 0, 0)] {
+            for asc in [false, true] {
+                s.prefetch_hit(ci, cj, k, asc);
+            }
+        }
+        prefetch(s.data(), usize::MAX);
+        let xs = [-3.5f32, -0.0, 0.0, 1.0, 2.5, f32::MAX, f32::MIN];
+        for a in xs {
+            for b in xs {
+                assert_eq!(fmin(a, b), a.min(b), "min {a} {b}");
+                assert_eq!(fmax(a, b), a.max(b), "max {a} {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn interior_gradient_equals_the_general_path_to_rounding() {
+        let v =
+            Volume::from_fn([9, 8, 7], [1.0; 3], |x, y, z| ((x * 7 + y * 13 + z * 29) % 17) as f32 * 1.37 - (x * y) as f32 * 0.11).unwrap();
+        for axis in 0..3 {
+            let s = SliceStack::new(&v, axis);
+            for k in 1..s.n[2] - 1 {
+                for cj in 1..s.n[1] - 2 {
+                    for ci in 1..s.n[0] - 2 {
+                        for (wi, wj) in [(0.0, 0.0), (0.3, 0.7), (0.999, 0.5)] {
+                            let a = s.gradient_interior(ci, cj, k, wi, wj);
+                            let b = s.gradient_general(ci, cj, k, wi, wj);
+                            for c in 0..3 {
+                                assert!((a[c] - b[c]).abs() <= 1e-5 * (1.0 + b[c].abs()), "{a:?} vs {b:?}");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

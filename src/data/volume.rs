@@ -1,0 +1,356 @@
+//! Stage 1 — the volume: a regular grid of scalar densities with voxel spacing.
+//!
+//! Owns the voxel storage ([`VoxelData`], u8/u16/i16/f32), the grid dimensions and
+//! the physical spacing, the size limits every loader checks *before* allocating,
+//! and the NaN/Inf policy: non-finite f32 voxels are **rejected** with
+//! [`Error::NonFinite`] when a volume is constructed, so no later stage ever sees one.
+//!
+//! Storage is x-fastest: voxel `(x, y, z)` lives at `x + nx * (y + ny * z)`.
+
+use crate::error::{Error, Result};
+
+/// Largest accepted edge length of a volume, in voxels.
+pub const MAX_DIM: usize = 1 << 14;
+/// Largest accepted voxel count (1 Gi voxels: 4 GiB as f32).
+pub const MAX_VOXELS: u64 = 1 << 30;
+
+/// The scalar type of the stored voxels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum VoxelType {
+    U8,
+    U16,
+    I16,
+    F32,
+}
+
+impl VoxelType {
+    /// Bytes per voxel.
+    pub fn size(self) -> usize {
+        match self {
+            VoxelType::U8 => 1,
+            VoxelType::U16 | VoxelType::I16 => 2,
+            VoxelType::F32 => 4,
+        }
+    }
+    /// Parses `u8`, `u16`, `i16` or `f32`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s.to_ascii_lowercase().as_str() {
+            "u8" | "uint8" | "uchar" => Ok(VoxelType::U8),
+            "u16" | "uint16" | "ushort" => Ok(VoxelType::U16),
+            "i16" | "int16" | "short" => Ok(VoxelType::I16),
+            "f32" | "float" | "float32" => Ok(VoxelType::F32),
+            other => Err(Error::value("voxel type", format!("'{other}' (expected u8, u16, i16 or f32)"))),
+        }
+    }
+    /// The canonical name (`u8`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            VoxelType::U8 => "u8",
+            VoxelType::U16 => "u16",
+            VoxelType::I16 => "i16",
+            VoxelType::F32 => "f32",
+        }
+    }
+}
+
+/// Typed voxel storage.
+#[derive(Clone, Debug, PartialEq)]
+pub enum VoxelData {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+    I16(Vec<i16>),
+    F32(Vec<f32>),
+}
+
+impl VoxelData {
+    /// Number of voxels.
+    pub fn len(&self) -> usize {
+        match self {
+            VoxelData::U8(v) => v.len(),
+            VoxelData::U16(v) => v.len(),
+            VoxelData::I16(v) => v.len(),
+            VoxelData::F32(v) => v.len(),
+        }
+    }
+    /// True when there are no voxels.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// The voxel type.
+    pub fn voxel_type(&self) -> VoxelType {
+        match self {
+            VoxelData::U8(_) => VoxelType::U8,
+            VoxelData::U16(_) => VoxelType::U16,
+            VoxelData::I16(_) => VoxelType::I16,
+            VoxelData::F32(_) => VoxelType::F32,
+        }
+    }
+    /// Voxel `i` as f32.
+    #[inline]
+    pub fn get(&self, i: usize) -> f32 {
+        match self {
+            VoxelData::U8(v) => v[i] as f32,
+            VoxelData::U16(v) => v[i] as f32,
+            VoxelData::I16(v) => v[i] as f32,
+            VoxelData::F32(v) => v[i],
+        }
+    }
+}
+
+/// Checks dimensions against the limits without allocating anything.
+///
+/// Every loader calls this on header values before it reserves memory, so a
+/// header claiming 100000³ voxels fails at once.
+pub fn check_dims(dims: [u64; 3]) -> Result<[usize; 3]> {
+    let bad = |why: String| Err(Error::BadDims { dims: dims.to_vec(), why });
+    if dims.contains(&0) {
+        return bad("every dimension must be at least 1".into());
+    }
+    if let Some(d) = dims.iter().find(|&&d| d > MAX_DIM as u64) {
+        return bad(format!("{d} exceeds the largest supported edge of {MAX_DIM} voxels"));
+    }
+    let n = dims[0] * dims[1] * dims[2];
+    if n > MAX_VOXELS {
+        return bad(format!("{n} voxels exceed the supported maximum of {MAX_VOXELS}"));
+    }
+    Ok([dims[0] as usize, dims[1] as usize, dims[2] as usize])
+}
+
+/// A scalar volume: dimensions, spacing and typed voxels.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Volume {
+    dims: [usize; 3],
+    spacing: [f32; 3],
+    data: VoxelData,
+}
+
+impl Volume {
+    /// Builds a volume, checking dims, spacing, the voxel count and (for f32) that
+    /// every voxel is finite.
+    pub fn new(dims: [usize; 3], spacing: [f32; 3], data: VoxelData) -> Result<Self> {
+        let d = check_dims(dims.map(|d| d as u64))?;
+        let n = d[0] * d[1] * d[2];
+        if data.len() != n {
+            return Err(Error::BadDims {
+                dims: dims.iter().map(|&d| d as u64).collect(),
+                why: format!("expected {n} voxels, got {}", data.len()),
+            });
+        }
+        check_spacing(spacing)?;
+        if let VoxelData::F32(v) = &data {
+            if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+                return Err(Error::NonFinite { index, value });
+            }
+        }
+        Ok(Volume { dims: d, spacing, data })
+    }
+
+    /// Builds an f32 volume by evaluating `f(x, y, z)` at every voxel.
+    pub fn from_fn(dims: [usize; 3], spacing: [f32; 3], f: impl Fn(usize, usize, usize) -> f32) -> Result<Self> {
+        let d = check_dims(dims.map(|d| d as u64))?;
+        let mut v = Vec::with_capacity(d[0] * d[1] * d[2]);
+        for z in 0..d[2] {
+            for y in 0..d[1] {
+                for x in 0..d[0] {
+                    v.push(f(x, y, z));
+                }
+            }
+        }
+        Volume::new(d, spacing, VoxelData::F32(v))
+    }
+
+    /// Grid size `[nx, ny, nz]`.
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+    /// Physical voxel size along x, y, z (any unit, typically mm).
+    pub fn spacing(&self) -> [f32; 3] {
+        self.spacing
+    }
+    /// Replaces the spacing (checked: finite and positive).
+    pub fn set_spacing(&mut self, spacing: [f32; 3]) -> Result<()> {
+        check_spacing(spacing)?;
+        self.spacing = spacing;
+        Ok(())
+    }
+    /// The voxel storage.
+    pub fn data(&self) -> &VoxelData {
+        &self.data
+    }
+    /// Number of voxels.
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+    /// Always false: a volume has at least one voxel.
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+    /// Linear index of voxel `(x, y, z)`.
+    #[inline]
+    pub fn index(&self, x: usize, y: usize, z: usize) -> usize {
+        x + self.dims[0] * (y + self.dims[1] * z)
+    }
+    /// Density at voxel `(x, y, z)` as f32.
+    #[inline]
+    pub fn get(&self, x: usize, y: usize, z: usize) -> f32 {
+        self.data.get(self.index(x, y, z))
+    }
+    /// Smallest and largest density.
+    pub fn value_range(&self) -> (f32, f32) {
+        let mut lo = f32::INFINITY;
+        let mut hi = f32::NEG_INFINITY;
+        for i in 0..self.len() {
+            let v = self.data.get(i);
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        (lo, hi)
+    }
+    /// Histogram of densities in `bins` equal bins over [`Volume::value_range`].
+    pub fn histogram(&self, bins: usize) -> Vec<u64> {
+        let bins = bins.max(1);
+        let (lo, hi) = self.value_range();
+        let mut h = vec![0u64; bins];
+        let scale = if hi > lo { bins as f64 / (hi as f64 - lo as f64) } else { 0.0 };
+        for i in 0..self.len() {
+            let b = ((self.data.get(i) as f64 - lo as f64) * scale) as usize;
+            h[b.min(bins - 1)] += 1;
+        }
+        h
+    }
+    /// All voxels converted to f32, x-fastest.
+    pub fn to_f32(&self) -> Vec<f32> {
+        (0..self.len()).map(|i| self.data.get(i)).collect()
+    }
+
+    /// Trilinear resampling onto a `dims` grid spanning the same physical box:
+    /// the corner voxels of the output sit on the corner voxels of the input
+    /// (output voxel `o` of an axis samples input coordinate `o·(n_in−1)/(n_out−1)`),
+    /// and the spacing grows or shrinks to match. Densities stay f32.
+    pub fn resampled(&self, dims: [usize; 3]) -> Result<Volume> {
+        let d = check_dims(dims.map(|d| d as u64))?;
+        // per axis: input coordinate step between output voxels
+        let step: [f64; 3] = std::array::from_fn(|a| if d[a] > 1 { (self.dims[a] - 1) as f64 / (d[a] - 1) as f64 } else { 0.0 });
+        let spacing: [f32; 3] =
+            std::array::from_fn(|a| if d[a] > 1 && self.dims[a] > 1 { (self.spacing[a] as f64 * step[a]) as f32 } else { self.spacing[a] });
+        // one axis's sample positions: lower input index and weight of the upper one
+        let taps = |a: usize| -> Vec<(usize, f32)> {
+            (0..d[a])
+                .map(|o| {
+                    let c = o as f64 * step[a];
+                    let i = (c.floor() as usize).min(self.dims[a].saturating_sub(2));
+                    let w = if self.dims[a] > 1 { (c - i as f64) as f32 } else { 0.0 };
+                    (i, w)
+                })
+                .collect()
+        };
+        let (tx, ty, tz) = (taps(0), taps(1), taps(2));
+        let [nx, ny, nz] = self.dims;
+        let at = |x: usize, y: usize, z: usize| self.data.get(x.min(nx - 1) + nx * (y.min(ny - 1) + ny * z.min(nz - 1)));
+        let mut out = Vec::with_capacity(d[0] * d[1] * d[2]);
+        for &(z, wz) in &tz {
+            for &(y, wy) in &ty {
+                for &(x, wx) in &tx {
+                    let lerp = |a: f32, b: f32, w: f32| a + (b - a) * w;
+                    let plane = |z: usize| lerp(lerp(at(x, y, z), at(x + 1, y, z), wx), lerp(at(x, y + 1, z), at(x + 1, y + 1, z), wx), wy);
+                    out.push(lerp(plane(z), plane(z + 1), wz));
+                }
+            }
+        }
+        Volume::new(d, spacing, VoxelData::F32(out))
+    }
+
+    /// Densities mapped linearly from the window `[lo, hi]` onto 0..=255
+    /// (clamped, rounded to nearest): an 8-bit copy for tools that take only
+    /// u8 voxels, such as VolPack's `.den` files. A density `v` becomes
+    /// `round(255·(v − lo)/(hi − lo))`.
+    pub fn window_u8(&self, lo: f32, hi: f32) -> Result<Volume> {
+        if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+            return Err(Error::value("window", format!("[{lo}, {hi}] (need finite lo < hi)")));
+        }
+        let scale = 255.0 / (hi as f64 - lo as f64);
+        let v = (0..self.len()).map(|i| ((self.data.get(i) as f64 - lo as f64) * scale).round().clamp(0.0, 255.0) as u8).collect();
+        Volume::new(self.dims, self.spacing, VoxelData::U8(v))
+    }
+}
+
+fn check_spacing(spacing: [f32; 3]) -> Result<()> {
+    if spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
+        return Err(Error::value("spacing", format!("{spacing:?} (each must be finite and > 0)")));
+    }
+    let (lo, hi) = spacing.iter().fold((f32::MAX, 0f32), |(a, b), &s| (a.min(s), b.max(s)));
+    if hi / lo > 1.0e4 {
+        return Err(Error::value("spacing", format!("{spacing:?}: anisotropy above 10^4 is not supported")));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rejects_zero_and_absurd_dims_without_allocating() {
+        assert!(check_dims([0, 4, 4]).is_err());
+        assert!(check_dims([100_000, 100_000, 100_000]).is_err());
+        assert!(check_dims([4096, 4096, 4096]).is_err());
+        assert_eq!(check_dims([4096, 4, 4]).unwrap(), [4096, 4, 4]);
+    }
+
+    #[test]
+    fn rejects_nan_and_inf() {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let e = Volume::new([2, 1, 1], [1.0; 3], VoxelData::F32(vec![0.0, bad])).unwrap_err();
+            assert!(matches!(e, Error::NonFinite { index: 1, .. }), "{e}");
+        }
+    }
+
+    #[test]
+    fn rejects_wrong_length_and_bad_spacing() {
+        assert!(Volume::new([2, 2, 2], [1.0; 3], VoxelData::U8(vec![0; 7])).is_err());
+        assert!(Volume::new([1, 1, 1], [0.0, 1.0, 1.0], VoxelData::U8(vec![0])).is_err());
+        assert!(Volume::new([1, 1, 1], [f32::NAN, 1.0, 1.0], VoxelData::U8(vec![0])).is_err());
+    }
+
+    #[test]
+    fn resampling_keeps_corners_and_linear_fields_exactly() {
+        // a linear field is reproduced exactly by trilinear resampling
+        let v = Volume::from_fn([5, 4, 3], [1.0, 2.0, 3.0], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
+        let r = v.resampled([9, 7, 5]).unwrap();
+        assert_eq!(r.dims(), [9, 7, 5]);
+        assert_eq!(r.spacing(), [0.5, 1.0, 1.5]);
+        for z in 0..5 {
+            for y in 0..7 {
+                for x in 0..9 {
+                    let want = x as f32 * 0.5 + 10.0 * y as f32 * 0.5 + 100.0 * z as f32 * 0.5;
+                    assert!((r.get(x, y, z) - want).abs() < 1e-3, "{x},{y},{z}: {} vs {want}", r.get(x, y, z));
+                }
+            }
+        }
+        // same dims: identity; one voxel along an axis: no step, spacing kept
+        assert_eq!(v.resampled([5, 4, 3]).unwrap().to_f32(), v.to_f32());
+        let flat = Volume::from_fn([3, 1, 2], [1.0; 3], |x, _, z| (x + z) as f32).unwrap();
+        assert_eq!(flat.resampled([5, 1, 2]).unwrap().get(4, 0, 1), 3.0);
+        assert!(v.resampled([0, 2, 2]).is_err());
+    }
+
+    #[test]
+    fn windowing_to_u8_clamps_and_rounds() {
+        let v = Volume::new([5, 1, 1], [1.0; 3], VoxelData::I16(vec![-2000, -1000, 275, 1550, 3000])).unwrap();
+        let w = v.window_u8(-1000.0, 1550.0).unwrap();
+        assert_eq!(w.data().voxel_type(), VoxelType::U8);
+        assert_eq!(w.to_f32(), vec![0.0, 0.0, 128.0, 255.0, 255.0]); // 127.5 rounds up
+        for (lo, hi) in [(1.0, 1.0), (2.0, 1.0), (f32::NAN, 1.0), (0.0, f32::INFINITY)] {
+            assert!(v.window_u8(lo, hi).is_err());
+        }
+    }
+
+    #[test]
+    fn indexing_is_x_fastest() {
+        let v = Volume::from_fn([3, 4, 5], [1.0; 3], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
+        assert_eq!(v.get(2, 3, 4), 432.0);
+        assert_eq!(v.value_range(), (0.0, 432.0));
+        assert_eq!(v.histogram(4).iter().sum::<u64>(), 60);
+    }
+}

@@ -1,0 +1,1024 @@
+//! Stage 3 — the bit-packed cell mask of one principal axis, and its shear.
+//!
+//! Owns [`CellCodes`] (one small code per cell `(ci, cj)` of every slice `k`,
+//! computed from the range of its four in-slice corner densities: 1 bit "may be
+//! visible" for a single transfer function, or the interval index of the highest
+//! corner among `n` tissue thresholds — the paper's adaptive threshold codes) and
+//! [`BinaryMask`]: those codes, `nb` bits per slice, packed along depth into words
+//! of type `W` (u32 or u64, one implementation) and kept *sheared*.
+//!
+//! **Super cells.** With cell size `s`, slice `k` sits at super offset
+//! `F[k] = ceil(f[k] / s)`, `f[k] = floor(trans[k])`, and a ray at intermediate
+//! column `p` reads super column `P = floor((p − pad)/s) + PAD`. Writing
+//! `a = p − pad = s·A + α` and `f = s·F − φ` (`0 ≤ α, φ < s`), the ray's cell at
+//! slice `k` is `ci = a + f = s·(A + F) + α − φ`, within `s − 1` of `s·SI` for the
+//! super cell `SI = A + F` found at `P` in slice `k`. So super cell `SI` holds the
+//! highest code of the cells `[s·SI − (s − 1), s·SI + (s − 1)]` (its own and its
+//! neighbours' halves, along both axes), and every ray's row is conservative: the
+//! image is the same for every `s`, while the mask shrinks by about `s²` and each
+//! shear step moves slices by `s` voxels. With `s = 1` nothing is dilated.
+//!
+//! Layout: `words[(q · width + p) · nw + w]` — the `nw` words of one depth row
+//! (one super column) are contiguous. The grid is padded by `PAD` super cells on
+//! every side, enough for any shear up to 45° about the centre slice, so no bit
+//! is ever shifted out.
+//!
+//! Shearing: [`BinaryMask::shear_to`] moves the mask to a target [`ShearState`],
+//! by incremental one-bit steps (per-bit shift vectors: each slice moves −1, 0
+//! or +1, the split between directions may fall anywhere inside a word) when the
+//! target is at most a few bits away, else by a direct shear (clear and re-scatter
+//! from the unsheared cell bits). Two incremental steps are fused into one pass
+//! over the words where the target is two or more bits away (each slice moves
+//! −2..=+2, five shift vectors): the same words, half the memory traffic.
+//! Either way only the occupied rectangle of the grid is touched.
+
+use rayon::prelude::*;
+
+use crate::data::slices::SliceStack;
+use crate::encode::depth::{Word, code_width_for, slot_shift};
+use crate::encode::shear::{ShearState, shift_vectors, shift_vectors2};
+use crate::error::{Error, Result};
+
+/// Steps above this count are done as one direct shear instead.
+pub const MAX_INCREMENTAL_STEPS: u32 = 6;
+
+/// Longest column (words per depth row) with shift kernels compiled for its
+/// length; longer columns run the general kernels, one step per pass.
+pub const MAX_FIXED_COLUMN: usize = 16;
+
+/// Longest column (words per depth row) whose incremental steps are fused two
+/// to a pass. Measured (`cargo bench --bench skips -- shear_two_steps`): two
+/// steps of the 256×256×225 head's mask take 242 µs fused against 330 µs
+/// single at 4 words (1-bit codes), but 2.6 ms against 1.3 ms at 15 words
+/// (4-bit codes), where the five-column window no longer fits in registers.
+pub const MAX_FUSED_COLUMN: usize = 4;
+// the fused kernels are compiled for the lengths [1 2 3 4] (`shift_columns2`, `shift_rows2`)
+const _: () = assert!(MAX_FUSED_COLUMN == 4);
+
+/// Largest super-cell size.
+pub const MAX_CELL: usize = 8;
+
+/// Padding and grid size of the intermediate image for a volume of `cells`
+/// cells per slice and `nk` slices: `pad = ceil((nk − 1)/2) + 2` covers every
+/// translation `|trans| ≤ (nk − 1)/2` of a view whose shear is at most one (plus
+/// rounding).
+pub fn geometry(cells: [usize; 2], nk: usize) -> (usize, [usize; 2]) {
+    let pad = nk.saturating_sub(1).div_ceil(2) + 2;
+    (pad, [cells[0] + 2 * pad, cells[1] + 2 * pad])
+}
+
+/// Inclusive rectangle `[p0, p1] × [q0, q1]` of grid columns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Rect {
+    pub p0: usize,
+    pub p1: usize,
+    pub q0: usize,
+    pub q1: usize,
+}
+
+impl Rect {
+    fn union(a: Option<Rect>, b: Option<Rect>) -> Option<Rect> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(Rect { p0: a.p0.min(b.p0), p1: a.p1.max(b.p1), q0: a.q0.min(b.q0), q1: a.q1.max(b.q1) }),
+            (a, None) => a,
+            (None, b) => b,
+        }
+    }
+}
+
+/// How much a shear did (for the "limit of the shear step" report).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ShearWork {
+    /// Incremental one-step shears performed.
+    pub steps: u32,
+    /// Direct shears performed.
+    pub direct: u32,
+    /// Words read-modify-written.
+    pub words: u64,
+}
+
+/// Unsheared per-cell codes of one principal axis.
+#[derive(Clone, Debug)]
+pub struct CellCodes {
+    /// Cells along i and j.
+    pub cells: [usize; 2],
+    /// Slices.
+    pub nk: usize,
+    /// Bits per code.
+    pub nb: u32,
+    /// Code of cell `(ci, cj, k)` at `(k · cells_j + cj) · cells_i + ci`.
+    pub codes: Vec<u8>,
+}
+
+impl CellCodes {
+    /// Codes from `code(lo, hi)` of each cell's corner range (must be `< 2^nb`).
+    pub fn build(stack: &SliceStack, nb: u32, code: impl Fn(f32, f32) -> u8 + Sync) -> Self {
+        let [ci_n, cj_n] = stack.cells();
+        let nk = stack.n[2];
+        let per = ci_n * cj_n;
+        let mut codes = vec![0u8; per * nk];
+        if per > 0 {
+            codes.par_chunks_mut(per).enumerate().for_each(|(k, out)| {
+                // a row's column minima/maxima are shared by neighbouring cells
+                let mut colmin = vec![0f32; ci_n + 1];
+                let mut colmax = vec![0f32; ci_n + 1];
+                for cj in 0..cj_n {
+                    for (i, (mn, mx)) in colmin.iter_mut().zip(colmax.iter_mut()).enumerate() {
+                        let (a, b) = (stack.at(i, cj, k), stack.at(i, cj + 1, k));
+                        *mn = a.min(b);
+                        *mx = a.max(b);
+                    }
+                    for ci in 0..ci_n {
+                        let lo = colmin[ci].min(colmin[ci + 1]);
+                        let hi = colmax[ci].max(colmax[ci + 1]);
+                        out[cj * ci_n + ci] = code(lo, hi);
+                    }
+                }
+            });
+        }
+        CellCodes { cells: [ci_n, cj_n], nk, nb, codes }
+    }
+
+    /// 1-bit codes: 1 where `visible(lo, hi)`.
+    pub fn binary(stack: &SliceStack, visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
+        Self::build(stack, 1, |lo, hi| visible(lo, hi) as u8)
+    }
+
+    /// Adaptive threshold codes: the index of the interval of the highest corner
+    /// among the ascending `thresholds` (0 below the first, `n` at or above the
+    /// last), in the smallest code width that holds `n + 1` intervals.
+    pub fn thresholds(stack: &SliceStack, thresholds: &[f32]) -> Result<Self> {
+        if thresholds.is_empty() || !thresholds.windows(2).all(|w| w[0] < w[1]) || thresholds.iter().any(|t| t.is_nan()) {
+            return Err(Error::value("thresholds", format!("{thresholds:?} (need 1..=15 strictly ascending values)")));
+        }
+        let nb = code_width_for(thresholds.len())
+            .ok_or_else(|| Error::value("thresholds", format!("{} thresholds (at most 15)", thresholds.len())))?;
+        Ok(Self::build(stack, nb, |_, hi| thresholds.partition_point(|&t| t <= hi) as u8))
+    }
+
+    /// The code of cell `(ci, cj, k)`.
+    #[inline]
+    pub fn code(&self, ci: usize, cj: usize, k: usize) -> u8 {
+        self.codes[(k * self.cells[1] + cj) * self.cells[0] + ci]
+    }
+
+    /// Super-cell codes for cell size `s` (dilated: see the module docs), with
+    /// each slice's bounding box of non-zero super cells.
+    fn supercells(&self, s: usize) -> ([usize; 2], Vec<u8>, Vec<Option<[usize; 4]>>) {
+        let [ci_n, cj_n] = self.cells;
+        // super cell SI covers cells [s·SI − (s − 1), s·SI + (s − 1)]; count those that cover any cell
+        let count = |c: usize| if c == 0 { 0 } else { (c + s - 2) / s + 1 };
+        let span = |si: usize, c: usize| ((s * si).saturating_sub(s - 1), (s * si + s).min(c));
+        let sc = [count(ci_n), count(cj_n)];
+        let per = sc[0] * sc[1];
+        let mut bbox: Vec<Option<[usize; 4]>> = vec![None; self.nk];
+        if s == 1 {
+            // no dilation: the codes themselves, plus each slice's bounding box
+            let out = self.codes.clone();
+            if per > 0 {
+                out.par_chunks(per).zip(bbox.par_iter_mut()).for_each(|(o, bb)| {
+                    for (cj, line) in o.chunks_exact(ci_n).enumerate() {
+                        let (Some(a), Some(b)) = (line.iter().position(|&c| c != 0), line.iter().rposition(|&c| c != 0)) else { continue };
+                        *bb = Some(match *bb {
+                            None => [a, b, cj, cj],
+                            Some([p, q, r, _]) => [p.min(a), q.max(b), r, cj],
+                        });
+                    }
+                });
+            }
+            return (sc, out, bbox);
+        }
+        let mut out = vec![0u8; per * self.nk];
+        if per == 0 {
+            return (sc, out, bbox);
+        }
+        out.par_chunks_mut(per).zip(bbox.par_iter_mut()).enumerate().for_each(|(k, (o, bb))| {
+            let slice = &self.codes[k * ci_n * cj_n..(k + 1) * ci_n * cj_n];
+            // max over the span along i, then along j
+            let mut rows = vec![0u8; sc[0] * cj_n];
+            for cj in 0..cj_n {
+                let r = &slice[cj * ci_n..(cj + 1) * ci_n];
+                for si in 0..sc[0] {
+                    let (a, b) = span(si, ci_n);
+                    rows[cj * sc[0] + si] = r[a..b].iter().copied().max().unwrap_or(0);
+                }
+            }
+            for sj in 0..sc[1] {
+                let (a, b) = span(sj, cj_n);
+                for si in 0..sc[0] {
+                    let m = (a..b).map(|cj| rows[cj * sc[0] + si]).max().unwrap_or(0);
+                    o[sj * sc[0] + si] = m;
+                    if m != 0 {
+                        *bb = Some(match *bb {
+                            None => [si, si, sj, sj],
+                            Some([p, q, r, t]) => [p.min(si), q.max(si), r.min(sj), t.max(sj)],
+                        });
+                    }
+                }
+            }
+        });
+        (sc, out, bbox)
+    }
+}
+
+/// The sheared, bit-packed cell mask of one principal axis.
+#[derive(Clone, Debug)]
+pub struct BinaryMask<W: Word> {
+    /// Super-cell size.
+    s: usize,
+    /// Bits per slice code.
+    nb: u32,
+    /// Super cells along i and j.
+    cells: [usize; 2],
+    /// Slices.
+    nk: usize,
+    /// Padding of the intermediate image (voxel units).
+    vpad: usize,
+    /// Padding on each side (super cells).
+    pad: usize,
+    /// Grid size `[width, height]` in super columns.
+    grid: [usize; 2],
+    /// Words per depth row.
+    nw: usize,
+    words: Vec<W>,
+    /// Unsheared super-cell codes, slice-major.
+    codes: Vec<u8>,
+    /// Per-slice bounding box of non-zero super cells `[si0, si1, sj0, sj1]`.
+    bbox: Vec<Option<[usize; 4]>>,
+    /// Current grid offset of each slice along i and j: `PAD − F[k]`.
+    off: [Vec<i32>; 2],
+    /// Scratch for shifts (no allocation per frame).
+    up: Vec<W>,
+    down: Vec<W>,
+    keep: Vec<W>,
+    row_buf: Vec<W>,
+    target: [Vec<i32>; 2],
+    prev_off: [Vec<i32>; 2],
+    /// Shift kernels compiled for AVX2 ([`hw_avx2`]); false runs the plain
+    /// build's kernels (the scalar reference, see [`BinaryMask::set_simd`]).
+    avx2: bool,
+    /// Fuse two incremental steps into one pass where possible ([`BinaryMask::set_fused`]).
+    fused: bool,
+    /// Scratch of a fused step: the shift vectors of the moves +2, +1, 0, −1, −2.
+    moves: [Vec<W>; 5],
+    /// Scratch of a fused step along j: old row q − 2, and a row of zeros.
+    row_buf2: Vec<W>,
+    zero_row: Vec<W>,
+}
+
+/// Runs `$fixed` with the constant `$n` bound to the column length `$nw` when it
+/// is 1 to [`MAX_FIXED_COLUMN`] words (a kernel compiled for that length), else
+/// `$any`. Sixteen u64 words hold 1024 one-bit slices, or 256 slices of the
+/// tissue presets' 4-bit codes.
+macro_rules! by_column_length {
+    ($nw:expr, $n:ident => $fixed:expr, _ => $any:expr) => {
+        by_column_length!(@arms $nw, $n, $fixed, $any, [1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16])
+    };
+    (@arms $nw:expr, $n:ident, $fixed:expr, $any:expr, [$($len:literal)*]) => {
+        match $nw {
+            $($len => {
+                const $n: usize = $len;
+                $fixed
+            })*
+            _ => $any,
+        }
+    };
+}
+
+impl<W: Word> BinaryMask<W> {
+    /// Builds the 1-bit mask of `stack` (cell size 1): cell `(ci, cj, k)` is set
+    /// when `visible(lo, hi)` for the range `[lo, hi]` of its four corner densities.
+    /// The mask starts unsheared.
+    pub fn build(stack: &SliceStack, visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
+        Self::from_codes(&CellCodes::binary(stack, visible), 1)
+    }
+
+    /// Packs `codes` with super-cell size `s` (1..=[`MAX_CELL`]), unsheared.
+    pub fn from_codes(codes: &CellCodes, s: usize) -> Self {
+        let s = s.clamp(1, MAX_CELL);
+        let (vpad, _) = geometry(codes.cells, codes.nk);
+        let (cells, sc, bbox) = codes.supercells(s);
+        let pad = vpad.div_ceil(s) + 1;
+        let grid = [cells[0] + 2 * pad, cells[1] + 2 * pad];
+        let nb = codes.nb;
+        let slots = (W::BITS / nb) as usize;
+        let nw = codes.nk.div_ceil(slots).max(1);
+        let nk = codes.nk;
+        let mut m = BinaryMask {
+            s,
+            nb,
+            cells,
+            nk,
+            vpad,
+            pad,
+            grid,
+            nw,
+            words: vec![W::ZERO; grid[0] * grid[1] * nw],
+            codes: sc,
+            bbox,
+            off: [vec![pad as i32; nk], vec![pad as i32; nk]],
+            up: vec![W::ZERO; nw],
+            down: vec![W::ZERO; nw],
+            keep: vec![W::ZERO; nw],
+            row_buf: vec![W::ZERO; grid[0] * nw],
+            target: [vec![0; nk], vec![0; nk]],
+            prev_off: [vec![0; nk], vec![0; nk]],
+            avx2: hw_avx2(),
+            fused: true,
+            moves: std::array::from_fn(|_| vec![W::ZERO; nw]),
+            row_buf2: vec![W::ZERO; grid[0] * nw],
+            zero_row: vec![W::ZERO; grid[0] * nw],
+        };
+        m.scatter();
+        m
+    }
+
+    /// Super-cell size.
+    pub fn cell_size(&self) -> usize {
+        self.s
+    }
+    /// Chooses the shift kernels: `true` (the default on a CPU with AVX2)
+    /// runs them compiled for AVX2, `false` the plain build's. Both give the
+    /// same words; the switch exists so tests and benches can compare them.
+    pub fn set_simd(&mut self, on: bool) {
+        self.avx2 = on && hw_avx2();
+    }
+
+    /// `true` (the default) fuses two incremental steps into one pass over the
+    /// words wherever the target is two or more bits away; `false` makes every
+    /// step a pass of its own. The same words either way (tests compare them).
+    pub fn set_fused(&mut self, on: bool) {
+        self.fused = on;
+    }
+
+    /// Bits per code.
+    pub fn code_width(&self) -> u32 {
+        self.nb
+    }
+    /// Grid size `[width, height]` in super columns.
+    pub fn grid(&self) -> [usize; 2] {
+        self.grid
+    }
+    /// Padding on each side, in super cells.
+    pub fn pad(&self) -> usize {
+        self.pad
+    }
+    /// Words per depth row.
+    pub fn words_per_row(&self) -> usize {
+        self.nw
+    }
+    /// Slices.
+    pub fn slices(&self) -> usize {
+        self.nk
+    }
+    /// Super cells along i and j.
+    pub fn cells(&self) -> [usize; 2] {
+        self.cells
+    }
+    /// The depth row of grid column `(p, q)`.
+    #[inline(always)]
+    pub fn row(&self, p: usize, q: usize) -> &[W] {
+        let s = (q * self.grid[0] + p) * self.nw;
+        &self.words[s..s + self.nw]
+    }
+    /// The depth row that ray `(p, q)` of the intermediate image reads.
+    #[inline(always)]
+    pub fn ray_row(&self, p: usize, q: usize) -> &[W] {
+        let (sp, sq) = self.ray_column(p, q);
+        self.row(sp, sq)
+    }
+    /// The super column `sp` of ray `p` and how many rays `p, p + 1, …` in a row
+    /// read it before the next column starts (1..=s): lets a row of rays step
+    /// from column to column without a division per ray.
+    #[inline]
+    pub fn column_run(&self, p: usize) -> (usize, usize) {
+        let s = self.s as i64;
+        let x = p as i64 - self.vpad as i64;
+        ((x.div_euclid(s) + self.pad as i64) as usize, (s - x.rem_euclid(s)) as usize)
+    }
+    /// The super column of ray `(p, q)`: `floor((p − pad)/s) + PAD`.
+    #[inline(always)]
+    pub fn ray_column(&self, p: usize, q: usize) -> (usize, usize) {
+        let s = self.s as i64;
+        let a = (p as i64 - self.vpad as i64).div_euclid(s) + self.pad as i64;
+        let b = (q as i64 - self.vpad as i64).div_euclid(s) + self.pad as i64;
+        (a as usize, b as usize)
+    }
+    /// All words (for comparisons in tests).
+    pub fn words(&self) -> &[W] {
+        &self.words
+    }
+    /// Bytes of the packed, sheared array.
+    pub fn bytes(&self) -> usize {
+        self.words.len() * W::BITS as usize / 8
+    }
+    /// The unsheared code of super cell `(si, sj, k)`.
+    pub fn code(&self, si: usize, sj: usize, k: usize) -> u8 {
+        self.codes[(k * self.cells[1] + sj) * self.cells[0] + si]
+    }
+    /// True when the unsheared super cell has a non-zero code.
+    pub fn cell(&self, si: usize, sj: usize, k: usize) -> bool {
+        self.code(si, sj, k) != 0
+    }
+    /// Current super offsets `F[k]` of each slice along i and j.
+    pub fn floors(&self) -> [Vec<i32>; 2] {
+        [0, 1].map(|a| self.off[a].iter().map(|o| self.pad as i32 - o).collect())
+    }
+
+    /// The occupied rectangle of the grid for the given offsets, if any code is set.
+    fn occupied(&self, off: &[Vec<i32>; 2]) -> Option<Rect> {
+        let mut r: Option<Rect> = None;
+        for (k, bb) in self.bbox.iter().enumerate() {
+            if let Some([i0, i1, j0, j1]) = *bb {
+                let (oi, oj) = (off[0][k], off[1][k]);
+                let s = Rect {
+                    p0: (i0 as i32 + oi) as usize,
+                    p1: (i1 as i32 + oi) as usize,
+                    q0: (j0 as i32 + oj) as usize,
+                    q1: (j1 as i32 + oj) as usize,
+                };
+                r = Rect::union(r, Some(s));
+            }
+        }
+        r
+    }
+
+    /// The occupied rectangle in the current state, in super columns.
+    pub fn occupied_rect(&self) -> Option<Rect> {
+        self.occupied(&self.off)
+    }
+
+    /// The rays of the intermediate image whose super column is occupied.
+    pub fn occupied_rays(&self, inter: [usize; 2]) -> Option<Rect> {
+        let r = self.occupied_rect()?;
+        let s = self.s as i64;
+        // P = floor((p − vpad)/s) + PAD  ⇔  p ∈ [(P − PAD)·s + vpad, (P − PAD)·s + vpad + s − 1]
+        let lo = |pp: usize| (pp as i64 - self.pad as i64) * s + self.vpad as i64;
+        let p0 = lo(r.p0).max(0) as usize;
+        let q0 = lo(r.q0).max(0) as usize;
+        let p1 = (lo(r.p1) + s - 1).min(inter[0] as i64 - 1);
+        let q1 = (lo(r.q1) + s - 1).min(inter[1] as i64 - 1);
+        if p1 < p0 as i64 || q1 < q0 as i64 {
+            return None;
+        }
+        Some(Rect { p0, p1: p1 as usize, q0, q1: q1 as usize })
+    }
+
+    /// Target offsets of a state; panics only if the state is not for this mask.
+    fn offsets_for(&self, state: &ShearState, out: &mut [Vec<i32>; 2]) {
+        assert_eq!(state.slices(), self.nk, "shear state for a different slice count");
+        for a in 0..2 {
+            for (o, &f) in out[a].iter_mut().zip(&state.floor[a]) {
+                // F = ceil(f / s)
+                let v = self.pad as i32 + (-f).div_euclid(self.s as i32);
+                // pad covers |floor| ≤ ceil((nk-1)/2)+1: a principal-axis view never exceeds it
+                assert!(v >= 0 && v as usize + self.cells[a] <= self.grid[a], "shear beyond 45° for this mask");
+                *o = v;
+            }
+        }
+    }
+
+    /// Moves the mask to `state`: incrementally when every slice is at most
+    /// [`MAX_INCREMENTAL_STEPS`] super cells away, else by a direct shear.
+    pub fn shear_to(&mut self, state: &ShearState) -> ShearWork {
+        let mut target = std::mem::take(&mut self.target);
+        self.offsets_for(state, &mut target);
+        let dist = (0..2).flat_map(|a| self.off[a].iter().zip(&target[a]).map(|(x, y)| (x - y).unsigned_abs())).max().unwrap_or(0);
+        let work = if dist == 0 {
+            ShearWork::default()
+        } else if dist <= MAX_INCREMENTAL_STEPS {
+            let mut w = ShearWork::default();
+            let mut left = dist;
+            while left > 0 {
+                let by = if self.fused && left >= 2 && self.nw <= MAX_FUSED_COLUMN { 2 } else { 1 };
+                w.words += self.step_towards(&target, by as i32);
+                w.steps += by;
+                left -= by;
+            }
+            w
+        } else {
+            self.direct(&target)
+        };
+        self.target = target;
+        work
+    }
+
+    /// Moves the mask to `state` by a direct shear (the reset): clear the occupied
+    /// region, then scatter every code to its target position.
+    pub fn shear_direct(&mut self, state: &ShearState) -> ShearWork {
+        let mut target = std::mem::take(&mut self.target);
+        self.offsets_for(state, &mut target);
+        let w = self.direct(&target);
+        self.target = target;
+        w
+    }
+
+    fn direct(&mut self, target: &[Vec<i32>; 2]) -> ShearWork {
+        let mut words = 0;
+        if let Some(r) = self.occupied_rect() {
+            let nw = self.nw;
+            for q in r.q0..=r.q1 {
+                let s = (q * self.grid[0] + r.p0) * nw;
+                let e = (q * self.grid[0] + r.p1 + 1) * nw;
+                self.words[s..e].fill(W::ZERO);
+                words += (e - s) as u64;
+            }
+        }
+        for a in 0..2 {
+            self.off[a].copy_from_slice(&target[a]);
+        }
+        self.scatter();
+        ShearWork { steps: 0, direct: 1, words }
+    }
+
+    /// Writes every code at its current offset (the grid must be clear there).
+    fn scatter(&mut self) {
+        let [ci_n, cj_n] = self.cells;
+        let (gw, nw, nk, nb) = (self.grid[0], self.nw, self.nk, self.nb);
+        let slots = (W::BITS / nb) as usize;
+        let (codes, off, bbox) = (&self.codes, &self.off, &self.bbox);
+        // parallel over grid rows q: each row's words are written by one task
+        self.words.par_chunks_mut(gw * nw).enumerate().for_each(|(q, row)| {
+            for k in 0..nk {
+                let Some([i0, i1, j0, j1]) = bbox[k] else { continue };
+                let cj = q as i32 - off[1][k];
+                if cj < j0 as i32 || cj > j1 as i32 {
+                    continue;
+                }
+                let cj = cj as usize;
+                debug_assert!(cj < cj_n);
+                let shift = slot_shift::<W>(nb, (k % slots) as u32);
+                let w = k / slots;
+                let line = &codes[(k * cj_n + cj) * ci_n..(k * cj_n + cj + 1) * ci_n];
+                for (ci, &c) in line.iter().enumerate().take(i1 + 1).skip(i0) {
+                    if c != 0 {
+                        let p = (ci as i32 + off[0][k]) as usize;
+                        row[p * nw + w] |= W::from_u64(c as u64) << shift;
+                    }
+                }
+            }
+        });
+    }
+
+    /// One incremental step (`by` = 1), or two fused into one pass (`by` = 2):
+    /// every slice moves at most `by` super columns along i and `by` super rows
+    /// along j towards `target`. Returns the words touched.
+    fn step_towards(&mut self, target: &[Vec<i32>; 2], by: i32) -> u64 {
+        let before = self.occupied_rect();
+        let mut next = std::mem::take(&mut self.off);
+        let mut prev = std::mem::take(&mut self.prev_off);
+        for a in 0..2 {
+            prev[a].copy_from_slice(&next[a]);
+        }
+        for a in 0..2 {
+            for (o, &t) in next[a].iter_mut().zip(&target[a]) {
+                *o += (t - *o).clamp(-by, by);
+            }
+        }
+        let after = self.occupied(&next);
+        let Some(r) = Rect::union(before, after) else {
+            self.off = next;
+            self.prev_off = prev;
+            return 0;
+        };
+        let mut touched = 0;
+        if by == 2 {
+            for a in 0..2 {
+                if shift_vectors2(self.nb, &prev[a], &next[a], &mut self.moves) > 0 {
+                    touched += if a == 0 { self.shift_columns2(r) } else { self.shift_rows2(r) };
+                }
+            }
+            self.off = next;
+            self.prev_off = prev;
+            return touched;
+        }
+        // along i (columns p)
+        if shift_vectors(self.nb, &prev[0], &next[0], &mut self.up, &mut self.down) > 0 {
+            self.set_keep();
+            touched += self.shift_columns(r);
+        }
+        // along j (rows q)
+        if shift_vectors(self.nb, &prev[1], &next[1], &mut self.up, &mut self.down) > 0 {
+            self.set_keep();
+            touched += self.shift_rows(r);
+        }
+        self.off = next;
+        self.prev_off = prev;
+        touched
+    }
+
+    fn set_keep(&mut self) {
+        for ((k, u), d) in self.keep.iter_mut().zip(&self.up).zip(&self.down) {
+            *k = !(*u | *d);
+        }
+    }
+
+    /// `new[p] = old[p] & keep | old[p−1] & up | old[p+1] & down` over the rect,
+    /// one grid row per task. Columns of 1 to 16 words (depths up to 1024
+    /// slices in u64, 256 of 4-bit codes) run a kernel with the column length
+    /// fixed at compile time ([`shift_columns_n`]): no inner loop to mispredict, the words of a column
+    /// combined in registers. Longer columns run [`shift_columns_any`].
+    fn shift_columns(&mut self, r: Rect) -> u64 {
+        let nw = self.nw;
+        let gw = self.grid[0];
+        let (up, down, keep) = (&self.up[..], &self.down[..], &self.keep[..]);
+        let (ps, pe) = (r.p0, r.p1.min(gw - 1));
+        let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
+        let tasks = rows.par_chunks_mut(gw * nw);
+        let avx2 = self.avx2;
+        by_column_length!(nw, N => tasks.for_each(|row| {
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: `avx2` is set only when `hw_avx2()` detected AVX2
+                    // on this CPU at run time, all the kernel requires; its body
+                    // is the safe `shift_columns_n`.
+                    unsafe { shift_columns_n_avx2::<W, N>(row, ps, pe, up, down, keep) };
+                    return;
+                }
+                let _ = avx2;
+                shift_columns_n::<W, N>(row, ps, pe, up, down, keep)
+            }),
+            _ => tasks.for_each(|row| shift_columns_any(row, nw, ps, pe, up, down, keep)));
+        ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
+    }
+
+    /// `new[q] = old[q] & keep | old[q−1] & up | old[q+1] & down` over the rect;
+    /// columns of 1 to 16 words run with the column length fixed at compile time.
+    fn shift_rows(&mut self, r: Rect) -> u64 {
+        let nw = self.nw;
+        let gw = self.grid[0];
+        let gh = self.grid[1];
+        let (ps, pe) = (r.p0 * nw, (r.p1 + 1).min(gw) * nw);
+        let prev = &mut self.row_buf[..pe - ps];
+        prev.fill(W::ZERO);
+        if r.q0 > 0 {
+            let s = (r.q0 - 1) * gw * nw;
+            prev.copy_from_slice(&self.words[s + ps..s + pe]);
+        }
+        let (up, down, keep) = (&self.up[..], &self.down[..], &self.keep[..]);
+        let zeros = [W::ZERO; 0];
+        for q in r.q0..=r.q1 {
+            let (head, tail) = self.words.split_at_mut((q + 1) * gw * nw);
+            let row = &mut head[q * gw * nw + ps..q * gw * nw + pe];
+            // the row below, or nothing past the grid's last row
+            let next = if q + 1 < gh { &tail[ps..pe] } else { &zeros[..] };
+            by_column_length!(nw, N => {
+                    #[cfg(target_arch = "x86_64")]
+                    if self.avx2 {
+                        // SAFETY: as in `shift_columns`: AVX2 was detected at run time.
+                        unsafe { shift_row_n_avx2::<W, N>(row, next, prev, up, down, keep) };
+                        continue;
+                    }
+                    shift_row_n::<W, N>(row, next, prev, up, down, keep)
+                },
+                _ => shift_row_any(row, next, prev, nw, up, down, keep));
+        }
+        ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
+    }
+
+    /// Two steps along i in one pass: `new[p] = OR_d old[p − d] & moves[2 − d]`
+    /// for d = +2..=−2 over the rect, one grid row per task; columns of 1 to
+    /// [`MAX_FUSED_COLUMN`] words only (longer ones take two single steps: see `shear_to`).
+    fn shift_columns2(&mut self, r: Rect) -> u64 {
+        let nw = self.nw;
+        let gw = self.grid[0];
+        let (ps, pe) = (r.p0, r.p1.min(gw - 1));
+        let moves = &self.moves;
+        let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
+        let tasks = rows.par_chunks_mut(gw * nw);
+        let avx2 = self.avx2;
+        by_column_length!(@arms nw, N, tasks.for_each(|row| {
+                let m = moves.each_ref().map(|v| fixed::<W, N>(v));
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: `avx2` is set only when `hw_avx2()` detected AVX2
+                    // on this CPU at run time, all the kernel requires; its body
+                    // is the safe `shift_columns2_n`.
+                    unsafe { shift_columns2_n_avx2::<W, N>(row, ps, pe, m) };
+                    return;
+                }
+                let _ = avx2;
+                shift_columns2_n::<W, N>(row, ps, pe, m)
+            }),
+            unreachable!("fused steps only for columns of 1 to 4 words"), [1 2 3 4]);
+        ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
+    }
+
+    /// Two steps along j in one pass: `new[q] = OR_d old[q − d] & moves[2 − d]`.
+    fn shift_rows2(&mut self, r: Rect) -> u64 {
+        let nw = self.nw;
+        let gw = self.grid[0];
+        let gh = self.grid[1];
+        let (ps, pe) = (r.p0 * nw, (r.p1 + 1).min(gw) * nw);
+        let (prev1, prev2) = (&mut self.row_buf[..pe - ps], &mut self.row_buf2[..pe - ps]);
+        for (buf, back) in [(&mut *prev1, 1), (&mut *prev2, 2)] {
+            match r.q0.checked_sub(back) {
+                Some(q) => buf.copy_from_slice(&self.words[q * gw * nw + ps..q * gw * nw + pe]),
+                None => buf.fill(W::ZERO),
+            }
+        }
+        let m = &self.moves;
+        let zeros = &self.zero_row[..pe - ps];
+        let row_len = gw * nw;
+        for q in r.q0..=r.q1 {
+            let (head, tail) = self.words.split_at_mut((q + 1) * row_len);
+            let row = &mut head[q * row_len + ps..q * row_len + pe];
+            // the two rows below, or zeros past the grid's last row
+            let next1 = if q + 1 < gh { &tail[ps..pe] } else { zeros };
+            let next2 = if q + 2 < gh { &tail[row_len + ps..row_len + pe] } else { zeros };
+            by_column_length!(@arms nw, N, {
+                    let m = m.each_ref().map(|v| fixed::<W, N>(v));
+                    #[cfg(target_arch = "x86_64")]
+                    if self.avx2 {
+                        // SAFETY: as in `shift_columns`: AVX2 was detected at run time.
+                        unsafe { shift_row2_n_avx2::<W, N>(row, next1, next2, prev1, prev2, m) };
+                        continue;
+                    }
+                    shift_row2_n::<W, N>(row, next1, next2, prev1, prev2, m)
+                },
+                unreachable!("fused steps only for columns of 1 to 4 words"), [1 2 3 4]);
+        }
+        ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
+    }
+
+    /// One paper-style rotation step of `state` (see [`ShearState::rotated`]):
+    /// the end slices move by `s` voxels (one super cell), applied incrementally.
+    /// Returns the new state.
+    pub fn rotate_step(&mut self, state: &ShearState, along: usize, dir: i32) -> ShearState {
+        let next = state.rotated(along, dir * self.s as i32);
+        self.shear_to(&next);
+        next
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_columns`] for columns of `N` words:
+/// columns `ps..=pe` of `row` become `old[p] & keep | old[p−1] & up | old[p+1] & down`
+/// (the column before `ps` is read as it is, the one past the row's end as zero).
+#[inline(always)]
+fn shift_columns_n<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
+    let (up, down, keep): (&[W; N], &[W; N], &[W; N]) = (fixed(up), fixed(down), fixed(keep));
+    let gw = row.len() / N;
+    let mut prev = if ps > 0 { *fixed::<W, N>(&row[(ps - 1) * N..]) } else { [W::ZERO; N] };
+    let mut old = *fixed::<W, N>(&row[ps * N..]);
+    for p in ps..=pe {
+        let next = if p + 1 < gw { *fixed::<W, N>(&row[(p + 1) * N..]) } else { [W::ZERO; N] };
+        let out: &mut [W; N] = (&mut row[p * N..p * N + N]).try_into().expect("N words");
+        for w in 0..N {
+            out[w] = (old[w] & keep[w]) | (prev[w] & up[w]) | (next[w] & down[w]);
+        }
+        prev = old;
+        old = next;
+    }
+}
+
+/// The first `N` words of `s` as an array (the caller guarantees the length).
+#[inline(always)]
+fn fixed<W: Word, const N: usize>(s: &[W]) -> &[W; N] {
+    s[..N].try_into().expect("N words")
+}
+
+/// [`shift_columns_n`] for any column length `nw`, in blocks of 64 words per
+/// column so that the previous column's old words ride in a stack buffer.
+fn shift_columns_any<W: Word>(row: &mut [W], nw: usize, ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
+    const BUF: usize = 64;
+    let gw = row.len() / nw;
+    for w0 in (0..nw).step_by(BUF) {
+        let m = BUF.min(nw - w0);
+        let mut prev = [W::ZERO; BUF];
+        if ps > 0 {
+            prev[..m].copy_from_slice(&row[(ps - 1) * nw + w0..(ps - 1) * nw + w0 + m]);
+        }
+        for p in ps..=pe {
+            let base = p * nw + w0;
+            for w in 0..m {
+                let old = row[base + w];
+                let nx = if p + 1 < gw { row[base + nw + w] } else { W::ZERO };
+                row[base + w] = (old & keep[w0 + w]) | (prev[w] & up[w0 + w]) | (nx & down[w0 + w]);
+                prev[w] = old;
+            }
+        }
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_rows`] for columns of `N` words: `row`
+/// becomes `row & keep | prev & up | next & down` column by column, and `prev`
+/// takes the row's old words (`next` empty: the row below is all zero).
+#[inline(always)]
+fn shift_row_n<W: Word, const N: usize>(row: &mut [W], next: &[W], prev: &mut [W], up: &[W], down: &[W], keep: &[W]) {
+    let (up, down, keep): (&[W; N], &[W; N], &[W; N]) = (fixed(up), fixed(down), fixed(keep));
+    let (row, _) = row.as_chunks_mut::<N>();
+    let (prev, _) = prev.as_chunks_mut::<N>();
+    let (next, _) = next.as_chunks::<N>();
+    let column = |cw: &mut [W; N], pw: &mut [W; N], nx: &[W; N]| {
+        for w in 0..N {
+            let old = cw[w];
+            cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx[w] & down[w]);
+            pw[w] = old;
+        }
+    };
+    if next.is_empty() {
+        // past the grid's last row: the row below reads as zero
+        row.iter_mut().zip(prev.iter_mut()).for_each(|(cw, pw)| column(cw, pw, &[W::ZERO; N]));
+    } else {
+        row.iter_mut().zip(prev.iter_mut()).zip(next).for_each(|((cw, pw), nx)| column(cw, pw, nx));
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_columns2`] for columns of `N` words:
+/// columns `ps..=pe` become `OR_j old[p − 2 + j] & m[j]` (columns before `ps`
+/// are read as they are, those past the row's end as zero). The five old
+/// columns around `p` ride in a window, so a column is written after it is read.
+#[inline(always)]
+fn shift_columns2_n<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, m: [&[W; N]; 5]) {
+    let gw = row.len() / N;
+    let col = |row: &[W], p: usize| if p < gw { *fixed::<W, N>(&row[p * N..]) } else { [W::ZERO; N] };
+    // ps − 2 and ps − 1 wrap to huge indices (read as zero) at the grid's edge
+    let mut win = [col(row, ps.wrapping_sub(2)), col(row, ps.wrapping_sub(1)), col(row, ps), col(row, ps + 1), col(row, ps + 2)];
+    for p in ps..=pe {
+        let out: &mut [W; N] = (&mut row[p * N..p * N + N]).try_into().expect("N words");
+        for w in 0..N {
+            out[w] = (win[0][w] & m[0][w]) | (win[1][w] & m[1][w]) | (win[2][w] & m[2][w]) | (win[3][w] & m[3][w]) | (win[4][w] & m[4][w]);
+        }
+        win = [win[1], win[2], win[3], win[4], col(row, p + 3)];
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_rows2`] for columns of `N` words: `row`
+/// becomes `prev2 & m[0] | prev1 & m[1] | row & m[2] | next1 & m[3] | next2 & m[4]`
+/// column by column; `prev2` takes `prev1` and `prev1` the row's old words.
+#[inline(always)]
+fn shift_row2_n<W: Word, const N: usize>(row: &mut [W], next1: &[W], next2: &[W], prev1: &mut [W], prev2: &mut [W], m: [&[W; N]; 5]) {
+    let (row, _) = row.as_chunks_mut::<N>();
+    let (prev1, _) = prev1.as_chunks_mut::<N>();
+    let (prev2, _) = prev2.as_chunks_mut::<N>();
+    let (next1, _) = next1.as_chunks::<N>();
+    let (next2, _) = next2.as_chunks::<N>();
+    for ((((cw, p1), p2), n1), n2) in row.iter_mut().zip(prev1.iter_mut()).zip(prev2.iter_mut()).zip(next1).zip(next2) {
+        for w in 0..N {
+            let old = cw[w];
+            cw[w] = (p2[w] & m[0][w]) | (p1[w] & m[1][w]) | (old & m[2][w]) | (n1[w] & m[3][w]) | (n2[w] & m[4][w]);
+            p2[w] = p1[w];
+            p1[w] = old;
+        }
+    }
+}
+
+/// [`shift_columns2_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn shift_columns2_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, m: [&[W; N]; 5]) {
+    shift_columns2_n::<W, N>(row, ps, pe, m)
+}
+
+/// [`shift_row2_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn shift_row2_n_avx2<W: Word, const N: usize>(
+    row: &mut [W],
+    next1: &[W],
+    next2: &[W],
+    prev1: &mut [W],
+    prev2: &mut [W],
+    m: [&[W; N]; 5],
+) {
+    shift_row2_n::<W, N>(row, next1, next2, prev1, prev2, m)
+}
+
+/// [`shift_columns_n`] compiled for AVX2: a column of up to four u64 words is
+/// one 256-bit register. Callers must have checked [`hw_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn shift_columns_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
+    shift_columns_n::<W, N>(row, ps, pe, up, down, keep)
+}
+
+/// [`shift_row_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn shift_row_n_avx2<W: Word, const N: usize>(row: &mut [W], next: &[W], prev: &mut [W], up: &[W], down: &[W], keep: &[W]) {
+    shift_row_n::<W, N>(row, next, prev, up, down, keep)
+}
+
+/// True when the CPU has AVX2, so the shear's shift kernels run their copies
+/// compiled for it. Detected once (the std macro caches it).
+pub fn hw_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// [`shift_row_n`] for any column length `nw`.
+fn shift_row_any<W: Word>(row: &mut [W], next: &[W], prev: &mut [W], nw: usize, up: &[W], down: &[W], keep: &[W]) {
+    for (c, (cw, pw)) in row.chunks_exact_mut(nw).zip(prev.chunks_exact_mut(nw)).enumerate() {
+        for w in 0..nw {
+            let old = cw[w];
+            let nx = if next.is_empty() { W::ZERO } else { next[c * nw + w] };
+            cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx & down[w]);
+            pw[w] = old;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::volume::Volume;
+
+    fn blob(n: [usize; 3], seed: u64) -> Volume {
+        Volume::from_fn(n, [1.0; 3], |x, y, z| {
+            let mut s = seed ^ (x as u64 * 0x9E37_79B9 + y as u64 * 0x85EB_CA6B + z as u64 * 0xC2B2_AE35);
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s = s.wrapping_mul(0x2545F4914F6CDD1D);
+            if (s >> 40) % 7 == 0 { 100.0 } else { 0.0 }
+        })
+        .unwrap()
+    }
+
+    /// The mask recomputed from scratch with a bit vector per code plane: code
+    /// (p, q, k) is the unsheared code at (p − off_i, q − off_j).
+    fn naive<W: Word>(m: &BinaryMask<W>) -> Vec<W> {
+        use bitvec::prelude::*;
+        let slots = (W::BITS / m.nb) as usize;
+        let mut planes = vec![bitvec![0; m.grid[0] * m.grid[1] * m.nk]; m.nb as usize];
+        let fl = m.floors();
+        for k in 0..m.nk {
+            for cj in 0..m.cells[1] {
+                for ci in 0..m.cells[0] {
+                    let c = m.code(ci, cj, k);
+                    let p = (ci as i32 + m.pad as i32 - fl[0][k]) as usize;
+                    let q = (cj as i32 + m.pad as i32 - fl[1][k]) as usize;
+                    for (b, plane) in planes.iter_mut().enumerate() {
+                        plane.set((q * m.grid[0] + p) * m.nk + k, (c >> b) & 1 == 1);
+                    }
+                }
+            }
+        }
+        let mut out = vec![W::ZERO; m.words.len()];
+        for col in 0..m.grid[0] * m.grid[1] {
+            for k in 0..m.nk {
+                let c: u64 = (0..m.nb as usize).map(|b| (planes[b][col * m.nk + k] as u64) << b).sum();
+                out[col * m.nw + k / slots] |= W::from_u64(c) << slot_shift::<W>(m.nb, (k % slots) as u32);
+            }
+        }
+        out
+    }
+
+    fn check_incremental<W: Word>(n: [usize; 3]) {
+        let v = blob(n, 99);
+        let st = SliceStack::new(&v, 2);
+        let mut m = BinaryMask::<W>::build(&st, |_, hi| hi > 50.0);
+        assert_eq!(m.words, naive(&m));
+        let mut s = ShearState::identity(n[2]);
+        let mut seed = 3u64;
+        let lim = (n[2] as i64 - 1) / 2;
+        let mut net = [0i64; 2];
+        for step in 0..400 {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let along = (seed >> 35) as usize & 1;
+            let dir = if (seed >> 45) & 1 == 0 { 1 } else { -1 };
+            if (net[along] + dir as i64).abs() > lim {
+                continue;
+            }
+            net[along] += dir as i64;
+            s = m.rotate_step(&s, along, dir);
+            if step % 37 == 0 {
+                assert_eq!(m.words, naive(&m), "after step {step}");
+            }
+        }
+        let mut direct = BinaryMask::<W>::build(&st, |_, hi| hi > 50.0);
+        direct.shear_direct(&s);
+        assert_eq!(m.words, direct.words);
+        assert_eq!(m.words, naive(&m));
+    }
+
+    #[test]
+    fn incremental_equals_direct_u32_and_u64() {
+        check_incremental::<u32>([13, 11, 45]);
+        check_incremental::<u64>([13, 11, 45]);
+        check_incremental::<u32>([9, 7, 70]);
+        check_incremental::<u64>([9, 7, 130]);
+        check_incremental::<u32>([5, 6, 2]);
+    }
+
+    #[test]
+    fn build_is_exactly_the_corner_rule() {
+        let v = blob([9, 8, 7], 5);
+        let st = SliceStack::new(&v, 2);
+        let m = BinaryMask::<u32>::build(&st, |_, hi| hi > 50.0);
+        for k in 0..7 {
+            for cj in 0..7 {
+                for ci in 0..8 {
+                    let any = [(0, 0), (1, 0), (0, 1), (1, 1)].iter().any(|&(a, b)| st.at(ci + a, cj + b, k) > 50.0);
+                    assert_eq!(m.cell(ci, cj, k), any);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,11 @@
+//! Stage 4 — the view: camera, factorization, and the frame plan every traversal reads.
+//!
+//! Owns the camera and its standard views ([`camera`]), Lacroute's
+//! factorization of the viewing transform into a shear of the slices and a
+//! warp of the intermediate image ([`factor`], re-exported here).
+
+pub mod camera;
+mod factor;
+
+pub use camera::*;
+pub use factor::*;

@@ -18,17 +18,17 @@ use std::time::Instant;
 use crate::classify::presets::Tissue;
 use crate::classify::shading::Shading;
 use crate::classify::{Classifier, TransferFunction};
-use crate::composite::Intermediate;
 use crate::composite::Mode;
-use crate::composite::raycast::{RayContext, SliceParams, render_binary, render_brute, volume_rect};
+use crate::composite::raycast::{RayContext, render_binary, render_brute, volume_rect};
+use crate::composite::{Intermediate, Rect};
 use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
 use crate::data::slices::SliceStack;
 use crate::data::volume::Volume;
 use crate::encode::depth::{Matcher, Search, binary_matcher};
-use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, Rect, ShearWork, geometry};
+use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, ShearWork};
 use crate::encode::rle::{ClassKey, RleCache};
-use crate::encode::shear::ShearState;
 use crate::error::{Error, Result};
+use crate::view::plan::{FramePlan, Grid, Limiter, RayLimits};
 use crate::view::{Camera, Factorization};
 use crate::warp::{Canvas, Texel, warp};
 
@@ -246,6 +246,7 @@ struct FrameKey {
     settings: Settings,
     generation: u64,
     tissue: Option<usize>,
+    limiter: Option<u64>,
 }
 
 static NEXT_STAMP: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
@@ -269,10 +270,11 @@ pub struct Renderer {
     shade: ShadeTable,
     codes: [Option<(u64, CellCodes)>; 3],
     masks: [Option<AxisMask>; 3],
-    params: SliceParams,
-    state: ShearState,
+    /// The plan of the last frame (its arrays reused by the next).
+    plan: Option<FramePlan>,
+    /// The producer of per-pixel ray limits, if any, and a counter bumped when it changes.
+    limiter: Option<(std::sync::Arc<dyn Limiter>, u64)>,
     inter: Intermediate,
-    last_fact: Option<Factorization>,
     /// The inputs and stamp of the last frame written.
     last_frame: Option<(FrameKey, u64)>,
     pool: rayon::ThreadPool,
@@ -288,7 +290,7 @@ impl Renderer {
         let classifier = Classifier::new(tf, range.0, range.1);
         let iso = tf.lower_threshold().unwrap_or(f32::INFINITY);
         let pool = build_pool(settings.threads)?;
-        check_cell(settings.cell)?;
+        check_settings(&settings)?;
         Ok(Renderer {
             volume,
             range,
@@ -302,10 +304,9 @@ impl Renderer {
             shade: ShadeTable::default(),
             codes: [None, None, None],
             masks: [None, None, None],
-            params: SliceParams::default(),
-            state: ShearState::identity(0),
+            plan: None,
+            limiter: None,
             inter: Intermediate::default(),
-            last_fact: None,
             last_frame: None,
             pool,
             rle: RleCache::new(),
@@ -379,7 +380,7 @@ impl Renderer {
     /// follow on the next frame if the word size or cell size changed, normal
     /// codes if the packing did).
     pub fn set_settings(&mut self, s: Settings) -> Result<()> {
-        check_cell(s.cell)?;
+        check_settings(&s)?;
         if s.threads != self.settings.threads {
             self.pool = build_pool(s.threads)?;
         }
@@ -432,13 +433,23 @@ impl Renderer {
             (None, _) => &self.classifier,
         }
     }
+    /// Sets (or, with `None`, removes) the producer of per-pixel ray limits
+    /// that narrows every following frame's plan: a clip region or geometry.
+    pub fn set_limiter(&mut self, limiter: Option<std::sync::Arc<dyn Limiter>>) {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        self.limiter = limiter.map(|l| (l, NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)));
+    }
     /// The intermediate image of the last frame.
     pub fn intermediate(&self) -> &Intermediate {
         &self.inter
     }
     /// The factorization of the last frame.
     pub fn last_factorization(&self) -> Option<&Factorization> {
-        self.last_fact.as_ref()
+        self.plan.as_ref().map(|p| &p.view)
+    }
+    /// The frame plan of the last frame.
+    pub fn last_plan(&self) -> Option<&FramePlan> {
+        self.plan.as_ref()
     }
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
@@ -499,7 +510,7 @@ impl Renderer {
         let p = crate::view::permutation(axis);
         let n = [dims[p[0]], dims[p[1]], dims[p[2]]];
         let cells = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
-        let (vpad, grid) = geometry(cells, n[2]);
+        let Grid { pad: vpad, size: grid, .. } = Grid::parallel(cells, n[2]);
         let too_big = |what: String| {
             Err(Error::value(
                 "volume shape",
@@ -620,99 +631,131 @@ impl Renderer {
             settings: self.settings,
             generation: self.generation,
             tissue: self.tissues.as_ref().map(|t| t.current),
+            limiter: self.limiter.as_ref().map(|l| l.1),
         };
         if let Some((k, stamp)) = self.last_frame {
             if k == key && out.stamp == stamp && out.width == camera.size[0] && out.height == camera.size[1] {
-                return Ok(FrameStats { skipped: true, axis: self.last_fact.as_ref().map_or(0, |f| f.axis), ..Default::default() });
+                return Ok(FrameStats { skipped: true, axis: self.plan.as_ref().map_or(0, |p| p.view.axis), ..Default::default() });
             }
         }
         let f = Factorization::new(camera, self.volume.dims(), self.volume.spacing())?;
         let mut stats = FrameStats { axis: f.axis, ..Default::default() };
         stats.build_ms = self.ensure_axis(f.axis)?;
+        // the frame plan (the parallel projection is its only producer so far)
+        let plan = match &mut self.plan {
+            Some(p) => {
+                let buf = p.take_limits();
+                p.set_parallel(&f, self.volume.spacing());
+                if let Some((l, _)) = &self.limiter {
+                    p.apply_limiter(l.as_ref(), buf.unwrap_or_default());
+                }
+                p
+            }
+            None => {
+                let p = self.plan.insert(FramePlan::parallel(&f, self.volume.spacing()));
+                if let Some((l, _)) = &self.limiter {
+                    p.apply_limiter(l.as_ref(), RayLimits::default());
+                }
+                p
+            }
+        };
         let mode = self.settings.mode;
         if mode == Mode::Blend {
-            let min_sp = self.volume.spacing().iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
-            let ratio = (f.sample_spacing / min_sp) as f32;
             match &mut self.tissues {
-                Some(ts) => ts.blend_cls[ts.current].set_sample_ratio(ratio),
-                None => self.classifier.set_sample_ratio(ratio),
+                Some(ts) => ts.blend_cls[ts.current].set_sample_ratio(plan.opacity_ratio),
+                None => self.classifier.set_sample_ratio(plan.opacity_ratio),
             }
         }
-
-        // one job on the pool per frame: shear, render and warp all run inside it
-        let pool = &self.pool;
-        let (state, params, inter) = (&mut self.state, &mut self.params, &mut self.inter);
-        let (masks, stacks, tissues, settings) = (&mut self.masks, &self.stacks, &self.tissues, self.settings);
+        let stack = self.stacks[f.axis].as_ref().expect("ensure_axis builds the stack");
+        let (cls, iso, matcher): (&Classifier, f32, &Matcher) = match (&self.tissues, mode) {
+            (Some(ts), Mode::Iso) => (&ts.iso_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
+            (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
+            (None, _) => (&self.classifier, self.iso, binary_matcher()),
+        };
+        let settings = self.settings;
+        let (inter, masks, rle) = (&mut self.inter, &mut self.masks, &mut self.rle);
         let (normals, shade) = (&self.normals, &mut self.shade);
-        let (classifier, iso_single) = (&self.classifier, self.iso);
-        let (rle, min_spacing) = (&mut self.rle, self.volume.spacing().iter().fold(f32::MAX, |a, &b| a.min(b)) as f64);
-        pool.install(|| {
-            // shear
+        let plan = &*plan;
+        // one job on the pool per frame: shear, render and warp all run inside it,
+        // by the one pipeline of this method
+        let result: Result<()> = self.pool.install(|| {
             let t = Instant::now();
-            state.set_view(&f);
-            params.fill(state);
-            let stack = stacks[f.axis].as_ref().expect("ensured");
-            let (pad, grid) = geometry(stack.cells(), stack.n[2]);
+            inter.prepare(plan.grid.size);
             let rect: Option<Rect> = match settings.method {
                 Method::Binary => {
-                    let m = masks[f.axis].as_mut().expect("ensured");
+                    let m = masks[f.axis].as_mut().ok_or_else(|| missing("the sheared mask", f.axis))?;
                     let w: ShearWork = match &mut m.mask {
-                        AnyMask::W32(m) => m.shear_to(state),
-                        AnyMask::W64(m) => m.shear_to(state),
+                        AnyMask::W32(m) => m.shear_to(&plan.shear),
+                        AnyMask::W64(m) => m.shear_to(&plan.shear),
                     };
-                    stats.shear_steps = w.steps;
-                    stats.shear_direct = w.direct;
-                    stats.shear_words = w.words;
+                    (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);
+                    let rect = match &m.mask {
+                        _ if !settings.occupied_rect => volume_rect(plan, stack.cells()),
+                        AnyMask::W32(m) => m.occupied_rays(plan.grid.size),
+                        AnyMask::W64(m) => m.occupied_rays(plan.grid.size),
+                    };
+                    stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
+                    let t = Instant::now();
+                    let ctx = table_shading(
+                        RayContext::new(stack, cls, plan, mode, iso, settings.shading, settings.ert),
+                        settings,
+                        normals[f.axis].as_ref(),
+                        shade,
+                        &f,
+                    );
                     match &m.mask {
-                        _ if !settings.occupied_rect => volume_rect(params, stack.cells(), pad, grid),
-                        AnyMask::W32(m) => m.occupied_rays(grid),
-                        AnyMask::W64(m) => m.occupied_rays(grid),
+                        AnyMask::W32(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
+                        AnyMask::W64(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                     }
+                    stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
+                    rect
                 }
-                Method::Brute => volume_rect(params, stack.cells(), pad, grid),
+                Method::Brute => {
+                    let rect = volume_rect(plan, stack.cells());
+                    stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
+                    let t = Instant::now();
+                    let ctx = table_shading(
+                        RayContext::new(stack, cls, plan, mode, iso, settings.shading, settings.ert),
+                        settings,
+                        normals[f.axis].as_ref(),
+                        shade,
+                        &f,
+                    );
+                    render_brute(&ctx, rect, inter);
+                    stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
+                    rect
+                }
                 Method::Rle | Method::BruteRle => {
-                    // the per-view tables; opacity corrected as on the binary path
-                    // (iso opacities are 0 or 1, so iso needs no correction)
-                    let ratio = if mode == Mode::Blend { (f.sample_spacing / min_spacing) as f32 } else { 1.0 };
-                    rle.prepare_view(&f, ratio, settings.shading);
+                    // the per-view tables; iso opacities are 0 or 1, so iso needs no correction
+                    let ratio = if mode == Mode::Blend { plan.opacity_ratio } else { 1.0 };
+                    rle.prepare_view(plan, ratio, settings.shading);
+                    let rect = match settings.method {
+                        Method::Rle => {
+                            rle.axis(f.axis).ok_or_else(|| missing("the run-length encoding", f.axis))?;
+                            rle.rect(plan)
+                        }
+                        _ => volume_rect(plan, stack.cells()),
+                    };
+                    stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
+                    let t = Instant::now();
                     match settings.method {
-                        Method::Rle => rle.rect(&f, params, pad, grid),
-                        _ => volume_rect(params, stack.cells(), pad, grid),
+                        Method::Rle => rle.render(plan, settings.ert, rect, inter),
+                        _ => rle.render_brute(stack, plan, settings.ert, rect, inter),
                     }
+                    stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
+                    rect
                 }
             };
-            stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
-
-            // render the intermediate image
-            let t = Instant::now();
-            inter.prepare(grid);
-            let (cls, iso, matcher): (&Classifier, f32, &Matcher) = match (tissues, mode) {
-                (Some(ts), Mode::Iso) => (&ts.iso_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
-                (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
-                (None, _) => (classifier, iso_single, binary_matcher()),
-            };
-            let mut ctx = RayContext::new(stack, cls, params, &f, pad, mode, iso, settings.shading, settings.ert);
-            if let (Normals::Codes, Some(ns)) = (settings.normals, normals[f.axis].as_ref()) {
-                shade.update(headlight_object(&f), settings.shading);
-                ctx = ctx.with_normals(ns, shade);
-            }
-            match (settings.method, masks[f.axis].as_ref().map(|m| &m.mask)) {
-                (Method::Rle, _) => rle.render(&f, params, pad, settings.ert, rect, inter),
-                (Method::BruteRle, _) => rle.render_brute(stack, &f, params, pad, settings.ert, rect, inter),
-                (Method::Binary, Some(AnyMask::W32(m))) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
-                (Method::Binary, Some(AnyMask::W64(m))) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
-                _ => render_brute(&ctx, rect, inter),
-            }
             stats.rays = rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);
-            stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
 
             // warp
             let t = Instant::now();
             out.prepare(camera.size[0], camera.size[1]);
-            warp(inter, &f, [pad as f64, pad as f64], out);
+            warp(inter, plan, out);
             stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
+            Ok(())
         });
-        self.last_fact = Some(f);
+        result?;
         let stamp = NEXT_STAMP.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         out.stamp = stamp;
         self.last_frame = Some((key, stamp));
@@ -749,8 +792,14 @@ mod tests {
     }
 }
 
-fn check_cell(cell: usize) -> Result<()> {
-    if (1..=MAX_CELL).contains(&cell) { Ok(()) } else { Err(Error::value("cell size", format!("{cell} (must be 1..={MAX_CELL})"))) }
+fn check_settings(s: &Settings) -> Result<()> {
+    if !(1..=MAX_CELL).contains(&s.cell) {
+        return Err(Error::value("cell size", format!("{} (must be 1..={MAX_CELL})", s.cell)));
+    }
+    if s.ert.is_nan() {
+        return Err(Error::value("early ray termination threshold", "NaN (give an opacity; 1 disables termination)"));
+    }
+    Ok(())
 }
 
 fn build_pool(threads: usize) -> Result<rayon::ThreadPool> {
@@ -758,4 +807,27 @@ fn build_pool(threads: usize) -> Result<rayon::ThreadPool> {
         .num_threads(threads)
         .build()
         .map_err(|e| Error::Other(format!("cannot start {threads} worker threads: {e}")))
+}
+
+/// A pipeline's artefact that `ensure_axis` should have built is missing: an
+/// error, never a silent fall-back to another path.
+fn missing(what: &str, axis: usize) -> Error {
+    Error::Other(format!("internal: {what} of axis {} was not built for this frame", ["x", "y", "z"][axis]))
+}
+
+/// `ctx` with table shading when the settings ask for it and the normal codes exist.
+fn table_shading<'a>(
+    ctx: RayContext<'a>,
+    settings: Settings,
+    normals: Option<&'a NormalStack>,
+    shade: &'a mut ShadeTable,
+    f: &Factorization,
+) -> RayContext<'a> {
+    match (settings.normals, normals) {
+        (Normals::Codes, Some(ns)) => {
+            shade.update(headlight_object(f), settings.shading);
+            ctx.with_normals(ns, shade)
+        }
+        _ => ctx,
+    }
 }

@@ -16,7 +16,7 @@ use rayon::prelude::*;
 
 use crate::composite::Intermediate;
 use crate::error::{Error, Result};
-use crate::view::Factorization;
+use crate::view::plan::FramePlan;
 
 /// A rendered image of pixels `T` ([`Texel`]), row 0 at the top: [`Image`]
 /// (f32) or [`Image8`] (8-bit). Two images are equal when their sizes and
@@ -189,13 +189,17 @@ impl Texel for [u8; 4] {
     }
 }
 
-/// Warps `inter` into `out` (already sized): output pixel `(u, v)` takes the
-/// bilinear sample of `inter` at the intermediate position of the sheared point
-/// `inverse_warp(u, v)` plus `origin` (the intermediate pixel of sheared `(0, 0)`),
-/// stored as `T` (into an [`Image8`]: each channel rounded by [`to8`], the same
-/// bytes as [`Image::to_rgba8`] of the f32 warp).
-pub fn warp<T: Texel>(inter: &Intermediate, f: &Factorization, origin: [f64; 2], out: &mut Canvas<T>) {
-    let (inv, it) = f.inverse_warp();
+/// Warps `inter` into `out` (already sized) by `plan`'s warp: output pixel
+/// `(u, v)` takes the bilinear sample of `inter` at the intermediate pixel of
+/// the sheared point the plan's inverse warp gives, stored as `T` (into an
+/// [`Image8`]: each channel rounded by [`to8`], the same bytes as
+/// [`Image::to_rgba8`] of the f32 warp). The affine warp of a parallel view
+/// steps along each row in fixed point.
+pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>) {
+    assert!(plan.warp.is_affine() && plan.grid.pitch == 1.0, "the warp kernel maps affine warps onto a one-voxel grid");
+    let m = &plan.warp.inverse;
+    let (inv, it) = ([[m.x_axis.x, m.y_axis.x], [m.x_axis.y, m.y_axis.y]], [m.z_axis.x, m.z_axis.y]);
+    let origin = [plan.grid.pad as f64; 2];
     let w = out.width;
     let valid = inter.valid;
     out.data.par_chunks_mut(w).zip(out.spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {

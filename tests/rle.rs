@@ -287,7 +287,8 @@ fn rle_agrees_with_the_binary_path() {
 
 /// Degenerate inputs render without panicking and agree with the reference:
 /// flat volumes (one voxel thick along any axis), nothing visible, everything
-/// opaque, and early-termination thresholds of 0 and NaN (nothing composites).
+/// opaque, and an early-termination threshold of 0 (nothing composites); a NaN
+/// threshold is refused before any frame (`tests/plan.rs` checks every path).
 #[test]
 fn degenerate_inputs_are_handled() {
     let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, 0.4, 0.9, 0.2), [24, 24]);
@@ -295,15 +296,17 @@ fn degenerate_inputs_are_handled() {
         let vol = random_volume(dims, 5, [1.0; 3]);
         let tfs = [TransferFunction::threshold(1e6, [1.0; 3]), TransferFunction::threshold(-1e6, [1.0; 3]), random_tf(7)];
         for tf in &tfs {
-            for (mode, ert) in [(Mode::Iso, 0.99), (Mode::Blend, 0.99), (Mode::Blend, 0.0), (Mode::Iso, f32::NAN)] {
+            for (mode, ert) in [(Mode::Iso, 0.99), (Mode::Blend, 0.99), (Mode::Blend, 0.0), (Mode::Iso, 0.0)] {
                 let base = Settings { mode, ert, threads: 2, ..Settings::default() };
                 let (ri, rpx) = render(&vol, tf, Settings { method: Method::Rle, ..base }, &cam);
                 let (bi, bpx) = render(&vol, tf, Settings { method: Method::BruteRle, ..base }, &cam);
                 assert!(max_diff(&rpx, &bpx) <= TOL && max_diff(&ri.data, &bi.data) <= TOL, "{dims:?} {mode:?} ert {ert}");
-                if ert.is_nan() || ert <= 0.0 {
+                if ert <= 0.0 {
                     assert!(ri.data.iter().all(|c| *c == [0.0; 4]), "ert {ert} composites nothing");
                 }
             }
+            let nan = Settings { method: Method::Rle, ert: f32::NAN, ..Settings::default() };
+            assert!(Renderer::new(vol.clone(), tf, nan).is_err(), "a NaN threshold is refused");
         }
     }
 }

@@ -55,7 +55,6 @@ use crate::classify::Classifier;
 use crate::classify::shading::Shading;
 use crate::composite::Mode;
 use crate::data::volume::Volume;
-use crate::encode::mask::geometry;
 use crate::error::{Error, Result};
 use crate::render::Renderer;
 use crate::view::{Camera, Factorization};
@@ -547,25 +546,23 @@ impl Tracer<'_> {
 /// fractional slice ([`Factorization::sheared_to_voxel`]).
 pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>> {
     let vol = renderer.volume();
-    let f = renderer.last_factorization().ok_or_else(|| Error::value("fast path depth", "the renderer has not rendered a frame yet"))?;
+    let plan = renderer.last_plan().ok_or_else(|| Error::value("fast path depth", "the renderer has not rendered a frame yet"))?;
+    let f = &plan.view;
     if *f != Factorization::new(camera, vol.dims(), vol.spacing())? {
         return Err(Error::value("fast path depth", "the last frame was rendered with a different camera"));
     }
     let rays = Rays::new(camera, vol.dims(), vol.spacing())?;
     let inter = renderer.intermediate();
-    let (pad, grid) = geometry([f.n[0].saturating_sub(1), f.n[1].saturating_sub(1)], f.n[2]);
-    if inter.size != grid {
+    if inter.size != plan.grid.size {
         return Err(Error::value("fast path depth", "the intermediate image does not match the last frame's geometry"));
     }
-    let (inv, it) = f.inverse_warp();
     let [w, h] = camera.size;
+    let (grid, pad) = (plan.grid.size, plan.grid.pad as f64);
     let mut out = vec![f64::NAN; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
         for (u, o) in row.iter_mut().enumerate() {
-            let (uf, vf) = (u as f64, v as f64);
-            let a = inv[0][0] * uf + inv[0][1] * vf + it[0];
-            let b = inv[1][0] * uf + inv[1][1] * vf + it[1];
-            let (p, q) = (a + pad as f64, b + pad as f64);
+            let Some([a, b]) = plan.warp.to_sheared(u as f64, v as f64) else { continue };
+            let (p, q) = (a / plan.grid.pitch + pad, b / plan.grid.pitch + pad);
             let (x0, y0) = (p.floor(), q.floor());
             let (fx, fy) = (p - x0, q - y0);
             let (mut wsum, mut ksum) = (0.0, 0.0);

@@ -1,16 +1,22 @@
-//! Stage 6 — the intermediate image and the compositing arithmetic.
+//! Stage 5 — compositing into the intermediate image: the traversals and the
+//! policies they share.
 //!
 //! Owns [`Intermediate`] (the base-plane image every shear-warp path renders into:
-//! premultiplied RGBA plus the iso hit depth per pixel, and the rectangle that was
-//! written this frame), the shading model ([`Shading`]: Blinn-Phong with a
-//! headlight, two-sided) and front-to-back compositing ([`composite`]). Binary,
-//! RLE and brute-force paths all call these same functions, so their images can be
-//! compared sample for sample.
+//! premultiplied RGBA plus the iso hit depth per pixel, and the rectangle
+//! ([`Rect`]) that was written this frame), the rendering [`Mode`], and the
+//! policies written once: front-to-back "over" ([`composite`],
+//! [`composite_premultiplied`]) and early ray termination ([`terminated`]); the
+//! shading model is [`crate::classify::shading`]. The two traversals read the
+//! frame plan ([`crate::view::plan`]) and nothing else about the view:
+//! - [`raycast`]: the ray traversal (the binary rotator's rows and their brute
+//!   force), post-classified and shaded per sample;
+//! - [`slices`]: the slice traversal of the pre-classified RLE path and its
+//!   brute force.
 
 pub mod raycast;
+pub mod slices;
 
 pub use crate::classify::shading::Shading;
-use crate::encode::mask::Rect;
 
 /// Rendering mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -33,6 +39,17 @@ impl Mode {
     }
 }
 
+/// The early-ray-termination policy of every path: a pixel whose accumulated
+/// opacity has reached `ert` composites nothing more. It is asked *before* each
+/// sample, so the threshold means the same on the ray and slice traversals:
+/// `ert ≤ 0` composites nothing, `ert = 1` stops only at full opacity (which
+/// changes no pixel), and a NaN threshold composites nothing (the renderer
+/// rejects it before a frame; this keeps every kernel in agreement anyway).
+#[inline(always)]
+pub fn terminated(opacity: f32, ert: f32) -> bool {
+    !(opacity < ert)
+}
+
 /// Front-to-back "over": adds a sample of colour `rgb` and opacity `alpha` behind
 /// the premultiplied accumulation `acc`.
 #[inline(always)]
@@ -53,6 +70,25 @@ pub fn composite_premultiplied(acc: &mut [f32; 4], s: [f32; 4]) {
     acc[1] += t * s[1];
     acc[2] += t * s[2];
     acc[3] += t * s[3];
+}
+
+/// Inclusive rectangle `[p0, p1] × [q0, q1]` of grid columns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Rect {
+    pub p0: usize,
+    pub p1: usize,
+    pub q0: usize,
+    pub q1: usize,
+}
+
+impl Rect {
+    pub(crate) fn union(a: Option<Rect>, b: Option<Rect>) -> Option<Rect> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(Rect { p0: a.p0.min(b.p0), p1: a.p1.max(b.p1), q0: a.q0.min(b.q0), q1: a.q1.max(b.q1) }),
+            (a, None) => a,
+            (None, b) => b,
+        }
+    }
 }
 
 /// The intermediate (base-plane) image.

@@ -25,52 +25,30 @@ use rayon::prelude::*;
 
 use crate::classify::Classifier;
 use crate::classify::shading::{Shading, headlight_ndl};
-use crate::composite::{Intermediate, Mode, composite};
+use crate::composite::Rect;
+use crate::composite::{Intermediate, Mode, composite, terminated};
 use crate::data::normals::{NormalStack, PackedCells, ShadeTable, apply_shade};
 use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
-use crate::encode::mask::{BinaryMask, Rect};
-use crate::encode::shear::ShearState;
-use crate::view::Factorization;
-
-/// Per-slice sample parameters of one view: integer offset and in-cell weight of
-/// every slice along i and j (`trans = floor + weight`). Reused across frames.
-#[derive(Clone, Debug, Default)]
-pub struct SliceParams {
-    /// Slice by slice: what a ray reads at one slice, in one 16-byte load.
-    pub slices: Vec<SliceParam>,
-}
-
-/// One slice's integer offset and in-cell weight along i and j.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct SliceParam {
-    pub floor: [i32; 2],
-    pub weight: [f32; 2],
-}
-
-impl SliceParams {
-    /// Fills from a shear state (the mask and the rays use the very same numbers).
-    pub fn fill(&mut self, st: &ShearState) {
-        self.slices.clear();
-        let weight = |a: usize, k: usize| (st.trans[a][k] - st.floor[a][k] as f64) as f32;
-        self.slices.extend(
-            (0..st.floor[0].len()).map(|k| SliceParam { floor: [st.floor[0][k], st.floor[1][k]], weight: [weight(0, k), weight(1, k)] }),
-        );
-    }
-}
+use crate::encode::mask::BinaryMask;
+use crate::view::plan::{FramePlan, MapKind, SliceMap};
 
 /// Everything a ray needs, borrowed for one frame.
 pub struct RayContext<'a> {
     pub stack: &'a SliceStack,
     pub classifier: &'a Classifier,
-    pub params: &'a SliceParams,
+    /// The frame's plan.
+    pub plan: &'a FramePlan,
+    /// The frame's per-slice maps (translations: [`MapKind::Translate`]).
+    pub maps: &'a [SliceMap],
     pub shading: Shading,
     pub mode: Mode,
     /// Iso value (iso mode).
     pub iso: f32,
     /// Unshaded colour of the iso surface.
     pub iso_rgb: [f32; 3],
-    /// Early ray termination threshold on accumulated opacity (blend mode).
+    /// Early ray termination threshold on accumulated opacity (blend mode; see
+    /// [`crate::composite::terminated`]).
     pub ert: f32,
     pub ascending: bool,
     /// Padding of the intermediate grid (mask column p ↔ sheared a = p − pad).
@@ -145,32 +123,33 @@ impl Cells for PackedCells<'_> {
 }
 
 impl<'a> RayContext<'a> {
-    /// Sets up the rays of one frame.
-    #[allow(clippy::too_many_arguments)]
+    /// Sets up the rays of one frame of `plan` (whose slices must be `stack`'s).
     pub fn new(
         stack: &'a SliceStack,
         classifier: &'a Classifier,
-        params: &'a SliceParams,
-        f: &Factorization,
-        pad: usize,
+        plan: &'a FramePlan,
         mode: Mode,
         iso: f32,
         shading: Shading,
         ert: f32,
     ) -> Self {
+        assert_eq!(plan.kind, MapKind::Translate, "the ray traversal samples translated slices");
+        assert_eq!(plan.maps.len(), stack.n[2], "a plan for another stack");
         let c = stack.cells();
         let iso_c = classifier.classify(iso);
+        let f = &plan.view;
         RayContext {
             stack,
             classifier,
-            params,
+            plan,
+            maps: &plan.maps,
             shading,
             mode,
             iso,
             iso_rgb: [iso_c.r, iso_c.g, iso_c.b],
             ert,
             ascending: f.ascending,
-            pad: pad as i32,
+            pad: plan.grid.pad as i32,
             cells: [c[0] as u32, c[1] as u32],
             grad_m: f.grad_to_eye_z.map(|x| x as f32),
             grad_s: f.grad_scale.map(|x| x as f32),
@@ -221,7 +200,7 @@ impl<'a> RayContext<'a> {
     /// The cell and weights of ray `(p, q)` at slice `k`, or `None` outside the volume.
     #[inline(always)]
     fn locate(&self, p: i32, q: i32, k: usize) -> Option<(usize, usize, f32, f32)> {
-        let s = self.params.slices[k];
+        let s = self.maps[k];
         let ci = p - self.pad + s.floor[0];
         let cj = q - self.pad + s.floor[1];
         if (ci as u32) < self.cells[0] && (cj as u32) < self.cells[1] {
@@ -262,12 +241,14 @@ impl<'a> RayContext<'a> {
         }
     }
 
-    /// Traces ray `(p, q)` over the candidate slices `ks` (front to back).
+    /// Traces ray `(p, q)` over the candidate slices `ks` (front to back), all
+    /// within the ray's slice range `[lo, hi]` (index order), which also bounds
+    /// an iso hit's refinement.
     #[inline(always)]
-    pub fn trace<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
+    pub fn trace<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
         match self.mode {
             Mode::Blend => self.trace_blend(v, p, q, ks),
-            Mode::Iso => self.trace_iso(v, p, q, ks),
+            Mode::Iso => self.trace_iso(v, p, q, ks, lo, hi),
         }
     }
 
@@ -275,6 +256,9 @@ impl<'a> RayContext<'a> {
     fn trace_blend<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
         let mut acc = [0f32; 4];
         for k in ks {
+            if terminated(acc[3], self.ert) {
+                break;
+            }
             let Some((ci, cj, wi, wj)) = self.locate(p, q, k) else {
                 continue;
             };
@@ -285,41 +269,51 @@ impl<'a> RayContext<'a> {
             }
             let c = self.classifier.classify(d);
             composite(&mut acc, self.shade_sample(v, [c.r, c.g, c.b], ci, cj, k, wi, wj), alpha);
-            if acc[3] >= self.ert {
-                break;
-            }
         }
         RayResult { rgba: acc, depth: f32::NAN }
     }
 
     #[inline(always)]
-    fn trace_iso<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
+    fn trace_iso<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
         for k in ks {
             let Some((ci, cj, wi, wj)) = self.locate(p, q, k) else {
                 continue;
             };
             let d = self.sample(v, ci, cj, k, wi, wj);
             if d >= self.iso {
-                return self.iso_hit(v, p, q, k, ci, cj, wi, wj, d);
+                return self.iso_hit(v, p, q, k, ci, cj, wi, wj, d, lo, hi);
             }
         }
         MISS
     }
 
-    /// The slice before `k` in walking order, if any.
+    /// The slice before `k` in walking order within `[lo, hi]`, if any.
     #[inline(always)]
-    fn prev_slice(&self, k: usize) -> Option<usize> {
-        if self.ascending { k.checked_sub(1) } else { Some(k + 1).filter(|&x| x < self.stack.n[2]) }
+    fn prev_slice(&self, k: usize, lo: usize, hi: usize) -> Option<usize> {
+        if self.ascending { (k > lo).then(|| k - 1) } else { (k < hi).then_some(k + 1) }
     }
 
     /// Refines a hit at slice `k` against the previous slice in walking order and
     /// shades it.
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
-    fn iso_hit<V: Cells>(&self, v: &V, p: i32, q: i32, k: usize, ci: usize, cj: usize, wi: f32, wj: f32, d: f32) -> RayResult {
+    fn iso_hit<V: Cells>(
+        &self,
+        v: &V,
+        p: i32,
+        q: i32,
+        k: usize,
+        ci: usize,
+        cj: usize,
+        wi: f32,
+        wj: f32,
+        d: f32,
+        lo: usize,
+        hi: usize,
+    ) -> RayResult {
         // the sample before the hit, when it is below the iso value: the surface
         // crosses between the two slices at fraction t
-        let before = self.prev_slice(k).and_then(|kp| {
+        let before = self.prev_slice(k, lo, hi).and_then(|kp| {
             let (pi, pj, pwi, pwj) = self.locate(p, q, kp)?;
             let dp = self.sample(v, pi, pj, kp, pwi, pwj);
             (dp < self.iso).then(|| (kp, ((self.iso - dp) / (d - dp)).clamp(0.0, 1.0), (pi, pj, pwi, pwj)))
@@ -369,15 +363,17 @@ pub fn render_binary<W: Word>(
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
-    match ctx.packed() {
-        Some(v) => binary_rows(ctx, &v, mask, search, m, prefetch, rect, out),
-        None => binary_rows(ctx, &ctx.split(), mask, search, m, prefetch, rect, out),
+    match (ctx.packed(), ctx.plan.limited()) {
+        (Some(v), false) => binary_rows::<W, _, false>(ctx, &v, mask, search, m, prefetch, rect, out),
+        (Some(v), true) => binary_rows::<W, _, true>(ctx, &v, mask, search, m, prefetch, rect, out),
+        (None, false) => binary_rows::<W, _, false>(ctx, &ctx.split(), mask, search, m, prefetch, rect, out),
+        (None, true) => binary_rows::<W, _, true>(ctx, &ctx.split(), mask, search, m, prefetch, rect, out),
     }
 }
 
-/// [`render_binary`] for one cell layout.
+/// [`render_binary`] for one cell layout, with (`LIMITED`) or without ray limits.
 #[allow(clippy::too_many_arguments)]
-fn binary_rows<W: Word, V: Cells>(
+fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
     ctx: &RayContext,
     v: &V,
     mask: &BinaryMask<W>,
@@ -394,11 +390,11 @@ fn binary_rows<W: Word, V: Cells>(
             // SAFETY: `hw` is true only when `hw_bitscan()` detected lzcnt and
             // bmi1 on this CPU at run time, which is all `binary_row_lzcnt`
             // requires; its body is the safe `binary_row`.
-            unsafe { binary_row_lzcnt(ctx, v, mask, search, m, prefetch, q, p0, crow, drow) };
+            unsafe { binary_row_lzcnt::<W, V, LIMITED>(ctx, v, mask, search, m, prefetch, q, p0, crow, drow) };
             return;
         }
         let _ = hw;
-        binary_row(ctx, v, mask, search, m, prefetch, q, p0, crow, drow);
+        binary_row::<W, V, LIMITED>(ctx, v, mask, search, m, prefetch, q, p0, crow, drow);
     });
 }
 
@@ -406,10 +402,51 @@ fn binary_rows<W: Word, V: Cells>(
 /// cover a memory latency, few enough lines (about 12 per ray) to stay in L1/L2.
 pub const PREFETCH_GROUP: usize = 16;
 
+/// The candidate slices of `it` (front to back) that lie in `[lo, hi]`: those
+/// before the range are skipped, the walk ends past it.
+struct Clip<I> {
+    it: I,
+    lo: usize,
+    hi: usize,
+    ascending: bool,
+}
+
+impl<I: Iterator<Item = usize>> Iterator for Clip<I> {
+    type Item = usize;
+    #[inline(always)]
+    fn next(&mut self) -> Option<usize> {
+        loop {
+            let k = self.it.next()?;
+            let (before, past) = if self.ascending { (k < self.lo, k > self.hi) } else { (k > self.hi, k < self.lo) };
+            if past {
+                return None;
+            }
+            if !before {
+                return Some(k);
+            }
+        }
+    }
+}
+
+/// Traces ray `(p, q)` over candidates `ks`: the whole stack, or (`LIMITED`)
+/// clipped to the plan's range for the ray.
+#[inline(always)]
+fn trace_ray<V: Cells, const LIMITED: bool>(ctx: &RayContext, v: &V, p: usize, q: usize, ks: impl Iterator<Item = usize>) -> RayResult {
+    if LIMITED {
+        let [lo, hi] = ctx.plan.ray_range(p, q);
+        if lo > hi {
+            return MISS;
+        }
+        ctx.trace(v, p as i32, q as i32, Clip { it: ks, lo, hi, ascending: ctx.ascending }, lo, hi)
+    } else {
+        ctx.trace(v, p as i32, q as i32, ks, 0, ctx.stack.n[2] - 1)
+    }
+}
+
 /// One row of [`render_binary`] (inlined into both compiled copies).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn binary_row<W: Word, V: Cells>(
+fn binary_row<W: Word, V: Cells, const LIMITED: bool>(
     ctx: &RayContext,
     v: &V,
     mask: &BinaryMask<W>,
@@ -449,7 +486,7 @@ fn binary_row<W: Word, V: Cells>(
         for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter_mut()).enumerate() {
             let res = match walk.take() {
                 None => MISS,
-                Some(walk) => ctx.trace(v, (pg + dp) as i32, q as i32, walk),
+                Some(walk) => trace_ray::<V, LIMITED>(ctx, v, pg + dp, q, walk),
             };
             *c = res.rgba;
             *d = res.depth;
@@ -463,7 +500,7 @@ fn binary_row<W: Word, V: Cells>(
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "lzcnt,bmi1")]
-unsafe fn binary_row_lzcnt<W: Word, V: Cells>(
+unsafe fn binary_row_lzcnt<W: Word, V: Cells, const LIMITED: bool>(
     ctx: &RayContext,
     v: &V,
     mask: &BinaryMask<W>,
@@ -475,10 +512,11 @@ unsafe fn binary_row_lzcnt<W: Word, V: Cells>(
     crow: &mut [[f32; 4]],
     drow: &mut [f32],
 ) {
-    binary_row(ctx, v, mask, search, m, prefetch, q, p0, crow, drow)
+    binary_row::<W, V, LIMITED>(ctx, v, mask, search, m, prefetch, q, p0, crow, drow)
 }
 
-/// The brute-force reference: every slice of every ray of `rect`, no mask.
+/// The brute-force reference: every slice of every ray of `rect` (within the
+/// plan's slice range and ray limits), no mask.
 pub fn render_brute(ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate) {
     match ctx.packed() {
         Some(v) => brute_rows(ctx, &v, rect, out),
@@ -488,11 +526,15 @@ pub fn render_brute(ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate
 
 /// [`render_brute`] for one cell layout.
 fn brute_rows<V: Cells>(ctx: &RayContext, v: &V, rect: Option<Rect>, out: &mut Intermediate) {
-    let nk = ctx.stack.n[2];
     render_rows(rect, out, |q, p0, crow, drow| {
         for (dp, (c, d)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
-            let p = (p0 + dp) as i32;
-            let res = if ctx.ascending { ctx.trace(v, p, q as i32, 0..nk) } else { ctx.trace(v, p, q as i32, (0..nk).rev()) };
+            let p = p0 + dp;
+            let [lo, hi] = ctx.plan.ray_range(p, q);
+            let res = match (lo <= hi, ctx.ascending) {
+                (false, _) => MISS,
+                (true, true) => ctx.trace(v, p as i32, q as i32, lo..=hi, lo, hi),
+                (true, false) => ctx.trace(v, p as i32, q as i32, (lo..=hi).rev(), lo, hi),
+            };
             *c = res.rgba;
             *d = res.depth;
         }
@@ -514,13 +556,14 @@ fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(usize, u
 }
 
 /// The rectangle of the intermediate grid that rays through the volume can reach
-/// under these slice offsets (geometry only, no mask): used by brute force.
-pub fn volume_rect(params: &SliceParams, cells: [usize; 2], pad: usize, grid: [usize; 2]) -> Option<Rect> {
-    if cells[0] == 0 || cells[1] == 0 || params.slices.is_empty() {
+/// under `plan`'s slice maps (geometry only, no mask): used by brute force.
+pub fn volume_rect(plan: &FramePlan, cells: [usize; 2]) -> Option<Rect> {
+    let (pad, grid) = (plan.grid.pad, plan.grid.size);
+    if cells[0] == 0 || cells[1] == 0 || plan.maps.is_empty() {
         return None;
     }
     let span = |a: usize| {
-        let floors = || params.slices.iter().map(move |s| s.floor[a]);
+        let floors = || plan.maps.iter().map(move |s| s.floor[a]);
         let lo = floors().map(|f| pad as i32 - f).min().unwrap_or(0).max(0) as usize;
         let hi = floors().map(|f| pad as i32 - f + cells[a] as i32 - 1).max().unwrap_or(0) as usize;
         (lo, hi.min(grid[a] - 1))

@@ -34,6 +34,7 @@
 
 use rayon::prelude::*;
 
+use crate::composite::Rect;
 use crate::data::slices::SliceStack;
 use crate::encode::depth::{Word, code_width_for, slot_shift};
 use crate::encode::shear::{ShearState, shift_vectors, shift_vectors2};
@@ -57,34 +58,6 @@ const _: () = assert!(MAX_FUSED_COLUMN == 4);
 
 /// Largest super-cell size.
 pub const MAX_CELL: usize = 8;
-
-/// Padding and grid size of the intermediate image for a volume of `cells`
-/// cells per slice and `nk` slices: `pad = ceil((nk − 1)/2) + 2` covers every
-/// translation `|trans| ≤ (nk − 1)/2` of a view whose shear is at most one (plus
-/// rounding).
-pub fn geometry(cells: [usize; 2], nk: usize) -> (usize, [usize; 2]) {
-    let pad = nk.saturating_sub(1).div_ceil(2) + 2;
-    (pad, [cells[0] + 2 * pad, cells[1] + 2 * pad])
-}
-
-/// Inclusive rectangle `[p0, p1] × [q0, q1]` of grid columns.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Rect {
-    pub p0: usize,
-    pub p1: usize,
-    pub q0: usize,
-    pub q1: usize,
-}
-
-impl Rect {
-    fn union(a: Option<Rect>, b: Option<Rect>) -> Option<Rect> {
-        match (a, b) {
-            (Some(a), Some(b)) => Some(Rect { p0: a.p0.min(b.p0), p1: a.p1.max(b.p1), q0: a.q0.min(b.q0), q1: a.q1.max(b.q1) }),
-            (a, None) => a,
-            (None, b) => b,
-        }
-    }
-}
 
 /// How much a shear did (for the "limit of the shear step" report).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -296,7 +269,7 @@ impl<W: Word> BinaryMask<W> {
     /// Packs `codes` with super-cell size `s` (1..=[`MAX_CELL`]), unsheared.
     pub fn from_codes(codes: &CellCodes, s: usize) -> Self {
         let s = s.clamp(1, MAX_CELL);
-        let (vpad, _) = geometry(codes.cells, codes.nk);
+        let vpad = crate::view::plan::Grid::parallel(codes.cells, codes.nk).pad;
         let (cells, sc, bbox) = codes.supercells(s);
         let pad = vpad.div_ceil(s) + 1;
         let grid = [cells[0] + 2 * pad, cells[1] + 2 * pad];

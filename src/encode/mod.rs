@@ -7,7 +7,8 @@
 //!   vectors), and searched along depth for candidate slices ([`depth`]: byte
 //!   LUTs and bit scans over 1/2/4-bit codes);
 //! - Lacroute's run-length encoding of the pre-classified volume per principal
-//!   axis ([`rle`]), with its slice traversal.
+//!   axis ([`rle`]: classification per voxel, runs, per-view tables; its slice
+//!   traversal is [`crate::composite::slices`]).
 
 pub mod depth;
 pub mod mask;

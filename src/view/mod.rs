@@ -2,10 +2,13 @@
 //!
 //! Owns the camera and its standard views ([`camera`]), Lacroute's
 //! factorization of the viewing transform into a shear of the slices and a
-//! warp of the intermediate image ([`factor`], re-exported here).
+//! warp of the intermediate image ([`factor`], re-exported here), and the
+//! per-frame plan every traversal reads ([`plan`]).
 
 pub mod camera;
 mod factor;
+pub mod plan;
 
 pub use camera::*;
 pub use factor::*;
+pub use plan::FramePlan;

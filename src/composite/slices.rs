@@ -1,0 +1,454 @@
+//! The slice traversal: compositing a run-length-encoded volume slice by slice,
+//! front to back, into the intermediate image ([`render_rle`]), and its
+//! brute-force reference ([`render_brute_preclassified`]).
+//!
+//! Both read the frame plan (slice maps, slice range, per-pixel ray limits) and
+//! share the bilinear blend of four premultiplied voxels, the early ray
+//! termination policy ([`crate::composite::terminated`]) and "over"
+//! ([`crate::composite::composite_premultiplied`]) with every other path. See
+//! [`crate::encode::rle`] for the encoding and the skips.
+
+// Negated float comparisons (`!(a > b)`) are deliberate here: NaN takes the
+// "no" branch.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use rayon::prelude::*;
+
+use crate::composite::Rect;
+use crate::composite::{Intermediate, composite_premultiplied, terminated};
+pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
+use crate::data::slices::SliceStack;
+use crate::encode::rle::runs::{Cursor, INF};
+use crate::encode::rle::{Preclass, RleVolume, RleVoxel, ViewTables};
+use crate::view::plan::FramePlan;
+
+/// Intermediate rows per parallel band.
+const BAND: usize = 16;
+
+/// Weights of the cell's voxels `(ci, cj)`, `(ci + 1, cj)`, `(ci, cj + 1)`,
+/// `(ci + 1, cj + 1)`, each repeated over the four channels (so [`blend`] is
+/// four plain vector multiply-adds).
+type Weights = [[f32; 4]; 4];
+
+#[inline(always)]
+fn cell_weights(wi: f32, wj: f32) -> Weights {
+    [(1.0 - wi) * (1.0 - wj), wi * (1.0 - wj), (1.0 - wi) * wj, wi * wj].map(|x| [x; 4])
+}
+
+/// The bilinear blend of four premultiplied voxels (both paths use exactly this).
+#[inline(always)]
+fn blend(c00: [f32; 4], c10: [f32; 4], c01: [f32; 4], c11: [f32; 4], w: &Weights) -> [f32; 4] {
+    let mut s = [0f32; 4];
+    for c in 0..4 {
+        s[c] = c00[c] * w[0][c] + c10[c] * w[1][c] + c01[c] * w[2][c] + c11[c] * w[3][c];
+    }
+    s
+}
+
+/// First pixel at or after `x` that is not opaque, compressing the path.
+///
+/// `links[x] == 0` means pixel `x` is not opaque; otherwise `x + links[x]` is a
+/// pixel further on to continue from. The row's last entry is a sentinel that
+/// never becomes opaque, so the walk always ends.
+#[inline(always)]
+fn find(links: &mut [u32], x: usize) -> usize {
+    if links[x] == 0 {
+        return x;
+    }
+    let mut y = x;
+    while links[y] != 0 {
+        y += links[y] as usize;
+    }
+    // every pixel on the way now points straight at y
+    let mut z = x;
+    while z != y {
+        let next = z + links[z] as usize;
+        links[z] = (y - z) as u32;
+        z = next;
+    }
+    y
+}
+
+/// Composites slice `k`'s cells between scanlines `bot` (row `cj`) and `top`
+/// (row `cj + 1`) into one intermediate row: pixel `x = ci + off` for cell
+/// columns `ci` in `[ci_lo, ci_hi]`.
+///
+/// Alternates two skips: opaque pixels through the links, transparent voxels
+/// through the runs. Between them, [`span`] composites the pixels that touch
+/// some non-transparent voxel.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn composite_row<const LIM: bool>(
+    mut bot: Cursor,
+    mut top: Cursor,
+    ci_lo: u32,
+    ci_hi: u32,
+    off: isize,
+    w: &Weights,
+    t: &ViewTables,
+    ert: f32,
+    px: &mut [[f32; 4]],
+    links: &mut [u32],
+    lim: Limits,
+) {
+    let mut ci = ci_lo;
+    loop {
+        // skip opaque pixels through the links
+        let x = find(links, (ci as isize + off) as usize);
+        ci = (x as isize - off) as u32;
+        if ci > ci_hi {
+            return;
+        }
+        // skip transparent voxels: pixel ci reads columns ci and ci + 1 of both scanlines
+        bot.seek(ci);
+        top.seek(ci);
+        let nx = bot.first_from(ci).min(top.first_from(ci));
+        if nx > ci + 1 {
+            if nx == INF || nx - 1 > ci_hi {
+                return;
+            }
+            ci = nx - 1;
+            continue;
+        }
+        ci = span::<LIM>(&mut bot, &mut top, ci, ci_hi, off, w, t, ert, px, links, lim);
+        if ci > ci_hi {
+            return;
+        }
+    }
+}
+
+/// Composites the span of pixels from `ci` (not opaque, touching a
+/// non-transparent voxel) up to the first pixel that is opaque or touches only
+/// transparent voxels, or past `ci_hi`; returns where it stopped.
+///
+/// The span is walked in segments: columns over which both scanlines stay in the
+/// same kind of run, so each is a plain loop over one or two voxel slices
+/// ([`segment`]). The right column of one pixel is the left column of the next,
+/// so each voxel is shaded once per row.
+#[allow(clippy::too_many_arguments)]
+#[inline(never)] // one small function per span keeps the loops' state in registers
+fn span<const LIM: bool>(
+    bot: &mut Cursor,
+    top: &mut Cursor,
+    mut ci: u32,
+    ci_hi: u32,
+    off: isize,
+    w: &Weights,
+    t: &ViewTables,
+    ert: f32,
+    px: &mut [[f32; 4]],
+    links: &mut [u32],
+    lim: Limits,
+) -> u32 {
+    let (vb, vt) = (bot.at(ci), top.at(ci));
+    let mut left = Left { b: t.get(vb), t: t.get(vt), any: vb.is_some() || vt.is_some() };
+    loop {
+        let c1 = ci + 1;
+        bot.step(c1);
+        top.step(c1);
+        let (bin, tin) = (c1 >= bot.s, c1 >= top.s);
+        // the segment's right columns: [c1, end)
+        let end = (if bin { bot.e } else { bot.s }).min(if tin { top.e } else { top.s }).min(ci_hi + 2);
+        let n = (end - c1) as usize;
+        let x0 = (ci as isize + off) as usize;
+        let (p, l) = (&mut px[x0..x0 + n], &mut links[x0..x0 + n]);
+        let lm = Limits { row: if LIM { &lim.row[x0..x0 + n] } else { &[][..] }, k: lim.k };
+        let bv = if bin { &bot.vox[bot.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
+        let tv = if tin { &top.vox[top.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
+        let (want, done) = match (bin, tin) {
+            (true, true) => (n, segment::<true, true, LIM>(p, l, bv, tv, &mut left, w, t, ert, lm)),
+            (true, false) => (n, segment::<true, false, LIM>(p, l, bv, &[], &mut left, w, t, ert, lm)),
+            (false, true) => (n, segment::<false, true, LIM>(p, l, &[], tv, &mut left, w, t, ert, lm)),
+            (false, false) => {
+                if !left.any {
+                    return ci; // all four voxels transparent: back to run skipping
+                }
+                let lm1 = Limits { row: if LIM { &lm.row[..1] } else { &[][..] }, k: lm.k };
+                (1, segment::<false, false, LIM>(&mut p[..1], &mut l[..1], &[], &[], &mut left, w, t, ert, lm1))
+            }
+        };
+        ci += done as u32;
+        if done < want || ci > ci_hi {
+            return ci; // an opaque pixel (back to the links), or the end
+        }
+    }
+}
+
+/// The left column of the next pixel: its two voxels' colours, and whether
+/// either is non-transparent.
+struct Left {
+    b: [f32; 4],
+    t: [f32; 4],
+    any: bool,
+}
+
+/// The ray limits of a row's pixels and the slice being composited: with
+/// `LIM`, pixel `x` composites slice `k` only when `row[x] = [k0, k1]` holds it.
+#[derive(Clone, Copy)]
+struct Limits<'a> {
+    row: &'a [[u32; 2]],
+    k: u32,
+}
+
+impl Limits<'_> {
+    const NONE: Limits<'static> = Limits { row: &[], k: 0 };
+}
+
+/// Composites consecutive pixels `px` (their `links`) whose right columns are
+/// `bv` / `tv` (bottom / top scanline; `B` / `T` false: transparent, the slice
+/// is unused), skipping (`LIM`) pixels whose ray limits exclude the slice.
+/// Stops before the first opaque pixel; returns how many it did.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn segment<const B: bool, const T: bool, const LIM: bool>(
+    px: &mut [[f32; 4]],
+    links: &mut [u32],
+    bv: &[RleVoxel],
+    tv: &[RleVoxel],
+    left: &mut Left,
+    w: &Weights,
+    t: &ViewTables,
+    ert: f32,
+    lim: Limits,
+) -> usize {
+    // exact lengths, so the loop below needs no bounds checks
+    let n = px.len();
+    let links = &mut links[..n];
+    let bv = &bv[..if B { n } else { 0 }];
+    let tv = &tv[..if T { n } else { 0 }];
+    let (mut lb, mut lt) = (left.b, left.t);
+    let mut done = n;
+    for s in 0..n {
+        if links[s] != 0 {
+            done = s;
+            break;
+        }
+        let rb = if B { t.voxel(bv[s]) } else { [0.0; 4] };
+        let rt = if T { t.voxel(tv[s]) } else { [0.0; 4] };
+        let inside = !LIM || {
+            let [k0, k1] = lim.row[s];
+            k0 <= lim.k && lim.k <= k1
+        };
+        if inside {
+            let acc = &mut px[s];
+            composite_premultiplied(acc, blend(lb, rb, lt, rt, w));
+            if terminated(acc[3], ert) {
+                links[s] = 1;
+            }
+        }
+        (lb, lt) = (rb, rt);
+    }
+    if done > 0 {
+        *left = Left { b: lb, t: lt, any: B || T };
+    }
+    done
+}
+
+/// Clears `rect`'s part of the intermediate rows in `px` / `depth` (row stride `gw`).
+fn clear_rows(px: &mut [[f32; 4]], depth: &mut [f32], gw: usize, r: &Rect) {
+    for (row, drow) in px.chunks_mut(gw).zip(depth.chunks_mut(gw)) {
+        row[r.p0..=r.p1].fill([0.0; 4]);
+        drow[r.p0..=r.p1].fill(f32::NAN);
+    }
+}
+
+/// Composites `rle` into `rect` of the intermediate image (every pixel of `rect`
+/// written, transparent where nothing composited; depth NaN) and seals it.
+/// `links` is scratch space, sized for the whole grid on first use and reused
+/// across frames.
+#[allow(clippy::too_many_arguments)]
+pub fn render_rle(
+    rle: &RleVolume,
+    tables: &ViewTables,
+    plan: &FramePlan,
+    ert: f32,
+    rect: Option<Rect>,
+    links: &mut Vec<u32>,
+    out: &mut Intermediate,
+) {
+    out.seal(rect);
+    let Some(r) = rect else { return };
+    let gw = out.size[0];
+    let width = r.p1 - r.p0 + 1;
+    let lw = width + 1; // links per row, with the sentinel
+    let rows = r.q1 - r.q0 + 1;
+    // sized for the whole grid once, so no later rectangle grows it
+    let most = out.size[1] * (out.size[0] + 1);
+    if links.len() < most {
+        links.resize(most, 0);
+    }
+    let fr = RleFrame { rle, tables, plan, pad: plan.grid.pad as isize, ert, r, gw, lw };
+    let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
+    let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];
+    let bands = px.par_chunks_mut(gw * BAND).zip(depth.par_chunks_mut(gw * BAND)).zip(links[..rows * lw].par_chunks_mut(lw * BAND));
+    bands.enumerate().for_each(|(b, ((px, depth), links))| fr.band(r.q0 + b * BAND, px, depth, links));
+}
+
+/// The per-frame constants of [`render_rle`].
+struct RleFrame<'a> {
+    rle: &'a RleVolume,
+    tables: &'a ViewTables,
+    plan: &'a FramePlan,
+    pad: isize,
+    ert: f32,
+    /// The rectangle written.
+    r: Rect,
+    /// Row stride of the intermediate image and of the links.
+    gw: usize,
+    lw: usize,
+}
+
+impl RleFrame<'_> {
+    /// Renders the band of intermediate rows from `q_first` (`px`, `depth` and
+    /// `links` hold its rows): clears it, then composites every slice front to back.
+    #[inline(never)]
+    fn band(&self, q_first: usize, px: &mut [[f32; 4]], depth: &mut [f32], links: &mut [u32]) {
+        let (r, gw, lw, rle) = (&self.r, self.gw, self.lw, self.rle);
+        let [ni, nj, _] = rle.n;
+        clear_rows(px, depth, gw, r);
+        links.fill(0);
+        // nothing composites when even an empty pixel counts as terminated
+        if terminated(0.0, self.ert) {
+            return;
+        }
+        let nrows = px.len() / gw;
+        for k in self.plan.front_to_back() {
+            let bb = rle.bbox[k];
+            if bb[0] > bb[1] {
+                continue;
+            }
+            let sp = self.plan.maps[k];
+            let w = cell_weights(sp.weight[0], sp.weight[1]);
+            // cell column ci lands on pixel ci + op (row-relative: ci + off)
+            let op = self.pad - sp.floor[0] as isize;
+            let off = op - r.p0 as isize;
+            // cells of the rect that touch the slice's non-transparent box
+            let ci_lo = (r.p0 as isize - op).max(bb[0] as isize - 1).max(0);
+            let ci_hi = (r.p1 as isize - op).min(bb[1] as isize).min(ni as isize - 2);
+            if ci_lo > ci_hi {
+                continue;
+            }
+            let fj = sp.floor[1] as isize;
+            for row in 0..nrows {
+                let cj = (q_first + row) as isize - self.pad + fj;
+                if cj < 0 || cj > nj as isize - 2 || cj + 1 < bb[2] as isize || cj > bb[3] as isize {
+                    continue;
+                }
+                let s = cj as usize + nj * k;
+                // the pixels that touch the pair's non-transparent columns: from one
+                // left of the first to the last (an empty pair gives lo > hi)
+                let (eb, et) = (rle.extent[s], rle.extent[s + 1]);
+                let lo = (eb[0].min(et[0]) as isize - 1).max(ci_lo);
+                let hi = (eb[1].max(et[1]) as isize).min(ci_hi);
+                if lo > hi {
+                    continue;
+                }
+                // all of them opaque already: nothing to do
+                let lrow = &mut links[row * lw..(row + 1) * lw];
+                let first = find(lrow, (lo + off) as usize) as isize - off;
+                if first > hi {
+                    continue;
+                }
+                // the next row brings in scanline s + 2: ask for its voxels at the
+                // edges this row starts and ends at (silhouettes move slowly)
+                rle.prefetch_scanline(s + 2, first as usize, hi as usize);
+                let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
+                let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
+                match &self.plan.limits {
+                    None => {
+                        composite_row::<false>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, Limits::NONE)
+                    }
+                    Some(l) => {
+                        let lim = Limits { row: &l.row(q_first + row)[r.p0..=r.p1], k: k as u32 };
+                        composite_row::<true>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, lim)
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The reference for [`render_rle`]: slice by slice, front to back, every voxel
+/// of the slice is classified from the densities into `slice_buf` (reused), then
+/// every pixel of `rect` whose opacity is below `ert` composites its cell's
+/// sample. No runs, no links; same positions, weights and arithmetic.
+#[allow(clippy::too_many_arguments)]
+pub fn render_brute_preclassified(
+    stack: &SliceStack,
+    pre: &Preclass,
+    tables: &ViewTables,
+    plan: &FramePlan,
+    ert: f32,
+    rect: Option<Rect>,
+    slice_buf: &mut Vec<[f32; 4]>,
+    out: &mut Intermediate,
+) {
+    out.seal(rect);
+    let Some(r) = rect else { return };
+    let [ni, nj, _] = stack.n;
+    let gw = out.size[0];
+    let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
+    let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];
+    px.par_chunks_mut(gw).zip(depth.par_chunks_mut(gw)).for_each(|(p, d)| clear_rows(p, d, gw, &r));
+    slice_buf.resize(ni * nj, [0.0; 4]);
+    let pad = plan.grid.pad;
+    for k in plan.front_to_back() {
+        slice_buf.par_chunks_mut(ni).enumerate().for_each(|(j, row)| {
+            for (i, c) in row.iter_mut().enumerate() {
+                *c = tables.get(pre.classify_voxel(stack, i, j, k));
+            }
+        });
+        let buf = &slice_buf[..];
+        let sp = plan.maps[k];
+        let w = cell_weights(sp.weight[0], sp.weight[1]);
+        let (fi, fj) = (sp.floor[0] as isize, sp.floor[1] as isize);
+        px.par_chunks_mut(gw).enumerate().for_each(|(row, prow)| {
+            let cj = (r.q0 + row) as isize - pad as isize + fj;
+            if cj < 0 || cj > nj as isize - 2 {
+                return;
+            }
+            for (p, acc) in prow.iter_mut().enumerate().take(r.p1 + 1).skip(r.p0) {
+                let ci = p as isize - pad as isize + fi;
+                if ci < 0 || ci > ni as isize - 2 {
+                    continue;
+                }
+                if terminated(acc[3], ert) {
+                    continue;
+                }
+                if let Some(l) = &plan.limits {
+                    let [k0, k1] = l.get(p, r.q0 + row);
+                    if (k as u32) < k0 || (k as u32) > k1 {
+                        continue;
+                    }
+                }
+                let b = ci as usize + ni * cj as usize;
+                composite_premultiplied(acc, blend(buf[b], buf[b + 1], buf[b + ni], buf[b + ni + 1], &w));
+            }
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn links_compress_paths() {
+        let mut links = vec![0u32; 11];
+        for x in [2, 3, 4, 5, 7, 8] {
+            links[x] = 1;
+        }
+        assert_eq!(find(&mut links, 0), 0);
+        assert_eq!(find(&mut links, 2), 6);
+        assert_eq!(links[2], 4);
+        assert_eq!(links[3], 3);
+        assert_eq!(find(&mut links, 7), 9);
+        // 6 becomes opaque: 2 → 6 → 7 → 9
+        links[6] = 1;
+        assert_eq!(find(&mut links, 2), 9);
+        assert_eq!(links[2], 7);
+        links[9] = 1;
+        assert_eq!(find(&mut links, 0), 0);
+        assert_eq!(find(&mut links, 3), 10);
+    }
+}

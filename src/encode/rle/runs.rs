@@ -1,0 +1,347 @@
+//! One principal axis's run-length encoding ([`RleVolume`]): per scanline,
+//! `(transparent, non-transparent)` run pairs and the stored voxels, the
+//! per-slice bounding boxes and per-scanline extents, and the run [`Cursor`]
+//! the slice traversal walks two scanlines with.
+
+use rayon::prelude::*;
+
+use super::preclass::{BRIDGE, BRIDGE_NORMAL, Preclass, RleVoxel};
+use crate::composite::Rect;
+pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
+use crate::data::slices::{SliceStack, prefetch};
+use crate::view::plan::FramePlan;
+
+/// End of a scanline for the run cursors.
+pub(crate) const INF: u32 = u32::MAX;
+
+/// One principal axis of the volume, run-length encoded.
+#[derive(Clone, Debug)]
+pub struct RleVolume {
+    /// Principal axis (0 = x, 1 = y, 2 = z).
+    pub axis: usize,
+    /// Sizes along `(i, j, k)`.
+    pub n: [usize; 3],
+    /// Run lengths: per scanline `(transparent, non-transparent)` pairs.
+    runs: Vec<u16>,
+    /// Scanline `s = j + nj·k` owns `runs[scan_runs[s]..scan_runs[s + 1]]`.
+    scan_runs: Vec<u32>,
+    /// ... and `voxels[scan_voxels[s]..scan_voxels[s + 1]]`.
+    scan_voxels: Vec<u32>,
+    /// The non-transparent voxels, scanline by scanline, in `i` order.
+    voxels: Vec<RleVoxel>,
+    /// Per scanline, the first and last column of its non-transparent voxels
+    /// (`[u16::MAX, 0]` when it has none): lets a row pair that has nothing to do
+    /// be rejected without walking its runs.
+    pub(crate) extent: Vec<[u16; 2]>,
+    /// Per slice, the bounding box `[i0, i1, j0, j1]` (inclusive) of its
+    /// non-transparent voxels; `i0 > i1` when the slice is empty.
+    pub(crate) bbox: Vec<[u32; 4]>,
+}
+
+/// One slice's part of an encoding (built in parallel, then concatenated).
+struct SliceRuns {
+    runs: Vec<u16>,
+    voxels: Vec<RleVoxel>,
+    /// Per scanline: end of its runs and voxels (relative to the slice).
+    ends: Vec<(u32, u32)>,
+    extent: Vec<[u16; 2]>,
+    bbox: [u32; 4],
+}
+
+impl RleVolume {
+    /// Encodes `stack` (one principal axis) under classification `pre`, in
+    /// parallel over slices (on the current rayon pool).
+    pub fn encode(stack: &SliceStack, pre: &Preclass) -> Self {
+        let [ni, nj, nk] = stack.n;
+        let slices: Vec<SliceRuns> = (0..nk)
+            .into_par_iter()
+            .map(|k| {
+                let mut s = SliceRuns {
+                    runs: Vec::new(),
+                    voxels: Vec::new(),
+                    ends: Vec::with_capacity(nj),
+                    extent: Vec::with_capacity(nj),
+                    bbox: [u32::MAX, 0, u32::MAX, 0],
+                };
+                for j in 0..nj {
+                    s.extent.push([u16::MAX, 0]);
+                    // `gap` is where the current transparent run began; `run` where the
+                    // current non-transparent run began; `pending` counts the
+                    // transparent voxels since its last non-transparent one
+                    let (mut gap, mut run, mut pending): (usize, Option<usize>, usize) = (0, None, 0);
+                    for i in 0..ni {
+                        match pre.classify_voxel(stack, i, j, k) {
+                            Some(v) => {
+                                // a short gap inside the run: bridge it with its transparent voxels
+                                if run.is_some() {
+                                    s.voxels.extend((i - pending..i).map(|b| pre.bridge_voxel(stack, b, j, k)));
+                                }
+                                run.get_or_insert(i);
+                                pending = 0;
+                                s.voxels.push(v);
+                            }
+                            None => {
+                                if let Some(start) = run {
+                                    pending += 1;
+                                    if pending > BRIDGE {
+                                        let end = i + 1 - pending;
+                                        s.push_pair(start - gap, end - start, start, end - 1, j);
+                                        (gap, run, pending) = (end, None, 0);
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    if let Some(start) = run {
+                        let end = ni - pending;
+                        s.push_pair(start - gap, end - start, start, end - 1, j);
+                    }
+                    s.ends.push((s.runs.len() as u32, s.voxels.len() as u32));
+                }
+                s
+            })
+            .collect();
+        let total_runs: usize = slices.iter().map(|s| s.runs.len()).sum();
+        let total_voxels: usize = slices.iter().map(|s| s.voxels.len()).sum();
+        let mut rle = RleVolume {
+            axis: stack.axis,
+            n: stack.n,
+            runs: Vec::with_capacity(total_runs),
+            scan_runs: Vec::with_capacity(nj * nk + 1),
+            scan_voxels: Vec::with_capacity(nj * nk + 1),
+            voxels: Vec::with_capacity(total_voxels),
+            extent: Vec::with_capacity(nj * nk),
+            bbox: Vec::with_capacity(nk),
+        };
+        rle.scan_runs.push(0);
+        rle.scan_voxels.push(0);
+        for s in slices {
+            // run and voxel counts fit u32: the volume has at most 2^30 voxels
+            let (r0, v0) = (rle.runs.len() as u32, rle.voxels.len() as u32);
+            rle.scan_runs.extend(s.ends.iter().map(|e| r0 + e.0));
+            rle.scan_voxels.extend(s.ends.iter().map(|e| v0 + e.1));
+            rle.runs.extend_from_slice(&s.runs);
+            rle.voxels.extend_from_slice(&s.voxels);
+            rle.extent.extend_from_slice(&s.extent);
+            rle.bbox.push(s.bbox);
+        }
+        rle
+    }
+
+    /// Bytes held by the encoding.
+    pub fn bytes(&self) -> usize {
+        self.runs.len() * 2
+            + (self.scan_runs.len() + self.scan_voxels.len() + self.extent.len()) * 4
+            + self.voxels.len() * 4
+            + self.bbox.len() * 16
+    }
+
+    /// Number of voxels stored: the non-transparent ones and the bridged transparent ones.
+    pub fn voxel_count(&self) -> usize {
+        self.voxels.len()
+    }
+
+    /// Number of bridged transparent voxels stored (see [`BRIDGE`]).
+    pub fn bridged_count(&self) -> usize {
+        self.voxels.iter().filter(|v| v.normal == BRIDGE_NORMAL).count()
+    }
+
+    /// Number of non-transparent runs.
+    pub fn run_count(&self) -> usize {
+        self.runs.len() / 2
+    }
+
+    /// The `(transparent, non-transparent)` run-length pairs of scanline `(j, k)`
+    /// (a non-transparent run may contain bridged transparent voxels).
+    pub fn scanline_runs(&self, j: usize, k: usize) -> &[u16] {
+        let s = j + self.n[1] * k;
+        &self.runs[self.scan_runs[s] as usize..self.scan_runs[s + 1] as usize]
+    }
+
+    /// Decodes scanline `(j, k)`: its non-transparent voxels with their `i`
+    /// (bridged transparent voxels left out).
+    pub fn decode_scanline(&self, j: usize, k: usize) -> impl Iterator<Item = (usize, RleVoxel)> + '_ {
+        self.stored_scanline(j, k).filter(|(_, v)| v.normal != BRIDGE_NORMAL)
+    }
+
+    /// Every voxel stored for scanline `(j, k)` with its `i`, bridged
+    /// transparent voxels included.
+    pub fn stored_scanline(&self, j: usize, k: usize) -> impl Iterator<Item = (usize, RleVoxel)> + '_ {
+        let s = j + self.n[1] * k;
+        let vox = &self.voxels[self.scan_voxels[s] as usize..self.scan_voxels[s + 1] as usize];
+        let mut pos = 0usize;
+        let mut next = 0usize;
+        self.scanline_runs(j, k).chunks_exact(2).flat_map(move |pair| {
+            let start = pos + pair[0] as usize;
+            let len = pair[1] as usize;
+            pos = start + len;
+            let first = next;
+            next += len;
+            (0..len).map(move |t| (start + t, vox[first + t]))
+        })
+    }
+
+    /// Hints the cache to fetch scanline `s`'s voxels near columns `a` and `b`
+    /// (assuming one run from its first non-transparent column: exact for solid
+    /// objects, a harmless guess otherwise).
+    #[inline(always)]
+    pub(crate) fn prefetch_scanline(&self, s: usize, a: usize, b: usize) {
+        if s + 1 >= self.scan_voxels.len() {
+            return;
+        }
+        let (v0, v1) = (self.scan_voxels[s] as usize, self.scan_voxels[s + 1] as usize);
+        if v0 == v1 {
+            return;
+        }
+        let lo = self.extent[s][0] as usize;
+        let at = |c: usize| (v0 + c.saturating_sub(lo)).min(v1 - 1);
+        prefetch(&self.voxels, at(a));
+        prefetch(&self.voxels, at(b));
+    }
+
+    /// A run cursor at the start of scanline `s = j + nj·k`.
+    #[inline(always)]
+    pub(crate) fn cursor(&self, s: usize) -> Cursor<'_> {
+        let runs = &self.runs[self.scan_runs[s] as usize..self.scan_runs[s + 1] as usize];
+        let vox = &self.voxels[self.scan_voxels[s] as usize..self.scan_voxels[s + 1] as usize];
+        Cursor::new(runs, vox)
+    }
+
+    /// The rectangle of the intermediate grid this view can write: the union over
+    /// slices of the pixels whose cell touches a non-transparent voxel.
+    pub fn rect(&self, plan: &FramePlan) -> Option<Rect> {
+        let (pad, grid) = (plan.grid.pad, plan.grid.size);
+        let [ni, nj, _] = self.n;
+        if ni < 2 || nj < 2 {
+            return None;
+        }
+        let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
+        for (k, b) in self.bbox.iter().enumerate() {
+            if b[0] > b[1] {
+                continue;
+            }
+            // voxel v touches cells v − 1 and v
+            let span = [(b[0], b[1], ni), (b[2], b[3], nj)];
+            for (a, &(v0, v1, n)) in span.iter().enumerate() {
+                let off = pad as i64 - plan.maps[k].floor[a] as i64;
+                lo[a] = lo[a].min((v0 as i64 - 1).max(0) + off);
+                hi[a] = hi[a].max((v1 as i64).min(n as i64 - 2) + off);
+            }
+        }
+        if lo[0] > hi[0] {
+            return None;
+        }
+        let clamp = |x: i64, a: usize| x.clamp(0, grid[a] as i64 - 1) as usize;
+        Some(Rect { p0: clamp(lo[0], 0), p1: clamp(hi[0], 0), q0: clamp(lo[1], 1), q1: clamp(hi[1], 1) })
+    }
+}
+
+impl SliceRuns {
+    /// Appends a pair: `gap` transparent voxels, then `len` non-transparent ones
+    /// spanning `i0..=i1` of row `j` (scanlines are at most 2^14 long, so u16 fits).
+    fn push_pair(&mut self, gap: usize, len: usize, i0: usize, i1: usize, j: usize) {
+        self.runs.push(gap as u16);
+        self.runs.push(len as u16);
+        // the scanline's extent (pairs come in increasing i)
+        if let Some(e) = self.extent.last_mut() {
+            e[0] = e[0].min(i0 as u16);
+            e[1] = i1 as u16;
+        }
+        let b = &mut self.bbox;
+        b[0] = b[0].min(i0 as u32);
+        b[1] = b[1].max(i1 as u32);
+        b[2] = b[2].min(j as u32);
+        b[3] = b[3].max(j as u32);
+    }
+}
+
+/// Walks the non-transparent runs of one scanline with a monotone column.
+#[derive(Clone, Copy)]
+pub(crate) struct Cursor<'a> {
+    runs: &'a [u16],
+    pub(crate) vox: &'a [RleVoxel],
+    /// Next pair to read.
+    r: usize,
+    /// Current non-transparent run `[s, e)` (`INF` past the last one) ...
+    pub(crate) s: u32,
+    pub(crate) e: u32,
+    /// ... whose voxel at column `x` is `vox[base + x]` (wrapping arithmetic).
+    pub(crate) base: u32,
+}
+
+impl<'a> Cursor<'a> {
+    #[inline(always)]
+    pub(crate) fn new(runs: &'a [u16], vox: &'a [RleVoxel]) -> Self {
+        let mut c = Cursor { runs, vox, r: 0, s: 0, e: 0, base: 0 };
+        c.next_run();
+        c
+    }
+
+    #[inline(always)]
+    fn next_run(&mut self) {
+        // the voxel index of the next run's first column is where this run ends
+        let v = self.base.wrapping_add(self.e);
+        if self.r + 1 < self.runs.len() {
+            self.s = self.e + self.runs[self.r] as u32;
+            self.e = self.s + self.runs[self.r + 1] as u32;
+            self.r += 2;
+        } else {
+            self.s = INF;
+            self.e = INF;
+        }
+        self.base = v.wrapping_sub(self.s);
+    }
+
+    /// Moves to the run containing or following column `x` (`x` never decreases).
+    #[inline(always)]
+    pub(crate) fn seek(&mut self, x: u32) {
+        while self.e <= x {
+            self.next_run();
+        }
+    }
+
+    /// [`Cursor::seek`] to `x` from `x − 1`: runs are never empty and never
+    /// adjacent, so at most one step.
+    #[inline(always)]
+    pub(crate) fn step(&mut self, x: u32) {
+        if self.e <= x {
+            self.next_run();
+        }
+    }
+
+    /// First non-transparent column at or after `x` (after `seek(x)`).
+    #[inline(always)]
+    pub(crate) fn first_from(&self, x: u32) -> u32 {
+        self.s.max(x)
+    }
+
+    /// The voxel at column `x` (after `seek(x)`), `None` if transparent.
+    #[inline(always)]
+    pub(crate) fn at(&self, x: u32) -> Option<RleVoxel> {
+        if x >= self.s { Some(self.vox[self.base.wrapping_add(x) as usize]) } else { None }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cursor_walks_runs() {
+        // columns 2..4 and 7..8 non-transparent
+        let runs = [2u16, 2, 3, 1];
+        let vox: Vec<RleVoxel> = (0..3).map(|c| RleVoxel { class: c, normal: 0 }).collect();
+        let mut c = Cursor::new(&runs, &vox);
+        let mut got = vec![];
+        for x in 0..10 {
+            c.seek(x);
+            got.push(c.at(x).map(|v| v.class));
+            if x == 4 {
+                assert_eq!(c.first_from(x), 7);
+            }
+        }
+        assert_eq!(got, [None, None, Some(0), Some(1), None, None, None, Some(2), None, None]);
+        c.seek(50);
+        assert_eq!(c.first_from(50), INF);
+    }
+}

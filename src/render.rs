@@ -29,6 +29,7 @@ use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, Rect, ShearWork, geom
 use crate::encode::rle::{ClassKey, RleCache};
 use crate::encode::shear::ShearState;
 use crate::error::{Error, Result};
+use crate::kernels::{self, CpuLevel};
 use crate::view::{Camera, Factorization};
 use crate::warp::{Canvas, Texel, warp};
 
@@ -146,6 +147,11 @@ pub struct Settings {
     /// cache lines ([`crate::data::normals::NormalStack`]). `false` keeps them
     /// apart: a benchmark knob that shows what packing buys (same image).
     pub pack: bool,
+    /// CPU level of the kernels (the binary path's depth-search row loop and
+    /// the mask's shear kernels), capped by what the CPU has: every level gives
+    /// the same image; lower levels run the plain references. Defaults to
+    /// [`kernels::level`] (the detected level, capped by `SHEARWARP_CPU`).
+    pub cpu: CpuLevel,
 }
 
 impl Default for Settings {
@@ -163,6 +169,7 @@ impl Default for Settings {
             prefetch: true,
             normals: Normals::Codes,
             pack: true,
+            cpu: kernels::level(),
         }
     }
 }
@@ -206,6 +213,12 @@ impl AnyMask {
         match self {
             AnyMask::W32(m) => m.bytes(),
             AnyMask::W64(m) => m.bytes(),
+        }
+    }
+    fn set_cpu_level(&mut self, cpu: CpuLevel) {
+        match self {
+            AnyMask::W32(m) => m.set_cpu_level(cpu),
+            AnyMask::W64(m) => m.set_cpu_level(cpu),
         }
     }
 }
@@ -576,6 +589,10 @@ impl Renderer {
                 });
                 self.masks[axis] = Some(AxisMask { key, mask });
             }
+            // the shear kernels follow the settings' CPU level (a mask outlives a settings change)
+            if let Some(m) = self.masks[axis].as_mut() {
+                m.mask.set_cpu_level(self.settings.cpu);
+            }
         }
         if matches!(self.settings.method, Method::Rle | Method::BruteRle) {
             let key = self.rle_key();
@@ -699,8 +716,12 @@ impl Renderer {
             match (settings.method, masks[f.axis].as_ref().map(|m| &m.mask)) {
                 (Method::Rle, _) => rle.render(&f, params, pad, settings.ert, rect, inter),
                 (Method::BruteRle, _) => rle.render_brute(stack, &f, params, pad, settings.ert, rect, inter),
-                (Method::Binary, Some(AnyMask::W32(m))) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
-                (Method::Binary, Some(AnyMask::W64(m))) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
+                (Method::Binary, Some(AnyMask::W32(m))) => {
+                    render_binary(&ctx, m, settings.search, settings.cpu, matcher, settings.prefetch, rect, inter)
+                }
+                (Method::Binary, Some(AnyMask::W64(m))) => {
+                    render_binary(&ctx, m, settings.search, settings.cpu, matcher, settings.prefetch, rect, inter)
+                }
                 _ => render_brute(&ctx, rect, inter),
             }
             stats.rays = rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);

@@ -812,7 +812,7 @@ fn write_apng(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
 /// quietly run the scalar kernels, so the command line says so and stops.
 fn check_cpu_env() -> Result<()> {
     if let Err(e) = kernels::env_override() {
-        usage!("{e} (the environment variable caps the CPU level of the kernels)");
+        usage!("{e}; unset it to run the kernels at the level the CPU has");
     }
     Ok(())
 }

@@ -589,7 +589,8 @@ impl Renderer {
                 });
                 self.masks[axis] = Some(AxisMask { key, mask });
             }
-            // the shear kernels follow the settings' CPU level (a mask outlives a settings change)
+            // the mask carries the settings' CPU level to its shear kernels and to
+            // the ray loop's bit scan (`render_binary`); a mask outlives a settings change
             if let Some(m) = self.masks[axis].as_mut() {
                 m.mask.set_cpu_level(self.settings.cpu);
             }
@@ -716,12 +717,8 @@ impl Renderer {
             match (settings.method, masks[f.axis].as_ref().map(|m| &m.mask)) {
                 (Method::Rle, _) => rle.render(&f, params, pad, settings.ert, rect, inter),
                 (Method::BruteRle, _) => rle.render_brute(stack, &f, params, pad, settings.ert, rect, inter),
-                (Method::Binary, Some(AnyMask::W32(m))) => {
-                    render_binary(&ctx, m, settings.search, settings.cpu, matcher, settings.prefetch, rect, inter)
-                }
-                (Method::Binary, Some(AnyMask::W64(m))) => {
-                    render_binary(&ctx, m, settings.search, settings.cpu, matcher, settings.prefetch, rect, inter)
-                }
+                (Method::Binary, Some(AnyMask::W32(m))) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
+                (Method::Binary, Some(AnyMask::W64(m))) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                 _ => render_brute(&ctx, rect, inter),
             }
             stats.rays = rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);

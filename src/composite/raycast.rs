@@ -31,7 +31,6 @@ use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::{BinaryMask, Rect};
 use crate::encode::shear::ShearState;
-use crate::kernels::CpuLevel;
 use crate::view::Factorization;
 
 /// Per-slice sample parameters of one view: integer offset and in-cell weight of
@@ -358,23 +357,22 @@ impl<'a> RayContext<'a> {
 /// `prefetch`, a prefetch of the voxel rows its first candidate slice reads),
 /// then the walks, so the cache misses of a group overlap instead of stalling
 /// one ray after the other. With
-/// [`Search::Bitscan`] at CPU level `cpu` with AVX2 (capped by what the CPU
-/// has) the row loop runs a copy compiled for `lzcnt`/`tzcnt`; at
-/// [`CpuLevel::Scalar`] the plain build's (the same image).
+/// [`Search::Bitscan`] at the mask's CPU level ([`BinaryMask::cpu_level`], the
+/// renderer's [`crate::render::Settings::cpu`]) `Avx2` the row loop runs a copy
+/// compiled for `lzcnt`/`tzcnt`; at `Scalar` the plain build's (the same image).
 #[allow(clippy::too_many_arguments)]
 pub fn render_binary<W: Word>(
     ctx: &RayContext,
     mask: &BinaryMask<W>,
     search: Search,
-    cpu: CpuLevel,
     m: &Matcher,
     prefetch: bool,
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
     match ctx.packed() {
-        Some(v) => binary_rows(ctx, &v, mask, search, cpu, m, prefetch, rect, out),
-        None => binary_rows(ctx, &ctx.split(), mask, search, cpu, m, prefetch, rect, out),
+        Some(v) => binary_rows(ctx, &v, mask, search, m, prefetch, rect, out),
+        None => binary_rows(ctx, &ctx.split(), mask, search, m, prefetch, rect, out),
     }
 }
 
@@ -385,21 +383,19 @@ fn binary_rows<W: Word, V: Cells>(
     v: &V,
     mask: &BinaryMask<W>,
     search: Search,
-    cpu: CpuLevel,
     m: &Matcher,
     prefetch: bool,
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
-    let hw = search == Search::Bitscan && cpu.capped().has_avx2();
+    let hw = search == Search::Bitscan && mask.cpu_level().has_avx2();
     render_rows(rect, out, |q, p0, crow, drow| {
         #[cfg(target_arch = "x86_64")]
         if hw {
-            // SAFETY: `hw` is true only when `cpu.capped()` (a level <=
-            // `kernels::detected()`) is `Avx2`, and `detected()` is `Avx2` only
-            // when lzcnt and bmi1 (and avx2) were detected on this CPU at run
-            // time, which is all `binary_row_lzcnt` requires; its body is the
-            // safe `binary_row`.
+            // SAFETY: a mask's CPU level is always <= `kernels::detected()`
+            // (capped on every set), and `detected()` is `Avx2` only when
+            // lzcnt and bmi1 were detected on this CPU at run time, which is
+            // all `binary_row_lzcnt` requires; its body is the safe `binary_row`.
             unsafe { binary_row_lzcnt(ctx, v, mask, search, m, prefetch, q, p0, crow, drow) };
             return;
         }
@@ -465,8 +461,8 @@ fn binary_row<W: Word, V: Cells>(
 
 /// [`binary_row`] compiled with `lzcnt`/`tzcnt`: `leading_zeros` and
 /// `trailing_zeros` of the depth search become single instructions instead of
-/// `bsr`/`bsf` plus a zero test. Callers must hold a [`CpuLevel`] with AVX2 that
-/// is at most [`crate::kernels::detected`] (the level implies lzcnt and bmi1).
+/// `bsr`/`bsf` plus a zero test. Callers must hold a CPU level with AVX2 that is
+/// at most [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "lzcnt,bmi1")]

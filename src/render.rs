@@ -29,7 +29,6 @@ use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, Rect, ShearWork, geom
 use crate::encode::rle::{ClassKey, RleCache};
 use crate::encode::shear::ShearState;
 use crate::error::{Error, Result};
-use crate::kernels::{self, CpuLevel};
 use crate::view::{Camera, Factorization};
 use crate::warp::{Canvas, Texel, warp};
 
@@ -150,8 +149,8 @@ pub struct Settings {
     /// CPU level of the kernels (the binary path's depth-search row loop and
     /// the mask's shear kernels), capped by what the CPU has: every level gives
     /// the same image; lower levels run the plain references. Defaults to
-    /// [`kernels::level`] (the detected level, capped by `SHEARWARP_CPU`).
-    pub cpu: CpuLevel,
+    /// [`crate::kernels::level`] (the detected level, capped by `SHEARWARP_CPU`).
+    pub cpu: crate::kernels::CpuLevel,
 }
 
 impl Default for Settings {
@@ -169,7 +168,7 @@ impl Default for Settings {
             prefetch: true,
             normals: Normals::Codes,
             pack: true,
-            cpu: kernels::level(),
+            cpu: crate::kernels::level(),
         }
     }
 }
@@ -215,7 +214,7 @@ impl AnyMask {
             AnyMask::W64(m) => m.bytes(),
         }
     }
-    fn set_cpu_level(&mut self, cpu: CpuLevel) {
+    fn set_cpu_level(&mut self, cpu: crate::kernels::CpuLevel) {
         match self {
             AnyMask::W32(m) => m.set_cpu_level(cpu),
             AnyMask::W64(m) => m.set_cpu_level(cpu),

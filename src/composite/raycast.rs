@@ -392,10 +392,11 @@ fn binary_rows<W: Word, V: Cells>(
     render_rows(rect, out, |q, p0, crow, drow| {
         #[cfg(target_arch = "x86_64")]
         if hw {
-            // SAFETY: a mask's CPU level is always <= `kernels::detected()`
-            // (capped on every set), and `detected()` is `Avx2` only when
-            // lzcnt and bmi1 were detected on this CPU at run time, which is
-            // all `binary_row_lzcnt` requires; its body is the safe `binary_row`.
+            // SAFETY: `hw` is true only when the mask's CPU level has AVX2; a
+            // mask's level is always capped to at most `kernels::detected()`,
+            // which is `Avx2` only when `is_x86_feature_detected!` found lzcnt and
+            // bmi1 on this CPU at run time, which is all `binary_row_lzcnt`
+            // requires; its body is the safe `binary_row`.
             unsafe { binary_row_lzcnt(ctx, v, mask, search, m, prefetch, q, p0, crow, drow) };
             return;
         }

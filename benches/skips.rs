@@ -4,7 +4,7 @@
 //! of a shear step — its words against a memcpy of the same bytes; rays cast
 //! only inside the occupied mask's rectangle against the whole volume's; the RLE
 //! path's per-view tables reused when nothing changed against rebuilt; the
-//! binary path's bit-scan kernels (run-time dispatched lzcnt, plain bsr, LUT);
+//! binary path's bit-scan kernels (at every CPU level: lzcnt, plain bsr; LUT);
 //! the binary row's prefetches against none; shading by normal code and table
 //! against the exact gradient; densities packed with the normal codes against
 //! the two arrays apart; the shear's kernels compiled for AVX2 against plain;
@@ -153,10 +153,12 @@ fn skips(c: &mut Criterion) {
     g.finish();
     // the depth search kernels of the binary path, whole frames
     let mut g = c.benchmark_group("bitscan_kernels_iso_skin");
-    for search in [Search::Bitscan, Search::BitscanBsr, Search::Lut] {
-        let r = renderer(Settings { search, ..Settings::default() }, "skin");
-        bench_turn(&mut g, search.name(), r);
+    // (bit scan at every CPU level this machine runs: lzcnt/tzcnt against bsr/bsf)
+    for cpu in shearwarp::kernels::all_levels() {
+        let r = renderer(Settings { search: Search::Bitscan, cpu, ..Settings::default() }, "skin");
+        bench_turn(&mut g, format!("bitscan-{}", cpu.name()), r);
     }
+    bench_turn(&mut g, "lut", renderer(Settings { search: Search::Lut, ..Settings::default() }, "skin"));
     g.finish();
     // the binary row's prefetches (the voxel rows of each ray's first candidate,
     // while a group of rays is bit-scanned) against none; on a 256×256×225 head,
@@ -206,7 +208,7 @@ fn skips(c: &mut Criterion) {
     let mut st = ShearState::identity(225);
     st = m.rotate_step(&st, 0, 1);
     let mut plain = m.clone();
-    plain.set_simd(false);
+    plain.set_cpu_level(shearwarp::kernels::CpuLevel::Scalar);
     let plain_st = st.clone();
     let w = m.shear_to(&st.rotated(0, 1)).words.max(1);
     let bytes = (w * 8) as usize;

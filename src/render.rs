@@ -146,6 +146,11 @@ pub struct Settings {
     /// cache lines ([`crate::data::normals::NormalStack`]). `false` keeps them
     /// apart: a benchmark knob that shows what packing buys (same image).
     pub pack: bool,
+    /// CPU level of the kernels (the binary path's depth-search row loop and
+    /// the mask's shear kernels), capped by what the CPU has: every level gives
+    /// the same image; lower levels run the plain references. Defaults to
+    /// [`crate::kernels::level`] (the detected level, capped by `SHEARWARP_CPU`).
+    pub cpu: crate::kernels::CpuLevel,
 }
 
 impl Default for Settings {
@@ -163,6 +168,7 @@ impl Default for Settings {
             prefetch: true,
             normals: Normals::Codes,
             pack: true,
+            cpu: crate::kernels::level(),
         }
     }
 }
@@ -206,6 +212,12 @@ impl AnyMask {
         match self {
             AnyMask::W32(m) => m.bytes(),
             AnyMask::W64(m) => m.bytes(),
+        }
+    }
+    fn set_cpu_level(&mut self, cpu: crate::kernels::CpuLevel) {
+        match self {
+            AnyMask::W32(m) => m.set_cpu_level(cpu),
+            AnyMask::W64(m) => m.set_cpu_level(cpu),
         }
     }
 }
@@ -586,6 +598,11 @@ impl Renderer {
                     WordSize::U64 => AnyMask::W64(BinaryMask::from_codes(codes, key.cell)),
                 });
                 self.masks[axis] = Some(AxisMask { key, mask });
+            }
+            // the mask carries the settings' CPU level to its shear kernels and to
+            // the ray loop's bit scan (`render_binary`); a mask outlives a settings change
+            if let Some(m) = self.masks[axis].as_mut() {
+                m.mask.set_cpu_level(self.settings.cpu);
             }
         }
         if matches!(self.settings.method, Method::Rle | Method::BruteRle) {

@@ -25,6 +25,8 @@ fn a_tiny_matrix_writes_every_output() {
     assert_eq!(json["records"].as_array().unwrap().len(), 8 * 7);
     assert_eq!(json["summary"].as_array().unwrap().len(), 7);
     assert_eq!(json["views"].as_array().unwrap().len(), 8);
+    // the CPU level the kernels ran at
+    assert!(["scalar", "avx2"].contains(&json["cpu"].as_str().unwrap()), "cpu: {}", json["cpu"]);
     for r in json["records"].as_array().unwrap() {
         assert!(r["frame_ms"].as_f64().unwrap() >= 0.0);
         assert!(r["error"]["rmse"].as_f64().unwrap() < 0.2, "{r}");

@@ -176,3 +176,56 @@ fn opacity_curve_sets_the_blend_transfer_function() {
     }
     sw().args(["render", "--mode", "blend", "--opacity", "1:0", "--iso", "3"]).assert().code(2);
 }
+
+/// `SHEARWARP_CPU` is the one switch of the kernels' CPU level: reports name the
+/// level, `scalar` runs the plain kernels with the same image, and a name that
+/// is no level is a usage error.
+#[test]
+fn shearwarp_cpu_caps_the_level_and_reports_it() {
+    let json = |c: &mut Command| -> serde_json::Value {
+        let out = c.output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    // unset: the detected level
+    let info = json(sw().env_remove("SHEARWARP_CPU").args(["info", "--phantom-dims", "20,20,20", "--json"]));
+    assert!(["scalar", "avx2"].contains(&info["cpu"].as_str().unwrap()), "{info}");
+    assert_eq!(info["cpu"], info["cpu_detected"]);
+    // scalar: every report says so
+    let info = json(sw().env("SHEARWARP_CPU", "scalar").args(["info", "--phantom-dims", "20,20,20", "--json"]));
+    assert_eq!(info["cpu"], "scalar", "{info}");
+    let rot = json(sw().env("SHEARWARP_CPU", "scalar").args([
+        "rotate",
+        "--phantom-dims",
+        "32,32,28",
+        "--size",
+        "48",
+        "--degrees",
+        "6",
+        "--json",
+    ]));
+    assert_eq!(rot["cpu"], "scalar", "{rot}");
+    // the same image at the plain kernels as at the detected level
+    let dir = tempfile::tempdir().unwrap();
+    let mut pngs = Vec::new();
+    for (name, cpu) in [("native.png", None), ("scalar.png", Some("scalar"))] {
+        let out = dir.path().join(name);
+        let mut c = sw();
+        match cpu {
+            Some(l) => c.env("SHEARWARP_CPU", l),
+            None => c.env_remove("SHEARWARP_CPU"),
+        };
+        let j = json(c.args(["render", "--phantom-dims", "40,40,36", "--size", "64", "--rotate", "10,25,0", "--json", "-o"]).arg(&out));
+        assert_eq!(j["cpu"], cpu.unwrap_or(info["cpu_detected"].as_str().unwrap()), "{j}");
+        pngs.push(image::open(&out).unwrap().to_rgb8());
+    }
+    assert!(pngs[0] == pngs[1], "the scalar kernels render a different image");
+    // a name that is no level: exit 2, naming the variable and the value
+    sw().env("SHEARWARP_CPU", "sse9")
+        .args(["render", "--phantom-dims", "20,20,20", "--size", "16", "--json", "-o"])
+        .arg(dir.path().join("x.png"))
+        .assert()
+        .code(2)
+        .stderr(predicate::str::contains("SHEARWARP_CPU").and(predicate::str::contains("sse9")));
+    sw().env("SHEARWARP_CPU", "sse9").args(["info", "--phantom-dims", "20,20,20"]).assert().code(2);
+}

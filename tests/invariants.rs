@@ -10,6 +10,7 @@ use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::encode::depth::{Search, bit_of};
 use shearwarp::encode::mask::BinaryMask;
 use shearwarp::encode::shear::ShearState;
+use shearwarp::kernels::{self, CpuLevel};
 use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
 use shearwarp::view::{Camera, Factorization, rotate_eye};
 use shearwarp::warp::{Image, Image8};
@@ -233,11 +234,13 @@ proptest! {
         }
     }
 
-    /// The run-time dispatched bit-scan kernel (lzcnt/tzcnt when the CPU has
-    /// them), the plain build's bsr/bsf kernel and the byte-LUT search give the
-    /// same image bit for bit, for 1- and 2-bit codes and any cell size.
+    /// At every CPU level this machine can run (`kernels::all_levels`), the
+    /// bit-scan kernels (at `Avx2` the row loop compiled for lzcnt/tzcnt and the
+    /// shear kernels for AVX2) and the byte-LUT search give the image of the
+    /// plain build's kernels (`CpuLevel::Scalar`, bsr/bsf) bit for bit, for any
+    /// word and cell size.
     #[test]
-    fn dispatched_bitscan_equals_the_plain_kernel(
+    fn every_cpu_level_renders_like_the_scalar_kernels(
         nx in 2usize..24, ny in 2usize..24, nz in 2usize..90, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, blend in any::<bool>(), u64w in any::<bool>(), cell in 1usize..4,
     ) {
@@ -251,14 +254,16 @@ proptest! {
             threads: 1,
             ..Settings::default()
         };
-        let hw = render(&vol, &tf, Settings { search: Search::Bitscan, ..base }, &cam);
-        let bsr = render(&vol, &tf, Settings { search: Search::BitscanBsr, ..base }, &cam);
-        let lut = render(&vol, &tf, Settings { search: Search::Lut, ..base }, &cam);
+        let scalar = render(&vol, &tf, Settings { search: Search::Bitscan, cpu: CpuLevel::Scalar, ..base }, &cam);
         let flat = |v: &[[f32; 4]]| v.iter().flatten().copied().collect::<Vec<f32>>();
-        for other in [&bsr, &lut] {
-            prop_assert!(same_bits(&flat(&hw.1), &flat(&other.1)), "intermediate images differ");
-            prop_assert!(same_bits(&hw.2, &other.2), "iso depths differ");
-            prop_assert_eq!(&hw.0, &other.0);
+        for cpu in kernels::all_levels() {
+            for search in [Search::Bitscan, Search::Lut] {
+                let other = render(&vol, &tf, Settings { search, cpu, ..base }, &cam);
+                let what = format!("{} search at CPU level {}", search.name(), cpu.name());
+                prop_assert!(same_bits(&flat(&scalar.1), &flat(&other.1)), "intermediate images differ: {}", what);
+                prop_assert!(same_bits(&scalar.2, &other.2), "iso depths differ: {}", what);
+                prop_assert!(scalar.0 == other.0, "images differ: {}", what);
+            }
         }
     }
 
@@ -280,17 +285,35 @@ proptest! {
 /// No drift: thousands of incremental steps in random directions (one-bit
 /// rotation steps and multi-bit jumps) end in exactly the mask sheared directly.
 #[test]
-fn the_dispatched_kernel_is_what_runs_here() {
-    // report which copy the tests above compared on this machine
-    eprintln!("hardware lzcnt/tzcnt: {}", shearwarp::encode::depth::hw_bitscan());
-    #[cfg(target_arch = "x86_64")]
-    assert_eq!(
-        shearwarp::encode::depth::hw_bitscan(),
-        std::arch::is_x86_feature_detected!("lzcnt") && std::arch::is_x86_feature_detected!("bmi1")
+fn the_cpu_level_is_what_runs_here() {
+    // report which kernels the tests above compared on this machine
+    eprintln!(
+        "CPU level: {} (detected {}, compared: {:?})",
+        kernels::level().name(),
+        kernels::detected().name(),
+        kernels::all_levels().iter().map(|l| l.name()).collect::<Vec<_>>()
     );
-    eprintln!("AVX2 shear kernels: {}", shearwarp::encode::mask::hw_avx2());
     #[cfg(target_arch = "x86_64")]
-    assert_eq!(shearwarp::encode::mask::hw_avx2(), std::arch::is_x86_feature_detected!("avx2"));
+    {
+        use std::arch::is_x86_feature_detected as has;
+        assert_eq!(kernels::detected().has_avx2(), has!("avx2") && has!("lzcnt") && has!("bmi1"));
+    }
+    // the one switch: renderers and masks default to the process's level
+    assert_eq!(Settings::default().cpu, kernels::level());
+    let st = SliceStack::new(&random_volume([6, 5, 7], 3, [1.0; 3]), 2);
+    let mut m = BinaryMask::<u64>::build(&st, |_, hi| hi > 60.0);
+    assert_eq!(m.cpu_level(), kernels::level());
+    // a level above the CPU's is capped
+    m.set_cpu_level(CpuLevel::Avx2);
+    assert_eq!(m.cpu_level(), kernels::detected());
+    m.set_cpu_level(CpuLevel::Scalar);
+    assert_eq!(m.cpu_level(), CpuLevel::Scalar);
+    // `SHEARWARP_CPU` caps the level (CI's second pass sets `scalar`)
+    match std::env::var("SHEARWARP_CPU").ok().as_deref().map(str::trim) {
+        Some("scalar") => assert_eq!(kernels::level(), CpuLevel::Scalar),
+        None => assert_eq!(kernels::level(), kernels::detected()),
+        _ => {}
+    }
 }
 
 #[test]
@@ -347,8 +370,9 @@ fn no_drift_after_thousands_of_random_steps() {
 /// The shear kernels specialised per column length (1 to 8 words) and the
 /// general one (more words): random one-bit steps about both axes and
 /// multi-bit jumps end in exactly the mask sheared directly, for every length,
-/// with the kernels compiled for AVX2 (where the CPU has it) and the plain ones,
-/// and with multi-bit jumps made of fused two-step passes or of single steps.
+/// at every CPU level the machine can run (the kernels compiled for AVX2 where
+/// the CPU has it, and the plain ones), and with multi-bit jumps made of fused
+/// two-step passes or of single steps.
 #[test]
 fn every_column_length_shears_like_the_direct_shear() {
     // u64 columns of 1..=9, 12, 16 and 17 words, u32 columns of 2, 10 and 17 words
@@ -377,10 +401,19 @@ fn every_column_length_shears_like_the_direct_shear() {
         macro_rules! run {
             ($w:ty) => {{
                 let mut m = BinaryMask::<$w>::build(&st, |_, hi| hi > 60.0);
-                let mut plain = m.clone();
-                plain.set_simd(false);
+                m.set_cpu_level(CpuLevel::Scalar);
+                // one mask per level this CPU runs, compared with the scalar one
+                let mut levels: Vec<(CpuLevel, BinaryMask<$w>)> = kernels::all_levels()
+                    .into_iter()
+                    .map(|l| {
+                        let mut c = m.clone();
+                        c.set_cpu_level(l);
+                        (l, c)
+                    })
+                    .collect();
                 let mut single = m.clone();
                 single.set_fused(false);
+                single.set_cpu_level(kernels::detected());
                 let mut state = ShearState::identity(nz);
                 for step in 0..240 {
                     if step % 40 == 39 {
@@ -388,7 +421,9 @@ fn every_column_length_shears_like_the_direct_shear() {
                         let e = [0, 1].map(|a| (state.ends[a][1] + (rnd() % 7) as f64 - 3.0).clamp(-(lim as f64), lim as f64));
                         state = ShearState::from_ends(nz, [0, 1].map(|a| [-e[a], e[a]]));
                         m.shear_to(&state);
-                        plain.shear_to(&state);
+                        for (_, c) in levels.iter_mut() {
+                            c.shear_to(&state);
+                        }
                         single.shear_to(&state);
                     } else {
                         let along = (rnd() & 1) as usize;
@@ -396,19 +431,25 @@ fn every_column_length_shears_like_the_direct_shear() {
                         if (state.ends[along][1] + dir as f64).abs() > lim as f64 {
                             continue;
                         }
-                        plain.rotate_step(&state, along, dir);
+                        for (_, c) in levels.iter_mut() {
+                            c.rotate_step(&state, along, dir);
+                        }
                         single.rotate_step(&state, along, dir);
                         state = m.rotate_step(&state, along, dir);
                     }
                     if step % 10 == 0 {
-                        assert_eq!(m.words(), plain.words(), "AVX2 and plain kernels, depth {nz}, step {step}");
+                        for (l, c) in &levels {
+                            assert_eq!(m.words(), c.words(), "{} and scalar kernels, depth {nz}, step {step}", l.name());
+                        }
                         assert_eq!(m.words(), single.words(), "fused and single steps, depth {nz}, step {step}");
                     }
                 }
                 let mut d = BinaryMask::<$w>::build(&st, |_, hi| hi > 60.0);
                 d.shear_direct(&state);
                 assert_eq!(m.words(), d.words(), "depth {nz}, {} bits", <$w>::BITS);
-                assert_eq!(plain.words(), d.words(), "plain kernels, depth {nz}, {} bits", <$w>::BITS);
+                for (l, c) in &levels {
+                    assert_eq!(c.words(), d.words(), "{} kernels, depth {nz}, {} bits", l.name(), <$w>::BITS);
+                }
             }};
         }
         if word64 { run!(u64) } else { run!(u32) }

@@ -317,6 +317,8 @@ pub struct Report {
     pub spacing: [f32; 3],
     pub size: usize,
     pub threads: usize,
+    /// CPU level of the kernels (`scalar`, `avx2`): [`shearwarp::kernels::level`].
+    pub cpu: &'static str,
     pub reps: usize,
     pub rounds: usize,
     pub warmup: usize,
@@ -408,6 +410,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
         spacing,
         size: cmd.size,
         threads: if cmd.threads == 0 { rayon::current_num_threads() } else { cmd.threads },
+        cpu: shearwarp::kernels::level().name(),
         reps: cmd.reps,
         rounds: cmd.rounds,
         warmup: cmd.warmup,
@@ -596,8 +599,8 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
     let d = rep.dims;
     let _ = writeln!(
         s,
-        "# shearwarp bench: {} {}×{}×{} (spacing {:?}), {}×{} px, {} threads\n",
-        rep.volume, d[0], d[1], d[2], rep.spacing, rep.size, rep.size, rep.threads
+        "# shearwarp bench: {} {}×{}×{} (spacing {:?}), {}×{} px, {} threads, {} kernels\n",
+        rep.volume, d[0], d[1], d[2], rep.spacing, rep.size, rep.size, rep.threads, rep.cpu
     );
     let _ = writeln!(
         s,

@@ -18,6 +18,7 @@ use shearwarp::data::io;
 use shearwarp::data::phantom::Phantom;
 use shearwarp::data::volume::{Volume, VoxelType};
 use shearwarp::encode::depth::Search;
+use shearwarp::kernels;
 use shearwarp::render::{FrameStats, Method, Normals, Renderer, Settings, WordSize};
 use shearwarp::view::{Camera, NamedView, one_bit_step_deg, rotate_eye};
 use shearwarp::warp::Image;
@@ -535,7 +536,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
-            "size": cam.size[0], "output": cmd.output, "build_ms": stats.build_ms, "shear_ms": stats.shear_ms,
+            "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(),
         });
@@ -635,7 +636,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
-            "tissue_switches": switch_ns.len(), "tissue_switch_ns_median": median(&mut switch_ns),
+            "cpu": s.cpu.capped().name(), "tissue_switches": switch_ns.len(), "tissue_switch_ns_median": median(&mut switch_ns),
             "threads": if s.threads == 0 { rayon::current_num_threads() } else { s.threads },
             "size": cam0.size[0], "axis": AXES[axis],
             "frames": frames, "degrees": frames as f64 * step, "step_deg": step, "build_ms": build_ms,
@@ -684,6 +685,7 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": vol.dims(), "type": vol.data().voxel_type().name(), "spacing": vol.spacing(),
             "min": lo, "max": hi, "histogram": hist, "ct_hounsfield": ct,
+            "cpu": kernels::level().name(), "cpu_detected": kernels::detected().name(),
             "tissues": tissues.iter().map(|t| serde_json::json!({"name": t.name, "threshold": t.threshold})).collect::<Vec<_>>(),
         });
         say!("{j}");
@@ -695,6 +697,11 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     say!("  dims      {} × {} × {} ({} voxels, {})", d[0], d[1], d[2], vol.len(), vol.data().voxel_type().name());
     say!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
     say!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
+    say!(
+        "  cpu       {} kernels (detected {}; SHEARWARP_CPU=scalar|avx2|native caps it)",
+        kernels::level().name(),
+        kernels::detected().name()
+    );
     say!("  histogram ({} bins, log scale):", cmd.bins);
     let maxl = hist.iter().map(|&c| ((c + 1) as f64).ln()).fold(0.0, f64::max).max(1e-9);
     for (i, &c) in hist.iter().enumerate() {
@@ -801,17 +808,26 @@ fn write_apng(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
     Ok(())
 }
 
+/// Rejects a `SHEARWARP_CPU` that names no CPU level: the library would
+/// quietly run the scalar kernels, so the command line says so and stops.
+fn check_cpu_env() -> Result<()> {
+    if let Err(e) = kernels::env_override() {
+        usage!("{e}; unset it to run the kernels at the level the CPU has");
+    }
+    Ok(())
+}
+
 /// Entry point of the binary: parses arguments, runs, maps errors to exit codes.
 pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    let res = match &cli.command {
+    let res = check_cpu_env().and_then(|()| match &cli.command {
         Command::Render(c) => run_render(c),
         Command::Rotate(c) => run_rotate(c),
         Command::Info(c) => run_info(c),
         Command::Bench(c) => crate::app::bench::run(c),
         Command::View(c) => crate::app::viewer::run(c),
         Command::Export(c) => run_export(c),
-    };
+    });
     match res {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {

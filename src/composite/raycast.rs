@@ -351,8 +351,9 @@ impl<'a> RayContext<'a> {
 /// `prefetch`, a prefetch of the voxel rows its first candidate slice reads),
 /// then the walks, so the cache misses of a group overlap instead of stalling
 /// one ray after the other. With
-/// [`Search::Bitscan`] on a CPU with `lzcnt`/`tzcnt` the row loop runs a copy
-/// compiled for them.
+/// [`Search::Bitscan`] at the mask's CPU level ([`BinaryMask::cpu_level`], the
+/// renderer's [`crate::render::Settings::cpu`]) `Avx2` the row loop runs a copy
+/// compiled for `lzcnt`/`tzcnt`; at `Scalar` the plain build's (the same image).
 #[allow(clippy::too_many_arguments)]
 pub fn render_binary<W: Word>(
     ctx: &RayContext,
@@ -383,11 +384,13 @@ fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
-    let hw = search == Search::Bitscan && crate::encode::depth::hw_bitscan();
+    let hw = search == Search::Bitscan && mask.cpu_level().has_avx2();
     render_rows(rect, out, |q, p0, crow, drow| {
         #[cfg(target_arch = "x86_64")]
         if hw {
-            // SAFETY: `hw` is true only when `hw_bitscan()` detected lzcnt and
+            // SAFETY: `hw` is true only when the mask's CPU level has AVX2; a
+            // mask's level is always capped to at most `kernels::detected()`,
+            // which is `Avx2` only when `is_x86_feature_detected!` found lzcnt and
             // bmi1 on this CPU at run time, which is all `binary_row_lzcnt`
             // requires; its body is the safe `binary_row`.
             unsafe { binary_row_lzcnt::<W, V, LIMITED>(ctx, v, mask, search, m, prefetch, q, p0, crow, drow) };
@@ -496,7 +499,8 @@ fn binary_row<W: Word, V: Cells, const LIMITED: bool>(
 
 /// [`binary_row`] compiled with `lzcnt`/`tzcnt`: `leading_zeros` and
 /// `trailing_zeros` of the depth search become single instructions instead of
-/// `bsr`/`bsf` plus a zero test. Callers must have checked [`crate::encode::depth::hw_bitscan`].
+/// `bsr`/`bsf` plus a zero test. Callers must hold a CPU level with AVX2 that is
+/// at most [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "lzcnt,bmi1")]

@@ -136,26 +136,12 @@ pub static TZ8: [u8; 256] = {
 pub enum Search {
     /// The paper's binary search for the first non-zero byte plus a byte table.
     Lut,
-    /// Hardware bit scan (`leading_zeros` / `trailing_zeros`), dispatched at run
-    /// time: the binary path's row loop runs a copy compiled for `lzcnt`/`tzcnt`
-    /// when the CPU has them ([`hw_bitscan`]), else the plain build's `bsr`/`bsf`.
+    /// Hardware bit scan (`leading_zeros` / `trailing_zeros`). At CPU level
+    /// [`CpuLevel::Avx2`](crate::kernels::CpuLevel::Avx2) the binary path's row loop
+    /// runs a copy compiled for `lzcnt`/`tzcnt`; at [`CpuLevel::Scalar`](crate::kernels::CpuLevel::Scalar)
+    /// the plain build's `bsr`/`bsf` (the scalar reference, chosen by
+    /// [`crate::render::Settings::cpu`]).
     Bitscan,
-    /// The same bit scan forced to the plain x86-64 build (`bsr`/`bsf`, no
-    /// run-time dispatch): the scalar reference of the dispatched kernel.
-    BitscanBsr,
-}
-
-/// True when the CPU has `lzcnt` and `tzcnt` (BMI1), so [`Search::Bitscan`] runs
-/// its row loop compiled for them. Detected once (the std macro caches it).
-pub fn hw_bitscan() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("lzcnt") && std::arch::is_x86_feature_detected!("bmi1")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
 }
 
 impl Search {
@@ -164,7 +150,6 @@ impl Search {
         match s {
             "lut" => Some(Search::Lut),
             "bitscan" | "bit-scan" => Some(Search::Bitscan),
-            "bitscan-bsr" | "bsr" => Some(Search::BitscanBsr),
             _ => None,
         }
     }
@@ -173,7 +158,6 @@ impl Search {
         match self {
             Search::Lut => "lut",
             Search::Bitscan => "bitscan",
-            Search::BitscanBsr => "bitscan-bsr",
         }
     }
 }
@@ -225,7 +209,7 @@ pub fn tz_lut<W: Word>(w: W) -> u32 {
 pub fn lz<W: Word>(w: W, s: Search) -> u32 {
     match s {
         Search::Lut => lz_lut(w),
-        Search::Bitscan | Search::BitscanBsr => w.lz(),
+        Search::Bitscan => w.lz(),
     }
 }
 
@@ -234,7 +218,7 @@ pub fn lz<W: Word>(w: W, s: Search) -> u32 {
 pub fn tz<W: Word>(w: W, s: Search) -> u32 {
     match s {
         Search::Lut => tz_lut(w),
-        Search::Bitscan | Search::BitscanBsr => w.tz(),
+        Search::Bitscan => w.tz(),
     }
 }
 
@@ -384,7 +368,7 @@ impl Matcher {
                 }
                 None
             }
-            (Search::Bitscan | Search::BitscanBsr, _) => {
+            (Search::Bitscan, _) => {
                 let h = self.hits(w);
                 if h == W::ZERO {
                     return None;
@@ -614,7 +598,7 @@ mod tests {
                 if !asc {
                     want.reverse();
                 }
-                for s in [Search::Lut, Search::Bitscan, Search::BitscanBsr] {
+                for s in [Search::Lut, Search::Bitscan] {
                     let got: Vec<usize> = SetBits::with_matcher(row, asc, s, &m).collect();
                     assert_eq!(got, want, "nb={nb} c={c} asc={asc} {s:?}");
                     // peeking (even twice) before each step changes nothing

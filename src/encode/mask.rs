@@ -39,6 +39,7 @@ use crate::data::slices::SliceStack;
 use crate::encode::depth::{Word, code_width_for, slot_shift};
 use crate::encode::shear::{ShearState, shift_vectors, shift_vectors2};
 use crate::error::{Error, Result};
+use crate::kernels::{self, CpuLevel};
 
 /// Steps above this count are done as one direct shear instead.
 pub const MAX_INCREMENTAL_STEPS: u32 = 6;
@@ -227,9 +228,10 @@ pub struct BinaryMask<W: Word> {
     row_buf: Vec<W>,
     target: [Vec<i32>; 2],
     prev_off: [Vec<i32>; 2],
-    /// Shift kernels compiled for AVX2 ([`hw_avx2`]); false runs the plain
-    /// build's kernels (the scalar reference, see [`BinaryMask::set_simd`]).
-    avx2: bool,
+    /// Which shift kernels run: at [`CpuLevel::Avx2`] the copies compiled for
+    /// AVX2, at [`CpuLevel::Scalar`] the plain build's (the reference, see
+    /// [`BinaryMask::set_cpu_level`]). Always at most [`kernels::detected`].
+    cpu: CpuLevel,
     /// Fuse two incremental steps into one pass where possible ([`BinaryMask::set_fused`]).
     fused: bool,
     /// Scratch of a fused step: the shift vectors of the moves +2, +1, 0, −1, −2.
@@ -296,7 +298,7 @@ impl<W: Word> BinaryMask<W> {
             row_buf: vec![W::ZERO; grid[0] * nw],
             target: [vec![0; nk], vec![0; nk]],
             prev_off: [vec![0; nk], vec![0; nk]],
-            avx2: hw_avx2(),
+            cpu: kernels::level(),
             fused: true,
             moves: std::array::from_fn(|_| vec![W::ZERO; nw]),
             row_buf2: vec![W::ZERO; grid[0] * nw],
@@ -310,11 +312,19 @@ impl<W: Word> BinaryMask<W> {
     pub fn cell_size(&self) -> usize {
         self.s
     }
-    /// Chooses the shift kernels: `true` (the default on a CPU with AVX2)
-    /// runs them compiled for AVX2, `false` the plain build's. Both give the
-    /// same words; the switch exists so tests and benches can compare them.
-    pub fn set_simd(&mut self, on: bool) {
-        self.avx2 = on && hw_avx2();
+    /// Chooses the shift kernels by CPU level, capped by what the CPU has
+    /// ([`kernels::detected`]): [`CpuLevel::Avx2`] runs them compiled for
+    /// AVX2, [`CpuLevel::Scalar`] the plain build's. Every level gives the same
+    /// words; the default is [`kernels::level`] (the renderer sets
+    /// [`crate::render::Settings::cpu`]), lower levels exist so tests and
+    /// benches can compare the kernels.
+    pub fn set_cpu_level(&mut self, cpu: CpuLevel) {
+        self.cpu = cpu.capped();
+    }
+
+    /// The CPU level the shift kernels run at (after capping).
+    pub fn cpu_level(&self) -> CpuLevel {
+        self.cpu
     }
 
     /// `true` (the default) fuses two incremental steps into one pass over the
@@ -598,13 +608,15 @@ impl<W: Word> BinaryMask<W> {
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
         let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
         let tasks = rows.par_chunks_mut(gw * nw);
-        let avx2 = self.avx2;
+        let avx2 = self.cpu.has_avx2();
         by_column_length!(nw, N => tasks.for_each(|row| {
                 #[cfg(target_arch = "x86_64")]
                 if avx2 {
-                    // SAFETY: `avx2` is set only when `hw_avx2()` detected AVX2
-                    // on this CPU at run time, all the kernel requires; its body
-                    // is the safe `shift_columns_n`.
+                    // SAFETY: `self.cpu` is always capped (`set_cpu_level`,
+                    // `kernels::level`) to at most `kernels::detected()`, which
+                    // is `Avx2` only when AVX2 was detected on this CPU at run
+                    // time, all the kernel requires; its body is the safe
+                    // `shift_columns_n`.
                     unsafe { shift_columns_n_avx2::<W, N>(row, ps, pe, up, down, keep) };
                     return;
                 }
@@ -637,8 +649,9 @@ impl<W: Word> BinaryMask<W> {
             let next = if q + 1 < gh { &tail[ps..pe] } else { &zeros[..] };
             by_column_length!(nw, N => {
                     #[cfg(target_arch = "x86_64")]
-                    if self.avx2 {
-                        // SAFETY: as in `shift_columns`: AVX2 was detected at run time.
+                    if self.cpu.has_avx2() {
+                        // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
+                        // so AVX2 was detected at run time.
                         unsafe { shift_row_n_avx2::<W, N>(row, next, prev, up, down, keep) };
                         continue;
                     }
@@ -659,14 +672,15 @@ impl<W: Word> BinaryMask<W> {
         let moves = &self.moves;
         let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
         let tasks = rows.par_chunks_mut(gw * nw);
-        let avx2 = self.avx2;
+        let avx2 = self.cpu.has_avx2();
         by_column_length!(@arms nw, N, tasks.for_each(|row| {
                 let m = moves.each_ref().map(|v| fixed::<W, N>(v));
                 #[cfg(target_arch = "x86_64")]
                 if avx2 {
-                    // SAFETY: `avx2` is set only when `hw_avx2()` detected AVX2
-                    // on this CPU at run time, all the kernel requires; its body
-                    // is the safe `shift_columns2_n`.
+                    // SAFETY: `self.cpu` is always capped to at most
+                    // `kernels::detected()`, which is `Avx2` only when AVX2 was
+                    // detected on this CPU at run time, all the kernel
+                    // requires; its body is the safe `shift_columns2_n`.
                     unsafe { shift_columns2_n_avx2::<W, N>(row, ps, pe, m) };
                     return;
                 }
@@ -702,8 +716,9 @@ impl<W: Word> BinaryMask<W> {
             by_column_length!(@arms nw, N, {
                     let m = m.each_ref().map(|v| fixed::<W, N>(v));
                     #[cfg(target_arch = "x86_64")]
-                    if self.avx2 {
-                        // SAFETY: as in `shift_columns`: AVX2 was detected at run time.
+                    if self.cpu.has_avx2() {
+                        // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
+                        // so AVX2 was detected at run time.
                         unsafe { shift_row2_n_avx2::<W, N>(row, next1, next2, prev1, prev2, m) };
                         continue;
                     }
@@ -836,14 +851,16 @@ fn shift_row2_n<W: Word, const N: usize>(row: &mut [W], next1: &[W], next2: &[W]
     }
 }
 
-/// [`shift_columns2_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
+/// [`shift_columns2_n`] compiled for AVX2. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn shift_columns2_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, m: [&[W; N]; 5]) {
     shift_columns2_n::<W, N>(row, ps, pe, m)
 }
 
-/// [`shift_row2_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
+/// [`shift_row2_n`] compiled for AVX2. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn shift_row2_n_avx2<W: Word, const N: usize>(
@@ -858,31 +875,20 @@ unsafe fn shift_row2_n_avx2<W: Word, const N: usize>(
 }
 
 /// [`shift_columns_n`] compiled for AVX2: a column of up to four u64 words is
-/// one 256-bit register. Callers must have checked [`hw_avx2`].
+/// one 256-bit register. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn shift_columns_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
     shift_columns_n::<W, N>(row, ps, pe, up, down, keep)
 }
 
-/// [`shift_row_n`] compiled for AVX2. Callers must have checked [`hw_avx2`].
+/// [`shift_row_n`] compiled for AVX2. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn shift_row_n_avx2<W: Word, const N: usize>(row: &mut [W], next: &[W], prev: &mut [W], up: &[W], down: &[W], keep: &[W]) {
     shift_row_n::<W, N>(row, next, prev, up, down, keep)
-}
-
-/// True when the CPU has AVX2, so the shear's shift kernels run their copies
-/// compiled for it. Detected once (the std macro caches it).
-pub fn hw_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
 }
 
 /// [`shift_row_n`] for any column length `nw`.

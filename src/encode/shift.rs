@@ -1,0 +1,191 @@
+//! The shear's shift kernels: one pass over the depth rows of a sheared mask
+//! moves every slice's bits by −1, 0 or +1 (one step; three shift vectors) or
+//! by −2..=+2 (two fused steps; five vectors).
+//!
+//! Each kernel is compiled for the column lengths it is called with (`N`
+//! words per depth row, 1 to [`crate::encode::mask::MAX_FIXED_COLUMN`]), with
+//! a general loop beside it for longer columns, and every fixed-length kernel
+//! has an AVX2 copy (`*_avx2`, `#[target_feature(enable = "avx2")]`) whose body
+//! is the plain one: [`crate::encode::mask::BinaryMask`] picks between them by
+//! its [`crate::kernels::CpuLevel`], and the invariant tests compare every
+//! level with the scalar kernels word for word.
+
+use crate::encode::depth::Word;
+
+/// One grid row of [`BinaryMask::shift_columns`] for columns of `N` words:
+/// columns `ps..=pe` of `row` become `old[p] & keep | old[p−1] & up | old[p+1] & down`
+/// (the column before `ps` is read as it is, the one past the row's end as zero).
+#[inline(always)]
+pub(crate) fn shift_columns_n<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
+    let (up, down, keep): (&[W; N], &[W; N], &[W; N]) = (fixed(up), fixed(down), fixed(keep));
+    let gw = row.len() / N;
+    let mut prev = if ps > 0 { *fixed::<W, N>(&row[(ps - 1) * N..]) } else { [W::ZERO; N] };
+    let mut old = *fixed::<W, N>(&row[ps * N..]);
+    for p in ps..=pe {
+        let next = if p + 1 < gw { *fixed::<W, N>(&row[(p + 1) * N..]) } else { [W::ZERO; N] };
+        let out: &mut [W; N] = (&mut row[p * N..p * N + N]).try_into().expect("N words");
+        for w in 0..N {
+            out[w] = (old[w] & keep[w]) | (prev[w] & up[w]) | (next[w] & down[w]);
+        }
+        prev = old;
+        old = next;
+    }
+}
+
+/// The first `N` words of `s` as an array (the caller guarantees the length).
+#[inline(always)]
+pub(crate) fn fixed<W: Word, const N: usize>(s: &[W]) -> &[W; N] {
+    s[..N].try_into().expect("N words")
+}
+
+/// [`shift_columns_n`] for any column length `nw`, in blocks of 64 words per
+/// column so that the previous column's old words ride in a stack buffer.
+pub(crate) fn shift_columns_any<W: Word>(row: &mut [W], nw: usize, ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
+    const BUF: usize = 64;
+    let gw = row.len() / nw;
+    for w0 in (0..nw).step_by(BUF) {
+        let m = BUF.min(nw - w0);
+        let mut prev = [W::ZERO; BUF];
+        if ps > 0 {
+            prev[..m].copy_from_slice(&row[(ps - 1) * nw + w0..(ps - 1) * nw + w0 + m]);
+        }
+        for p in ps..=pe {
+            let base = p * nw + w0;
+            for w in 0..m {
+                let old = row[base + w];
+                let nx = if p + 1 < gw { row[base + nw + w] } else { W::ZERO };
+                row[base + w] = (old & keep[w0 + w]) | (prev[w] & up[w0 + w]) | (nx & down[w0 + w]);
+                prev[w] = old;
+            }
+        }
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_rows`] for columns of `N` words: `row`
+/// becomes `row & keep | prev & up | next & down` column by column, and `prev`
+/// takes the row's old words (`next` empty: the row below is all zero).
+#[inline(always)]
+pub(crate) fn shift_row_n<W: Word, const N: usize>(row: &mut [W], next: &[W], prev: &mut [W], up: &[W], down: &[W], keep: &[W]) {
+    let (up, down, keep): (&[W; N], &[W; N], &[W; N]) = (fixed(up), fixed(down), fixed(keep));
+    let (row, _) = row.as_chunks_mut::<N>();
+    let (prev, _) = prev.as_chunks_mut::<N>();
+    let (next, _) = next.as_chunks::<N>();
+    let column = |cw: &mut [W; N], pw: &mut [W; N], nx: &[W; N]| {
+        for w in 0..N {
+            let old = cw[w];
+            cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx[w] & down[w]);
+            pw[w] = old;
+        }
+    };
+    if next.is_empty() {
+        // past the grid's last row: the row below reads as zero
+        row.iter_mut().zip(prev.iter_mut()).for_each(|(cw, pw)| column(cw, pw, &[W::ZERO; N]));
+    } else {
+        row.iter_mut().zip(prev.iter_mut()).zip(next).for_each(|((cw, pw), nx)| column(cw, pw, nx));
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_columns2`] for columns of `N` words:
+/// columns `ps..=pe` become `OR_j old[p − 2 + j] & m[j]` (columns before `ps`
+/// are read as they are, those past the row's end as zero). The five old
+/// columns around `p` ride in a window, so a column is written after it is read.
+#[inline(always)]
+pub(crate) fn shift_columns2_n<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, m: [&[W; N]; 5]) {
+    let gw = row.len() / N;
+    let col = |row: &[W], p: usize| if p < gw { *fixed::<W, N>(&row[p * N..]) } else { [W::ZERO; N] };
+    // ps − 2 and ps − 1 wrap to huge indices (read as zero) at the grid's edge
+    let mut win = [col(row, ps.wrapping_sub(2)), col(row, ps.wrapping_sub(1)), col(row, ps), col(row, ps + 1), col(row, ps + 2)];
+    for p in ps..=pe {
+        let out: &mut [W; N] = (&mut row[p * N..p * N + N]).try_into().expect("N words");
+        for w in 0..N {
+            out[w] = (win[0][w] & m[0][w]) | (win[1][w] & m[1][w]) | (win[2][w] & m[2][w]) | (win[3][w] & m[3][w]) | (win[4][w] & m[4][w]);
+        }
+        win = [win[1], win[2], win[3], win[4], col(row, p + 3)];
+    }
+}
+
+/// One grid row of [`BinaryMask::shift_rows2`] for columns of `N` words: `row`
+/// becomes `prev2 & m[0] | prev1 & m[1] | row & m[2] | next1 & m[3] | next2 & m[4]`
+/// column by column; `prev2` takes `prev1` and `prev1` the row's old words.
+#[inline(always)]
+pub(crate) fn shift_row2_n<W: Word, const N: usize>(
+    row: &mut [W],
+    next1: &[W],
+    next2: &[W],
+    prev1: &mut [W],
+    prev2: &mut [W],
+    m: [&[W; N]; 5],
+) {
+    let (row, _) = row.as_chunks_mut::<N>();
+    let (prev1, _) = prev1.as_chunks_mut::<N>();
+    let (prev2, _) = prev2.as_chunks_mut::<N>();
+    let (next1, _) = next1.as_chunks::<N>();
+    let (next2, _) = next2.as_chunks::<N>();
+    for ((((cw, p1), p2), n1), n2) in row.iter_mut().zip(prev1.iter_mut()).zip(prev2.iter_mut()).zip(next1).zip(next2) {
+        for w in 0..N {
+            let old = cw[w];
+            cw[w] = (p2[w] & m[0][w]) | (p1[w] & m[1][w]) | (old & m[2][w]) | (n1[w] & m[3][w]) | (n2[w] & m[4][w]);
+            p2[w] = p1[w];
+            p1[w] = old;
+        }
+    }
+}
+
+/// [`shift_columns2_n`] compiled for AVX2. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn shift_columns2_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, m: [&[W; N]; 5]) {
+    shift_columns2_n::<W, N>(row, ps, pe, m)
+}
+
+/// [`shift_row2_n`] compiled for AVX2. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn shift_row2_n_avx2<W: Word, const N: usize>(
+    row: &mut [W],
+    next1: &[W],
+    next2: &[W],
+    prev1: &mut [W],
+    prev2: &mut [W],
+    m: [&[W; N]; 5],
+) {
+    shift_row2_n::<W, N>(row, next1, next2, prev1, prev2, m)
+}
+
+/// [`shift_columns_n`] compiled for AVX2: a column of up to four u64 words is
+/// one 256-bit register. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn shift_columns_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
+    shift_columns_n::<W, N>(row, ps, pe, up, down, keep)
+}
+
+/// [`shift_row_n`] compiled for AVX2. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn shift_row_n_avx2<W: Word, const N: usize>(
+    row: &mut [W],
+    next: &[W],
+    prev: &mut [W],
+    up: &[W],
+    down: &[W],
+    keep: &[W],
+) {
+    shift_row_n::<W, N>(row, next, prev, up, down, keep)
+}
+
+/// [`shift_row_n`] for any column length `nw`.
+pub(crate) fn shift_row_any<W: Word>(row: &mut [W], next: &[W], prev: &mut [W], nw: usize, up: &[W], down: &[W], keep: &[W]) {
+    for (c, (cw, pw)) in row.chunks_exact_mut(nw).zip(prev.chunks_exact_mut(nw)).enumerate() {
+        for w in 0..nw {
+            let old = cw[w];
+            let nx = if next.is_empty() { W::ZERO } else { next[c * nw + w] };
+            cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx & down[w]);
+            pw[w] = old;
+        }
+    }
+}

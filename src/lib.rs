@@ -23,6 +23,7 @@ pub mod io;
 pub mod mask;
 pub mod metrics;
 pub mod normals;
+pub mod orientation;
 pub mod phantom;
 pub mod presets;
 pub mod raycast;

@@ -15,6 +15,7 @@ use glam::DMat3;
 
 use crate::depth::Search;
 use crate::io;
+use crate::orientation::{PatientFrame, View, view_rotation};
 use crate::phantom::Phantom;
 use crate::presets;
 use crate::raycast::Mode;
@@ -140,6 +141,10 @@ pub struct VolumeArgs {
     /// Voxel spacing X,Y,Z (overrides the file's).
     #[arg(long, value_parser = parse_spacing)]
     pub spacing: Option<[f32; 3]>,
+    /// Patient orientation of the index axes: where x, y, z point, e.g. RAS, LPS, LAS
+    /// (raw and .den files carry none; replaces a file's own). Named views follow it.
+    #[arg(long, value_name = "CODE")]
+    pub orientation: Option<String>,
 }
 
 /// File formats on the command line.
@@ -267,7 +272,8 @@ pub enum NormalsArg {
     /// The exact gradient at every sample.
     Gradient,
 }
-/// Named starting views (RAS: +x right, +y anterior, +z superior).
+/// Named starting views: the patient's anatomy, from the volume's orientation
+/// (index axes taken as RAS when it is unknown).
 #[derive(ValueEnum, Clone, Copy, Debug)]
 pub enum ViewArg {
     Anterior,
@@ -478,6 +484,27 @@ impl VolumeArgs {
         if let Some(sp) = self.spacing {
             vol.set_spacing(sp)?;
         }
+        match (&self.orientation, path) {
+            (Some(code), _) => {
+                let frame = PatientFrame::from_code(code)?;
+                if let Some(old) = vol.frame().copied() {
+                    eprintln!("note: --orientation {code} replaces the file's own orientation {}", old.stored_code());
+                    // back to the file's voxel order before the new frame is applied
+                    if let Some(a) = old.reversed_axis {
+                        vol.reverse_axis(a);
+                    }
+                    vol.set_frame(None);
+                }
+                vol.set_frame(Some(frame));
+            }
+            // the phantoms are built RAS, centred on the origin
+            (None, None) => {
+                let (d, sp) = (vol.dims(), vol.spacing());
+                let origin = glam::DVec3::from_array(std::array::from_fn(|a| -(d[a] as f64 - 1.0) / 2.0 * sp[a] as f64));
+                vol.set_frame(Some(PatientFrame { origin, ..PatientFrame::ras() }));
+            }
+            (None, Some(_)) => {}
+        }
         let name = match path {
             Some(p) => p.display().to_string(),
             None => format!("{} phantom", self.phantom().name()),
@@ -531,6 +558,17 @@ impl RenderArgs {
     /// `--iso` makes a custom threshold instead.
     pub fn renderer(&self, vol: Volume) -> Result<Renderer> {
         let settings = self.settings()?;
+        let d = vol.dims();
+        if let Some(a) = d.iter().position(|&n| n < 2) {
+            usage!(
+                "the volume is {}×{}×{}: one voxel thick along {}, and shear-warp renders the cells between voxels, so the \
+                 image would be empty; `shearwarp info` describes it",
+                d[0],
+                d[1],
+                d[2],
+                AXES[a]
+            );
+        }
         let tissues = presets::tissues_for(&vol);
         let hi = vol.value_range().1;
         let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
@@ -573,6 +611,7 @@ impl RenderArgs {
         if self.size == 0 || self.size > 16384 {
             usage!("--size must be 1..=16384, got {}", self.size);
         }
+        check_threads(self.threads)?;
         Ok(Settings {
             method: match self.method {
                 MethodArg::Binary => Method::Binary,
@@ -604,9 +643,10 @@ impl RenderArgs {
         })
     }
 
-    /// The starting camera.
-    pub fn camera(&self) -> Result<Camera> {
-        let mut r = base_view(self.view);
+    /// The starting camera for a volume placed in the patient by `frame`
+    /// ([`Volume::frame`]; `None`: index axes taken as RAS).
+    pub fn camera(&self, frame: Option<&PatientFrame>) -> Result<Camera> {
+        let mut r = view_rotation(self.view.view(), frame);
         if let Some([rx, ry, rz]) = self.rotate {
             r = rotate_eye(rotate_eye(rotate_eye(r, 0, rx), 1, ry), 2, rz);
         }
@@ -619,18 +659,64 @@ impl RenderArgs {
     }
 }
 
-/// Object-to-eye rotation of a named view (RAS volume: +y anterior, +z superior).
+/// Object-to-eye rotation of a named view of a volume whose index axes are
+/// RAS (+x right, +y anterior, +z superior), as the phantoms are; for a loaded
+/// volume use [`crate::orientation::view_rotation`] with its frame.
 pub fn base_view(v: ViewArg) -> DMat3 {
-    // anterior: eye x = −object x (patient's right on the image left), eye y = object z, eye z = object y
-    let anterior = DMat3::from_cols_array(&[-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
-    match v {
-        ViewArg::Anterior => anterior,
-        ViewArg::Posterior => rotate_eye(anterior, 1, 180.0),
-        ViewArg::Left => rotate_eye(anterior, 1, -90.0),
-        ViewArg::Right => rotate_eye(anterior, 1, 90.0),
-        ViewArg::Superior => rotate_eye(anterior, 0, 90.0),
-        ViewArg::Inferior => rotate_eye(anterior, 0, -90.0),
+    view_rotation(v.view(), None)
+}
+
+impl ViewArg {
+    /// The library's view.
+    pub fn view(self) -> View {
+        match self {
+            ViewArg::Anterior => View::Anterior,
+            ViewArg::Posterior => View::Posterior,
+            ViewArg::Left => View::Left,
+            ViewArg::Right => View::Right,
+            ViewArg::Superior => View::Superior,
+            ViewArg::Inferior => View::Inferior,
+        }
     }
+}
+
+/// The largest `--threads` accepted: 8 per core (at least 8). More threads
+/// than that only add start-up and scheduling cost (100000 used to hang).
+pub fn max_threads() -> usize {
+    8 * std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Checks a `--threads` count against [`max_threads`] (a [`Usage`] error above it).
+pub fn check_threads(threads: usize) -> Result<()> {
+    let max = max_threads();
+    if threads > max {
+        usage!("--threads {threads} is more than {max} (8 per core on this machine's {} cores); 0 uses every core", max / 8);
+    }
+    Ok(())
+}
+
+/// Warnings about a frame that is not what it may seem: an iso value outside
+/// the data's range, or an image with nothing visible. Printed on stderr and
+/// listed in `--json` output.
+pub fn frame_warnings(r: &Renderer, coverage: f64) -> Vec<String> {
+    let mut w = Vec::new();
+    let (lo, hi) = r.volume().value_range();
+    if r.settings().mode == Mode::Iso {
+        let iso = r.iso();
+        if iso > hi {
+            w.push(format!("the iso value {iso} is above the data's largest value {hi}: nothing can be visible"));
+        } else if iso <= lo {
+            w.push(format!("the iso value {iso} is at or below the data's smallest value {lo}: the whole volume box is opaque"));
+        }
+    }
+    if coverage == 0.0 {
+        w.push(format!(
+            "nothing is visible in the image (tissue {}, iso {}, data range {lo} … {hi}); try another --tissue or --iso",
+            r.classification_name(),
+            r.iso()
+        ));
+    }
+    w
 }
 
 /// A spinner on stderr while something of unknown length runs (hidden when
@@ -671,11 +757,15 @@ fn median(v: &mut [f64]) -> f64 {
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let (vol, name) = cmd.volume.load()?;
     let dims = vol.dims();
+    let cam = cmd.render.camera(vol.frame())?;
     let mut r = cmd.render.renderer(vol)?;
-    let cam = cmd.render.camera()?;
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let stats = r.render(&cam, &mut img)?;
     img.save_png(&cmd.output)?;
+    let warnings = frame_warnings(&r, img.coverage());
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     if cmd.json {
         let s = r.settings();
         let j = serde_json::json!({
@@ -683,7 +773,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
             "size": cam.size[0], "output": cmd.output, "build_ms": stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
-            "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(),
+            "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,
         });
         say!("{j}");
     } else {
@@ -719,11 +809,10 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let dims = vol.dims();
     let step = match cmd.step_deg.as_str() {
         "auto" => one_bit_step_deg(&vol) * cmd.render.cell as f64,
-        s => s
-            .parse::<f64>()
-            .ok()
-            .filter(|x| x.is_finite() && *x > 0.0)
-            .with_context(|| format!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'"))?,
+        s => match s.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0) {
+            Some(x) => x,
+            None => usage!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'"),
+        },
     };
     if !(cmd.degrees.is_finite() && cmd.degrees > 0.0) {
         usage!("--degrees must be a positive number, got {}", cmd.degrees);
@@ -732,12 +821,16 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     if frames > 1_000_000 {
         usage!("{frames} frames is too many (raise --step-deg)");
     }
+    let cam0 = cmd.render.camera(vol.frame())?;
     let mut r = cmd.render.renderer(vol)?;
-    let cam0 = cmd.render.camera()?;
     if cmd.cycle_tissues > 0 && r.tissues().is_none_or(|(t, _)| t.len() < 2) {
         usage!("--cycle-tissues needs tissue presets (it cannot be combined with --iso)");
     }
-    let mut switch_ns: Vec<f64> = Vec::new();
+    // A tissue switch costs the selection plus whatever the next frame would
+    // otherwise rebuild: the RLE paths re-encode the volume for the new
+    // classification (per principal axis), the binary path only swaps a table.
+    let reencodes = matches!(r.settings().method, crate::render::Method::Rle | crate::render::Method::BruteRle);
+    let (mut select_ns, mut switch_ms, mut after_switch_ms): (Vec<f64>, Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new(), Vec::new());
     let build_ms = r.prepare_all_axes();
     if let Some(d) = &cmd.frames_dir {
         std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create directory", d.display()))?;
@@ -752,17 +845,27 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let pb = progress(frames as u64, cmd.render.quiet || cmd.json, "rotating");
     let mut img = Image::new(cam0.size[0], cam0.size[1]);
     let mut all: Vec<FrameStats> = Vec::with_capacity(frames);
+    let loop_start = std::time::Instant::now();
     for f in 0..frames {
-        if cmd.cycle_tissues > 0 && f > 0 && f % cmd.cycle_tissues == 0 {
+        let mut cam = cam0;
+        cam.rotation = rotate_eye(cam0.rotation, axis, f as f64 * step);
+        let switched = cmd.cycle_tissues > 0 && f > 0 && f % cmd.cycle_tissues == 0;
+        if switched {
             let n = r.tissues().map_or(1, |(t, _)| t.len());
             let next = (r.tissues().map_or(0, |(_, c)| c) + 1) % n;
             let t = std::time::Instant::now();
             r.select_tissue(next)?;
-            switch_ns.push(t.elapsed().as_secs_f64() * 1e9);
+            select_ns.push(t.elapsed().as_secs_f64() * 1e9);
+            // the rebuild the switch causes, for the principal axis of the coming frame
+            let v = r.volume();
+            let principal = crate::view::Factorization::new(&cam, v.dims(), v.spacing())?.axis;
+            r.prepare_axis(principal)?;
+            switch_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
-        let mut cam = cam0;
-        cam.rotation = rotate_eye(cam0.rotation, axis, f as f64 * step);
         let st = r.render(&cam, &mut img)?;
+        if switched {
+            after_switch_ms.push(st.build_ms + st.frame_ms());
+        }
         all.push(st);
         if let Some(d) = &cmd.frames_dir {
             img.save_png(&d.join(format!("frame_{f:05}.png")))?;
@@ -772,10 +875,30 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         }
         pb.inc(1);
     }
+    let loop_ms = loop_start.elapsed().as_secs_f64() * 1e3;
     pb.finish_and_clear();
+    let frames_ms_total: f64 = all.iter().map(|s| s.build_ms + s.frame_ms()).sum();
+    let switch_ms_total: f64 = switch_ms.iter().sum();
+    let warnings = frame_warnings(&r, img.coverage());
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     let col = |g: fn(&FrameStats) -> f64| median(&mut all.iter().map(g).collect::<Vec<_>>());
     let (shear, render, warp, frame) = (col(|s| s.shear_ms), col(|s| s.render_ms), col(|s| s.warp_ms), col(|s| s.frame_ms()));
     let fps = if frame > 0.0 { 1000.0 / frame } else { f64::INFINITY };
+    // an animation of every frame of a long turn is huge (801 frames, 45 MB
+    // for a full turn of a large scan): keep at most MAX_ANIMATION_FRAMES
+    let kept = if kept.len() > MAX_ANIMATION_FRAMES {
+        let every = kept.len().div_ceil(MAX_ANIMATION_FRAMES);
+        let kept: Vec<_> = kept.into_iter().step_by(every).collect();
+        eprintln!(
+            "note: the animation keeps every {every}th of the {frames} frames ({} frames); --step-deg sets the step, --frames-dir keeps them all",
+            kept.len()
+        );
+        kept
+    } else {
+        kept
+    };
     if let Some(p) = &cmd.gif {
         write_gif(p, &kept)?;
     }
@@ -787,7 +910,13 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
-            "tissue_switches": switch_ns.len(), "tissue_switch_ns_median": median(&mut switch_ns),
+            "tissue_switches": switch_ms.len(),
+            // the full cost of a switch: selection plus the rebuild it causes (re-encoding on the RLE paths)
+            "tissue_switch_ns_median": median(&mut switch_ms.clone()) * 1e6,
+            "tissue_switch_ms_median": median(&mut switch_ms.clone()), "tissue_switch_ms_total": switch_ms_total,
+            "tissue_switch_reencodes": reencodes, "tissue_select_ns_median": median(&mut select_ns),
+            "tissue_switch_next_frame_ms_median": median(&mut after_switch_ms),
+            "frames_ms_total": frames_ms_total, "loop_ms": loop_ms, "warnings": warnings,
             "threads": if s.threads == 0 { rayon::current_num_threads() } else { s.threads },
             "size": cam0.size[0], "axis": AXES[axis],
             "frames": frames, "degrees": frames as f64 * step, "step_deg": step, "build_ms": build_ms,
@@ -812,8 +941,15 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             r.classification_name(),
             r.iso()
         );
-        if !switch_ns.is_empty() {
-            say!("  {} tissue switches, median {:.0} ns each", switch_ns.len(), median(&mut switch_ns));
+        if !switch_ms.is_empty() {
+            say!(
+                "  {} tissue switches, median {:.3} ms each ({}; selection alone {:.0} ns), next frame {:.3} ms",
+                switch_ms.len(),
+                median(&mut switch_ms.clone()),
+                if reencodes { "re-encodes the volume for the new classification" } else { "a table swap, no rebuild" },
+                median(&mut select_ns),
+                median(&mut after_switch_ms)
+            );
         }
         say!("  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms", frames as f64 * step);
         say!("  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms");
@@ -832,11 +968,33 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     let hist = vol.histogram(cmd.bins);
     let tissues = presets::tissues_for(&vol);
     let ct = presets::looks_like_ct(&vol);
+    let range = presets::data_range(&vol);
+    let sentinel_note = range.sentinel.map(|s| {
+        format!(
+            "{} voxels hold {s}, far from the other values ({} … {}): a no-data sentinel? It dominates the range; the presets \
+             ignore it, but the renderer's classification spans it, so replace it for a useful render",
+            range.sentinel_voxels, range.bulk.0, range.bulk.1
+        )
+    });
+    let frame = vol.frame().copied();
+    let source = if cmd.volume.orientation.is_some() {
+        "--orientation"
+    } else if cmd.volume.file.is_none() && cmd.volume.raw.is_none() && cmd.volume.den.is_none() {
+        "phantom"
+    } else {
+        "file"
+    };
     if cmd.json {
         let j = serde_json::json!({
             "volume": name, "dims": vol.dims(), "type": vol.data().voxel_type().name(), "spacing": vol.spacing(),
             "min": lo, "max": hi, "histogram": hist, "ct_hounsfield": ct,
             "tissues": tissues.iter().map(|t| serde_json::json!({"name": t.name, "threshold": t.threshold})).collect::<Vec<_>>(),
+            "orientation": frame.map(|f| f.code()), "orientation_source": frame.map(|_| source),
+            "stored_orientation": frame.map(|f| f.stored_code()), "reversed_axis": frame.and_then(|f| f.reversed_axis.map(|a| AXES[a])),
+            "origin_ras": frame.map(|f| f.origin.to_array()), "origin_lps": frame.map(|f| f.origin_lps().to_array()),
+            "directions_ras": frame.map(|f| [f.directions.x_axis.to_array(), f.directions.y_axis.to_array(), f.directions.z_axis.to_array()]),
+            "oblique_deg": frame.map(|f| f.obliquity_deg()), "skew_deg": frame.map(|f| f.skew_deg),
+            "sentinel": range.sentinel, "sentinel_voxels": range.sentinel_voxels, "warnings": sentinel_note.iter().collect::<Vec<_>>(),
         });
         say!("{j}");
         return Ok(());
@@ -846,7 +1004,30 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     say!("{name}");
     say!("  dims      {} × {} × {} ({} voxels, {})", d[0], d[1], d[2], vol.len(), vol.data().voxel_type().name());
     say!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
+    match frame {
+        Some(f) => {
+            let mut notes = vec![format!("from the {source}")];
+            if let Some(a) = f.reversed_axis {
+                notes.push(format!("stored {}: the {} axis was reversed on load so the picture is not mirrored", f.stored_code(), AXES[a]));
+            }
+            if f.obliquity_deg() > 0.01 {
+                notes.push(format!("oblique: up to {:.1}° off the patient axes", f.obliquity_deg()));
+            }
+            if f.skew_deg > 0.01 {
+                notes.push(format!("skewed grid, drawn with the nearest orthogonal axes ({:.2}° off)", f.skew_deg));
+            }
+            say!("  orientation {} (index axes x, y, z point {}; {})", f.code(), f.code(), notes.join("; "));
+            let (o, l) = (f.origin, f.origin_lps());
+            say!("  origin    RAS ({:.3}, {:.3}, {:.3}) mm = LPS ({:.3}, {:.3}, {:.3}) mm", o.x, o.y, o.z, l.x, l.y, l.z);
+        }
+        None => {
+            say!("  orientation unknown (this format carries none): named views take the index axes as RAS; set it with --orientation CODE")
+        }
+    }
     say!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
+    if let Some(n) = &sentinel_note {
+        say!("  warning   {n}");
+    }
     say!("  histogram ({} bins, log scale):", cmd.bins);
     let maxl = hist.iter().map(|&c| ((c + 1) as f64).ln()).fold(0.0, f64::max).max(1e-9);
     for (i, &c) in hist.iter().enumerate() {
@@ -923,6 +1104,9 @@ pub fn run_export(cmd: &ExportCmd) -> Result<()> {
     }
     Ok(())
 }
+
+/// Most frames an animation (`--gif`, `--apng`) keeps; longer runs keep every n-th.
+pub const MAX_ANIMATION_FRAMES: usize = 200;
 
 fn write_gif(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
     use image::codecs::gif::{GifEncoder, Repeat};

@@ -424,12 +424,16 @@ fn sort_slices(slices: &mut [SliceInfo]) -> Result<f64> {
             ));
         }
     }
-    // The typical distance is the median gap: a missing slice doubles one gap
-    // but barely moves the median, so the gap reported is the one at fault.
-    let mut sorted_gaps = gaps.clone();
-    sorted_gaps.sort_by(f64::total_cmp);
-    let typical = sorted_gaps[(sorted_gaps.len() - 1) / 2];
-    if let Some(i) = gaps.iter().position(|g| (g - typical).abs() > 0.01 * typical + 1e-3) {
+    // Uniform within 1% (+0.001 mm) of the mean distance. When not, the gap
+    // reported is the one farthest from the median distance: a missing slice
+    // doubles one gap and inflates the mean, but barely moves the median, so
+    // the files named are the neighbours of the hole.
+    let mean = (keyed[keyed.len() - 1].0 - keyed[0].0) / gaps.len() as f64;
+    if gaps.iter().any(|g| (g - mean).abs() > 0.01 * mean + 1e-3) {
+        let mut sorted_gaps = gaps.clone();
+        sorted_gaps.sort_by(f64::total_cmp);
+        let typical = sorted_gaps[(sorted_gaps.len() - 1) / 2];
+        let i = (0..gaps.len()).max_by(|&a, &b| (gaps[a] - typical).abs().total_cmp(&(gaps[b] - typical).abs())).unwrap_or(0);
         let (a, b) = (&keyed[i].1.path, &keyed[i + 1].1.path);
         let missing = gaps[i] / typical - 1.0;
         let hint = if missing > 0.5 && (missing - missing.round()).abs() < 0.1 {
@@ -446,7 +450,6 @@ fn sort_slices(slices: &mut [SliceInfo]) -> Result<f64> {
             ),
         ));
     }
-    let mean = (keyed[keyed.len() - 1].0 - keyed[0].0) / gaps.len() as f64;
     for (s, (_, k)) in slices.iter_mut().zip(keyed) {
         *s = k;
     }

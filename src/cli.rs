@@ -695,6 +695,12 @@ pub fn check_threads(threads: usize) -> Result<()> {
     Ok(())
 }
 
+/// A density for messages: plain, or in scientific notation when huge or tiny
+/// (a ±FLT_MAX sentinel is `-3.4028235e38`, not 39 digits).
+fn num(x: f32) -> String {
+    if x != 0.0 && !(1e-4..1e9).contains(&x.abs()) { format!("{x:e}") } else { format!("{x}") }
+}
+
 /// Warnings about a frame that is not what it may seem: an iso value outside
 /// the data's range, or an image with nothing visible. Printed on stderr and
 /// listed in `--json` output.
@@ -704,16 +710,22 @@ pub fn frame_warnings(r: &Renderer, coverage: f64) -> Vec<String> {
     if r.settings().mode == Mode::Iso {
         let iso = r.iso();
         if iso > hi {
-            w.push(format!("the iso value {iso} is above the data's largest value {hi}: nothing can be visible"));
+            w.push(format!("the iso value {} is above the data's largest value {}: nothing can be visible", num(iso), num(hi)));
         } else if iso <= lo {
-            w.push(format!("the iso value {iso} is at or below the data's smallest value {lo}: the whole volume box is opaque"));
+            w.push(format!(
+                "the iso value {} is at or below the data's smallest value {}: the whole volume box is opaque",
+                num(iso),
+                num(lo)
+            ));
         }
     }
     if coverage == 0.0 {
         w.push(format!(
-            "nothing is visible in the image (tissue {}, iso {}, data range {lo} … {hi}); try another --tissue or --iso",
+            "nothing is visible in the image (tissue {}, iso {}, data range {} … {}); try another --tissue or --iso",
             r.classification_name(),
-            r.iso()
+            num(r.iso()),
+            num(lo),
+            num(hi)
         ));
     }
     w
@@ -975,9 +987,12 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     let range = presets::data_range(&vol);
     let sentinel_note = range.sentinel.map(|s| {
         format!(
-            "{} voxels hold {s}, far from the other values ({} … {}): a no-data sentinel? It dominates the range; the presets \
-             ignore it, but the renderer's classification spans it, so replace it for a useful render",
-            range.sentinel_voxels, range.bulk.0, range.bulk.1
+            "{} voxels hold {}, far from the other values ({} … {}): a no-data sentinel? It dominates the range; the presets \
+             ignore it, but the renderer's classification table spans it, so replace it for a faithful render",
+            range.sentinel_voxels,
+            num(s),
+            num(range.bulk.0),
+            num(range.bulk.1)
         )
     });
     let frame = vol.frame().copied();
@@ -1020,7 +1035,17 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
             if f.skew_deg > 0.01 {
                 notes.push(format!("skewed grid, drawn with the nearest orthogonal axes ({:.2}° off)", f.skew_deg));
             }
-            say!("  orientation {} (index axes x, y, z point {}; {})", f.code(), f.code(), notes.join("; "));
+            let word = |c: char| match c {
+                'R' => "right",
+                'L' => "left",
+                'A' => "anterior",
+                'P' => "posterior",
+                'S' => "superior",
+                _ => "inferior",
+            };
+            let code = f.code();
+            let axes: Vec<String> = code.chars().zip(AXES).map(|(c, a)| format!("{a} → {}", word(c))).collect();
+            say!("  orientation {code} (index {}; {})", axes.join(", "), notes.join("; "));
             let (o, l) = (f.origin, f.origin_lps());
             say!("  origin    RAS ({:.3}, {:.3}, {:.3}) mm = LPS ({:.3}, {:.3}, {:.3}) mm", o.x, o.y, o.z, l.x, l.y, l.z);
         }
@@ -1028,16 +1053,18 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
             say!("  orientation unknown (this format carries none): named views take the index axes as RAS; set it with --orientation CODE")
         }
     }
-    say!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
+    say!("  range     {} … {}{}", num(lo), num(hi), if ct { "  (looks like CT in Hounsfield units)" } else { "" });
     if let Some(n) = &sentinel_note {
         say!("  warning   {n}");
     }
     say!("  histogram ({} bins, log scale):", cmd.bins);
     let maxl = hist.iter().map(|&c| ((c + 1) as f64).ln()).fold(0.0, f64::max).max(1e-9);
     for (i, &c) in hist.iter().enumerate() {
-        let a = lo + (hi - lo) * i as f32 / cmd.bins as f32;
+        // in f64: hi − lo overflows f32 for ±FLT_MAX data
+        let a = (lo as f64 + (hi as f64 - lo as f64) * i as f64 / cmd.bins as f64) as f32;
+        let a = if a.abs() >= 1e9 { format!("{a:.3e}") } else { format!("{a:.1}") };
         let bar = "#".repeat((((c + 1) as f64).ln() / maxl * 40.0) as usize);
-        say!("    {a:>10.1} {c:>10} {bar}");
+        say!("    {a:>10} {c:>10} {bar}");
     }
     say!("  suggested tissue thresholds ({}):", if ct { "CT presets" } else { "from the histogram" });
     for t in &tissues {

@@ -4,7 +4,7 @@
 //! shear-warp fast rotator (Csébfalvi 1999).
 //!
 //! The pipeline, one module per stage:
-//! volume ([`volume`], [`slices`], [`phantom`]) → classify ([`classify`], [`presets`])
+//! volume ([`volume`], [`io`], [`orientation`], [`slices`], [`phantom`]) → classify ([`classify`], [`presets`])
 //! → mask ([`mask`], [`shear`], [`depth`]) → factorize view ([`view`])
 //! → composite into the intermediate image ([`raycast`], [`composite`], shaded by
 //! [`normals`]) → warp ([`warp`]).

@@ -364,6 +364,10 @@ fn mirrored_files_are_reversed_and_record_it() {
     assert!(f.origin.abs_diff_eq(g.at([23, 0, 0]), 1e-4), "{:?} vs {:?}", f.origin, g.at([23, 0, 0]));
     let raw = g.values();
     assert_eq!(v.get(0, 3, 4), raw[23 + 24 * (3 + 22 * 4)]);
+    // raw + sidecar keep the frame, reversal included
+    let r = dir.path().join("las.raw");
+    shearwarp::io::save_raw(&v, &r).unwrap();
+    assert_eq!(load_file(&r), v);
     // the same file without `space` has no orientation and keeps its order
     let text = std::fs::read(&p).unwrap();
     let text = String::from_utf8_lossy(&text[..200]).replace("space: left-anterior-superior\n", "space dimension: 3\n");

@@ -197,3 +197,17 @@ fn long_animations_keep_at_most_200_frames() {
     use image::AnimationDecoder;
     assert_eq!(frames.into_frames().count(), 180);
 }
+
+#[test]
+fn a_truncated_nifti_header_is_plain_words() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("short.nii");
+    let mut h = vec![0u8; 200];
+    h[0..4].copy_from_slice(&348i32.to_le_bytes());
+    std::fs::write(&p, &h).unwrap();
+    let o = sw().arg("info").arg(&p).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("short.nii") && err.contains("ends inside the 348-byte header"), "{err}");
+    assert!(!err.contains("Io(") && !err.contains("kind:"), "Rust debug text: {err}");
+}

@@ -393,7 +393,7 @@ pub struct ReferenceRecord {
 /// Runs `shearwarp bench`.
 pub fn run(cmd: &BenchCmd) -> Result<()> {
     cmd.check()?;
-    crate::cli::check_threads(cmd.threads)?;
+    crate::checks::check_threads(cmd.threads)?;
     let (vol, name) = cmd.volume.load()?;
     let report = measure(cmd, vol, name)?;
     if let Some(p) = &cmd.csv {

@@ -498,11 +498,7 @@ impl VolumeArgs {
                 vol.set_frame(Some(frame));
             }
             // the phantoms are built RAS, centred on the origin
-            (None, None) => {
-                let (d, sp) = (vol.dims(), vol.spacing());
-                let origin = glam::DVec3::from_array(std::array::from_fn(|a| -(d[a] as f64 - 1.0) / 2.0 * sp[a] as f64));
-                vol.set_frame(Some(PatientFrame { origin, ..PatientFrame::ras() }));
-            }
+            (None, None) => vol.set_frame(Some(PatientFrame::centred_ras(vol.dims(), vol.spacing()))),
             (None, Some(_)) => {}
         }
         let name = match path {
@@ -558,17 +554,7 @@ impl RenderArgs {
     /// `--iso` makes a custom threshold instead.
     pub fn renderer(&self, vol: Volume) -> Result<Renderer> {
         let settings = self.settings()?;
-        let d = vol.dims();
-        if let Some(a) = d.iter().position(|&n| n < 2) {
-            usage!(
-                "the volume is {}×{}×{}: one voxel thick along {}, and shear-warp renders the cells between voxels, so the \
-                 image would be empty; `shearwarp info` describes it",
-                d[0],
-                d[1],
-                d[2],
-                AXES[a]
-            );
-        }
+        crate::checks::check_renderable(vol.dims())?;
         let tissues = presets::tissues_for(&vol);
         let hi = vol.value_range().1;
         let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
@@ -611,7 +597,7 @@ impl RenderArgs {
         if self.size == 0 || self.size > 16384 {
             usage!("--size must be 1..=16384, got {}", self.size);
         }
-        check_threads(self.threads)?;
+        crate::checks::check_threads(self.threads)?;
         Ok(Settings {
             method: match self.method {
                 MethodArg::Binary => Method::Binary,
@@ -680,57 +666,6 @@ impl ViewArg {
     }
 }
 
-/// The largest `--threads` accepted: 8 per core (at least 8). More threads
-/// than that only add start-up and scheduling cost (100000 used to hang).
-pub fn max_threads() -> usize {
-    8 * std::thread::available_parallelism().map_or(1, |n| n.get())
-}
-
-/// Checks a `--threads` count against [`max_threads`] (a [`Usage`] error above it).
-pub fn check_threads(threads: usize) -> Result<()> {
-    let max = max_threads();
-    if threads > max {
-        usage!("--threads {threads} is more than {max} (8 per core on this machine's {} cores); 0 uses every core", max / 8);
-    }
-    Ok(())
-}
-
-/// A density for messages: plain, or in scientific notation when huge or tiny
-/// (a ±FLT_MAX sentinel is `-3.4028235e38`, not 39 digits).
-fn num(x: f32) -> String {
-    if x != 0.0 && !(1e-4..1e9).contains(&x.abs()) { format!("{x:e}") } else { format!("{x}") }
-}
-
-/// Warnings about a frame that is not what it may seem: an iso value outside
-/// the data's range, or an image with nothing visible. Printed on stderr and
-/// listed in `--json` output.
-pub fn frame_warnings(r: &Renderer, coverage: f64) -> Vec<String> {
-    let mut w = Vec::new();
-    let (lo, hi) = r.volume().value_range();
-    if r.settings().mode == Mode::Iso {
-        let iso = r.iso();
-        if iso > hi {
-            w.push(format!("the iso value {} is above the data's largest value {}: nothing can be visible", num(iso), num(hi)));
-        } else if iso <= lo {
-            w.push(format!(
-                "the iso value {} is at or below the data's smallest value {}: the whole volume box is opaque",
-                num(iso),
-                num(lo)
-            ));
-        }
-    }
-    if coverage == 0.0 {
-        w.push(format!(
-            "nothing is visible in the image (tissue {}, iso {}, data range {} … {}); try another --tissue or --iso",
-            r.classification_name(),
-            num(r.iso()),
-            num(lo),
-            num(hi)
-        ));
-    }
-    w
-}
-
 /// A spinner on stderr while something of unknown length runs (hidden when
 /// stderr is not a terminal).
 fn spinner(msg: &str) -> indicatif::ProgressBar {
@@ -774,7 +709,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let stats = r.render(&cam, &mut img)?;
     img.save_png(&cmd.output)?;
-    let warnings = frame_warnings(&r, img.coverage());
+    let warnings = crate::checks::frame_warnings(&r, img.coverage());
     for w in &warnings {
         eprintln!("warning: {w}");
     }
@@ -895,7 +830,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     pb.finish_and_clear();
     let frames_ms_total: f64 = all.iter().map(|s| s.build_ms + s.frame_ms()).sum();
     let switch_ms_total: f64 = switch_ms.iter().sum();
-    let warnings = frame_warnings(&r, img.coverage());
+    let warnings = crate::checks::frame_warnings(&r, img.coverage());
     for w in &warnings {
         eprintln!("warning: {w}");
     }
@@ -985,16 +920,7 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     let tissues = presets::tissues_for(&vol);
     let ct = presets::looks_like_ct(&vol);
     let range = presets::data_range(&vol);
-    let sentinel_note = range.sentinel.map(|s| {
-        format!(
-            "{} voxels hold {}, far from the other values ({} … {}): a no-data sentinel? It dominates the range; the presets \
-             ignore it, but the renderer's classification table spans it, so replace it for a faithful render",
-            range.sentinel_voxels,
-            num(s),
-            num(range.bulk.0),
-            num(range.bulk.1)
-        )
-    });
+    let sentinel_note = range.sentinel_note();
     let frame = vol.frame().copied();
     let source = if cmd.volume.orientation.is_some() {
         "--orientation"
@@ -1025,35 +951,18 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     say!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
     match frame {
         Some(f) => {
-            let mut notes = vec![format!("from the {source}")];
-            if let Some(a) = f.reversed_axis {
-                notes.push(format!("stored {}: the {} axis was reversed on load so the picture is not mirrored", f.stored_code(), AXES[a]));
-            }
-            if f.obliquity_deg() > 0.01 {
-                notes.push(format!("oblique: up to {:.1}° off the patient axes", f.obliquity_deg()));
-            }
-            if f.skew_deg > 0.01 {
-                notes.push(format!("skewed grid, drawn with the nearest orthogonal axes ({:.2}° off)", f.skew_deg));
-            }
-            let word = |c: char| match c {
-                'R' => "right",
-                'L' => "left",
-                'A' => "anterior",
-                'P' => "posterior",
-                'S' => "superior",
-                _ => "inferior",
-            };
-            let code = f.code();
-            let axes: Vec<String> = code.chars().zip(AXES).map(|(c, a)| format!("{a} → {}", word(c))).collect();
-            say!("  orientation {code} (index {}; {})", axes.join(", "), notes.join("; "));
+            say!("  orientation {}, from the {source}", f.describe());
             let (o, l) = (f.origin, f.origin_lps());
             say!("  origin    RAS ({:.3}, {:.3}, {:.3}) mm = LPS ({:.3}, {:.3}, {:.3}) mm", o.x, o.y, o.z, l.x, l.y, l.z);
         }
-        None => {
-            say!("  orientation unknown (this format carries none): named views take the index axes as RAS; set it with --orientation CODE")
-        }
+        None => say!("  orientation {}", crate::orientation::UNKNOWN),
     }
-    say!("  range     {} … {}{}", num(lo), num(hi), if ct { "  (looks like CT in Hounsfield units)" } else { "" });
+    say!(
+        "  range     {} … {}{}",
+        crate::checks::fmt_density(lo),
+        crate::checks::fmt_density(hi),
+        if ct { "  (looks like CT in Hounsfield units)" } else { "" }
+    );
     if let Some(n) = &sentinel_note {
         say!("  warning   {n}");
     }

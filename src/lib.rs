@@ -14,6 +14,7 @@
 //! against; [`bench`] runs the speed/accuracy matrix (`shearwarp bench`).
 
 pub mod bench;
+pub mod checks;
 pub mod classify;
 pub mod cli;
 pub mod composite;

@@ -294,11 +294,52 @@ impl PatientFrame {
             .fold(0.0, f64::max)
     }
 
+    /// The RAS frame centred on the origin for a volume of `dims` voxels
+    /// `spacing` apart (how the built-in phantoms are placed).
+    pub fn centred_ras(dims: [usize; 3], spacing: [f32; 3]) -> Self {
+        let origin = DVec3::from_array(std::array::from_fn(|a| -(dims[a] as f64 - 1.0) / 2.0 * spacing[a] as f64));
+        PatientFrame { origin, ..PatientFrame::ras() }
+    }
+
+    /// One line for reports: the code, where each index axis points, and any
+    /// reversal, obliquity or skew, e.g. `LPS (index x → left, y → posterior,
+    /// z → superior)`.
+    pub fn describe(&self) -> String {
+        let word = |c: char| match c {
+            'R' => "right",
+            'L' => "left",
+            'A' => "anterior",
+            'P' => "posterior",
+            'S' => "superior",
+            _ => "inferior",
+        };
+        let code = self.code();
+        let axes: Vec<String> = code.chars().zip(["x", "y", "z"]).map(|(c, a)| format!("{a} → {}", word(c))).collect();
+        let mut notes = vec![format!("index {}", axes.join(", "))];
+        if let Some(a) = self.reversed_axis {
+            notes.push(format!(
+                "stored {}: the {} axis was reversed on load so the picture is not mirrored",
+                self.stored_code(),
+                ["x", "y", "z"][a]
+            ));
+        }
+        if self.obliquity_deg() > 0.01 {
+            notes.push(format!("oblique: up to {:.1}° off the patient axes", self.obliquity_deg()));
+        }
+        if self.skew_deg > 0.01 {
+            notes.push(format!("skewed grid, drawn with the nearest orthogonal axes ({:.2}° off)", self.skew_deg));
+        }
+        format!("{code} ({})", notes.join("; "))
+    }
+
     /// The origin in LPS (DICOM's patient coordinates).
     pub fn origin_lps(&self) -> DVec3 {
         DVec3::new(-self.origin.x, -self.origin.y, self.origin.z)
     }
 }
+
+/// What reports say about a volume without orientation.
+pub const UNKNOWN: &str = "unknown (this format carries none): named views take the index axes as RAS; set it with --orientation CODE";
 
 /// Converts an LPS vector (DICOM, NRRD `left-posterior-superior`) to RAS.
 pub fn lps_to_ras(v: DVec3) -> DVec3 {

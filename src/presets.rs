@@ -109,6 +109,21 @@ impl DataRange {
     pub fn working(&self) -> (f32, f32) {
         self.bulk
     }
+
+    /// What a report should say about the sentinel, if there is one.
+    pub fn sentinel_note(&self) -> Option<String> {
+        let n = crate::checks::fmt_density;
+        self.sentinel.map(|s| {
+            format!(
+                "{} voxels hold {}, far from the other values ({} … {}): a no-data sentinel? It dominates the range; the \
+                 presets ignore it, but the renderer's classification table spans it, so replace it for a faithful render",
+                self.sentinel_voxels,
+                n(s),
+                n(self.bulk.0),
+                n(self.bulk.1)
+            )
+        })
+    }
 }
 
 /// The value range of `v` and any sentinel that dominates it (see [`DataRange`]).

@@ -1,4 +1,4 @@
-//! The RLE path on VolPack's comparison cases (scripts/volpack/README.md):
+//! The RLE path on VolPack's comparison cases (benches/scripts/volpack/README.md):
 //! the same transfer functions, early termination and rotation, single-threaded.
 //!
 //! `cargo run --release --example rle_volpack_tf -- FILE.den [SIZE] [FRAMES] [METHOD] [opaque|ramp]`

@@ -20,13 +20,11 @@ pub enum Error {
     /// A file that could not be read or parsed.
     #[error("{path}: {why}")]
     File { path: PathBuf, why: String },
-    /// I/O error with the path it happened on.
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    /// I/O error with the path it happened on. (Not marked as the error's
+    /// source: the message already holds it, and a report that walks the
+    /// chain would print it twice.)
+    #[error("{path}: {error}")]
+    Io { path: PathBuf, error: std::io::Error },
     /// Anything else (image encoding, ...).
     #[error("{0}")]
     Other(String),

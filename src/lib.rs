@@ -7,7 +7,7 @@
 //! The library is the renderer; the command-line tool, the bench runner and the
 //! viewer live in the binary (feature `cli`). The folders follow one frame:
 //!
-//! data ([`data`]: volume, loaders, phantoms, slice stacks, normal codes)
+//! data ([`data`]: volume, patient orientation, loaders, phantoms, slice stacks, normal codes)
 //! → classify ([`classify`]: transfer functions, presets, shading)
 //! → encode ([`encode`]: cell mask, shear, depth search, RLE)
 //! → view ([`view`]: camera, factorization, frame plan)
@@ -15,12 +15,14 @@
 //! → warp ([`warp`]: the intermediate image to the final one).
 //! [`render`] runs that pipeline per frame; [`kernels`] holds the one CPU
 //! level every SIMD kernel is chosen by. [`accuracy`] (reference renderer,
-//! analytic truth, metrics) is what the fast paths are measured against.
+//! analytic truth, metrics) is what the fast paths are measured against;
+//! [`checks`] holds the sanity checks and warnings every front end shares.
 //!
 //! The everyday API is re-exported here: load or build a [`Volume`], make a
 //! [`Renderer`] with [`Settings`], and render a [`Camera`] into an [`Image`].
 
 pub mod accuracy;
+pub mod checks;
 pub mod classify;
 pub mod composite;
 pub mod data;

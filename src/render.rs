@@ -820,6 +820,7 @@ fn check_settings(s: &Settings) -> Result<()> {
 }
 
 fn build_pool(threads: usize) -> Result<rayon::ThreadPool> {
+    crate::checks::check_threads(threads)?;
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()

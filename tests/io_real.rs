@@ -1,5 +1,5 @@
 //! The loaders on the real sample scans in `$SHEARWARP_DATA` (see
-//! `scripts/fetch-data.sh`); every test prints that it was skipped and passes
+//! `tests/fetch-data.sh`); every test prints that it was skipped and passes
 //! when the variable is unset.
 //!
 //! Each scan is also written out as raw + sidecar and read back identical.

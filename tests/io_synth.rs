@@ -666,3 +666,19 @@ fn format_inference_and_missing_files() {
     assert!(e.to_string().contains("not a regular file"), "{e}");
     assert!(Format::infer(Path::new("/dev/null")).is_err());
 }
+
+#[test]
+fn dicom_missing_slice_names_its_neighbours() {
+    // slices at z = 0, 2.5, …, 17.5 without the one at 7.5: the error names
+    // the two slices around the hole (it used to name the first slice whose
+    // gap differed from the mean, which the hole itself inflates)
+    let dir = tempfile::tempdir().unwrap();
+    let ts = dicom_dictionary_std::uids::EXPLICIT_VR_LITTLE_ENDIAN;
+    for k in (0..8).filter(|&k| k != 3) {
+        ct_slice(&dir.path().join(format!("k{k}.dcm")), "1.2.3.5", 10 + k, 3, 4, k as f64 * 2.5, &ct_values(4, 3, 0), ts);
+    }
+    let e = load_err(dir.path());
+    assert!(e.contains("k4.dcm") && e.contains("k2.dcm"), "{e}");
+    assert!(e.contains("5.0000 mm") && e.contains("2.5000 mm apart") && e.contains("1 slice(s) missing"), "{e}");
+    assert!(!e.contains("k1.dcm") && !e.contains("k0.dcm"), "{e}");
+}

@@ -347,6 +347,7 @@ pub struct ReferenceRecord {
 /// Runs `shearwarp bench`.
 pub fn run(cmd: &BenchCmd) -> Result<()> {
     cmd.check()?;
+    shearwarp::checks::check_threads(cmd.threads)?;
     let (vol, name) = cmd.volume.load()?;
     let report = measure(cmd, vol, name)?;
     if let Some(p) = &cmd.csv {

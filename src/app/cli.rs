@@ -15,6 +15,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use shearwarp::classify::presets;
 use shearwarp::composite::Mode;
 use shearwarp::data::io;
+use shearwarp::data::orientation::{PatientFrame, view_rotation};
 use shearwarp::data::phantom::Phantom;
 use shearwarp::data::volume::{Volume, VoxelType};
 use shearwarp::encode::depth::Search;
@@ -140,6 +141,10 @@ pub struct VolumeArgs {
     /// Voxel spacing X,Y,Z (overrides the file's).
     #[arg(long, value_parser = parse_spacing)]
     pub spacing: Option<[f32; 3]>,
+    /// Patient orientation of the index axes: where x, y, z point, e.g. RAS, LPS, LAS
+    /// (raw and .den files carry none; replaces a file's own). Named views follow it.
+    #[arg(long, value_name = "CODE")]
+    pub orientation: Option<String>,
 }
 
 /// Render settings shared by every command.
@@ -403,6 +408,23 @@ impl VolumeArgs {
         if let Some(sp) = self.spacing {
             vol.set_spacing(sp)?;
         }
+        match (&self.orientation, path) {
+            (Some(code), _) => {
+                let frame = PatientFrame::from_code(code)?;
+                if let Some(old) = vol.frame().copied() {
+                    eprintln!("note: --orientation {code} replaces the file's own orientation {}", old.stored_code());
+                    // back to the file's voxel order before the new frame is applied
+                    if let Some(a) = old.reversed_axis {
+                        vol.reverse_axis(a);
+                    }
+                    vol.set_frame(None);
+                }
+                vol.set_frame(Some(frame));
+            }
+            // the phantoms are built RAS, centred on the origin
+            (None, None) => vol.set_frame(Some(PatientFrame::centred_ras(vol.dims(), vol.spacing()))),
+            (None, Some(_)) => {}
+        }
         let name = match path {
             Some(p) => p.display().to_string(),
             None => format!("{} phantom", self.phantom.name()),
@@ -418,6 +440,7 @@ impl RenderArgs {
     /// `--iso` makes a custom threshold instead.
     pub fn renderer(&self, vol: Volume) -> Result<Renderer> {
         let settings = self.settings()?;
+        shearwarp::checks::check_renderable(vol.dims())?;
         let tissues = presets::tissues_for(&vol);
         let hi = vol.value_range().1;
         let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
@@ -460,6 +483,7 @@ impl RenderArgs {
         if self.size == 0 || self.size > 16384 {
             usage!("--size must be 1..=16384, got {}", self.size);
         }
+        shearwarp::checks::check_threads(self.threads)?;
         Ok(Settings {
             method: self.method,
             mode: self.mode,
@@ -473,9 +497,10 @@ impl RenderArgs {
         })
     }
 
-    /// The starting camera.
-    pub fn camera(&self) -> Result<Camera> {
-        let mut r = self.view.rotation();
+    /// The starting camera for a volume placed in the patient by `frame`
+    /// ([`Volume::frame`]; `None`: index axes taken as RAS).
+    pub fn camera(&self, frame: Option<&PatientFrame>) -> Result<Camera> {
+        let mut r = view_rotation(self.view, frame);
         if let Some([rx, ry, rz]) = self.rotate {
             r = rotate_eye(rotate_eye(rotate_eye(r, 0, rx), 1, ry), 2, rz);
         }
@@ -526,11 +551,15 @@ fn median(v: &mut [f64]) -> f64 {
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let (vol, name) = cmd.volume.load()?;
     let dims = vol.dims();
+    let cam = cmd.render.camera(vol.frame())?;
     let mut r = cmd.render.renderer(vol)?;
-    let cam = cmd.render.camera()?;
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let stats = r.render(&cam, &mut img)?;
     img.save_png(&cmd.output)?;
+    let warnings = shearwarp::checks::frame_warnings(&r, img.coverage());
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     if cmd.json {
         let s = r.settings();
         let j = serde_json::json!({
@@ -538,7 +567,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
             "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
-            "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(),
+            "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,
         });
         say!("{j}");
     } else {
@@ -568,11 +597,10 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let dims = vol.dims();
     let step = match cmd.step_deg.as_str() {
         "auto" => one_bit_step_deg(vol.dims()) * cmd.render.cell as f64,
-        s => s
-            .parse::<f64>()
-            .ok()
-            .filter(|x| x.is_finite() && *x > 0.0)
-            .with_context(|| format!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'"))?,
+        s => match s.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0) {
+            Some(x) => x,
+            None => usage!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'"),
+        },
     };
     if !(cmd.degrees.is_finite() && cmd.degrees > 0.0) {
         usage!("--degrees must be a positive number, got {}", cmd.degrees);
@@ -581,12 +609,16 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     if frames > 1_000_000 {
         usage!("{frames} frames is too many (raise --step-deg)");
     }
+    let cam0 = cmd.render.camera(vol.frame())?;
     let mut r = cmd.render.renderer(vol)?;
-    let cam0 = cmd.render.camera()?;
     if cmd.cycle_tissues > 0 && r.tissues().is_none_or(|(t, _)| t.len() < 2) {
         usage!("--cycle-tissues needs tissue presets (it cannot be combined with --iso)");
     }
-    let mut switch_ns: Vec<f64> = Vec::new();
+    // A tissue switch costs the selection plus whatever the next frame would
+    // otherwise rebuild: the RLE paths re-encode the volume for the new
+    // classification (per principal axis), the binary path only swaps a table.
+    let reencodes = matches!(r.settings().method, shearwarp::render::Method::Rle | shearwarp::render::Method::BruteRle);
+    let (mut select_ns, mut switch_ms, mut after_switch_ms): (Vec<f64>, Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new(), Vec::new());
     let build_ms = r.prepare_all_axes();
     if let Some(d) = &cmd.frames_dir {
         std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create directory", d.display()))?;
@@ -601,17 +633,31 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let pb = progress(frames as u64, cmd.render.quiet || cmd.json, "rotating");
     let mut img = Image::new(cam0.size[0], cam0.size[1]);
     let mut all: Vec<FrameStats> = Vec::with_capacity(frames);
+    let loop_start = std::time::Instant::now();
+    let mut frames_wall_ms = 0.0;
     for f in 0..frames {
-        if cmd.cycle_tissues > 0 && f > 0 && f % cmd.cycle_tissues == 0 {
+        let mut cam = cam0;
+        cam.rotation = rotate_eye(cam0.rotation, axis, f as f64 * step);
+        let switched = cmd.cycle_tissues > 0 && f > 0 && f % cmd.cycle_tissues == 0;
+        if switched {
             let n = r.tissues().map_or(1, |(t, _)| t.len());
             let next = (r.tissues().map_or(0, |(_, c)| c) + 1) % n;
             let t = std::time::Instant::now();
             r.select_tissue(next)?;
-            switch_ns.push(t.elapsed().as_secs_f64() * 1e9);
+            select_ns.push(t.elapsed().as_secs_f64() * 1e9);
+            // the rebuild the switch causes, for the principal axis of the coming frame
+            let v = r.volume();
+            let principal = shearwarp::view::Factorization::new(&cam, v.dims(), v.spacing())?.axis;
+            r.prepare_axis(principal)?;
+            switch_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
-        let mut cam = cam0;
-        cam.rotation = rotate_eye(cam0.rotation, axis, f as f64 * step);
+        let t = std::time::Instant::now();
         let st = r.render(&cam, &mut img)?;
+        let wall = t.elapsed().as_secs_f64() * 1e3;
+        frames_wall_ms += wall;
+        if switched {
+            after_switch_ms.push(wall);
+        }
         all.push(st);
         if let Some(d) = &cmd.frames_dir {
             img.save_png(&d.join(format!("frame_{f:05}.png")))?;
@@ -621,10 +667,30 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         }
         pb.inc(1);
     }
+    let loop_ms = loop_start.elapsed().as_secs_f64() * 1e3;
     pb.finish_and_clear();
+    let frames_ms_total: f64 = all.iter().map(|s| s.build_ms + s.frame_ms()).sum();
+    let switch_ms_total: f64 = switch_ms.iter().sum();
+    let warnings = shearwarp::checks::frame_warnings(&r, img.coverage());
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     let col = |g: fn(&FrameStats) -> f64| median(&mut all.iter().map(g).collect::<Vec<_>>());
     let (shear, render, warp, frame) = (col(|s| s.shear_ms), col(|s| s.render_ms), col(|s| s.warp_ms), col(|s| s.frame_ms()));
     let fps = if frame > 0.0 { 1000.0 / frame } else { f64::INFINITY };
+    // an animation of every frame of a long turn is huge (801 frames, 45 MB
+    // for a full turn of a large scan): keep at most MAX_ANIMATION_FRAMES
+    let kept = if kept.len() > MAX_ANIMATION_FRAMES {
+        let every = kept.len().div_ceil(MAX_ANIMATION_FRAMES);
+        let kept: Vec<_> = kept.into_iter().step_by(every).collect();
+        eprintln!(
+            "note: the animation keeps every {every}th of the {frames} frames ({} frames); --step-deg sets the step, --frames-dir keeps them all",
+            kept.len()
+        );
+        kept
+    } else {
+        kept
+    };
     if let Some(p) = &cmd.gif {
         write_gif(p, &kept)?;
     }
@@ -636,7 +702,13 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
-            "cpu": s.cpu.capped().name(), "tissue_switches": switch_ns.len(), "tissue_switch_ns_median": median(&mut switch_ns),
+            "cpu": s.cpu.capped().name(), "tissue_switches": switch_ms.len(),
+            // the full cost of a switch: selection plus the rebuild it causes (re-encoding on the RLE paths)
+            "tissue_switch_ns_median": median(&mut switch_ms.clone()) * 1e6,
+            "tissue_switch_ms_median": median(&mut switch_ms.clone()), "tissue_switch_ms_total": switch_ms_total,
+            "tissue_switch_reencodes": reencodes, "tissue_select_ns_median": median(&mut select_ns),
+            "tissue_switch_next_frame_ms_median": median(&mut after_switch_ms),
+            "frames_ms_total": frames_ms_total, "frames_wall_ms_total": frames_wall_ms, "loop_ms": loop_ms, "warnings": warnings,
             "threads": if s.threads == 0 { rayon::current_num_threads() } else { s.threads },
             "size": cam0.size[0], "axis": AXES[axis],
             "frames": frames, "degrees": frames as f64 * step, "step_deg": step, "build_ms": build_ms,
@@ -661,8 +733,15 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             r.classification_name(),
             r.iso()
         );
-        if !switch_ns.is_empty() {
-            say!("  {} tissue switches, median {:.0} ns each", switch_ns.len(), median(&mut switch_ns));
+        if !switch_ms.is_empty() {
+            say!(
+                "  {} tissue switches, median {:.3} ms each ({}; selection alone {:.0} ns), next frame {:.3} ms",
+                switch_ms.len(),
+                median(&mut switch_ms.clone()),
+                if reencodes { "re-encodes the volume for the new classification" } else { "a table swap, no rebuild" },
+                median(&mut select_ns),
+                median(&mut after_switch_ms)
+            );
         }
         say!("  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms", frames as f64 * step);
         say!("  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms");
@@ -681,12 +760,28 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     let hist = vol.histogram(cmd.bins);
     let tissues = presets::tissues_for(&vol);
     let ct = presets::looks_like_ct(&vol);
+    let range = presets::data_range(&vol);
+    let sentinel_note = range.sentinel_note();
+    let frame = vol.frame().copied();
+    let source = if cmd.volume.orientation.is_some() {
+        "--orientation"
+    } else if cmd.volume.file.is_none() && cmd.volume.raw.is_none() && cmd.volume.den.is_none() {
+        "phantom"
+    } else {
+        "file"
+    };
     if cmd.json {
         let j = serde_json::json!({
             "volume": name, "dims": vol.dims(), "type": vol.data().voxel_type().name(), "spacing": vol.spacing(),
             "min": lo, "max": hi, "histogram": hist, "ct_hounsfield": ct,
             "cpu": kernels::level().name(), "cpu_detected": kernels::detected().name(),
             "tissues": tissues.iter().map(|t| serde_json::json!({"name": t.name, "threshold": t.threshold})).collect::<Vec<_>>(),
+            "orientation": frame.map(|f| f.code()), "orientation_source": frame.map(|_| source),
+            "stored_orientation": frame.map(|f| f.stored_code()), "reversed_axis": frame.and_then(|f| f.reversed_axis.map(|a| AXES[a])),
+            "origin_ras": frame.map(|f| f.origin.to_array()), "origin_lps": frame.map(|f| f.origin_lps().to_array()),
+            "directions_ras": frame.map(|f| [f.directions.x_axis.to_array(), f.directions.y_axis.to_array(), f.directions.z_axis.to_array()]),
+            "oblique_deg": frame.map(|f| f.obliquity_deg()), "skew_deg": frame.map(|f| f.skew_deg),
+            "sentinel": range.sentinel, "sentinel_voxels": range.sentinel_voxels, "warnings": sentinel_note.iter().collect::<Vec<_>>(),
         });
         say!("{j}");
         return Ok(());
@@ -696,7 +791,23 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     say!("{name}");
     say!("  dims      {} × {} × {} ({} voxels, {})", d[0], d[1], d[2], vol.len(), vol.data().voxel_type().name());
     say!("  spacing   {} × {} × {}", sp[0], sp[1], sp[2]);
-    say!("  range     {lo} … {hi}{}", if ct { "  (looks like CT in Hounsfield units)" } else { "" });
+    match frame {
+        Some(f) => {
+            say!("  orientation {}, from the {source}", f.describe());
+            let (o, l) = (f.origin, f.origin_lps());
+            say!("  origin    RAS ({:.3}, {:.3}, {:.3}) mm = LPS ({:.3}, {:.3}, {:.3}) mm", o.x, o.y, o.z, l.x, l.y, l.z);
+        }
+        None => say!("  orientation {}", shearwarp::data::orientation::UNKNOWN),
+    }
+    say!(
+        "  range     {} … {}{}",
+        shearwarp::checks::fmt_density(lo),
+        shearwarp::checks::fmt_density(hi),
+        if ct { "  (looks like CT in Hounsfield units)" } else { "" }
+    );
+    if let Some(n) = &sentinel_note {
+        say!("  warning   {n}");
+    }
     say!(
         "  cpu       {} kernels (detected {}; SHEARWARP_CPU=scalar|avx2|native caps it)",
         kernels::level().name(),
@@ -705,9 +816,11 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     say!("  histogram ({} bins, log scale):", cmd.bins);
     let maxl = hist.iter().map(|&c| ((c + 1) as f64).ln()).fold(0.0, f64::max).max(1e-9);
     for (i, &c) in hist.iter().enumerate() {
-        let a = lo + (hi - lo) * i as f32 / cmd.bins as f32;
+        // in f64: hi − lo overflows f32 for ±FLT_MAX data
+        let a = (lo as f64 + (hi as f64 - lo as f64) * i as f64 / cmd.bins as f64) as f32;
+        let a = if a.abs() >= 1e9 { format!("{a:.3e}") } else { format!("{a:.1}") };
         let bar = "#".repeat((((c + 1) as f64).ln() / maxl * 40.0) as usize);
-        say!("    {a:>10.1} {c:>10} {bar}");
+        say!("    {a:>10} {c:>10} {bar}");
     }
     say!("  suggested tissue thresholds ({}):", if ct { "CT presets" } else { "from the histogram" });
     for t in &tissues {
@@ -778,6 +891,9 @@ pub fn run_export(cmd: &ExportCmd) -> Result<()> {
     }
     Ok(())
 }
+
+/// Most frames an animation (`--gif`, `--apng`) keeps; longer runs keep every n-th.
+pub const MAX_ANIMATION_FRAMES: usize = 200;
 
 fn write_gif(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
     use image::codecs::gif::{GifEncoder, Repeat};

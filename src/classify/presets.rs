@@ -87,22 +87,122 @@ pub fn ct_tissue(name: &str) -> Option<Tissue> {
     ct_tissues().into_iter().find(|t| t.name == name)
 }
 
-/// True when the volume looks like CT in Hounsfield units (air near −1000).
-pub fn looks_like_ct(v: &Volume) -> bool {
+/// A volume's value range, and the sentinel (no-data value such as
+/// ±FLT_MAX) that dominates it, if one does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DataRange {
+    /// Smallest and largest value.
+    pub lo: f32,
+    pub hi: f32,
+    /// The range of the values other than the sentinel (`(lo, hi)` without one).
+    pub bulk: (f32, f32),
+    /// A value at one end of the range, far from all the others: the rest of
+    /// the data span less than 1/1000 of the full range (or the value is
+    /// beyond ±1e30). Thresholds and histograms ignore it.
+    pub sentinel: Option<f32>,
+    /// Voxels holding the sentinel.
+    pub sentinel_voxels: u64,
+}
+
+impl DataRange {
+    /// The range presets and histograms use: [`DataRange::bulk`].
+    pub fn working(&self) -> (f32, f32) {
+        self.bulk
+    }
+
+    /// What a report should say about the sentinel, if there is one.
+    pub fn sentinel_note(&self) -> Option<String> {
+        let n = crate::checks::fmt_density;
+        self.sentinel.map(|s| {
+            format!(
+                "{} voxels hold {}, far from the other values ({} … {}): a no-data sentinel? It dominates the range; the \
+                 presets ignore it, but the renderer's classification table spans it, so replace it for a faithful render",
+                self.sentinel_voxels,
+                n(s),
+                n(self.bulk.0),
+                n(self.bulk.1)
+            )
+        })
+    }
+}
+
+/// The value range of `v` and any sentinel that dominates it (see [`DataRange`]).
+pub fn data_range(v: &Volume) -> DataRange {
     let (lo, hi) = v.value_range();
+    let plain = DataRange { lo, hi, bulk: (lo, hi), sentinel: None, sentinel_voxels: 0 };
+    if hi <= lo {
+        return plain;
+    }
+    let span = hi as f64 - lo as f64;
+    // the range of the values other than the lowest, and other than the highest
+    let (mut lo2, mut hi2) = (f32::INFINITY, f32::NEG_INFINITY);
+    let (mut n_lo, mut n_hi) = (0u64, 0u64);
+    for i in 0..v.len() {
+        let x = v.data().get(i);
+        if x == lo {
+            n_lo += 1;
+        } else {
+            lo2 = lo2.min(x);
+        }
+        if x == hi {
+            n_hi += 1;
+        } else {
+            hi2 = hi2.max(x);
+        }
+    }
+    // the end value `s` is a sentinel when the rest has a spread of its own and
+    // lies far from it
+    let far = |rest_lo: f32, rest_hi: f32, s: f32| {
+        rest_lo < rest_hi
+            && ((rest_hi as f64 - rest_lo as f64) < 1e-3 * span || (s.abs() >= 1e30 && rest_lo.abs().max(rest_hi.abs()) < 1e30))
+    };
+    if far(lo2, hi, lo) {
+        return DataRange { bulk: (lo2, hi), sentinel: Some(lo), sentinel_voxels: n_lo, ..plain };
+    }
+    if far(lo, hi2, hi) {
+        return DataRange { bulk: (lo, hi2), sentinel: Some(hi), sentinel_voxels: n_hi, ..plain };
+    }
+    plain
+}
+
+/// True when the volume looks like CT in Hounsfield units (air near −1000),
+/// judged on the range without a sentinel.
+pub fn looks_like_ct(v: &Volume) -> bool {
+    let (lo, hi) = data_range(v).working();
     lo <= -900.0 && lo >= -3100.0 && hi > 0.0
+}
+
+/// `lo + (hi − lo)·f` without overflow (f64), as a finite f32.
+fn lerp(lo: f32, hi: f32, f: f64) -> f32 {
+    ((lo as f64) + (hi as f64 - lo as f64) * f).clamp(f32::MIN as f64, f32::MAX as f64) as f32
+}
+
+/// A 256-bin histogram over `[lo, hi]`, ignoring values outside it (a sentinel).
+fn histogram_in(v: &Volume, bins: usize, lo: f32, hi: f32) -> Vec<u64> {
+    let mut h = vec![0u64; bins];
+    let scale = if hi > lo { bins as f64 / (hi as f64 - lo as f64) } else { 0.0 };
+    for i in 0..v.len() {
+        let x = v.data().get(i);
+        if x < lo || x > hi {
+            continue;
+        }
+        let b = ((x as f64 - lo as f64) * scale) as usize;
+        h[b.min(bins - 1)] += 1;
+    }
+    h
 }
 
 /// Otsu's threshold over a 256-bin histogram: the density that best separates
 /// background from object. A sensible default iso value for MRI and unknown data.
+/// Finite for any finite data (a sentinel is left out).
 pub fn otsu_threshold(v: &Volume) -> f32 {
-    let (lo, hi) = v.value_range();
+    let (lo, hi) = data_range(v).working();
     if hi <= lo {
         return lo;
     }
-    let h = v.histogram(256);
+    let h = histogram_in(v, 256, lo, hi);
     let t = otsu_bins(&h, 0, 256).unwrap_or(0);
-    lo + (hi - lo) * (t as f32 + 1.0) / 256.0
+    lerp(lo, hi, (t as f64 + 1.0) / 256.0)
 }
 
 /// Otsu's split of histogram bins `[a, b)`: the last bin of the lower class.
@@ -132,13 +232,16 @@ fn otsu_bins(h: &[u64], a: usize, b: usize) -> Option<usize> {
 /// between-class variance, found exactly by dynamic programming over a 256-bin
 /// histogram), ascending. Fewer when the volume has fewer distinct levels.
 pub fn histogram_thresholds(v: &Volume) -> Vec<f32> {
-    let (lo, hi) = v.value_range();
+    let (lo, hi) = data_range(v).working();
     if hi <= lo {
         return vec![];
     }
-    let h = v.histogram(256);
-    let to_density = |t: usize| lo + (hi - lo) * t as f32 / 256.0;
-    multi_otsu(&h, 4).into_iter().map(to_density).collect()
+    let h = histogram_in(v, 256, lo, hi);
+    let to_density = |t: usize| lerp(lo, hi, t as f64 / 256.0);
+    let mut t: Vec<f32> = multi_otsu(&h, 4).into_iter().map(to_density).collect();
+    // bins closer than an f32 step collapse: keep distinct thresholds only
+    t.dedup();
+    t
 }
 
 /// Class boundaries (the first bin of classes 1..k) maximising Σ w·μ² over `k`
@@ -199,7 +302,7 @@ pub fn tissues_for(v: &Volume) -> Vec<Tissue> {
     if looks_like_ct(v) {
         return ct_tissues();
     }
-    let hi = v.value_range().1;
+    let hi = data_range(v).working().1;
     let names = ["low", "mid", "high"];
     let ts = histogram_thresholds(v);
     let ts = if ts.is_empty() { vec![otsu_threshold(v)] } else { ts };
@@ -210,8 +313,14 @@ pub fn tissues_for(v: &Volume) -> Vec<Tissue> {
 /// ramp that makes everything above `t` semi-transparent.
 pub fn generic(t: f32, hi: f32) -> Tissue {
     let rgb = [0.92, 0.9, 0.85];
-    let top = if hi > t { hi } else { t + 1.0 };
-    Tissue { name: "auto", threshold: t, rgb, tf: tf(&[(t, 0.0), (t + (top - t) * 0.5, 0.25), (top, 0.6)], &[(t, rgb)]) }
+    // in f64: t and hi may be anywhere in the f32 range (±FLT_MAX sentinels)
+    let top = if hi > t {
+        hi
+    } else {
+        let u = t + 1.0;
+        if u.is_finite() { u } else { t }
+    };
+    Tissue { name: "auto", threshold: t, rgb, tf: tf(&[(t, 0.0), (lerp(t, top, 0.5), 0.25), (top, 0.6)], &[(t, rgb)]) }
 }
 
 #[cfg(test)]
@@ -238,6 +347,32 @@ mod tests {
         assert!(t[0] > 0.0 && t[0] <= 50.0 && t[1] > 50.0 && t[1] <= 120.0 && t[2] > 120.0 && t[2] <= 220.0, "{t:?}");
         let tissues = tissues_for(&v);
         assert_eq!(tissues.iter().map(|t| t.name).collect::<Vec<_>>(), ["low", "mid", "high"]);
+    }
+
+    #[test]
+    fn extreme_and_sentinel_ranges_give_valid_presets() {
+        for (a, b) in [(-f32::MAX, f32::MAX), (0.0, f32::MAX), (-f32::MAX, 0.0), (1e37, 3e38), (-1e-38, 1e-38), (5.0, 5.0)] {
+            let v = Volume::from_fn([8, 4, 4], [1.0; 3], |x, y, _| if x < 4 { a } else { b - b.abs() * 0.1 * y as f32 }).unwrap();
+            let t = tissues_for(&v);
+            assert!(!t.is_empty());
+            for x in &t {
+                assert!(x.threshold.is_finite(), "{a} {b}: {x:?}");
+            }
+            assert!(t.windows(2).all(|w| w[0].threshold < w[1].threshold), "{t:?}");
+            assert!(otsu_threshold(&v).is_finite());
+            let _ = generic(a, b);
+            let _ = generic(b, a);
+        }
+        // a FLT_MAX no-data value around CT data
+        let v = Volume::from_fn([16, 8, 8], [1.0; 3], |x, y, _| if x == 0 { -f32::MAX } else { [-1000.0, 40.0, 900.0][y % 3] }).unwrap();
+        let r = data_range(&v);
+        assert_eq!(r.sentinel, Some(-f32::MAX));
+        assert_eq!(r.bulk, (-1000.0, 900.0));
+        assert_eq!(r.sentinel_voxels, 64);
+        assert!(looks_like_ct(&v));
+        // ordinary data have none, nor have two-valued masks
+        let m = Volume::from_fn([4, 4, 4], [1.0; 3], |x, _, _| (x % 2) as f32).unwrap();
+        assert_eq!(data_range(&m).sentinel, None);
     }
 
     #[test]

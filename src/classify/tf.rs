@@ -121,11 +121,23 @@ pub struct Classifier {
 impl Classifier {
     /// Tabulates `tf` over the density range `[lo, hi]` (normally the volume's).
     pub fn new(tf: &TransferFunction, lo: f32, hi: f32) -> Self {
-        let (lo, hi) = if hi > lo && (hi - lo).is_finite() { (lo, hi) } else { (lo, lo + 1.0) };
-        let step = (hi - lo) / (TABLE_NODES - 1) as f32;
+        // in f64: the range may span the whole f32 range (±FLT_MAX sentinels),
+        // where hi − lo overflows f32 but its 4095th part does not
+        let (lo, hi) = if hi > lo && lo.is_finite() && hi.is_finite() {
+            (lo, hi)
+        } else {
+            let up = lo + 1.0;
+            (lo, if up > lo { up } else { lo + lo.abs() * f32::EPSILON * 2.0 })
+        };
+        let step = if (hi - lo).is_finite() {
+            (hi - lo) / (TABLE_NODES - 1) as f32
+        } else {
+            ((hi as f64 - lo as f64) / (TABLE_NODES - 1) as f64) as f32
+        };
         let table: Vec<Rgba> = (0..TABLE_NODES)
             .map(|i| {
                 let d = lo + step * i as f32;
+                let d = if d.is_finite() { d } else { (lo as f64 + step as f64 * i as f64).min(f32::MAX as f64) as f32 };
                 let [r, g, b] = tf.color_at(d);
                 Rgba { r, g, b, a: tf.opacity_at(d) }
             })
@@ -206,7 +218,8 @@ impl Classifier {
 
     /// Density of table node `i`.
     pub fn node_density(&self, i: usize) -> f32 {
-        self.d0 + self.step * i as f32
+        let d = self.d0 + self.step * i as f32;
+        if d.is_finite() { d } else { (self.d0 as f64 + self.step as f64 * i as f64).clamp(f32::MIN as f64, f32::MAX as f64) as f32 }
     }
 
     /// The table node nearest to density `d` (clamped into the table): the

@@ -1,6 +1,7 @@
 //! Stage 1 — data: what a frame samples, before any classification.
 //!
-//! Owns the volume ([`volume`]: voxels of their own type, spacing, size limits),
+//! Owns the volume ([`volume`]: voxels of their own type, spacing, size limits,
+//! and where its index axes lie in the patient: [`orientation`]),
 //! the file loaders ([`io`]: NRRD, NIfTI, DICOM, .den, raw), the built-in
 //! phantoms ([`phantom`]), the per-axis slice stacks ([`slices`]: densities laid
 //! out along one principal axis, with the shared bilinear sample and gradient)
@@ -9,6 +10,7 @@
 
 pub mod io;
 pub mod normals;
+pub mod orientation;
 pub mod phantom;
 pub mod slices;
 pub mod volume;

@@ -7,6 +7,7 @@
 //!
 //! Storage is x-fastest: voxel `(x, y, z)` lives at `x + nx * (y + ny * z)`.
 
+use crate::data::orientation::PatientFrame;
 use crate::error::{Error, Result};
 
 /// Largest accepted edge length of a volume, in voxels.
@@ -117,12 +118,14 @@ pub fn check_dims(dims: [u64; 3]) -> Result<[usize; 3]> {
     Ok([dims[0] as usize, dims[1] as usize, dims[2] as usize])
 }
 
-/// A scalar volume: dimensions, spacing and typed voxels.
+/// A scalar volume: dimensions, spacing, typed voxels and (when the file says)
+/// where the index axes point in the patient.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Volume {
     dims: [usize; 3],
     spacing: [f32; 3],
     data: VoxelData,
+    frame: Option<PatientFrame>,
 }
 
 impl Volume {
@@ -143,7 +146,7 @@ impl Volume {
                 return Err(Error::NonFinite { index, value });
             }
         }
-        Ok(Volume { dims: d, spacing, data })
+        Ok(Volume { dims: d, spacing, data, frame: None })
     }
 
     /// Builds an f32 volume by evaluating `f(x, y, z)` at every voxel.
@@ -173,6 +176,64 @@ impl Volume {
         check_spacing(spacing)?;
         self.spacing = spacing;
         Ok(())
+    }
+    /// Where the index axes point in the patient (`None`: unknown, e.g. raw
+    /// and .den files; named views then take the index axes to be RAS).
+    /// Always right-handed (see [`Volume::set_frame`]).
+    pub fn frame(&self) -> Option<&PatientFrame> {
+        self.frame.as_ref()
+    }
+    /// Attaches (or clears) the patient frame. A mirrored frame (index axes of
+    /// the other handedness than the patient, e.g. `LAS`) reverses the voxels
+    /// along [`PatientFrame::mirror_axis`] and records it, so the volume always
+    /// carries a right-handed index frame and renders unmirrored.
+    pub fn set_frame(&mut self, frame: Option<PatientFrame>) {
+        self.frame = frame.map(|f| {
+            if f.is_mirrored() {
+                let a = f.mirror_axis();
+                self.reverse_axis(a);
+                f.reversed(a, self.dims[a], self.spacing[a])
+            } else {
+                f
+            }
+        });
+    }
+    /// The volume with frame `frame` (see [`Volume::set_frame`]).
+    pub fn with_frame(mut self, frame: Option<PatientFrame>) -> Self {
+        self.set_frame(frame);
+        self
+    }
+    /// Reverses the voxel order along index axis `axis` (the frame, if any, is
+    /// left alone: [`Volume::set_frame`] is the way to unmirror a volume).
+    pub fn reverse_axis(&mut self, axis: usize) {
+        let [nx, ny, nz] = self.dims;
+        fn rev<T: Copy>(v: &mut [T], axis: usize, nx: usize, ny: usize, nz: usize) {
+            match axis {
+                0 => v.chunks_exact_mut(nx).for_each(|row| row.reverse()),
+                1 => {
+                    for z in 0..nz {
+                        let plane = &mut v[z * nx * ny..(z + 1) * nx * ny];
+                        for y in 0..ny / 2 {
+                            let (a, b) = plane.split_at_mut((ny - 1 - y) * nx);
+                            a[y * nx..(y + 1) * nx].swap_with_slice(&mut b[..nx]);
+                        }
+                    }
+                }
+                _ => {
+                    let p = nx * ny;
+                    for z in 0..nz / 2 {
+                        let (a, b) = v.split_at_mut((nz - 1 - z) * p);
+                        a[z * p..(z + 1) * p].swap_with_slice(&mut b[..p]);
+                    }
+                }
+            }
+        }
+        match &mut self.data {
+            VoxelData::U8(v) => rev(v, axis, nx, ny, nz),
+            VoxelData::U16(v) => rev(v, axis, nx, ny, nz),
+            VoxelData::I16(v) => rev(v, axis, nx, ny, nz),
+            VoxelData::F32(v) => rev(v, axis, nx, ny, nz),
+        }
     }
     /// The voxel storage.
     pub fn data(&self) -> &VoxelData {
@@ -258,7 +319,7 @@ impl Volume {
                 }
             }
         }
-        Volume::new(d, spacing, VoxelData::F32(out))
+        Ok(Volume { frame: self.frame, ..Volume::new(d, spacing, VoxelData::F32(out))? })
     }
 
     /// Densities mapped linearly from the window `[lo, hi]` onto 0..=255
@@ -271,7 +332,7 @@ impl Volume {
         }
         let scale = 255.0 / (hi as f64 - lo as f64);
         let v = (0..self.len()).map(|i| ((self.data.get(i) as f64 - lo as f64) * scale).round().clamp(0.0, 255.0) as u8).collect();
-        Volume::new(self.dims, self.spacing, VoxelData::U8(v))
+        Ok(Volume { frame: self.frame, ..Volume::new(self.dims, self.spacing, VoxelData::U8(v))? })
     }
 }
 
@@ -344,6 +405,29 @@ mod tests {
         for (lo, hi) in [(1.0, 1.0), (2.0, 1.0), (f32::NAN, 1.0), (0.0, f32::INFINITY)] {
             assert!(v.window_u8(lo, hi).is_err());
         }
+    }
+
+    #[test]
+    fn mirrored_frames_reverse_the_voxels() {
+        let v = Volume::from_fn([3, 4, 5], [1.0, 2.0, 3.0], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
+        for axis in 0..3 {
+            let mut r = v.clone();
+            r.reverse_axis(axis);
+            for (x, y, z) in [(0, 0, 0), (2, 1, 3), (1, 3, 4)] {
+                let mut p = [x, y, z];
+                p[axis] = v.dims()[axis] - 1 - p[axis];
+                assert_eq!(r.get(x, y, z), v.get(p[0], p[1], p[2]), "axis {axis}");
+            }
+            r.reverse_axis(axis);
+            assert_eq!(r, v);
+        }
+        let las = PatientFrame::from_code("LAS").unwrap();
+        let m = v.clone().with_frame(Some(las));
+        assert_eq!(m.frame().unwrap().code(), "RAS");
+        assert_eq!(m.frame().unwrap().reversed_axis, Some(0));
+        assert_eq!(m.get(0, 1, 2), v.get(2, 1, 2));
+        let lps = PatientFrame::from_code("LPS").unwrap();
+        assert_eq!(v.clone().with_frame(Some(lps)).to_f32(), v.to_f32());
     }
 
     #[test]

@@ -41,23 +41,47 @@ pub fn rotate_eye(base: DMat3, axis: usize, deg: f64) -> DMat3 {
     r * base
 }
 
-/// A named anatomical view, for a volume whose index axes are RAS
-/// (+x the patient's left, +y anterior, +z superior).
+/// The six named anatomical views: from where the viewer looks at the
+/// patient. [`NamedView::rotation`] is the view of a volume whose index axes
+/// are RAS (+x toward the patient's right, +y anterior, +z superior);
+/// [`crate::data::orientation::view_rotation`] turns it into the view of a
+/// volume whose axes lie elsewhere in the patient.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum NamedView {
-    /// The face: the patient's right on the image's left, superior up.
+    /// In front of the patient, facing them: the patient's right on the image left.
     Anterior,
+    /// Behind the patient: the patient's right on the image right.
     Posterior,
+    /// At the patient's left side.
     Left,
+    /// At the patient's right side.
     Right,
-    /// From above, anterior up.
+    /// Above the head, looking down.
     Superior,
+    /// Below the feet, looking up.
     Inferior,
 }
 
 impl NamedView {
-    /// The object-to-eye rotation of this view.
+    /// Every view.
+    pub const ALL: [NamedView; 6] =
+        [NamedView::Anterior, NamedView::Posterior, NamedView::Left, NamedView::Right, NamedView::Superior, NamedView::Inferior];
+
+    /// The view's lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            NamedView::Anterior => "anterior",
+            NamedView::Posterior => "posterior",
+            NamedView::Left => "left",
+            NamedView::Right => "right",
+            NamedView::Superior => "superior",
+            NamedView::Inferior => "inferior",
+        }
+    }
+
+    /// The object-to-eye rotation of this view of a volume whose index axes are
+    /// RAS (the RAS-to-eye rotation; eye x right, y up, the viewer at +z).
     pub fn rotation(self) -> DMat3 {
         // anterior: eye x = −object x (patient's right on the image left), eye y = object z, eye z = object y
         let anterior = DMat3::from_cols_array(&[-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);

@@ -45,8 +45,8 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     }
     // check the options before loading anything
     let settings = cmd.render.settings()?;
-    let camera = cmd.render.camera()?;
     let (vol, name) = cmd.volume.load()?;
+    let camera = cmd.render.camera(vol.frame())?;
     let d = vol.dims();
     let tissues = presets::tissues_for(&vol);
     let range = vol.value_range();

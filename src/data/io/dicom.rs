@@ -25,7 +25,11 @@
 //! BitsAllocated; a compressed slice may not claim more than 1024× its file
 //! size in decoded pixels) and sorted by ImagePositionPatient · normal,
 //! where normal = row cosines × column cosines. x runs along a row (the column index), y down the columns (the
-//! row index) and z along the normal. Spacing: x = PixelSpacing\[1\] (the
+//! row index) and z along the normal. The volume carries that placement in the
+//! patient: index axes along the row cosines, column cosines and normal
+//! (always right-handed), voxel (0,0,0) at the first slice's
+//! ImagePositionPatient, converted from DICOM's LPS to RAS (without
+//! ImageOrientationPatient the orientation is unknown). Spacing: x = PixelSpacing\[1\] (the
 //! column spacing), y = PixelSpacing\[0\] (the row spacing), z = the distance
 //! between consecutive slice positions, which must be non-zero and uniform
 //! (within 1% + 0.001 mm; SliceThickness is not used). A single slice gets
@@ -49,7 +53,10 @@ use dicom_object::file::ReadPreamble;
 use dicom_object::{DefaultDicomObject, OpenFileOptions};
 use dicom_pixeldata::PixelDecoder;
 
+use glam::DVec3;
+
 use super::{io_error, make_volume};
+use crate::data::orientation::{PatientFrame, lps_to_ras};
 use crate::data::volume::{Volume, VoxelData, check_dims};
 use crate::error::{Error, Result};
 
@@ -187,6 +194,11 @@ pub fn load_dicom(path: &Path) -> Result<Volume> {
     };
     let [row_sp, col_sp] = first.pixel_spacing.unwrap_or([1.0, 1.0]);
     let spacing = [col_sp as f32, row_sp as f32, z_spacing as f32];
+    let frame = slices[0].orientation.and_then(|o| {
+        let (r, c) = (DVec3::new(o[0], o[1], o[2]), DVec3::new(o[3], o[4], o[5]));
+        let origin = slices[0].position.map_or(DVec3::ZERO, DVec3::from_array);
+        PatientFrame::from_axes([lps_to_ras(r), lps_to_ras(c), lps_to_ras(r.cross(c))], lps_to_ras(origin)).ok()
+    });
 
     // Pixel pass.
     let per_slice = dims[0] * dims[1];
@@ -214,7 +226,7 @@ pub fn load_dicom(path: &Path) -> Result<Volume> {
     } else {
         VoxelData::F32(values)
     };
-    make_volume(path, dims, spacing, data)
+    Ok(make_volume(path, dims, spacing, data)?.with_frame(frame))
 }
 
 /// Regular files in `dir`; errors name `shown`.
@@ -412,15 +424,29 @@ fn sort_slices(slices: &mut [SliceInfo]) -> Result<f64> {
             ));
         }
     }
+    // Uniform within 1% (+0.001 mm) of the mean distance. When not, the gap
+    // reported is the one farthest from the median distance: a missing slice
+    // doubles one gap and inflates the mean, but barely moves the median, so
+    // the files named are the neighbours of the hole.
     let mean = (keyed[keyed.len() - 1].0 - keyed[0].0) / gaps.len() as f64;
-    if let Some(i) = gaps.iter().position(|g| (g - mean).abs() > 0.01 * mean + 1e-3) {
+    if gaps.iter().any(|g| (g - mean).abs() > 0.01 * mean + 1e-3) {
+        let mut sorted_gaps = gaps.clone();
+        sorted_gaps.sort_by(f64::total_cmp);
+        let typical = sorted_gaps[(sorted_gaps.len() - 1) / 2];
+        let i = (0..gaps.len()).max_by(|&a, &b| (gaps[a] - typical).abs().total_cmp(&(gaps[b] - typical).abs())).unwrap_or(0);
+        let (a, b) = (&keyed[i].1.path, &keyed[i + 1].1.path);
+        let missing = gaps[i] / typical - 1.0;
+        let hint = if missing > 0.5 && (missing - missing.round()).abs() < 0.1 {
+            format!(" ({} slice(s) missing between them?)", missing.round())
+        } else {
+            String::new()
+        };
         return Err(Error::file(
-            &keyed[i + 1].1.path,
+            b,
             format!(
-                "inconsistent slice positions: {:.4} mm from {} where the series averages {mean:.4} mm \
-                 (missing or extra slices?)",
+                "inconsistent slice positions: {:.4} mm from the previous slice {} where the series' slices are {typical:.4} mm apart{hint}",
                 gaps[i],
-                keyed[i].1.path.display()
+                a.display()
             ),
         ));
     }

@@ -264,7 +264,7 @@ pub(crate) fn make_volume(path: &Path, dims: [usize; 3], spacing: [f32; 3], data
 
 /// An [`Error::Io`] for `path`.
 pub(crate) fn io_error(path: &Path, source: std::io::Error) -> Error {
-    Error::Io { path: path.to_path_buf(), source }
+    Error::Io { path: path.to_path_buf(), error: source }
 }
 
 /// Reads at most `expected + 1` bytes from `r` (a decompressor, typically)

@@ -16,6 +16,13 @@
 //! Spacing is `|pixdim[1..=3]|`, converted to millimetres when `xyzt_units`
 //! says metres or microns; an axis of size 1 with no valid pixdim gets 1.
 //! Header/image pairs (`.hdr` + `.img`, magic `ni1`) are not supported.
+//!
+//! Patient orientation follows the NIfTI-1 rules: the sform (`srow_x/y/z`)
+//! when `sform_code > 0`, else the qform (quaternion `quatern_b/c/d`,
+//! `qfac = pixdim[0]`, `qoffset_x/y/z`) when `qform_code > 0`, else none
+//! (unknown, as in an Analyze file). Both are RAS millimetres; mirrored axes
+//! are reversed on load (see [`crate::data::orientation`]). An sform whose columns
+//! are degenerate falls back to the qform.
 
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
@@ -23,7 +30,10 @@ use std::path::Path;
 
 use ::nifti::{InMemNiftiVolume, IntoNdArray, NiftiHeader, NiftiType};
 
+use glam::{DMat3, DVec3};
+
 use super::{Sample, io_error, make_volume, read_capped};
+use crate::data::orientation::PatientFrame;
 use crate::data::volume::{Volume, VoxelData, check_dims};
 use crate::error::{Error, Result};
 
@@ -41,7 +51,7 @@ pub fn load_nifti(path: &Path) -> Result<Volume> {
     let mut reader: Box<dyn Read> = if gz { Box::new(flate2::bufread::MultiGzDecoder::new(buffered)) } else { Box::new(buffered) };
     let err = |why: String| Error::file(path, why);
 
-    let header = NiftiHeader::from_reader(&mut reader).map_err(|e| err(format!("not a readable NIfTI-1 header ({e})")))?;
+    let header = NiftiHeader::from_reader(&mut reader).map_err(|e| err(format!("not a readable NIfTI-1 header: {}", nifti_error(&e))))?;
     if &header.magic == b"ni1\0" {
         return Err(err("a NIfTI .hdr/.img pair header: only single .nii/.nii.gz files are supported".into()));
     }
@@ -100,8 +110,8 @@ pub fn load_nifti(path: &Path) -> Result<Volume> {
         return Err(err(format!("file is truncated: it ends before vox_offset {vox}")));
     }
     let raw = read_capped(path, reader, nbytes, "NIfTI voxel data")?;
-    let volume = InMemNiftiVolume::from_raw_data(&header, raw).map_err(|e| err(format!("NIfTI volume: {e}")))?;
-    let typed = |e: ::nifti::NiftiError| err(format!("NIfTI voxel conversion: {e}"));
+    let volume = InMemNiftiVolume::from_raw_data(&header, raw).map_err(|e| err(format!("NIfTI volume: {}", nifti_error(&e))))?;
+    let typed = |e: ::nifti::NiftiError| err(format!("NIfTI voxel conversion: {}", nifti_error(&e)));
     let data = match (scaled, sample) {
         (false, Sample::U8) => VoxelData::U8(volume.into_nifti_typed_data::<u8>().map_err(typed)?),
         (false, Sample::U16) => VoxelData::U16(volume.into_nifti_typed_data::<u16>().map_err(typed)?),
@@ -115,7 +125,71 @@ pub fn load_nifti(path: &Path) -> Result<Volume> {
             VoxelData::F32(arr.reversed_axes().iter().copied().collect())
         }
     };
-    make_volume(path, dims, spacing, data)
+    Ok(make_volume(path, dims, spacing, data)?.with_frame(patient_frame(&header)))
+}
+
+/// The nifti crate's error in words (its I/O variant only has a debug form).
+fn nifti_error(e: &::nifti::NiftiError) -> String {
+    match e {
+        ::nifti::NiftiError::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            "the file ends inside the 348-byte header".to_string()
+        }
+        ::nifti::NiftiError::Io(io) => io.to_string(),
+        other => other.to_string(),
+    }
+}
+
+/// The index-to-patient frame per the NIfTI-1 rules: sform, else qform, else none.
+fn patient_frame(h: &NiftiHeader) -> Option<PatientFrame> {
+    let to_mm = match h.xyzt_units & 0x07 {
+        1 => 1000.0,
+        3 => 0.001,
+        _ => 1.0,
+    };
+    let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+    if h.sform_code > 0 && finite(&h.srow_x) && finite(&h.srow_y) && finite(&h.srow_z) {
+        let (x, y, z) = (h.srow_x.map(f64::from), h.srow_y.map(f64::from), h.srow_z.map(f64::from));
+        let cols = [0, 1, 2].map(|c| DVec3::new(x[c], y[c], z[c]));
+        let origin = DVec3::new(x[3], y[3], z[3]) * to_mm;
+        if let Ok(f) = PatientFrame::from_axes(cols, origin) {
+            return Some(f);
+        }
+    }
+    if h.qform_code > 0 {
+        let q = [h.quatern_b, h.quatern_c, h.quatern_d, h.quatern_x, h.quatern_y, h.quatern_z, h.pixdim[0]];
+        if !finite(&q) {
+            return None;
+        }
+        let (mut b, mut c, mut d) = (h.quatern_b as f64, h.quatern_c as f64, h.quatern_d as f64);
+        let aa = 1.0 - (b * b + c * c + d * d);
+        let a = if aa < 1e-7 {
+            // a 180° rotation: renormalise (b, c, d), as nifti1_io does
+            let n = (b * b + c * c + d * d).sqrt();
+            if n == 0.0 {
+                return None;
+            }
+            (b, c, d) = (b / n, c / n, d / n);
+            0.0
+        } else {
+            aa.sqrt()
+        };
+        let r = DMat3::from_cols_array(&[
+            a * a + b * b - c * c - d * d,
+            2.0 * (b * c + a * d),
+            2.0 * (b * d - a * c),
+            2.0 * (b * c - a * d),
+            a * a + c * c - b * b - d * d,
+            2.0 * (c * d + a * b),
+            2.0 * (b * d + a * c),
+            2.0 * (c * d - a * b),
+            a * a + d * d - c * c - b * b,
+        ]);
+        let qfac = if h.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+        let cols = [r.x_axis, r.y_axis, r.z_axis * qfac];
+        let origin = DVec3::new(h.quatern_x as f64, h.quatern_y as f64, h.quatern_z as f64) * to_mm;
+        return PatientFrame::from_axes(cols, origin).ok();
+    }
+    None
 }
 
 /// Voxel spacing in millimetres from `pixdim` and `xyzt_units`.

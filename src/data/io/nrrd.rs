@@ -12,7 +12,13 @@
 //! the rest becomes f32.
 //!
 //! Spacing comes from the norms of the `space directions` vectors, else from
-//! `spacings`, else it is 1. `dimension` must be 3; a 4-D (or higher) file is
+//! `spacings`, else it is 1. Patient orientation: with `space` set to a
+//! patient space (`left-posterior-superior`/`LPS`, `right-anterior-superior`/
+//! `RAS`, `left-anterior-superior`/`LAS`, and their `-time` forms) and a
+//! direction vector for every axis, the volume carries the index-to-patient
+//! frame (`space origin` gives voxel (0,0,0); 0 without it), converted to
+//! RAS; mirrored axes are reversed on load (see [`crate::data::orientation`]).
+//! Other spaces (`scanner-xyz`, `3D-right-handed`, none) leave it unknown. `dimension` must be 3; a 4-D (or higher) file is
 //! accepted when squeezing out axes of size 1 leaves exactly 3 (so a 4-D
 //! file with a size-1 vector or time axis loads), anything else is rejected.
 //!
@@ -24,7 +30,10 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
+use glam::DVec3;
+
 use super::{Sample, decode_samples, io_error, make_volume, read_capped};
+use crate::data::orientation::PatientFrame;
 use crate::data::volume::{Volume, check_dims};
 use crate::error::{Error, Result};
 
@@ -54,6 +63,9 @@ struct Header {
     encoding: Encoding,
     spacings: Option<Vec<f64>>,
     directions: Option<Vec<Option<Vec<f64>>>>,
+    /// Signs that turn the `space` coordinates into RAS (`None`: not a patient space).
+    space_to_ras: Option<[f64; 3]>,
+    origin: Option<Vec<f64>>,
     data_file: Option<String>,
     byte_skip: i64,
     line_skip: u64,
@@ -68,14 +80,15 @@ pub fn load_nrrd(path: &Path) -> Result<Volume> {
 
     // Axes, squeezed to three.
     let n_axes = h.sizes.len();
-    let mut axes: Vec<(u64, f64)> = Vec::with_capacity(n_axes);
+    let mut axes: Vec<(u64, f64, Option<Vec<f64>>)> = Vec::with_capacity(n_axes);
     for i in 0..n_axes {
         let sp = match (&h.directions, &h.spacings) {
             (Some(d), _) => d[i].as_ref().map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt()),
             (None, Some(s)) => Some(s[i]).filter(|x| !x.is_nan()),
             (None, None) => None,
         };
-        axes.push((h.sizes[i], sp.unwrap_or(1.0)));
+        let dir = h.directions.as_ref().and_then(|d| d[i].clone());
+        axes.push((h.sizes[i], sp.unwrap_or(1.0), dir));
     }
     while axes.len() > 3 {
         match axes.iter().position(|a| a.0 == 1) {
@@ -207,7 +220,41 @@ pub fn load_nrrd(path: &Path) -> Result<Volume> {
         }
     };
     let data = decode_samples(&bytes, h.sample, h.big_endian.unwrap_or(false));
-    make_volume(path, dims, spacing, data)
+    let frame = patient_frame(path, &h, &axes)?;
+    Ok(make_volume(path, dims, spacing, data)?.with_frame(frame))
+}
+
+/// The index-to-patient frame of the three (squeezed) axes, when the header
+/// places them in a patient space.
+fn patient_frame(path: &Path, h: &Header, axes: &[(u64, f64, Option<Vec<f64>>)]) -> Result<Option<PatientFrame>> {
+    let Some(sign) = h.space_to_ras else { return Ok(None) };
+    let to_ras = |v: &[f64]| DVec3::new(sign[0] * v[0], sign[1] * v[1], sign[2] * v[2]);
+    let mut dirs = [DVec3::ZERO; 3];
+    for (d, a) in dirs.iter_mut().zip(axes) {
+        match &a.2 {
+            Some(v) if v.len() >= 3 => *d = to_ras(v),
+            _ => return Ok(None),
+        }
+    }
+    let origin = match &h.origin {
+        Some(o) if o.len() >= 3 => to_ras(o),
+        Some(o) => return Err(Error::file(path, format!("NRRD space origin {o:?} has fewer than 3 coordinates"))),
+        None => DVec3::ZERO,
+    };
+    PatientFrame::from_axes(dirs, origin).map(Some).map_err(|e| Error::file(path, format!("NRRD space directions: {e}")))
+}
+
+/// RAS signs of a NRRD `space`: `Some` for the patient spaces, `None` for the
+/// others (`scanner-xyz`, `3D-right-handed`, …, and unknown names).
+fn parse_space(value: &str) -> Option<[f64; 3]> {
+    let v = value.trim().to_ascii_lowercase();
+    let v = v.strip_suffix("-time").unwrap_or(&v);
+    match v {
+        "right-anterior-superior" | "ras" | "rast" => Some([1.0, 1.0, 1.0]),
+        "left-anterior-superior" | "las" | "last" => Some([-1.0, 1.0, 1.0]),
+        "left-posterior-superior" | "lps" | "lpst" => Some([-1.0, -1.0, 1.0]),
+        _ => None,
+    }
 }
 
 /// Reads the header lines: returns `(field, value)` pairs and the byte
@@ -280,6 +327,7 @@ fn parse_fields(path: &Path, fields: &[(String, String)]) -> Result<Header> {
     let mut seen = std::collections::HashSet::new();
     let (mut sample, mut dimension, mut sizes, mut endian, mut encoding) = (None, None, None, None, None);
     let (mut spacings, mut directions, mut data_file) = (None, None, None);
+    let (mut space_to_ras, mut origin) = (None, None);
     let (mut byte_skip, mut line_skip) = (0i64, 0u64);
     for (key, value) in fields {
         let key = match key.as_str() {
@@ -332,6 +380,15 @@ fn parse_fields(path: &Path, fields: &[(String, String)]) -> Result<Header> {
                 spacings = Some(v.ok_or_else(|| err(format!("NRRD spacings '{}' are not numbers", clip(value))))?);
             }
             "space directions" => directions = Some(parse_directions(value).map_err(err)?),
+            "space" => space_to_ras = parse_space(value),
+            "space origin" => {
+                let o = parse_directions(value)
+                    .map_err(|_| err(format!("NRRD space origin '{}' is not a vector like (0,0,0)", clip(value))))?;
+                match o.as_slice() {
+                    [Some(v)] => origin = Some(v.clone()),
+                    _ => return Err(err(format!("NRRD space origin '{}' is not one vector like (0,0,0)", clip(value)))),
+                }
+            }
             "data file" => {
                 let v = value.as_str();
                 let tokens: Vec<&str> = v.split_whitespace().collect();
@@ -384,7 +441,7 @@ fn parse_fields(path: &Path, fields: &[(String, String)]) -> Result<Header> {
             return Err(err("NRRD space directions have vectors of different lengths".into()));
         }
     }
-    Ok(Header { sample, sizes, big_endian: endian, encoding, spacings, directions, data_file, byte_skip, line_skip })
+    Ok(Header { sample, sizes, big_endian: endian, encoding, spacings, directions, space_to_ras, origin, data_file, byte_skip, line_skip })
 }
 
 fn type_error(value: &str) -> String {

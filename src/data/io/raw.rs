@@ -10,7 +10,12 @@
 //!
 //! `type` is `u8`, `u16`, `i16` or `f32`; `endian` (`little`/`big`, default
 //! little), `spacing` (default 1,1,1) and `header_bytes` (bytes to skip before
-//! the voxels, default 0) are optional; unknown keys are rejected. The file
+//! the voxels, default 0) are optional; unknown keys are rejected. `frame`
+//! (optional; [`save_raw`] writes it for a volume that has one) places the
+//! index axes in the patient: `{"directions_ras": [[x], [y], [z]],
+//! "origin_ras": [..], "reversed_axis": 0, "skew_deg": 0}`, the RAS unit
+//! direction of each index axis (orthonormal, right-handed) and the RAS
+//! position of voxel 0 (see [`crate::data::orientation`]). The file
 //! must be exactly `header_bytes` + the voxel bytes long: a shorter file is
 //! truncated, a longer one means the spec is wrong.
 
@@ -20,7 +25,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use glam::{DMat3, DVec3};
+
 use super::{Sample, decode_samples, io_error, make_volume, read_region, with_suffix};
+use crate::data::orientation::PatientFrame;
 use crate::data::volume::{Volume, VoxelData, VoxelType, check_dims};
 use crate::error::{Error, Result};
 
@@ -68,6 +76,53 @@ struct Sidecar {
     spacing: [f32; 3],
     #[serde(default)]
     header_bytes: u64,
+    /// Where the index axes point in the patient (written by [`save_raw`]
+    /// for a volume that has a frame).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    frame: Option<SidecarFrame>,
+}
+
+/// A [`PatientFrame`] in a sidecar: RAS unit directions of index axes x, y, z
+/// (right-handed), the RAS position of voxel 0, and what the original file had.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct SidecarFrame {
+    directions_ras: [[f64; 3]; 3],
+    origin_ras: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    reversed_axis: Option<usize>,
+    #[serde(default)]
+    skew_deg: f64,
+}
+
+impl SidecarFrame {
+    fn of(f: &PatientFrame) -> Self {
+        let d = f.directions;
+        SidecarFrame {
+            directions_ras: [d.x_axis.to_array(), d.y_axis.to_array(), d.z_axis.to_array()],
+            origin_ras: f.origin.to_array(),
+            reversed_axis: f.reversed_axis,
+            skew_deg: f.skew_deg,
+        }
+    }
+
+    /// The frame, exactly as written; an error unless it is a finite
+    /// right-handed orthonormal frame.
+    fn frame(&self, path: &Path) -> Result<PatientFrame> {
+        let [x, y, z] = self.directions_ras.map(DVec3::from_array);
+        let d = DMat3::from_cols(x, y, z);
+        let origin = DVec3::from_array(self.origin_ras);
+        let ok = d.is_finite()
+            && origin.is_finite()
+            && (d.transpose() * d).abs_diff_eq(DMat3::IDENTITY, 1e-6)
+            && d.determinant() > 0.0
+            && self.reversed_axis.is_none_or(|a| a < 3)
+            && self.skew_deg.is_finite();
+        if !ok {
+            return Err(Error::file(path, "raw sidecar: frame.directions_ras must be three orthonormal right-handed unit vectors"));
+        }
+        Ok(PatientFrame { directions: d, origin, reversed_axis: self.reversed_axis, skew_deg: self.skew_deg })
+    }
 }
 
 fn little() -> String {
@@ -103,16 +158,7 @@ pub fn sidecar_path(path: &Path) -> PathBuf {
 
 /// Reads and checks a sidecar.
 pub fn read_sidecar(path: &Path) -> Result<RawSpec> {
-    let mut text = String::new();
-    File::open(path)
-        .map_err(|e| io_error(path, e))?
-        .take(MAX_SIDECAR + 1)
-        .read_to_string(&mut text)
-        .map_err(|e| Error::file(path, format!("raw sidecar is not UTF-8 text: {e}")))?;
-    if text.len() as u64 > MAX_SIDECAR {
-        return Err(Error::file(path, format!("raw sidecar is larger than {MAX_SIDECAR} bytes")));
-    }
-    let s: Sidecar = serde_json::from_str(&text).map_err(|e| Error::file(path, format!("raw sidecar is not valid: {e}")))?;
+    let s = read_sidecar_text(path)?;
     let dims = check_dims(s.dims).map_err(|e| Error::file(path, e.to_string()))?;
     let voxel_type = VoxelType::parse(&s.voxel_type).map_err(|e| Error::file(path, e.to_string()))?;
     let big_endian = match s.endian.to_ascii_lowercase().as_str() {
@@ -123,6 +169,20 @@ pub fn read_sidecar(path: &Path) -> Result<RawSpec> {
         }
     };
     Ok(RawSpec { dims, voxel_type, big_endian, spacing: s.spacing, header_bytes: s.header_bytes })
+}
+
+/// Reads a sidecar's JSON.
+fn read_sidecar_text(path: &Path) -> Result<Sidecar> {
+    let mut text = String::new();
+    File::open(path)
+        .map_err(|e| io_error(path, e))?
+        .take(MAX_SIDECAR + 1)
+        .read_to_string(&mut text)
+        .map_err(|e| Error::file(path, format!("raw sidecar is not UTF-8 text: {e}")))?;
+    if text.len() as u64 > MAX_SIDECAR {
+        return Err(Error::file(path, format!("raw sidecar is larger than {MAX_SIDECAR} bytes")));
+    }
+    serde_json::from_str(&text).map_err(|e| Error::file(path, format!("raw sidecar is not valid: {e}")))
 }
 
 /// Loads a raw file described by its sidecar (see [`find_sidecar`]).
@@ -141,7 +201,8 @@ pub fn load_raw_with_sidecar(path: &Path) -> Result<Volume> {
         ));
     };
     let spec = read_sidecar(&sidecar)?;
-    load_raw(path, &spec)
+    let frame = read_sidecar_text(&sidecar)?.frame.map(|f| f.frame(&sidecar)).transpose()?;
+    Ok(load_raw(path, &spec)?.with_frame(frame))
 }
 
 /// Writes `volume` as little-endian raw voxels to `path` and its sidecar to
@@ -162,6 +223,7 @@ pub fn save_raw(volume: &Volume, path: &Path) -> Result<PathBuf> {
         endian: little(),
         spacing: volume.spacing(),
         header_bytes: 0,
+        frame: volume.frame().map(SidecarFrame::of),
     };
     let json = serde_json::to_string_pretty(&sidecar).map_err(|e| Error::Other(e.to_string()))?;
     let side = sidecar_path(path);

@@ -4,7 +4,7 @@
 Renders a rotation sequence of a VolPack .den volume with VTK's CPU ray
 caster (vtkFixedPointVolumeRayCastMapper) and prints ONE JSON line with
 per-frame timings on stdout, using the same volume, classification, shading,
-views and zoom as scripts/volpack/harness.c (see scripts/vtk/README.md for
+views and zoom as benches/scripts/volpack/harness.c (see benches/scripts/vtk/README.md for
 what can and cannot be matched).  Everything else goes to stderr.
 
 Only renWin.Render() is timed.  Needs python3 with the `vtk` wheel (>= 9.1)
@@ -24,7 +24,7 @@ import time
 
 PROG = "harness.py"
 
-# Material / light, identical to scripts/volpack/harness.c
+# Material / light, identical to benches/scripts/volpack/harness.c
 MAT_AMBIENT = 0.10
 MAT_DIFFUSE = 0.60
 MAT_SPECULAR = 0.30
@@ -46,7 +46,7 @@ def log(msg):
 
 
 # ---------------------------------------------------------------------------
-# .den input (same rules as load_den() in scripts/volpack/harness.c)
+# .den input (same rules as load_den() in benches/scripts/volpack/harness.c)
 
 def load_den(path):
     """Return (bytes of nx*ny*nz u8 voxels, x fastest, (nx, ny, nz))."""
@@ -111,7 +111,7 @@ def parse_args(argv):
             "vtkFixedPointVolumeRayCastMapper (CPU ray casting, trilinear, shaded)\n"
             "and print one JSON line with per-frame timings (only renWin.Render()\n"
             "is timed).  Classification, shading, views and zoom match\n"
-            "scripts/volpack/harness.c; see scripts/vtk/README.md."),
+            "benches/scripts/volpack/harness.c; see benches/scripts/vtk/README.md."),
         epilog=(
             "opacity (d = 8-bit density, T = --threshold):\n"
             "  opaque: alpha = clamp((d - T)/4, 0, 1)\n"
@@ -126,7 +126,7 @@ def parse_args(argv):
             "  window (run under `xvfb-run -a` if there is no EGL); the path used is\n"
             "  reported as \"render_path\" in the JSON.\n"
             "example:\n"
-            "  python3 scripts/vtk/harness.py --den brainsmall.den --size 512 \\\n"
+            "  python3 benches/scripts/vtk/harness.py --den brainsmall.den --size 512 \\\n"
             "      --frames 60 --threads 2 --tf opaque"))
     ap.add_argument("--den", metavar="FILE", required=True,
                     help="VolPack .den volume (u8, 62-byte header)")
@@ -284,7 +284,7 @@ def choose_window(backend, display):
         log(ln)
     die("no working OpenGL window for VTK's image display; install EGL (libegl1 + "
         "libegl-mesa0) or run under Xvfb: `apt-get install -y xvfb` and "
-        "`xvfb-run -a python3 scripts/vtk/harness.py ...`", 1)
+        "`xvfb-run -a python3 benches/scripts/vtk/harness.py ...`", 1)
 
 
 def main(argv):

@@ -6,8 +6,8 @@
 # round, so neither always runs second) for every case; the table gives the
 # median frame ms of each and the ratio NEW/OLD of the medians.
 #
-#   scripts/ab-binaries.sh /path/to/old/shearwarp target/release/shearwarp
-#   ROUNDS=7 FRAMES=120 SIZE=512 VOLUMES="brainsmall head256" scripts/ab-binaries.sh OLD NEW
+#   benches/scripts/ab-binaries.sh /path/to/old/shearwarp target/release/shearwarp
+#   ROUNDS=7 FRAMES=120 SIZE=512 VOLUMES="brainsmall head256" benches/scripts/ab-binaries.sh OLD NEW
 #
 # The volumes are .den files written by NEW's `export` into OUT (default
 # target/ab): brainsmall (from $SHEARWARP_DATA or ../shared/data), brainsmall
@@ -16,7 +16,7 @@
 set -euo pipefail
 OLD=$(realpath "$1")
 NEW=$(realpath "$2")
-ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 OUT=${OUT:-$ROOT/target/ab}
 ROUNDS=${ROUNDS:-5}
 FRAMES=${FRAMES:-90}

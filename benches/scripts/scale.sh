@@ -4,11 +4,11 @@
 # for 1 thread and all cores: a table of median ms per frame with its split
 # into shear / render / warp, and the mask's bytes.
 #
-#   scripts/scale.sh                      # 90 frames per run
-#   FRAMES=30 DIMS="128 256" scripts/scale.sh
-#   EXTRA="--cell 4" scripts/scale.sh     # super cells
+#   benches/scripts/scale.sh                      # 90 frames per run
+#   FRAMES=30 DIMS="128 256" benches/scripts/scale.sh
+#   EXTRA="--cell 4" benches/scripts/scale.sh     # super cells
 set -euo pipefail
-ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 FRAMES=${FRAMES:-90}
 DIMS=${DIMS:-128 256 512}
 SIZES=${SIZES:-256 512 1024}

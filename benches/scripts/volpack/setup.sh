@@ -1,5 +1,5 @@
-# setup.sh -- sourced (not run) by scripts/compare-volpack.sh and
-# scripts/compare-rotators.sh after they set ROOT: logging, root and apt-get
+# setup.sh -- sourced (not run) by benches/scripts/compare-volpack.sh and
+# benches/scripts/compare-rotators.sh after they set ROOT: logging, root and apt-get
 # helpers, the VolPack harness build and the search for brainsmall.den.
 
 log() { printf '%s\n' "$*" >&2; }
@@ -21,10 +21,10 @@ apt_install() {
 }
 
 # volpack_harness BIN: installs libvolpack1-dev (and build-essential without a
-# C compiler) when missing, and builds BIN from scripts/volpack/harness.c when
+# C compiler) when missing, and builds BIN from benches/scripts/volpack/harness.c when
 # BIN is missing or older than the source.
 volpack_harness() {
-    local bin=$1 src=$ROOT/scripts/volpack/harness.c need=()
+    local bin=$1 src=$ROOT/benches/scripts/volpack/harness.c need=()
     dpkg -s libvolpack1-dev >/dev/null 2>&1 || need+=(libvolpack1-dev)
     command -v cc >/dev/null 2>&1 || need+=(build-essential)
     if [ ${#need[@]} -gt 0 ]; then

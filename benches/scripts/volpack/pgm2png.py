@@ -6,7 +6,7 @@ usage: pgm2png.py OUT.png IN1.pgm [IN2.pgm ...] [--flip]
 Several inputs are placed side by side (same height required) with a 4-pixel
 grey gap, which makes it easy to look at a rotation sequence at once.
 --flip writes every image bottom-up (row 0 at the bottom), i.e. the y-up
-orientation VolPack's window uses (see scripts/volpack/README.md).
+orientation VolPack's window uses (see benches/scripts/volpack/README.md).
 """
 import struct
 import sys

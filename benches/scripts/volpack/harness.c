@@ -11,7 +11,7 @@
  *
  * Everything the Rust side needs to match (threshold, opacity ramps, light,
  * material, window, orientation) is echoed in the JSON output and described
- * in scripts/volpack/README.md.
+ * in benches/scripts/volpack/README.md.
  */
 
 #define _POSIX_C_SOURCE 200809L

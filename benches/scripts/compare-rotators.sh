@@ -6,9 +6,9 @@
 # Prints median ms per frame and the speed-ups against VolPack and VTK, then
 # the limit of one shear step against a memcpy of the same bytes.
 #
-#   scripts/compare-rotators.sh                   # everything, 360 frames per run
-#   FRAMES=60 scripts/compare-rotators.sh         # quicker
-#   VOLUMES="brainsmall head256" SIZES=512 scripts/compare-rotators.sh
+#   benches/scripts/compare-rotators.sh                   # everything, 360 frames per run
+#   FRAMES=60 benches/scripts/compare-rotators.sh         # quicker
+#   VOLUMES="brainsmall head256" SIZES=512 benches/scripts/compare-rotators.sh
 #
 # Environment:
 #   FRAMES=360      frames per run (1° steps about the volume's y axis)
@@ -22,11 +22,11 @@
 # Installs libvolpack1-dev (apt-get), the vtk wheel (pip) and, only if VTK
 # cannot render off screen, xvfb; builds target/release/shearwarp and the
 # VolPack harness. How the classifications and views are matched:
-# scripts/volpack/README.md, scripts/vtk/README.md and README.md
+# benches/scripts/volpack/README.md, benches/scripts/vtk/README.md and README.md
 # ("Side by side with VolPack and VTK").
 set -euo pipefail
 
-ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 OUT=${OUT:-$ROOT/target/compare}
 FRAMES=${FRAMES:-360}
 ROUNDS=${ROUNDS:-1}
@@ -34,11 +34,11 @@ VOLUMES=${VOLUMES:-brainsmall brainsmall-up2 head256 chest}
 SIZES=${SIZES:-256 512}
 SW=$ROOT/target/release/shearwarp
 VP=$OUT/volpack-harness
-VTK_PY=$ROOT/scripts/vtk/harness.py
+VTK_PY=$ROOT/benches/scripts/vtk/harness.py
 NCPU=$(nproc)
 
 # shellcheck source=volpack/setup.sh
-. "$ROOT/scripts/volpack/setup.sh"
+. "$ROOT/benches/scripts/volpack/setup.sh"
 
 # ---------------------------------------------------------------- install and build
 mkdir -p "$OUT/data" "$OUT/runs" "$OUT/frames"

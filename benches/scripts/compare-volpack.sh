@@ -3,8 +3,8 @@
 # fixed matrix of cases and, once our CLI supports it, time
 # `shearwarp rotate` on the same cases, interleaved, and print the ratio.
 #
-#   scripts/compare-volpack.sh            # full matrix, 360 frames per case
-#   FRAMES=90 scripts/compare-volpack.sh  # quicker
+#   benches/scripts/compare-volpack.sh            # full matrix, 360 frames per case
+#   FRAMES=90 benches/scripts/compare-volpack.sh  # quicker
 #
 # Environment:
 #   FRAMES=360        frames per run (1 degree steps about the vertical axis)
@@ -26,7 +26,7 @@
 # (and PNG when python3 is present) under $OUT/frames/.
 set -euo pipefail
 
-ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 OUT=${OUT:-$ROOT/target/volpack}
 FRAMES=${FRAMES:-360}
 ROUNDS=${ROUNDS:-1}
@@ -36,7 +36,7 @@ SHEARWARP=${SHEARWARP:-$ROOT/target/release/shearwarp}
 SHEARWARP_EXTRA_ARGS=${SHEARWARP_EXTRA_ARGS:-}
 
 # shellcheck source=volpack/setup.sh
-. "$ROOT/scripts/volpack/setup.sh"
+. "$ROOT/benches/scripts/volpack/setup.sh"
 
 # ---------------------------------------------------------------- install and build
 mkdir -p "$OUT" "$OUT/data" "$OUT/frames" "$OUT/runs"
@@ -171,14 +171,14 @@ done
 if command -v python3 >/dev/null 2>&1; then
     for p in "$OUT"/frames/*.pgm; do
         [ -e "$p" ] || continue
-        python3 "$ROOT/scripts/volpack/pgm2png.py" "${p%.pgm}.png" "$p"
+        python3 "$ROOT/benches/scripts/volpack/pgm2png.py" "${p%.pgm}.png" "$p"
     done
 fi
 
 echo
 echo "VolPack (RLE shear-warp, vpRenderClassifiedVolume) vs ours: median ms per frame,"
 echo "$FRAMES frames, 1° steps about the vertical axis, 1 thread, $(uname -m), $(nproc) cores."
-echo "Opaque: alpha=clamp((d-24)/4,0,1); ramp: alpha=0.3*clamp((d-24)/231,0,1); see scripts/volpack/README.md."
+echo "Opaque: alpha=clamp((d-24)/4,0,1); ramp: alpha=0.3*clamp((d-24)/231,0,1); see benches/scripts/volpack/README.md."
 [ $OURS -eq 1 ] && echo "ours/VolPack < 1 means ours is faster."
 echo
 echo "$header"

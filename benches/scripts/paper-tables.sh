@@ -3,10 +3,10 @@
 #   Tables 1/2: iso preview (bone threshold, as in the paper) per cell size 1–4 — shear ms,
 #               render ms, frame rate, effective rotation speed (the view moves s bits per frame);
 #   Tables 3/4: alpha-blending render times for transfer functions A, B, C (skin, soft, bone).
-# Usage: scripts/paper-tables.sh [extra shearwarp args, e.g. a FILE or --threads 2]
+# Usage: benches/scripts/paper-tables.sh [extra shearwarp args, e.g. a FILE or --threads 2]
 # Env: SIZES="128,128,113 256,256,225" (phantom dims), CELLS="1 2 3 4", THREADS=1, OUT=512.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 cargo build --release --quiet
 B=target/release/shearwarp
 SIZES=${SIZES:-"128,128,113 256,256,225"}

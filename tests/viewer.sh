@@ -9,7 +9,7 @@
 #   - Q quits and the process exits with status 0.
 # Screenshots and logs go to target/viewer-test/. Needs xvfb, xauth, xdotool and
 # ImageMagick; installs them with apt-get when missing (as root) and fails loudly
-# when it cannot. Usage: scripts/test-viewer.sh
+# when it cannot. Usage: tests/viewer.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=target/viewer-test

@@ -1,0 +1,95 @@
+//! Sanity checks and warnings shared by the command-line tools: bounds on
+//! the thread count, volumes too thin to render, and warnings about frames
+//! that are not what they may seem (an iso value outside the data, an empty
+//! image). Quiet: callers print what these return.
+
+use crate::composite::Mode;
+use crate::error::{Error, Result};
+use crate::render::Renderer;
+
+/// The largest thread count accepted: 8 per core. More threads than that
+/// only add start-up and scheduling cost (`--threads 100000` used to hang).
+pub fn max_threads() -> usize {
+    8 * std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Checks a `--threads` count (0 = every core) against [`max_threads`].
+pub fn check_threads(threads: usize) -> Result<()> {
+    let max = max_threads();
+    if threads > max {
+        return Err(Error::value(
+            "--threads",
+            format!("{threads} is more than {max} (8 per core on this machine's {} cores); 0 uses every core", max / 8),
+        ));
+    }
+    Ok(())
+}
+
+/// A volume one voxel thick along an axis has no cells there, so shear-warp
+/// would draw an empty image: an error naming the axis.
+pub fn check_renderable(dims: [usize; 3]) -> Result<()> {
+    if let Some(a) = dims.iter().position(|&n| n < 2) {
+        return Err(Error::value(
+            "volume",
+            format!(
+                "{}×{}×{} is one voxel thick along {}, and shear-warp renders the cells between voxels, so the image would \
+                 be empty; `shearwarp info` describes it",
+                dims[0],
+                dims[1],
+                dims[2],
+                ["x", "y", "z"][a]
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A density for messages: plain, or in scientific notation when huge or tiny
+/// (a ±FLT_MAX sentinel prints as `-3.4028235e38`, not 39 digits).
+pub fn fmt_density(x: f32) -> String {
+    if x != 0.0 && !(1e-4..1e9).contains(&x.abs()) { format!("{x:e}") } else { format!("{x}") }
+}
+
+/// Warnings about the frame `r` last rendered, whose image has `coverage`
+/// (fraction of covered pixels): an iso value outside the data's range, or
+/// nothing visible. Empty when the image is what it looks like.
+pub fn frame_warnings(r: &Renderer, coverage: f64) -> Vec<String> {
+    let mut w = Vec::new();
+    let (lo, hi) = r.volume().value_range();
+    let n = fmt_density;
+    if r.settings().mode == Mode::Iso {
+        let iso = r.iso();
+        if iso > hi {
+            w.push(format!("the iso value {} is above the data's largest value {}: nothing can be visible", n(iso), n(hi)));
+        } else if iso <= lo {
+            w.push(format!("the iso value {} is at or below the data's smallest value {}: the whole volume box is opaque", n(iso), n(lo)));
+        }
+    }
+    if coverage == 0.0 {
+        w.push(format!(
+            "nothing is visible in the image (tissue {}, iso {}, data range {} … {}); try another --tissue or --iso",
+            r.classification_name(),
+            n(r.iso()),
+            n(lo),
+            n(hi)
+        ));
+    }
+    w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounds_and_formatting() {
+        assert!(check_threads(0).is_ok() && check_threads(max_threads()).is_ok());
+        let e = check_threads(max_threads() + 1).unwrap_err().to_string();
+        assert!(e.contains("--threads") && e.contains("8 per core"), "{e}");
+        assert!(check_renderable([2, 2, 2]).is_ok());
+        assert!(check_renderable([5, 1, 5]).unwrap_err().to_string().contains("along y"));
+        assert_eq!(fmt_density(-f32::MAX), "-3.4028235e38");
+        assert_eq!(fmt_density(-1000.0), "-1000");
+        assert_eq!(fmt_density(0.0), "0");
+    }
+}

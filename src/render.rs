@@ -28,7 +28,7 @@ use crate::encode::depth::{Matcher, Search, binary_matcher};
 use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, ShearWork};
 use crate::encode::rle::{ClassKey, RleCache};
 use crate::error::{Error, Result};
-use crate::view::plan::{FramePlan, Grid, Limiter, RayLimits};
+use crate::view::plan::{FramePlan, Grid, Limiter};
 use crate::view::{Camera, Factorization};
 use crate::warp::{Canvas, Texel, warp};
 
@@ -659,23 +659,13 @@ impl Renderer {
         let mut stats = FrameStats { axis: f.axis, ..Default::default() };
         stats.build_ms = self.ensure_axis(f.axis)?;
         // the frame plan (the parallel projection is its only producer so far)
-        let plan = match &mut self.plan {
-            Some(p) => {
-                let buf = p.take_limits();
-                p.set_parallel(&f, self.volume.spacing());
-                if let Some((l, _)) = &self.limiter {
-                    p.apply_limiter(l.as_ref(), buf.unwrap_or_default());
-                }
-                p
-            }
-            None => {
-                let p = self.plan.insert(FramePlan::parallel(&f, self.volume.spacing()));
-                if let Some((l, _)) = &self.limiter {
-                    p.apply_limiter(l.as_ref(), RayLimits::default());
-                }
-                p
-            }
-        };
+        let spacing = self.volume.spacing();
+        let plan = self.plan.get_or_insert_with(|| FramePlan::parallel(&f, spacing));
+        let limits = plan.take_limits();
+        plan.set_parallel(&f, spacing);
+        if let Some((l, _)) = &self.limiter {
+            plan.apply_limiter(l.as_ref(), limits.unwrap_or_default());
+        }
         let mode = self.settings.mode;
         if mode == Mode::Blend {
             match &mut self.tissues {
@@ -713,13 +703,7 @@ impl Renderer {
                     };
                     stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
-                    let ctx = table_shading(
-                        RayContext::new(stack, cls, plan, mode, iso, settings.shading, settings.ert),
-                        settings,
-                        normals[f.axis].as_ref(),
-                        shade,
-                        &f,
-                    );
+                    let ctx = ray_context(stack, cls, plan, iso, settings, normals[f.axis].as_ref(), shade);
                     match &m.mask {
                         AnyMask::W32(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                         AnyMask::W64(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
@@ -731,13 +715,7 @@ impl Renderer {
                     let rect = volume_rect(plan, stack.cells());
                     stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
-                    let ctx = table_shading(
-                        RayContext::new(stack, cls, plan, mode, iso, settings.shading, settings.ert),
-                        settings,
-                        normals[f.axis].as_ref(),
-                        shade,
-                        &f,
-                    );
+                    let ctx = ray_context(stack, cls, plan, iso, settings, normals[f.axis].as_ref(), shade);
                     render_brute(&ctx, rect, inter);
                     stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
                     rect
@@ -833,17 +811,22 @@ fn missing(what: &str, axis: usize) -> Error {
     Error::Other(format!("internal: {what} of axis {} was not built for this frame", ["x", "y", "z"][axis]))
 }
 
-/// `ctx` with table shading when the settings ask for it and the normal codes exist.
-fn table_shading<'a>(
-    ctx: RayContext<'a>,
+/// The rays' context of a frame of `plan`: the classification, iso value and
+/// material, with table shading when the settings ask for it and the normal
+/// codes exist (the shade table brought up to date for the view).
+fn ray_context<'a>(
+    stack: &'a SliceStack,
+    cls: &'a Classifier,
+    plan: &'a FramePlan,
+    iso: f32,
     settings: Settings,
     normals: Option<&'a NormalStack>,
     shade: &'a mut ShadeTable,
-    f: &Factorization,
 ) -> RayContext<'a> {
+    let ctx = RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert);
     match (settings.normals, normals) {
         (Normals::Codes, Some(ns)) => {
-            shade.update(headlight_object(f), settings.shading);
+            shade.update(headlight_object(&plan.view), settings.shading);
             ctx.with_normals(ns, shade)
         }
         _ => ctx,

@@ -19,7 +19,7 @@ use glam::{DMat3, DVec3};
 use shearwarp::classify::TransferFunction;
 use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
-use shearwarp::view::Camera;
+use shearwarp::view::{Camera, rotate_eye};
 use shearwarp::warp::Image;
 
 const SIZE: usize = 40;
@@ -48,23 +48,14 @@ fn hash(img: &Image) -> u64 {
     h
 }
 
-fn rot(axis: usize, deg: f64, base: DMat3) -> DMat3 {
-    let a = deg.to_radians();
-    let r = match axis {
-        0 => DMat3::from_rotation_x(a),
-        1 => DMat3::from_rotation_y(a),
-        _ => DMat3::from_rotation_z(a),
-    };
-    r * base
-}
-
 /// The views: index +y toward the viewer, index +z up (what the "anterior"
 /// view of a RAS volume is), turned about the vertical by 0°, 22.5°, 44.9°,
 /// 45°, 45.1° and 60°; from above; the main diagonal; and two fixed obliques.
 fn views() -> Vec<(String, DMat3)> {
-    let front = DMat3::from_cols_array(&[-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
-    let mut v: Vec<(String, DMat3)> = [0.0, 22.5, 44.9, 45.0, 45.1, 60.0].iter().map(|&a| (format!("y{a}"), rot(1, a, front))).collect();
-    v.push(("top".into(), rot(0, 90.0, front)));
+    let front = shearwarp::NamedView::Anterior.rotation();
+    let mut v: Vec<(String, DMat3)> =
+        [0.0, 22.5, 44.9, 45.0, 45.1, 60.0].iter().map(|&a| (format!("y{a}"), rotate_eye(front, 1, a))).collect();
+    v.push(("top".into(), rotate_eye(front, 0, 90.0)));
     let z = DVec3::ONE.normalize();
     let y = (DVec3::Z - z * z.z).normalize();
     v.push(("diagonal".into(), DMat3::from_cols(y.cross(z), y, z).transpose()));

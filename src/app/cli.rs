@@ -670,7 +670,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let loop_ms = loop_start.elapsed().as_secs_f64() * 1e3;
     pb.finish_and_clear();
     let frames_ms_total: f64 = all.iter().map(|s| s.build_ms + s.frame_ms()).sum();
-    let switch_ms_total: f64 = switch_ms.iter().sum();
+    let switch_ms_total: f64 = switch_ms.iter().fold(0.0, |a, b| a + b); // not sum(): an empty sum is -0.0
     let warnings = shearwarp::checks::frame_warnings(&r, img.coverage());
     for w in &warnings {
         eprintln!("warning: {w}");

@@ -3,10 +3,12 @@
 //! Owns the camera and its standard views ([`camera`]), Lacroute's
 //! factorization of the viewing transform into a shear of the slices and a
 //! warp of the intermediate image ([`factor`], re-exported here), and the
-//! per-frame plan every traversal reads ([`plan`]).
+//! per-frame plan every traversal reads ([`plan`]). [`perspective`] holds the
+//! perspective factorization (not yet a producer of plans).
 
 pub mod camera;
 mod factor;
+pub mod perspective;
 pub mod plan;
 
 pub use camera::*;

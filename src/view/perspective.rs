@@ -1,0 +1,246 @@
+//! The perspective factorization (Schulze et al.; Lacroute's disabled
+//! perspective code in VolPack): the first building block of issue 21.
+//!
+//! The eye sits at eye-space `(0, 0, D)`, `D` world units in front of the
+//! volume centre; a point at eye coordinates `e` lands on the output pixel
+//! `u = cu + f·e.x / (D − e.z)`, `v = cv − f·e.y / (D − e.z)` with `f = zoom·D`,
+//! so `zoom` keeps its parallel meaning in the plane through the centre and
+//! `D → ∞` is the parallel projection.
+//!
+//! In voxel-index space (where central projection survives the spacing) the eye
+//! is at `E`; the principal axis is the largest component of the direction from
+//! the eye to the volume centre. Slice `k_f`, the one nearest the eye, is the
+//! base plane at one intermediate pixel per voxel. The ray through sheared
+//! point `(a, b)` of the base plane meets slice `k` at
+//! `x_ij(k) = σ_k·(a, b) + τ_k` with `σ_k = 1 + κ·(k − k_f)`, `κ = 1/(k_f − E_k)`
+//! and `τ_k = −κ·E_ij·(k − k_f)`: every slice is the base plane scaled by
+//! `σ_k ≥ 1` (compositing only minifies) and translated. The warp from the base
+//! plane to the output is the 3×3 projective map [`PerspectiveView::warp`].
+//!
+//! Not yet here (issue 21): views whose rays deviate more than 45° from the
+//! principal axis (a wide field of view, the eye inside the volume), which
+//! need Lacroute's pyramid split — [`PerspectiveView::new`] says so with an
+//! error — and the plan producer and traversals that read scaled maps.
+
+use glam::{DMat3, DVec3};
+
+use crate::error::{Error, Result};
+use crate::view::plan::Warp;
+use crate::view::{Camera, permutation, principal_axis};
+
+/// A perspective view of one principal axis, factorized into scaled slices and
+/// a projective warp.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PerspectiveView {
+    /// Principal axis (0 = x) and the object axes of `(i, j, k)`.
+    pub axis: usize,
+    pub perm: [usize; 3],
+    /// Volume size along `(i, j, k)`.
+    pub n: [usize; 3],
+    /// The eye in permuted voxel-index coordinates `(i, j, k)`.
+    pub eye: [f64; 3],
+    /// The base plane: the slice nearest the eye.
+    pub k_front: usize,
+    /// `κ = 1/(k_front − eye_k)`.
+    pub kappa: f64,
+    /// True when slices are walked front to back in ascending `k`.
+    pub ascending: bool,
+    /// Base-plane sheared coordinates → output pixels.
+    pub warp: Warp,
+}
+
+impl PerspectiveView {
+    /// Factorizes `camera` seen from `distance` world units in front of the
+    /// volume centre, for a volume of `dims` voxels with `spacing`.
+    pub fn new(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+        if !(distance.is_finite() && distance > 0.0) {
+            return Err(Error::value("eye distance", format!("{distance} (must be finite and > 0)")));
+        }
+        let [w, h] = camera.size;
+        let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
+        let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let centre = (nd - 1.0) / 2.0;
+        let zoom = match camera.zoom {
+            Some(z) if z.is_finite() && z > 0.0 => z,
+            Some(z) => return Err(Error::value("zoom", format!("{z} (must be finite and > 0)"))),
+            None => (w.min(h) as f64) / ((nd - 1.0).max(DVec3::ONE) * sp).length(),
+        };
+        let r = camera.rotation;
+        // the eye in voxel space, and the principal axis of the direction to the centre
+        let eye_v = (r.transpose() * DVec3::new(0.0, 0.0, distance)) / sp + centre;
+        let axis = principal_axis(centre - eye_v);
+        let perm = permutation(axis);
+        let e = [eye_v[perm[0]], eye_v[perm[1]], eye_v[perm[2]]];
+        let n = [dims[perm[0]], dims[perm[1]], dims[perm[2]]];
+        let last = n[2].saturating_sub(1) as f64;
+        let (k_front, ascending) = if e[2] < 0.0 {
+            (0, true)
+        } else if e[2] > last {
+            (n[2] - 1, false)
+        } else {
+            return Err(Error::value("perspective view", "the eye is between the first and last slice: it needs the pyramid split"));
+        };
+        // one pyramid only if every ray into the box is within 45° of k: the
+        // conditions are linear over the box, so its corners decide
+        let mut corners = 0..8;
+        if corners.any(|c| {
+            let x = [0, 1, 2].map(|a| if c >> a & 1 == 1 { n[a].saturating_sub(1) as f64 } else { 0.0 });
+            let dk = (x[2] - e[2]).abs();
+            (x[0] - e[0]).abs() > dk * (1.0 + 1e-12) || (x[1] - e[1]).abs() > dk * (1.0 + 1e-12)
+        }) {
+            return Err(Error::value("perspective view", "rays deviate more than 45° from the principal axis: it needs the pyramid split"));
+        }
+        let kappa = 1.0 / (k_front as f64 - e[2]);
+        // the warp: sheared (a, b) on the base plane is voxel (a, b, k_front)
+        let unperm = |ijk: DVec3| -> DVec3 {
+            let mut v = DVec3::ZERO;
+            v[perm[0]] = ijk.x;
+            v[perm[1]] = ijk.y;
+            v[perm[2]] = ijk.z;
+            v
+        };
+        let to_eye = |v: DVec3| r * (v * sp);
+        let e0 = r * ((unperm(DVec3::new(0.0, 0.0, k_front as f64)) - centre) * sp);
+        let (ea, eb) = (to_eye(unperm(DVec3::X)), to_eye(unperm(DVec3::Y)));
+        let (cu, cv, f) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0, zoom * distance);
+        // rows (u·w, v·w, w) over columns (a, b, 1)
+        let rw = DVec3::new(-ea.z, -eb.z, distance - e0.z);
+        let ru = cu * rw + f * DVec3::new(ea.x, eb.x, e0.x);
+        let rv = cv * rw - f * DVec3::new(ea.y, eb.y, e0.y);
+        let forward = DMat3::from_cols(ru, rv, rw).transpose();
+        let det = forward.determinant();
+        if !(det.is_finite() && det != 0.0) {
+            return Err(Error::value("perspective view", "the base plane is seen edge-on"));
+        }
+        // F⁻¹ itself: (a, b, 1)/h with h > 0 in front of the eye (a negative
+        // multiple, such as adj(F) when det F < 0, would flip that test)
+        let inverse = forward.inverse();
+        Ok(PerspectiveView { axis, perm, n, eye: e, k_front, kappa, ascending, warp: Warp { forward, inverse } })
+    }
+
+    /// The scale `σ_k` of slice `k` (1 at the base plane, growing away from the eye).
+    pub fn scale(&self, k: f64) -> f64 {
+        1.0 + self.kappa * (k - self.k_front as f64)
+    }
+
+    /// The translation `τ_k` of slice `k` along `(i, j)`.
+    pub fn trans(&self, k: f64) -> [f64; 2] {
+        let d = k - self.k_front as f64;
+        [-self.kappa * self.eye[0] * d, -self.kappa * self.eye[1] * d]
+    }
+
+    /// The voxel position `[x, y, z]` where the ray through base-plane point
+    /// `(a, b)` meets (fractional) slice `k`.
+    pub fn sheared_to_voxel(&self, a: f64, b: f64, k: f64) -> [f64; 3] {
+        let (s, t) = (self.scale(k), self.trans(k));
+        let mut v = [0.0; 3];
+        v[self.perm[0]] = s * a + t[0];
+        v[self.perm[1]] = s * b + t[1];
+        v[self.perm[2]] = k;
+        v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The camera's true perspective projection of a voxel point.
+    fn project(cam: &Camera, distance: f64, zoom: f64, dims: [usize; 3], sp: [f32; 3], v: [f64; 3]) -> Option<[f64; 2]> {
+        let c = DVec3::new(dims[0] as f64 - 1.0, dims[1] as f64 - 1.0, dims[2] as f64 - 1.0) / 2.0;
+        let s = DVec3::new(sp[0] as f64, sp[1] as f64, sp[2] as f64);
+        let e = cam.rotation * ((DVec3::from_array(v) - c) * s);
+        let hz = distance - e.z;
+        (hz > 0.0).then(|| {
+            let f = zoom * distance;
+            [(cam.size[0] as f64 - 1.0) / 2.0 + f * e.x / hz, (cam.size[1] as f64 - 1.0) / 2.0 - f * e.y / hz]
+        })
+    }
+
+    #[test]
+    fn perspective_worked_example() {
+        // 3³ voxels, spacing 1, eye 15 units away, zoom 1, 3×3 output
+        let r = DMat3::from_cols_array(&[0.8, 0.0, -0.6, 0.0, 1.0, 0.0, 0.6, 0.0, 0.8]);
+        let cam = Camera { rotation: r, zoom: Some(1.0), size: [3, 3] };
+        let p = PerspectiveView::new(&cam, 15.0, [3, 3, 3], [1.0; 3]).unwrap();
+        assert_eq!((p.axis, p.k_front, p.ascending), (2, 2, false));
+        assert!((DVec3::from_array(p.eye) - DVec3::new(-8.0, 1.0, 13.0)).length() < 1e-12);
+        assert!((p.kappa + 1.0 / 11.0).abs() < 1e-15);
+        assert!((p.scale(0.0) - 13.0 / 11.0).abs() < 1e-15);
+        let want = DMat3::from_cols_array(&[12.6, 0.6, 0.6, 0.0, -15.0, 0.0, 10.6, 28.6, 13.6]);
+        assert!(p.warp.forward.abs_diff_eq(want, 1e-12), "{:?}", p.warp.forward);
+        for ((a, b), (u, v)) in [((0.0, 1.0), (0.779412, 1.0)), ((2.0, 0.0), (2.418919, 2.013514)), ((-1.2, 1.8), (-0.350932, 0.068323))] {
+            let [u2, v2] = p.warp.to_output(a, b).unwrap();
+            assert!((u2 - u).abs() < 1e-6 && (v2 - v).abs() < 1e-6, "({a}, {b}) → ({u2}, {v2})");
+        }
+    }
+
+    /// Schulze's §2.4 as a numeric test: projecting a sample of the scaled,
+    /// translated slices with the true camera gives the pixel the warp gives
+    /// its base-plane point, for every slice.
+    #[test]
+    fn perspective_projection_and_warp_commute() {
+        let mut seed = 7u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (dims, sp) = ([20, 26, 17], [1.0f32, 0.8, 1.5]);
+        let mut tested = 0;
+        for _ in 0..400 {
+            let r = DMat3::from_euler(glam::EulerRot::XYZ, rnd() * 7.0, rnd() * 7.0, rnd() * 7.0);
+            let distance = 60.0 + rnd() * 400.0;
+            let cam = Camera { rotation: r, zoom: Some(2.0), size: [96, 80] };
+            let Ok(p) = PerspectiveView::new(&cam, distance, dims, sp) else { continue };
+            tested += 1;
+            for _ in 0..6 {
+                let (a, b, k) = (rnd() * 20.0 - 2.0, rnd() * 26.0 - 2.0, rnd() * (p.n[2] - 1) as f64);
+                let x = p.sheared_to_voxel(a, b, k);
+                let want = project(&cam, distance, 2.0, dims, sp, x).unwrap();
+                let got = p.warp.to_output(a, b).unwrap();
+                assert!((got[0] - want[0]).abs() < 1e-8 && (got[1] - want[1]).abs() < 1e-8, "{got:?} vs {want:?}");
+                // and the inverse takes the pixel back to the base-plane point
+                let back = p.warp.to_sheared(got[0], got[1]).unwrap();
+                assert!((back[0] - a).abs() < 1e-8 && (back[1] - b).abs() < 1e-8);
+            }
+            assert!(p.scale(p.k_front as f64) == 1.0);
+            let far = if p.ascending { (p.n[2] - 1) as f64 } else { 0.0 };
+            assert!(p.scale(far) >= 1.0, "slices away from the eye are scaled up");
+        }
+        assert!(tested > 200, "only {tested} views had one pyramid");
+    }
+
+    /// As the eye recedes, slices stop scaling and their translations become
+    /// the parallel view's shear, so the perspective image converges to the
+    /// parallel one.
+    #[test]
+    fn perspective_converges_to_parallel_as_the_eye_recedes() {
+        let r = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, -0.5, 0.2);
+        let (dims, sp) = ([20, 30, 40], [1.0f32, 0.5, 3.0]);
+        let cam = Camera::new(r, [200, 100]);
+        let par = crate::view::Factorization::new(&cam, dims, sp).unwrap();
+        let mut last = f64::INFINITY;
+        for distance in [1e3, 1e4, 1e5, 1e6] {
+            let p = PerspectiveView::new(&cam, distance, dims, sp).unwrap();
+            assert_eq!(p.axis, par.axis);
+            let d = (p.n[2] - 1) as f64 - p.k_front as f64;
+            let err = (p.scale(p.k_front as f64 + d) - 1.0).abs()
+                + (0..2).map(|a| (p.trans(p.k_front as f64 + 1.0)[a] - par.shear[a]).abs()).sum::<f64>();
+            assert!(err < last * 0.2, "error {err} at {distance} did not shrink (was {last})");
+            last = err;
+        }
+        assert!(last < 1e-4);
+    }
+
+    #[test]
+    fn perspective_refuses_what_needs_the_pyramid_split() {
+        let cam = Camera::new(DMat3::IDENTITY, [64, 64]);
+        // the eye inside the volume
+        assert!(PerspectiveView::new(&cam, 2.0, [20, 20, 20], [1.0; 3]).is_err());
+        // close enough that the corner rays pass 45°
+        assert!(PerspectiveView::new(&cam, 18.0, [20, 20, 20], [1.0; 3]).is_err());
+        assert!(PerspectiveView::new(&cam, 40.0, [20, 20, 20], [1.0; 3]).is_ok());
+        assert!(PerspectiveView::new(&cam, f64::NAN, [20, 20, 20], [1.0; 3]).is_err());
+        assert!(PerspectiveView::new(&cam, -5.0, [20, 20, 20], [1.0; 3]).is_err());
+    }
+}

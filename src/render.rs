@@ -687,7 +687,6 @@ impl Renderer {
         // by the one pipeline of this method
         let result: Result<()> = self.pool.install(|| {
             let t = Instant::now();
-            inter.prepare(plan.grid.size);
             let rect: Option<Rect> = match settings.method {
                 Method::Binary => {
                     let m = masks[f.axis].as_mut().ok_or_else(|| missing("the sheared mask", f.axis))?;
@@ -703,6 +702,7 @@ impl Renderer {
                     };
                     stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
+                    inter.prepare(plan.grid.size);
                     let ctx = ray_context(stack, cls, plan, iso, settings, normals[f.axis].as_ref(), shade);
                     match &m.mask {
                         AnyMask::W32(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
@@ -715,6 +715,7 @@ impl Renderer {
                     let rect = volume_rect(plan, stack.cells());
                     stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
+                    inter.prepare(plan.grid.size);
                     let ctx = ray_context(stack, cls, plan, iso, settings, normals[f.axis].as_ref(), shade);
                     render_brute(&ctx, rect, inter);
                     stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -733,6 +734,7 @@ impl Renderer {
                     };
                     stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
+                    inter.prepare(plan.grid.size);
                     match settings.method {
                         Method::Rle => rle.render(plan, settings.ert, rect, inter),
                         _ => rle.render_brute(stack, plan, settings.ert, rect, inter),

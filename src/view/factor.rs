@@ -87,6 +87,27 @@ pub fn permutation(c: usize) -> [usize; 3] {
     }
 }
 
+/// The zoom of `camera` for a volume of `nd` voxels per axis with spacing `sp`:
+/// its own, or (None) the one that fits the volume's bounding diagonal to the
+/// smaller image side.
+pub(crate) fn camera_zoom(camera: &Camera, nd: DVec3, sp: DVec3) -> Result<f64> {
+    let [w, h] = camera.size;
+    match camera.zoom {
+        Some(z) if z.is_finite() && z > 0.0 => Ok(z),
+        Some(z) => Err(Error::value("zoom", format!("{z} (must be finite and > 0)"))),
+        None => Ok((w.min(h) as f64) / ((nd - 1.0).max(DVec3::ONE) * sp).length()),
+    }
+}
+
+/// The voxel-space vector of permuted coordinates `(i, j, k)` under `perm`.
+pub(crate) fn unpermute(perm: [usize; 3], ijk: DVec3) -> DVec3 {
+    let mut v = DVec3::ZERO;
+    v[perm[0]] = ijk.x;
+    v[perm[1]] = ijk.y;
+    v[perm[2]] = ijk.z;
+    v
+}
+
 impl Factorization {
     /// Factorizes `camera` for a volume of `dims` voxels with `spacing`.
     pub fn new(camera: &Camera, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
@@ -100,16 +121,7 @@ impl Factorization {
         }
         let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
         let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
-        let zoom = match camera.zoom {
-            Some(z) if z.is_finite() && z > 0.0 => z,
-            Some(z) => {
-                return Err(Error::value("zoom", format!("{z} (must be finite and > 0)")));
-            }
-            None => {
-                let diag = ((nd - 1.0).max(DVec3::ONE) * sp).length();
-                (w.min(h) as f64) / diag
-            }
-        };
+        let zoom = camera_zoom(camera, nd, sp)?;
         // viewing direction (into the scene) in world, then voxel space
         let dir_world = r.transpose() * DVec3::new(0.0, 0.0, -1.0);
         let dir_vox = dir_world / sp;
@@ -125,13 +137,7 @@ impl Factorization {
             let e = r * ((v - centre) * sp);
             DVec2::new((w as f64 - 1.0) / 2.0 + zoom * e.x, (h as f64 - 1.0) / 2.0 - zoom * e.y)
         };
-        let unperm = |ijk: DVec3| -> DVec3 {
-            let mut v = DVec3::ZERO;
-            v[perm[0]] = ijk.x;
-            v[perm[1]] = ijk.y;
-            v[perm[2]] = ijk.z;
-            v
-        };
+        let unperm = |ijk: DVec3| unpermute(perm, ijk);
         // sheared (a, b) at slice kc is the voxel (a, b, kc)
         let o = img(unperm(DVec3::new(0.0, 0.0, kc)));
         let ua = img(unperm(DVec3::new(1.0, 0.0, kc))) - o;

@@ -25,6 +25,7 @@
 use glam::{DMat3, DVec3};
 
 use crate::error::{Error, Result};
+use crate::view::factor::{camera_zoom, unpermute};
 use crate::view::plan::Warp;
 use crate::view::{Camera, permutation, principal_axis};
 
@@ -60,11 +61,7 @@ impl PerspectiveView {
         let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
         let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
         let centre = (nd - 1.0) / 2.0;
-        let zoom = match camera.zoom {
-            Some(z) if z.is_finite() && z > 0.0 => z,
-            Some(z) => return Err(Error::value("zoom", format!("{z} (must be finite and > 0)"))),
-            None => (w.min(h) as f64) / ((nd - 1.0).max(DVec3::ONE) * sp).length(),
-        };
+        let zoom = camera_zoom(camera, nd, sp)?;
         let r = camera.rotation;
         // the eye in voxel space, and the principal axis of the direction to the centre
         let eye_v = (r.transpose() * DVec3::new(0.0, 0.0, distance)) / sp + centre;
@@ -92,13 +89,7 @@ impl PerspectiveView {
         }
         let kappa = 1.0 / (k_front as f64 - e[2]);
         // the warp: sheared (a, b) on the base plane is voxel (a, b, k_front)
-        let unperm = |ijk: DVec3| -> DVec3 {
-            let mut v = DVec3::ZERO;
-            v[perm[0]] = ijk.x;
-            v[perm[1]] = ijk.y;
-            v[perm[2]] = ijk.z;
-            v
-        };
+        let unperm = |ijk: DVec3| unpermute(perm, ijk);
         let to_eye = |v: DVec3| r * (v * sp);
         let e0 = r * ((unperm(DVec3::new(0.0, 0.0, k_front as f64)) - centre) * sp);
         let (ea, eb) = (to_eye(unperm(DVec3::X)), to_eye(unperm(DVec3::Y)));

@@ -205,13 +205,9 @@ fn usage(msg: String) -> anyhow::Error {
     anyhow::Error::new(Usage(msg))
 }
 
+/// [`crate::app::median`]; NaN for no values (a table cell with nothing measured).
 fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+    crate::app::median(v).unwrap_or(f64::NAN)
 }
 
 impl BenchCmd {

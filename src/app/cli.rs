@@ -538,13 +538,9 @@ fn progress(len: u64, quiet: bool, msg: &str) -> indicatif::ProgressBar {
     pb
 }
 
+/// [`crate::app::median`]; 0 for no values (e.g. no tissue switches in `rotate --json`).
 fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+    crate::app::median(v).unwrap_or(0.0)
 }
 
 /// Runs `shearwarp render`.

@@ -10,3 +10,14 @@
 pub mod bench;
 pub mod cli;
 pub mod viewer;
+
+/// The median of `v` (sorted in place), `None` for no values: each report
+/// says what an empty column shows.
+pub fn median(v: &mut [f64]) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    Some(if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) })
+}

@@ -25,9 +25,22 @@ pub enum Error {
     /// chain would print it twice.)
     #[error("{path}: {error}")]
     Io { path: PathBuf, error: std::io::Error },
+    /// Structures that would exceed the memory budget (checked before anything
+    /// is allocated), or an allocation the system refused.
+    #[error("{}", memory_message(what, *needed, *held, *budget))]
+    Memory { what: String, needed: u64, held: u64, budget: u64 },
     /// Anything else (image encoding, ...).
     #[error("{0}")]
     Other(String),
+}
+
+fn memory_message(what: &str, needed: u64, held: u64, budget: u64) -> String {
+    let b = crate::checks::fmt_bytes;
+    if budget == 0 {
+        format!("{what} needs {}: the system refused the allocation (not enough memory or address space)", b(needed))
+    } else {
+        format!("{what} needs {} with {} held already, over the memory budget of {}", b(needed), b(held), b(budget))
+    }
 }
 
 /// Shorthand for results carrying [`Error`].

@@ -14,7 +14,8 @@
 //! → composite ([`composite`]: ray and slice traversals into the intermediate image)
 //! → warp ([`warp`]: the intermediate image to the final one).
 //! [`render`] runs that pipeline per frame; [`kernels`] holds the one CPU
-//! level every SIMD kernel is chosen by. [`accuracy`] (reference renderer,
+//! level every SIMD kernel is chosen by; [`memory`] what each structure holds
+//! and the fallible allocation of the large ones. [`accuracy`] (reference renderer,
 //! analytic truth, metrics) is what the fast paths are measured against;
 //! [`checks`] holds the sanity checks and warnings every front end shares.
 //!
@@ -29,6 +30,7 @@ pub mod data;
 pub mod encode;
 pub mod error;
 pub mod kernels;
+pub mod memory;
 pub mod render;
 pub mod view;
 pub mod warp;
@@ -36,6 +38,7 @@ pub mod warp;
 pub use composite::Mode;
 pub use data::volume::{Volume, VoxelData, VoxelType};
 pub use error::{Error, Result};
+pub use memory::Memory;
 pub use render::{FrameStats, Method, Renderer, Settings};
 pub use view::{Camera, NamedView};
 pub use warp::{Image, Image8};

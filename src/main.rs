@@ -3,5 +3,6 @@
 mod app;
 
 fn main() -> std::process::ExitCode {
+    app::mark_start();
     app::cli::main()
 }

@@ -22,12 +22,13 @@ use crate::composite::Mode;
 use crate::composite::raycast::{RayContext, render_binary, render_brute, volume_rect};
 use crate::composite::{Intermediate, Rect};
 use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
-use crate::data::slices::SliceStack;
+use crate::data::slices::{Densities, SliceStack};
 use crate::data::volume::Volume;
 use crate::encode::depth::{Matcher, Search, binary_matcher};
 use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, ShearWork};
 use crate::encode::rle::{ClassKey, RleCache};
 use crate::error::{Error, Result};
+use crate::memory::Memory;
 use crate::view::plan::{FramePlan, Grid, Limiter};
 use crate::view::{Camera, Factorization};
 use crate::warp::{Canvas, Texel, warp};
@@ -292,6 +293,8 @@ pub struct Renderer {
     pool: rayon::ThreadPool,
     /// Classification, encodings and tables of the pre-classified paths.
     rle: RleCache,
+    /// Largest total of [`Renderer::memory`] a new structure may bring about.
+    budget: Option<u64>,
 }
 
 impl Renderer {
@@ -322,6 +325,7 @@ impl Renderer {
             last_frame: None,
             pool,
             rle: RleCache::new(),
+            budget: None,
         })
     }
 
@@ -483,6 +487,110 @@ impl Renderer {
         &self.rle
     }
 
+    /// Bytes held now, per structure and axis.
+    pub fn memory(&self) -> Memory {
+        let per = |f: &dyn Fn(usize) -> usize| [0, 1, 2].map(|a| f(a) as u64);
+        Memory {
+            volume: self.volume_bytes(),
+            stacks: per(&|a| self.stacks[a].as_ref().map_or(0, SliceStack::bytes)),
+            normals: per(&|a| self.normals[a].as_ref().map_or(0, NormalStack::bytes)),
+            cell_codes: per(&|a| self.codes[a].as_ref().map_or(0, |c| c.1.bytes())),
+            masks: per(&|a| {
+                self.masks[a].as_ref().map_or(0, |m| match &m.mask {
+                    AnyMask::W32(m) => m.held_bytes(),
+                    AnyMask::W64(m) => m.held_bytes(),
+                })
+            }),
+            rle: self.rle.bytes().map(|b| b as u64),
+            intermediate: self.inter.bytes() as u64,
+        }
+    }
+
+    fn volume_bytes(&self) -> u64 {
+        (self.volume.len() * self.volume.data().voxel_type().size()) as u64
+    }
+
+    /// Limits what the renderer may hold ([`Renderer::memory`]'s total): before
+    /// it builds the structures a view needs, it predicts their size
+    /// ([`estimate_axis`]); when they would not fit it first frees the other
+    /// axes' structures (rebuilt when a view needs them again), and when they
+    /// still would not fit the frame fails with [`Error::Memory`], before
+    /// anything is allocated. `None` (the default) sets no limit.
+    pub fn set_memory_budget(&mut self, budget: Option<u64>) {
+        self.budget = budget;
+    }
+
+    /// The memory budget, if any.
+    pub fn memory_budget(&self) -> Option<u64> {
+        self.budget
+    }
+
+    /// The code width of the current classification's mask.
+    fn code_bits(&self) -> u32 {
+        self.tissues.as_ref().and_then(|t| crate::encode::depth::code_width_for(t.thresholds.len())).unwrap_or(1)
+    }
+
+    /// The bytes `ensure_axis(axis)` would allocate now (structures that exist
+    /// and are current count 0), and the intermediate image's growth.
+    fn missing_bytes(&self, axis: usize) -> Memory {
+        let mut m = estimate_axis(&self.volume, &self.settings, self.code_bits(), axis);
+        if self.stacks[axis].is_some() {
+            m.stacks[axis] = 0;
+        }
+        if self.normals[axis].is_some() {
+            m.normals[axis] = 0;
+        }
+        if self.masks[axis].as_ref().map(|m| m.key) == Some(self.mask_key()) {
+            m.masks[axis] = 0;
+            m.cell_codes[axis] = 0;
+        }
+        m.volume = 0;
+        m.intermediate = m.intermediate.saturating_sub(self.inter.bytes() as u64);
+        m
+    }
+
+    /// Frees every structure of principal axis `axis`.
+    fn drop_axis(&mut self, axis: usize) {
+        self.stacks[axis] = None;
+        self.normals[axis] = None;
+        self.codes[axis] = None;
+        self.masks[axis] = None;
+        self.rle.drop_axis(axis);
+    }
+
+    /// Checks the budget for building `axis` now; frees the other axes first
+    /// if that makes it fit.
+    fn fit_budget(&mut self, axis: usize) -> Result<()> {
+        let Some(budget) = self.budget else { return Ok(()) };
+        let needed = self.missing_bytes(axis).total();
+        if needed == 0 {
+            return Ok(());
+        }
+        if self.memory().total() + needed > budget {
+            for a in (0..3).filter(|&a| a != axis) {
+                self.drop_axis(a);
+            }
+        }
+        let held = self.memory().total();
+        if held + needed > budget {
+            let d = self.volume.dims();
+            return Err(Error::Memory {
+                what: format!(
+                    "rendering the {}×{}×{} volume along {} ({})",
+                    d[0],
+                    d[1],
+                    d[2],
+                    ["x", "y", "z"][axis],
+                    self.settings.method.name()
+                ),
+                needed,
+                held,
+                budget,
+            });
+        }
+        Ok(())
+    }
+
     /// What the pre-classified state depends on: classification generation,
     /// tissue and mode.
     fn rle_key(&self) -> ClassKey {
@@ -522,7 +630,7 @@ impl Renderer {
         let p = crate::view::permutation(axis);
         let n = [dims[p[0]], dims[p[1]], dims[p[2]]];
         let cells = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
-        let Grid { pad: vpad, size: grid, .. } = Grid::parallel(cells, n[2]);
+        let Grid { size: grid, .. } = Grid::parallel(cells, n[2]);
         let too_big = |what: String| {
             Err(Error::value(
                 "volume shape",
@@ -541,15 +649,7 @@ impl Renderer {
         }
         if self.settings.method == Method::Binary {
             // an upper bound of what BinaryMask::from_codes allocates
-            let s = self.settings.cell as u64;
-            let nb = self.tissues.as_ref().and_then(|t| crate::encode::depth::code_width_for(t.thresholds.len())).unwrap_or(1) as u64;
-            let bits = match self.settings.word {
-                WordSize::U32 => 32u64,
-                WordSize::U64 => 64,
-            };
-            let pad = (vpad as u64).div_ceil(s) + 1;
-            let g = cells.map(|c| (c as u64).div_ceil(s) + 1 + 2 * pad);
-            let bytes = g[0] * g[1] * (n[2] as u64).div_ceil(bits / nb).max(1) * (bits / 8);
+            let bytes = estimate_axis(&self.volume, &self.settings, self.code_bits(), axis).masks[axis];
             if bytes > MAX_MASK_BYTES {
                 return too_big(format!("its sheared mask would need {bytes} bytes (limit {MAX_MASK_BYTES})"));
             }
@@ -561,21 +661,37 @@ impl Renderer {
     /// exist and are current. Returns the milliseconds spent building.
     fn ensure_axis(&mut self, axis: usize) -> Result<f64> {
         self.check_axis_size(axis)?;
+        self.fit_budget(axis)?;
         let t = Instant::now();
-        if self.stacks[axis].is_none() {
-            let vol = &self.volume;
-            self.stacks[axis] = Some(self.pool.install(|| SliceStack::new(vol, axis)));
-        }
+        let compact = compact_binary(&self.volume, &self.settings);
         let raycast = matches!(self.settings.method, Method::Binary | Method::Brute);
+        if compact && self.normals[axis].is_none() {
+            // the packed cells straight from the volume: no f32 stack at all
+            let (vol, spacing) = (&self.volume, self.volume.spacing());
+            let ns = self.pool.install(|| NormalStack::try_packed_from_volume(vol, axis, spacing))?;
+            self.normals[axis] = Some(ns.expect("compact_binary checked that the volume packs"));
+            if self.stacks[axis].is_none() {
+                self.stacks[axis] = Some(SliceStack::shell(vol, axis));
+            }
+        }
+        if !compact && self.stacks[axis].as_ref().is_none_or(|s| !s.is_resident()) {
+            let vol = &self.volume;
+            self.stacks[axis] = Some(self.pool.install(|| SliceStack::try_new(vol, axis))?);
+        }
         if raycast && self.settings.normals == Normals::Codes && self.normals[axis].is_none() {
             let (stack, spacing, pack) =
                 (self.stacks[axis].as_ref().expect("stack built above"), self.volume.spacing(), self.settings.pack);
-            self.normals[axis] = Some(self.pool.install(|| NormalStack::with_packing(stack, spacing, pack)));
+            self.normals[axis] = Some(self.pool.install(|| NormalStack::try_with_packing(stack, spacing, pack))?);
         }
         if self.settings.method == Method::Binary {
             let key = self.mask_key();
             if self.masks[axis].as_ref().map(|m| m.key) != Some(key) {
-                let stack = self.stacks[axis].as_ref().expect("stack built above");
+                // the densities come from the resident stack, or from the packed cells
+                let stack: &dyn Densities = match (&self.stacks[axis], &self.normals[axis]) {
+                    (Some(s), _) if s.is_resident() => s,
+                    (_, Some(ns)) => ns,
+                    _ => return Err(missing("the densities", axis)),
+                };
                 // cell codes depend only on the classification; cell size and word size reuse them
                 let codes_key = key.generation * 2 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64);
                 if self.codes[axis].as_ref().map(|c| c.0) != Some(codes_key) {
@@ -787,6 +903,63 @@ mod tests {
         r.set_settings(Settings { mode: Mode::Blend, ..r.settings() }).unwrap();
         assert!(!r.render(&cam, &mut img).unwrap().skipped);
     }
+}
+
+/// True when the binary path keeps no f32 stack for `volume`: table shading
+/// with packed cells, whose 16-bit densities are all its rays read (8- and
+/// 16-bit scans). Every other path samples a resident [`SliceStack`].
+fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
+    settings.method == Method::Binary
+        && settings.normals == Normals::Codes
+        && settings.pack
+        && volume.data().voxel_type() != crate::data::volume::VoxelType::F32
+        && {
+            let (lo, hi) = volume.value_range();
+            hi - lo <= u16::MAX as f32
+        }
+}
+
+/// The bytes a renderer with `settings` holds for principal axis `axis` of
+/// `volume` once a frame along it is rendered (with a mask of `code_bits`-bit
+/// codes: 1 for one transfer function, 3 for the CT presets), before anything
+/// is built: the volume, the slice stack, the normal codes (4 bytes a voxel
+/// when packed with integer densities, else 2), the cell codes and the mask's
+/// words (binary path) and the intermediate image. The run-length encoding
+/// (RLE paths) depends on the data and is not predicted (0).
+pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis: usize) -> Memory {
+    let dims = volume.dims();
+    let p = crate::view::permutation(axis.min(2));
+    let n = [dims[p[0]], dims[p[1]], dims[p[2]]];
+    let voxels = (n[0] * n[1] * n[2]) as u64;
+    let cells = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
+    let grid = Grid::parallel(cells, n[2]);
+    let mut m = Memory {
+        volume: voxels * volume.data().voxel_type().size() as u64,
+        intermediate: grid.size[0] as u64 * grid.size[1] as u64 * 20,
+        ..Default::default()
+    };
+    let a = axis.min(2);
+    m.stacks[a] = if compact_binary(volume, settings) { 0 } else { voxels * 4 };
+    let raycast = matches!(settings.method, Method::Binary | Method::Brute);
+    if raycast && settings.normals == Normals::Codes {
+        let integer = volume.data().voxel_type() != crate::data::volume::VoxelType::F32;
+        m.normals[a] = voxels * if settings.pack && integer { 4 } else { 2 };
+    }
+    if settings.method == Method::Binary {
+        let s = settings.cell.clamp(1, MAX_CELL) as u64;
+        m.cell_codes[a] = cells[0] as u64 * cells[1] as u64 * n[2] as u64;
+        let bits = match settings.word {
+            WordSize::U32 => 32u64,
+            WordSize::U64 => 64,
+        };
+        let nb = code_bits.max(1) as u64;
+        let pad = (grid.pad as u64).div_ceil(s) + 1;
+        let g = cells.map(|c| (c as u64).div_ceil(s) + 1 + 2 * pad);
+        let words = g[0] * g[1] * (n[2] as u64).div_ceil(bits / nb).max(1) * (bits / 8);
+        let super_codes = if s > 1 { cells.map(|c| (c as u64).div_ceil(s) + 1).iter().product::<u64>() * n[2] as u64 } else { 0 };
+        m.masks[a] = words + super_codes;
+    }
+    m
 }
 
 fn check_settings(s: &Settings) -> Result<()> {

@@ -263,6 +263,7 @@ impl BenchCmd {
         let tissues = presets::tissues_for(&vol);
         let hi = vol.value_range().1;
         let mut r = Renderer::with_tissues(vol, &tissues, base)?;
+        r.set_memory_budget(crate::app::budget());
         if let Some(name) = self.tissue.as_deref().filter(|n| *n != "auto") {
             if r.select_tissue_named(name).is_err() {
                 let names: Vec<&str> = tissues.iter().map(|t| t.name).collect();

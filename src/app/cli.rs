@@ -20,7 +20,7 @@ use shearwarp::data::phantom::Phantom;
 use shearwarp::data::volume::{Volume, VoxelType};
 use shearwarp::encode::depth::Search;
 use shearwarp::kernels;
-use shearwarp::render::{FrameStats, Method, Normals, Renderer, Settings, WordSize};
+use shearwarp::render::{FrameStats, Method, Normals, Renderer, Settings, WordSize, estimate_axis};
 use shearwarp::view::{Camera, NamedView, one_bit_step_deg, rotate_eye};
 use shearwarp::warp::Image;
 
@@ -145,6 +145,13 @@ pub struct VolumeArgs {
     /// (raw and .den files carry none; replaces a file's own). Named views follow it.
     #[arg(long, value_name = "CODE")]
     pub orientation: Option<String>,
+    /// Largest memory the renderer may hold, in bytes with an optional k/M/G
+    /// suffix (e.g. 512M). Structures a view needs are predicted before they
+    /// are built; other axes are freed to make room; what still does not fit
+    /// fails with a clear error. Default: the machine's physical memory (or
+    /// `ulimit -v`, if lower)
+    #[arg(long, value_name = "BYTES", value_parser = parse_max_memory)]
+    pub max_memory: Option<u64>,
 }
 
 /// Render settings shared by every command.
@@ -360,6 +367,10 @@ fn parse_opacity(s: &str) -> std::result::Result<OpacityCurve, String> {
     shearwarp::classify::TransferFunction::new(pts, colour).map(OpacityCurve).map_err(|e| e.to_string())
 }
 
+fn parse_max_memory(s: &str) -> std::result::Result<u64, String> {
+    shearwarp::checks::parse_bytes(s).map_err(|e| e.to_string())
+}
+
 fn parse_rotation(s: &str) -> std::result::Result<[f64; 3], String> {
     let r: [f64; 3] = parse_triple(s, "angles")?;
     if r.iter().any(|x| !x.is_finite()) {
@@ -372,7 +383,14 @@ impl VolumeArgs {
     /// Loads or builds the volume and names it for reports. Any failure is a
     /// [`Usage`] error: the input is what is wrong.
     pub fn load(&self) -> Result<(Volume, String)> {
-        self.load_inner().map_err(|e| anyhow::Error::new(Usage(format!("{e:#}"))))
+        crate::app::set_budget(self.max_memory);
+        let (vol, name) = self.load_inner().map_err(|e| anyhow::Error::new(Usage(format!("{e:#}"))))?;
+        let bytes = (vol.len() * vol.data().voxel_type().size()) as u64;
+        if let Some(b) = crate::app::budget().filter(|&b| bytes > b) {
+            let f = shearwarp::checks::fmt_bytes;
+            usage!("{name}: the volume alone holds {}, over the memory budget of {} (--max-memory)", f(bytes), f(b));
+        }
+        Ok((vol, name))
     }
 
     fn load_inner(&self) -> Result<(Volume, String)> {
@@ -444,6 +462,7 @@ impl RenderArgs {
         let tissues = presets::tissues_for(&vol);
         let hi = vol.value_range().1;
         let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
+        r.set_memory_budget(crate::app::budget());
         match self.tissue.as_deref() {
             None | Some("auto") => {}
             Some(name) => {
@@ -543,15 +562,51 @@ fn median(v: &mut [f64]) -> f64 {
     crate::app::median(v).unwrap_or(0.0)
 }
 
+/// The renderer's memory per structure (bytes; per axis x, y, z where there
+/// is one), its total, the budget and the process's peak resident memory.
+fn memory_json(r: &Renderer) -> serde_json::Value {
+    let m = r.memory();
+    serde_json::json!({
+        "volume": m.volume, "stacks": m.stacks, "normals": m.normals, "cell_codes": m.cell_codes, "masks": m.masks,
+        "rle": m.rle, "intermediate": m.intermediate, "total": m.total(), "budget": r.memory_budget(),
+        "peak_rss_bytes": crate::app::peak_rss_bytes(),
+    })
+}
+
+/// The code width of a mask for `tissues` presets.
+fn code_bits(tissues: usize) -> u32 {
+    shearwarp::encode::depth::code_width_for(tissues.max(1)).unwrap_or(4)
+}
+
+/// What the binary iso preview (default settings, the volume's presets) would
+/// hold along each principal axis, predicted without building anything.
+fn memory_estimate(vol: &Volume, tissues: usize) -> serde_json::Value {
+    let per: Vec<serde_json::Value> = (0..3)
+        .map(|a| {
+            let m = estimate_axis(vol, &Settings::default(), code_bits(tissues), a);
+            serde_json::json!({
+                "axis": AXES[a], "volume": m.volume, "stack": m.stacks[a], "normals": m.normals[a], "cell_codes": m.cell_codes[a],
+                "mask": m.masks[a], "intermediate": m.intermediate, "total": m.total(),
+            })
+        })
+        .collect();
+    serde_json::json!({
+        "volume": (vol.len() * vol.data().voxel_type().size()) as u64, "binary_iso_per_axis": per,
+        "budget": crate::app::budget(),
+    })
+}
+
 /// Runs `shearwarp render`.
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let (vol, name) = cmd.volume.load()?;
+    let load_ms = crate::app::since_start_ms();
     let dims = vol.dims();
     let cam = cmd.render.camera(vol.frame())?;
     let mut r = cmd.render.renderer(vol)?;
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let stats = r.render(&cam, &mut img)?;
     img.save_png(&cmd.output)?;
+    let first_frame_ms = crate::app::since_start_ms();
     let warnings = shearwarp::checks::frame_warnings(&r, img.coverage());
     for w in &warnings {
         eprintln!("warning: {w}");
@@ -564,6 +619,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,
+            "load_ms": load_ms, "first_frame_ms": first_frame_ms, "memory": memory_json(&r),
         });
         say!("{j}");
     } else {
@@ -590,6 +646,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
 /// Runs `shearwarp rotate`.
 pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let (vol, name) = cmd.volume.load()?;
+    let load_ms = crate::app::since_start_ms();
     let dims = vol.dims();
     let step = match cmd.step_deg.as_str() {
         "auto" => one_bit_step_deg(vol.dims()) * cmd.render.cell as f64,
@@ -615,7 +672,9 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     // classification (per principal axis), the binary path only swaps a table.
     let reencodes = matches!(r.settings().method, shearwarp::render::Method::Rle | shearwarp::render::Method::BruteRle);
     let (mut select_ns, mut switch_ms, mut after_switch_ms): (Vec<f64>, Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new(), Vec::new());
-    let build_ms = r.prepare_all_axes();
+    // nothing is built before the first frame asks for it: each frame builds
+    // what its view needs (its principal axis), reported as its build_ms
+    let mut first_frame_ms = None;
     if let Some(d) = &cmd.frames_dir {
         std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create directory", d.display()))?;
     }
@@ -658,6 +717,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         if let Some(d) = &cmd.frames_dir {
             img.save_png(&d.join(format!("frame_{f:05}.png")))?;
         }
+        first_frame_ms.get_or_insert_with(crate::app::since_start_ms);
         if keep_frames {
             kept.push(img.to_rgb8());
         }
@@ -666,6 +726,8 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let loop_ms = loop_start.elapsed().as_secs_f64() * 1e3;
     pb.finish_and_clear();
     let frames_ms_total: f64 = all.iter().map(|s| s.build_ms + s.frame_ms()).sum();
+    let build_ms: f64 = all.iter().map(|s| s.build_ms).sum();
+    let build_ms_first = all.first().map_or(0.0, |s| s.build_ms);
     let switch_ms_total: f64 = switch_ms.iter().fold(0.0, |a, b| a + b); // not sum(): an empty sum is -0.0
     let warnings = shearwarp::checks::frame_warnings(&r, img.coverage());
     for w in &warnings {
@@ -711,6 +773,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             "shear_ms_median": shear, "render_ms_median": render, "warp_ms_median": warp, "frame_ms_median": frame,
             "fps": fps, "degrees_per_second": fps * step, "mask_bytes": r.mask_bytes(), "rle_bytes": r.rle_bytes(),
             "rle_axis_bytes": r.rle_axis_bytes(),
+            "load_ms": load_ms, "first_frame_ms": first_frame_ms, "build_ms_first": build_ms_first, "memory": memory_json(&r),
         });
         say!("{j}");
     } else {
@@ -739,7 +802,10 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
                 median(&mut after_switch_ms)
             );
         }
-        say!("  {frames} frames × {step:.3}° = {:.1}°; masks built in {build_ms:.1} ms", frames as f64 * step);
+        say!(
+            "  {frames} frames × {step:.3}° = {:.1}°; stacks and masks built in {build_ms:.1} ms (as frames needed them)",
+            frames as f64 * step
+        );
         say!("  median per frame: shear {shear:.3} ms, render {render:.3} ms, warp {warp:.3} ms, total {frame:.3} ms");
         say!("  {fps:.1} frames/s, {:.1} degrees/s", fps * step);
     }
@@ -778,6 +844,7 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
             "directions_ras": frame.map(|f| [f.directions.x_axis.to_array(), f.directions.y_axis.to_array(), f.directions.z_axis.to_array()]),
             "oblique_deg": frame.map(|f| f.obliquity_deg()), "skew_deg": frame.map(|f| f.skew_deg),
             "sentinel": range.sentinel, "sentinel_voxels": range.sentinel_voxels, "warnings": sentinel_note.iter().collect::<Vec<_>>(),
+            "memory": memory_estimate(&vol, tissues.len()),
         });
         say!("{j}");
         return Ok(());
@@ -809,6 +876,19 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
         kernels::level().name(),
         kernels::detected().name()
     );
+    {
+        let est: Vec<u64> = (0..3).map(|a| estimate_axis(&vol, &Settings::default(), code_bits(tissues.len()), a).total()).collect();
+        let f = shearwarp::checks::fmt_bytes;
+        let volume = (vol.len() * vol.data().voxel_type().size()) as u64;
+        say!(
+            "  memory    {} of voxels; the binary iso preview holds about {} along x / {} along y / {} along z (volume included), budget {}",
+            f(volume),
+            f(est[0]),
+            f(est[1]),
+            f(est[2]),
+            crate::app::budget().map_or("none".to_string(), f)
+        );
+    }
     say!("  histogram ({} bins, log scale):", cmd.bins);
     let maxl = hist.iter().map(|&c| ((c + 1) as f64).ln()).fold(0.0, f64::max).max(1e-9);
     for (i, &c) in hist.iter().enumerate() {

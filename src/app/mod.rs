@@ -11,6 +11,59 @@ pub mod bench;
 pub mod cli;
 pub mod viewer;
 
+use std::sync::OnceLock;
+use std::time::Instant;
+
+/// When `main` started (the origin of every report's `first_frame_ms`).
+static START: OnceLock<Instant> = OnceLock::new();
+
+/// Marks the process start; the first call wins.
+pub fn mark_start() {
+    START.get_or_init(Instant::now);
+}
+
+/// Milliseconds since [`mark_start`].
+pub fn since_start_ms() -> f64 {
+    START.get_or_init(Instant::now).elapsed().as_secs_f64() * 1e3
+}
+
+/// The memory budget every renderer of this process gets: `--max-memory` when
+/// given (set by [`set_budget`] while the volume loads), else the machine's
+/// physical memory or the process's address-space limit, whichever is lower
+/// (Linux; none elsewhere).
+static BUDGET: OnceLock<Option<u64>> = OnceLock::new();
+
+/// Sets the budget (`None`: the default); the first call wins.
+pub fn set_budget(b: Option<u64>) {
+    BUDGET.get_or_init(|| b.or_else(system_memory));
+}
+
+/// The budget for a new renderer.
+pub fn budget() -> Option<u64> {
+    *BUDGET.get_or_init(system_memory)
+}
+
+/// Physical memory (`MemTotal`), capped by `ulimit -v` (`Max address space`).
+fn system_memory() -> Option<u64> {
+    let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
+        s.lines().find(|l| l.starts_with("MemTotal:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok()).map(|kb| kb * 1024)
+    });
+    let limit = std::fs::read_to_string("/proc/self/limits").ok().and_then(|s| {
+        s.lines().find(|l| l.starts_with("Max address space")).and_then(|l| l.split_whitespace().nth(3)?.parse::<u64>().ok())
+    });
+    match (total, limit) {
+        (Some(t), Some(l)) => Some(t.min(l)),
+        (t, l) => t.or(l),
+    }
+}
+
+/// Peak resident memory of this process so far (`VmHWM`, Linux), in bytes.
+pub fn peak_rss_bytes() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kb: u64 = s.lines().find(|l| l.starts_with("VmHWM:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
 /// The median of `v` (sorted in place), `None` for no values: each report
 /// says what an empty column shows.
 pub fn median(v: &mut [f64]) -> Option<f64> {

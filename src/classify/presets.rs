@@ -135,21 +135,8 @@ pub fn data_range(v: &Volume) -> DataRange {
     }
     let span = hi as f64 - lo as f64;
     // the range of the values other than the lowest, and other than the highest
-    let (mut lo2, mut hi2) = (f32::INFINITY, f32::NEG_INFINITY);
-    let (mut n_lo, mut n_hi) = (0u64, 0u64);
-    for i in 0..v.len() {
-        let x = v.data().get(i);
-        if x == lo {
-            n_lo += 1;
-        } else {
-            lo2 = lo2.min(x);
-        }
-        if x == hi {
-            n_hi += 1;
-        } else {
-            hi2 = hi2.max(x);
-        }
-    }
+    let st = v.stats();
+    let (lo2, hi2, n_lo, n_hi) = (st.lo2, st.hi2, st.n_lo, st.n_hi);
     // the end value `s` is a sentinel when the rest has a spread of its own and
     // lies far from it
     let far = |rest_lo: f32, rest_hi: f32, s: f32| {
@@ -179,17 +166,7 @@ fn lerp(lo: f32, hi: f32, f: f64) -> f32 {
 
 /// A 256-bin histogram over `[lo, hi]`, ignoring values outside it (a sentinel).
 fn histogram_in(v: &Volume, bins: usize, lo: f32, hi: f32) -> Vec<u64> {
-    let mut h = vec![0u64; bins];
-    let scale = if hi > lo { bins as f64 / (hi as f64 - lo as f64) } else { 0.0 };
-    for i in 0..v.len() {
-        let x = v.data().get(i);
-        if x < lo || x > hi {
-            continue;
-        }
-        let b = ((x as f64 - lo as f64) * scale) as usize;
-        h[b.min(bins - 1)] += 1;
-    }
-    h
+    v.stats().histogram_in(v.data(), bins, lo, hi)
 }
 
 /// Otsu's threshold over a 256-bin histogram: the density that best separates

@@ -105,6 +105,11 @@ pub struct Intermediate {
 }
 
 impl Intermediate {
+    /// Bytes held (capacity of both planes).
+    pub fn bytes(&self) -> usize {
+        self.rgba.capacity() * 16 + self.depth.capacity() * 4
+    }
+
     /// Resizes for a grid of `size` (reusing the allocation when it is big enough).
     pub fn prepare(&mut self, size: [usize; 2]) {
         let n = size[0] * size[1];

@@ -2,6 +2,7 @@
 //!
 //! Owns the volume ([`volume`]: voxels of their own type, spacing, size limits,
 //! and where its index axes lie in the patient: [`orientation`]),
+//! its value statistics ([`stats`]: range and histograms, read once),
 //! the file loaders ([`io`]: NRRD, NIfTI, DICOM, .den, raw), the built-in
 //! phantoms ([`phantom`]), the per-axis slice stacks ([`slices`]: densities laid
 //! out along one principal axis, with the shared bilinear sample and gradient)
@@ -13,4 +14,5 @@ pub mod normals;
 pub mod orientation;
 pub mod phantom;
 pub mod slices;
+pub mod stats;
 pub mod volume;

@@ -24,7 +24,8 @@ use rayon::prelude::*;
 
 pub use crate::classify::shading::apply_shade;
 use crate::classify::shading::{ShadeEntry, Shading};
-use crate::data::slices::{SliceStack, cell_corners, prefetch_cell};
+use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch_cell};
+use crate::data::volume::{Volume, VoxelType};
 use crate::view::{Factorization, permutation};
 
 /// Cells per side of the hemi-octahedral normal grid.
@@ -118,7 +119,7 @@ fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
 /// is not touched at all. The densities come back exactly (integers below
 /// 2^24), so both layouts give the same image bit for bit. Otherwise: 2 bytes
 /// per voxel, codes only.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct NormalStack {
     /// Principal axis of the stack it was built from.
     pub axis: usize,
@@ -128,7 +129,7 @@ pub struct NormalStack {
 }
 
 /// How a [`NormalStack`] holds its codes.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 enum Store {
     /// One u16 code per voxel.
     Codes(Vec<u16>),
@@ -146,24 +147,66 @@ impl NormalStack {
 
     /// [`NormalStack::new`], packed only if `pack` (and the densities allow it):
     /// `false` keeps the codes apart, the reference layout of tests and benches.
+    ///
+    /// # Panics
+    /// When the system refuses the allocation (as `vec!` would).
     pub fn with_packing(stack: &SliceStack, spacing: [f32; 3], pack: bool) -> Self {
-        let codes = codes_of(stack, spacing);
+        Self::try_with_packing(stack, spacing, pack).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`NormalStack::with_packing`], or [`crate::Error::Memory`] when the
+    /// system refuses the allocation.
+    pub fn try_with_packing(stack: &SliceStack, spacing: [f32; 3], pack: bool) -> crate::Result<Self> {
+        let len = stack.n[0] * stack.n[1] * stack.n[2];
         let store = match pack.then(|| packing_offset(stack.data())).flatten() {
             Some(offset) => {
-                let mut words = vec![0u32; codes.len()];
-                words.par_chunks_mut(PACK_CHUNK).zip(stack.data().par_chunks(PACK_CHUNK)).zip(codes.par_chunks(PACK_CHUNK)).for_each(
-                    |((w, d), c)| {
-                        for ((w, &d), &c) in w.iter_mut().zip(d).zip(c) {
-                            // exact: d − offset is an integer in 0..=65535 (checked)
-                            *w = (d - offset) as u32 | (c as u32) << 16;
-                        }
-                    },
-                );
+                let mut words: Vec<u32> = crate::memory::zeroed(len, "the packed densities and normal codes")?;
+                // exact: d − offset is an integer in 0..=65535 (checked)
+                code_slices(stack, 0..stack.n[2], spacing, &mut words, |w, d, c| *w = (d - offset) as u32 | (c as u32) << 16);
                 Store::Packed { words, offset }
             }
-            None => Store::Codes(codes),
+            None => {
+                let mut codes: Vec<u16> = crate::memory::zeroed(len, "the normal codes")?;
+                code_slices(stack, 0..stack.n[2], spacing, &mut codes, |w, _, c| *w = c);
+                Store::Codes(codes)
+            }
         };
-        NormalStack { axis: stack.axis, n: stack.n, store }
+        Ok(NormalStack { axis: stack.axis, n: stack.n, store })
+    }
+
+    /// The packed stack of `vol` along `axis` ([`NormalStack::with_packing`]
+    /// with packing, the same words bit for bit) built straight from the
+    /// volume, a few slices at a time, so the whole f32 [`SliceStack`] never
+    /// exists: what the binary path needs of an 8- or 16-bit scan in 4 bytes a
+    /// voxel instead of 8. `None` when the densities cannot be packed (f32
+    /// voxels, or integers spanning more than 65 535).
+    pub fn try_packed_from_volume(vol: &Volume, axis: usize, spacing: [f32; 3]) -> crate::Result<Option<Self>> {
+        let Some(offset) = packable(vol) else { return Ok(None) };
+        let shell = SliceStack::shell(vol, axis);
+        let n = shell.n;
+        let n01 = n[0] * n[1];
+        let mut words: Vec<u32> = crate::memory::zeroed(n01 * n[2], "the packed densities and normal codes")?;
+        // blocks of slices, each coded from a window holding the slices on either side
+        const BLOCK: usize = 8;
+        let failed = std::sync::Mutex::new(None);
+        if n01 > 0 {
+            words.par_chunks_mut(BLOCK * n01).enumerate().for_each(|(b, out)| {
+                let k0 = b * BLOCK;
+                let k1 = k0 + out.len() / n01;
+                let w0 = k0.saturating_sub(1);
+                match SliceStack::try_window(vol, axis, w0..(k1 + 1).min(n[2])) {
+                    // exact: d − offset is an integer in 0..=65535
+                    Ok(win) => {
+                        code_slices(&win, k0 - w0..k1 - w0, spacing, out, |w, d, c| *w = (d - offset) as i32 as u32 | (c as u32) << 16)
+                    }
+                    Err(e) => *failed.lock().unwrap_or_else(|p| p.into_inner()) = Some(e),
+                }
+            });
+        }
+        if let Some(e) = failed.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e);
+        }
+        Ok(Some(NormalStack { axis, n, store: Store::Packed { words, offset } }))
     }
 
     /// The code of the voxel at stack index `index`.
@@ -210,43 +253,142 @@ impl NormalStack {
     }
 }
 
+impl Densities for NormalStack {
+    fn dims(&self) -> [usize; 3] {
+        self.n
+    }
+    /// # Panics
+    /// For codes kept apart (no densities): only packed stacks hold them.
+    fn row(&self, j: usize, k: usize, out: &mut [f32]) {
+        let Store::Packed { words, offset } = &self.store else { panic!("a normal stack without packed densities") };
+        let b = self.n[0] * (j + self.n[1] * k);
+        for (o, &w) in out.iter_mut().zip(&words[b..b + self.n[0]]) {
+            *o = (w & 0xFFFF) as f32 + offset;
+        }
+    }
+}
+
 /// Voxels per task of the packing pass.
 const PACK_CHUNK: usize = 1 << 16;
 
-/// The code of every voxel of `stack`, in parallel over slices.
-fn codes_of(stack: &SliceStack, spacing: [f32; 3]) -> Vec<u16> {
+/// Writes `put(out, density, code)` for every voxel of `stack` (layout of
+/// [`SliceStack::index`]), in parallel over slices. Interior voxels are coded a
+/// row at a time by [`encode_interior_row`] (branch-free, so the compiler
+/// vectorizes it); the border voxels by [`voxel_normal`]. Both give exactly
+/// [`voxel_normal`]'s code (a test compares every voxel).
+///
+/// Only the slices `ks` of `stack` are coded (`out` holds exactly those): a
+/// window of a larger stack codes its inner slices exactly as the whole stack
+/// would when it also holds the slices next to them (or they are the volume's
+/// first or last).
+fn code_slices<T: Send>(
+    stack: &SliceStack,
+    ks: std::ops::Range<usize>,
+    spacing: [f32; 3],
+    out: &mut [T],
+    put: impl Fn(&mut T, f32, u16) + Sync,
+) {
     let n = stack.n;
     let inv = spacing.map(|s| 1.0 / s);
-    let mut codes = vec![0u16; n[0] * n[1] * n[2]];
     let perm = permutation(stack.axis);
     let (n0, n01, d) = (n[0], n[0] * n[1], stack.data());
-    codes.par_chunks_mut(n01.max(1)).enumerate().for_each(|(k, slice)| {
+    // the stack axis c whose difference feeds object axis perm[c]
+    let mut src = [0usize; 3];
+    for c in 0..3 {
+        src[perm[c]] = c;
+    }
+    out.par_chunks_mut(n01.max(1)).enumerate().for_each(|(dk, slice)| {
+        let k = ks.start + dk;
+        let mut row_codes = vec![0u16; n0];
         for (j, row) in slice.chunks_mut(n0.max(1)).enumerate() {
-            let interior = j >= 1 && j + 1 < n[1] && k >= 1 && k + 1 < n[2];
-            for (i, c) in row.iter_mut().enumerate() {
-                if interior && i >= 1 && i + 1 < n0 {
-                    // voxel_normal without the border cases: the same central
-                    // differences ((hi − lo) / 2 is exactly (hi − lo) · 0.5)
-                    let b = i + n0 * j + n01 * k;
-                    let g = [(d[b + 1] - d[b - 1]) * 0.5, (d[b + n0] - d[b - n0]) * 0.5, (d[b + n01] - d[b - n01]) * 0.5];
-                    *c = object_normal(g, perm, inv);
-                } else {
+            let b = n01 * k + n0 * j;
+            let interior = j >= 1 && j + 1 < n[1] && k >= 1 && k + 1 < n[2] && n0 >= 3;
+            if interior {
+                let m = n0 - 2;
+                // per stack axis: the lower and upper neighbours of voxels 1..=m of the row
+                let pairs: [(&[f32], &[f32]); 3] = [
+                    (&d[b..b + m], &d[b + 2..b + 2 + m]),
+                    (&d[b - n0 + 1..b - n0 + 1 + m], &d[b + n0 + 1..b + n0 + 1 + m]),
+                    (&d[b - n01 + 1..b - n01 + 1 + m], &d[b + n01 + 1..b + n01 + 1 + m]),
+                ];
+                encode_interior_row(&mut row_codes[1..=m], [pairs[src[0]], pairs[src[1]], pairs[src[2]]], [inv[0], inv[1], inv[2]]);
+                row_codes[0] = voxel_normal(stack, 0, j, k, inv);
+                row_codes[n0 - 1] = voxel_normal(stack, n0 - 1, j, k, inv);
+            } else {
+                for (i, c) in row_codes.iter_mut().enumerate() {
                     *c = voxel_normal(stack, i, j, k, inv);
                 }
             }
+            for ((o, &dv), &c) in row.iter_mut().zip(&d[b..b + n0]).zip(&row_codes) {
+                put(o, dv, c);
+            }
         }
     });
-    codes
+}
+
+/// The codes of a row of interior voxels: `g[a]` holds, for object axis `a`,
+/// the densities one voxel below and above along the stack axis that maps to
+/// it; `inv` the inverse spacing per object axis. The same arithmetic as
+/// [`object_normal`] of a central difference and [`encode_normal`], written
+/// without branches.
+#[inline(always)]
+fn encode_interior_row(out: &mut [u16], g: [(&[f32], &[f32]); 3], inv: [f32; 3]) {
+    let m = out.len();
+    let ([xl, xh], [yl, yh], [zl, zh]) = ([&g[0].0[..m], &g[0].1[..m]], [&g[1].0[..m], &g[1].1[..m]], [&g[2].0[..m], &g[2].1[..m]]);
+    for t in 0..m {
+        let w = [(xh[t] - xl[t]) * 0.5 * inv[0], (yh[t] - yl[t]) * 0.5 * inv[1], (zh[t] - zl[t]) * 0.5 * inv[2]];
+        out[t] = encode_normal_branchless(w);
+    }
+}
+
+/// [`encode_normal`] without branches (selects instead), for vectorized loops.
+#[inline(always)]
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN counts as a zero gradient
+fn encode_normal_branchless(g: [f32; 3]) -> u16 {
+    let len2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+    let s = if g[2] < 0.0 { -1.0f32 } else { 1.0 };
+    let (x, y, z) = (g[0] * s, g[1] * s, g[2] * s);
+    let l1 = x.abs() + y.abs() + z;
+    let (x, y) = (x / l1, y / l1);
+    let half = (NORMAL_SIDE - 1) as f32 / 2.0;
+    // `max` turns NaN into 0 (what `clamp` then `as` gives), so the value is
+    // finite and in [0, 127]
+    let q = |c: f32| {
+        let v = ((c + 1.0) * half + 0.5).max(0.0).min((NORMAL_SIDE - 1) as f32);
+        // SAFETY: `v` is finite and in [0, 127] (after `max`, `min`), so it is
+        // representable in i32, which is all `to_int_unchecked` requires; unlike
+        // `as`, it needs no saturation code, so the loop vectorizes.
+        unsafe { v.to_int_unchecked::<i32>() }
+    };
+    let code = q(x + y) + NORMAL_SIDE as i32 * q(x - y);
+    let code = if code == ZERO_NORMAL as i32 { (NORMAL_CODES - 1) as i32 } else { code };
+    if !(len2 > 1e-30) { ZERO_NORMAL } else { code as u16 }
+}
+
+/// [`packing_offset`] of any stack of `vol`, from its value statistics: the
+/// smallest value when the voxels are integers spanning at most 65 535.
+fn packable(vol: &Volume) -> Option<f32> {
+    if vol.data().voxel_type() == VoxelType::F32 {
+        return None;
+    }
+    let (lo, hi) = vol.value_range();
+    // integer voxel types hold integers of magnitude below 2^24
+    (hi - lo <= u16::MAX as f32).then_some(lo)
 }
 
 /// The offset that packs `data` into 16 bits exactly, if there is one: every
 /// value an integer, the smallest at least −2^24 and the largest at most
 /// 65 535 above it and below 2^24 (so `(v − offset) as u16 as f32 + offset == v`).
 fn packing_offset(data: &[f32]) -> Option<f32> {
+    // `v == (v as i32) as f32` is the integer test (cheaper than `trunc`, a libm
+    // call on the baseline x86-64): beyond ±2^31 it may say yes, but such
+    // values fail the ±2^24 bound below anyway
     const EXACT: f32 = (1 << 24) as f32;
     let (lo, hi, whole) = data
         .par_chunks(PACK_CHUNK)
-        .map(|c| c.iter().fold((f32::INFINITY, f32::NEG_INFINITY, true), |(lo, hi, w), &v| (lo.min(v), hi.max(v), w && v == v.trunc())))
+        .map(|c| {
+            c.iter().fold((f32::INFINITY, f32::NEG_INFINITY, true), |(lo, hi, w), &v| (lo.min(v), hi.max(v), w && v == (v as i32) as f32))
+        })
         .reduce(|| (f32::INFINITY, f32::NEG_INFINITY, true), |a, b| (a.0.min(b.0), a.1.max(b.1), a.2 && b.2));
     (whole && lo <= hi && lo >= -EXACT && hi < EXACT && hi - lo <= u16::MAX as f32).then_some(lo)
 }
@@ -444,6 +586,69 @@ mod tests {
     }
 
     #[test]
+    fn branchless_encoder_equals_encode_normal() {
+        let mut st = 0x9E3779B97F4A7C15u64;
+        let mut r = move || {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let special = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            1e-16,
+            -1e-16,
+            1e-15,
+            3.0e-16,
+            0.5,
+            -0.5,
+            127.5,
+            f32::MAX / 4.0,
+            f32::MAX,
+            f32::INFINITY,
+            -f32::INFINITY,
+            f32::NAN,
+        ];
+        for &a in &special {
+            for &b in &special {
+                for &c in &special {
+                    assert_eq!(encode_normal_branchless([a, b, c]), encode_normal([a, b, c]), "{a} {b} {c}");
+                }
+            }
+        }
+        for _ in 0..200_000 {
+            let g = [r(), r(), r()].map(|x| x * 300.0);
+            assert_eq!(encode_normal_branchless(g), encode_normal(g), "{g:?}");
+            let g = [r().round(), r().round() * 0.5, 0.0];
+            assert_eq!(encode_normal_branchless(g), encode_normal(g), "{g:?}");
+        }
+    }
+
+    #[test]
+    fn normal_stack_codes_every_voxel_like_voxel_normal_for_any_shape() {
+        for dims in [[2, 3, 4], [3, 1, 3], [9, 3, 3], [4, 4, 2], [1, 5, 5]] {
+            let v = Volume::from_fn(dims, [0.7, 1.3, 0.4], |x, y, z| ((x * 5 + y * 11 + z * 3) % 7) as f32 * 1.5 - y as f32).unwrap();
+            for axis in 0..3 {
+                let s = SliceStack::new(&v, axis);
+                let inv = v.spacing().map(|x| 1.0 / x);
+                for pack in [false, true] {
+                    let ns = NormalStack::with_packing(&s, v.spacing(), pack);
+                    for k in 0..s.n[2] {
+                        for j in 0..s.n[1] {
+                            for i in 0..s.n[0] {
+                                assert_eq!(ns.at(s.index(i, j, k)), voxel_normal(&s, i, j, k, inv), "{dims:?} axis {axis}");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn normal_stack_codes_every_voxel_like_voxel_normal() {
         let v =
             Volume::from_fn([7, 6, 5], [0.5, 1.0, 2.0], |x, y, z| ((x * 7 + y * 13 + z * 29) % 11) as f32 - (x * z) as f32 * 0.3).unwrap();
@@ -490,6 +695,44 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn packed_from_the_volume_equals_packed_from_the_stack() {
+        use crate::data::volume::VoxelData;
+        let dims = [9, 7, 21]; // 21 slices: blocks of 8 with a partial last one, along z
+        let n = 9 * 7 * 21;
+        let h = |i: usize| (i * 2_654_435_761usize) >> 7;
+        let vols = [
+            VoxelData::U8((0..n).map(|i| (h(i) % 256) as u8).collect()),
+            VoxelData::I16((0..n).map(|i| (h(i) % 4096) as i16 - 1024).collect()),
+            VoxelData::U16((0..n).map(|i| (h(i) % 65536) as u16).collect()),
+            VoxelData::I16((0..n).map(|i| if i == 5 { -32768 } else { (h(i) % 3000) as i16 }).collect()),
+        ];
+        for (t, data) in vols.into_iter().enumerate() {
+            let v = Volume::new(dims, [0.7, 1.1, 1.9], data).unwrap();
+            for axis in 0..3 {
+                let want = NormalStack::new(&SliceStack::new(&v, axis), v.spacing());
+                let got = NormalStack::try_packed_from_volume(&v, axis, v.spacing()).unwrap().expect("integers pack");
+                assert!(got.packed().is_some());
+                assert_eq!(got, want, "type {t} axis {axis}");
+                // the rows it gives the cell codes are the stack's
+                let s = SliceStack::new(&v, axis);
+                let (mut a, mut b) = (vec![0f32; s.n[0]], vec![0f32; s.n[0]]);
+                for k in [0, s.n[2] / 2, s.n[2] - 1] {
+                    for j in 0..s.n[1] {
+                        Densities::row(&got, j, k, &mut a);
+                        Densities::row(&s, j, k, &mut b);
+                        assert_eq!(a, b);
+                    }
+                }
+                let shell = SliceStack::shell(&v, axis);
+                assert_eq!((shell.n, shell.is_resident(), s.is_resident()), (s.n, false, true));
+            }
+        }
+        // f32 voxels are not packed from the volume
+        let f = Volume::from_fn([4, 4, 4], [1.0; 3], |x, _, _| x as f32).unwrap();
+        assert!(NormalStack::try_packed_from_volume(&f, 0, f.spacing()).unwrap().is_none());
     }
 
     #[test]

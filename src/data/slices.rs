@@ -8,7 +8,7 @@
 
 use rayon::prelude::*;
 
-use crate::data::volume::Volume;
+use crate::data::volume::{Volume, VoxelData};
 use crate::view::permutation;
 
 /// Densities permuted for principal axis `axis`.
@@ -33,26 +33,103 @@ pub struct Sample {
     pub w: [f32; 2],
 }
 
+/// What a stage that needs a stack's densities one row at a time (the cell
+/// codes) reads: a resident [`SliceStack`] or the packed cells of a
+/// [`crate::data::normals::NormalStack`], which hold the same values exactly.
+pub trait Densities: Sync {
+    /// Sizes along `(i, j, k)`.
+    fn dims(&self) -> [usize; 3];
+    /// Writes row `j` of slice `k` (`dims()[0]` densities) into `out`.
+    fn row(&self, j: usize, k: usize, out: &mut [f32]);
+}
+
+impl Densities for SliceStack {
+    fn dims(&self) -> [usize; 3] {
+        self.n
+    }
+    #[inline]
+    fn row(&self, j: usize, k: usize, out: &mut [f32]) {
+        let b = self.index(0, j, k);
+        out.copy_from_slice(&self.data[b..b + self.n[0]]);
+    }
+}
+
 impl SliceStack {
     /// Permutes `vol` for principal axis `axis`.
+    ///
+    /// # Panics
+    /// When the system refuses the allocation (as `vec!` would);
+    /// [`SliceStack::try_new`] returns the error instead.
     pub fn new(vol: &Volume, axis: usize) -> Self {
+        Self::try_new(vol, axis).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`SliceStack::new`], or [`crate::Error::Memory`] when the system refuses
+    /// the allocation.
+    pub fn try_new(vol: &Volume, axis: usize) -> crate::Result<Self> {
+        let nk = vol.dims()[permutation(axis)[2]];
+        Self::try_window(vol, axis, 0..nk)
+    }
+
+    /// The slices `ks` (along the principal axis) of [`SliceStack::new`]`(vol,
+    /// axis)`: its slice `k` is the full stack's slice `ks.start + k`. What
+    /// builds an axis's normal codes a few slices at a time, without the
+    /// whole f32 stack in memory.
+    pub fn try_window(vol: &Volume, axis: usize, ks: std::ops::Range<usize>) -> crate::Result<Self> {
         let perm = permutation(axis);
         let d = vol.dims();
-        let n = [d[perm[0]], d[perm[1]], d[perm[2]]];
-        let mut data = vec![0f32; n[0] * n[1] * n[2]];
+        let ks = ks.start.min(d[perm[2]])..ks.end.min(d[perm[2]]);
+        let n = [d[perm[0]], d[perm[1]], ks.len()];
+        let mut data: Vec<f32> = crate::memory::zeroed(n[0] * n[1] * n[2], "the slice stack")?;
         let stride = [1usize, d[0], d[0] * d[1]];
         let (si, sj, sk) = (stride[perm[0]], stride[perm[1]], stride[perm[2]]);
-        let src = vol.data();
-        data.par_chunks_mut(n[0] * n[1].max(1)).enumerate().for_each(|(k, slice)| {
-            for j in 0..n[1] {
-                let row = &mut slice[j * n[0]..(j + 1) * n[0]];
-                let base = k * sk + j * sj;
-                for (i, out) in row.iter_mut().enumerate() {
-                    *out = src.get(base + i * si);
+        // one loop per voxel type (no type dispatch per voxel)
+        fn gather<T: Copy + Sync>(src: &[T], data: &mut [f32], n: [usize; 3], s: [usize; 3], f: impl Fn(T) -> f32 + Sync) {
+            let [si, sj, sk] = s;
+            data.par_chunks_mut(n[0] * n[1].max(1)).enumerate().for_each(|(k, slice)| {
+                for j in 0..n[1] {
+                    let row = &mut slice[j * n[0]..(j + 1) * n[0]];
+                    let base = k * sk + j * sj;
+                    if si == 1 {
+                        for (out, &v) in row.iter_mut().zip(&src[base..base + n[0]]) {
+                            *out = f(v);
+                        }
+                    } else {
+                        for (i, out) in row.iter_mut().enumerate() {
+                            *out = f(src[base + i * si]);
+                        }
+                    }
                 }
-            }
-        });
-        SliceStack { axis, n, data }
+            });
+        }
+        let st = [si, sj, sk];
+        let from = ks.start * sk;
+        match vol.data() {
+            VoxelData::U8(v) => gather(&v[from..], &mut data, n, st, |x| x as f32),
+            VoxelData::U16(v) => gather(&v[from..], &mut data, n, st, |x| x as f32),
+            VoxelData::I16(v) => gather(&v[from..], &mut data, n, st, |x| x as f32),
+            VoxelData::F32(v) => gather(&v[from..], &mut data, n, st, |x| x),
+        }
+        Ok(SliceStack { axis, n, data })
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.data.len() * 4
+    }
+
+    /// The geometry of the stack of `vol` along `axis` without its densities:
+    /// what a path that reads its samples from elsewhere (the binary path from
+    /// packed cells, [`crate::data::normals::NormalStack::try_packed_from_volume`])
+    /// needs. Reading a density from it panics; [`SliceStack::is_resident`] says which it is.
+    pub fn shell(vol: &Volume, axis: usize) -> Self {
+        let (perm, d) = (permutation(axis), vol.dims());
+        SliceStack { axis, n: [d[perm[0]], d[perm[1]], d[perm[2]]], data: Vec::new() }
+    }
+
+    /// False for a [`SliceStack::shell`].
+    pub fn is_resident(&self) -> bool {
+        self.data.len() == self.n[0] * self.n[1] * self.n[2]
     }
 
     /// Density at voxel `(i, j, k)`.

@@ -8,6 +8,7 @@
 //! Storage is x-fastest: voxel `(x, y, z)` lives at `x + nx * (y + ny * z)`.
 
 use crate::data::orientation::PatientFrame;
+use crate::data::stats::ValueStats;
 use crate::error::{Error, Result};
 
 /// Largest accepted edge length of a volume, in voxels.
@@ -126,6 +127,19 @@ pub struct Volume {
     spacing: [f32; 3],
     data: VoxelData,
     frame: Option<PatientFrame>,
+    /// The value statistics, computed on first use (the voxel values never
+    /// change after construction: [`Volume::reverse_axis`] only reorders them).
+    stats: StatsCache,
+}
+
+/// A lazily computed [`ValueStats`]; equal for any two volumes (a cache, not data).
+#[derive(Clone, Debug, Default)]
+struct StatsCache(std::sync::OnceLock<ValueStats>);
+
+impl PartialEq for StatsCache {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 impl Volume {
@@ -146,7 +160,7 @@ impl Volume {
                 return Err(Error::NonFinite { index, value });
             }
         }
-        Ok(Volume { dims: d, spacing, data, frame: None })
+        Ok(Volume { dims: d, spacing, data, frame: None, stats: StatsCache::default() })
     }
 
     /// Builds an f32 volume by evaluating `f(x, y, z)` at every voxel.
@@ -257,28 +271,19 @@ impl Volume {
     pub fn get(&self, x: usize, y: usize, z: usize) -> f32 {
         self.data.get(self.index(x, y, z))
     }
+    /// The value statistics (computed once, in parallel, on first use).
+    pub fn stats(&self) -> &ValueStats {
+        self.stats.0.get_or_init(|| ValueStats::of(&self.data))
+    }
     /// Smallest and largest density.
     pub fn value_range(&self) -> (f32, f32) {
-        let mut lo = f32::INFINITY;
-        let mut hi = f32::NEG_INFINITY;
-        for i in 0..self.len() {
-            let v = self.data.get(i);
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
-        (lo, hi)
+        let s = self.stats();
+        (s.lo, s.hi)
     }
     /// Histogram of densities in `bins` equal bins over [`Volume::value_range`].
     pub fn histogram(&self, bins: usize) -> Vec<u64> {
-        let bins = bins.max(1);
         let (lo, hi) = self.value_range();
-        let mut h = vec![0u64; bins];
-        let scale = if hi > lo { bins as f64 / (hi as f64 - lo as f64) } else { 0.0 };
-        for i in 0..self.len() {
-            let b = ((self.data.get(i) as f64 - lo as f64) * scale) as usize;
-            h[b.min(bins - 1)] += 1;
-        }
-        h
+        self.stats().histogram_in(&self.data, bins, lo, hi)
     }
     /// All voxels converted to f32, x-fastest.
     pub fn to_f32(&self) -> Vec<f32> {

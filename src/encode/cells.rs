@@ -7,9 +7,11 @@
 //! paper's adaptive threshold codes). They depend only on the classification:
 //! a new cell size or word size re-packs the mask from the same codes.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
-use crate::data::slices::SliceStack;
+use crate::data::slices::Densities;
 use crate::encode::depth::code_width_for;
 use crate::error::{Error, Result};
 
@@ -22,15 +24,17 @@ pub struct CellCodes {
     pub nk: usize,
     /// Bits per code.
     pub nb: u32,
-    /// Code of cell `(ci, cj, k)` at `(k · cells_j + cj) · cells_i + ci`.
-    pub codes: Vec<u8>,
+    /// Code of cell `(ci, cj, k)` at `(k · cells_j + cj) · cells_i + ci`;
+    /// shared with the masks packed from it at cell size 1 (no copy).
+    pub codes: Arc<Vec<u8>>,
 }
 
 impl CellCodes {
     /// Codes from `code(lo, hi)` of each cell's corner range (must be `< 2^nb`).
-    pub fn build(stack: &SliceStack, nb: u32, code: impl Fn(f32, f32) -> u8 + Sync) -> Self {
-        let [ci_n, cj_n] = stack.cells();
-        let nk = stack.n[2];
+    pub fn build(stack: &(impl Densities + ?Sized), nb: u32, code: impl Fn(f32, f32) -> u8 + Sync) -> Self {
+        let n = stack.dims();
+        let [ci_n, cj_n] = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
+        let nk = n[2];
         let per = ci_n * cj_n;
         let mut codes = vec![0u8; per * nk];
         if per > 0 {
@@ -38,38 +42,53 @@ impl CellCodes {
                 // a row's column minima/maxima are shared by neighbouring cells
                 let mut colmin = vec![0f32; ci_n + 1];
                 let mut colmax = vec![0f32; ci_n + 1];
+                let n0 = ci_n + 1;
+                let (mut r0, mut r1) = (vec![0f32; n0], vec![0f32; n0]);
                 for cj in 0..cj_n {
-                    for (i, (mn, mx)) in colmin.iter_mut().zip(colmax.iter_mut()).enumerate() {
-                        let (a, b) = (stack.at(i, cj, k), stack.at(i, cj + 1, k));
+                    if cj == 0 {
+                        stack.row(0, k, &mut r0);
+                    } else {
+                        std::mem::swap(&mut r0, &mut r1);
+                    }
+                    stack.row(cj + 1, k, &mut r1);
+                    for (((mn, mx), &a), &b) in colmin.iter_mut().zip(colmax.iter_mut()).zip(&r0).zip(&r1) {
                         *mn = a.min(b);
                         *mx = a.max(b);
                     }
-                    for ci in 0..ci_n {
+                    let row = &mut out[cj * ci_n..(cj + 1) * ci_n];
+                    for (ci, o) in row.iter_mut().enumerate() {
                         let lo = colmin[ci].min(colmin[ci + 1]);
                         let hi = colmax[ci].max(colmax[ci + 1]);
-                        out[cj * ci_n + ci] = code(lo, hi);
+                        *o = code(lo, hi);
                     }
                 }
             });
         }
-        CellCodes { cells: [ci_n, cj_n], nk, nb, codes }
+        CellCodes { cells: [ci_n, cj_n], nk, nb, codes: Arc::new(codes) }
     }
 
     /// 1-bit codes: 1 where `visible(lo, hi)`.
-    pub fn binary(stack: &SliceStack, visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
+    pub fn binary(stack: &(impl Densities + ?Sized), visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
         Self::build(stack, 1, |lo, hi| visible(lo, hi) as u8)
     }
 
     /// Adaptive threshold codes: the index of the interval of the highest corner
     /// among the ascending `thresholds` (0 below the first, `n` at or above the
     /// last), in the smallest code width that holds `n + 1` intervals.
-    pub fn thresholds(stack: &SliceStack, thresholds: &[f32]) -> Result<Self> {
+    pub fn thresholds(stack: &(impl Densities + ?Sized), thresholds: &[f32]) -> Result<Self> {
         if thresholds.is_empty() || !thresholds.windows(2).all(|w| w[0] < w[1]) || thresholds.iter().any(|t| t.is_nan()) {
             return Err(Error::value("thresholds", format!("{thresholds:?} (need 1..=15 strictly ascending values)")));
         }
         let nb = code_width_for(thresholds.len())
             .ok_or_else(|| Error::value("thresholds", format!("{} thresholds (at most 15)", thresholds.len())))?;
-        Ok(Self::build(stack, nb, |_, hi| thresholds.partition_point(|&t| t <= hi) as u8))
+        // the count of thresholds at or below `hi` (= `partition_point(|t| t <= hi)`
+        // of the ascending list), without a branch per threshold
+        Ok(Self::build(stack, nb, |_, hi| thresholds.iter().map(|&t| (t <= hi) as u8).sum()))
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.codes.len()
     }
 
     /// The code of cell `(ci, cj, k)`.
@@ -80,7 +99,7 @@ impl CellCodes {
 
     /// Super-cell codes for cell size `s` (dilated: see the module docs), with
     /// each slice's bounding box of non-zero super cells.
-    pub(crate) fn supercells(&self, s: usize) -> ([usize; 2], Vec<u8>, Vec<Option<[usize; 4]>>) {
+    pub(crate) fn supercells(&self, s: usize) -> ([usize; 2], Arc<Vec<u8>>, Vec<Option<[usize; 4]>>) {
         let [ci_n, cj_n] = self.cells;
         // super cell SI covers cells [s·SI − (s − 1), s·SI + (s − 1)]; count those that cover any cell
         let count = |c: usize| if c == 0 { 0 } else { (c + s - 2) / s + 1 };
@@ -106,7 +125,7 @@ impl CellCodes {
         }
         let mut out = vec![0u8; per * self.nk];
         if per == 0 {
-            return (sc, out, bbox);
+            return (sc, Arc::new(out), bbox);
         }
         out.par_chunks_mut(per).zip(bbox.par_iter_mut()).enumerate().for_each(|(k, (o, bb))| {
             let slice = &self.codes[k * ci_n * cj_n..(k + 1) * ci_n * cj_n];
@@ -133,6 +152,6 @@ impl CellCodes {
                 }
             }
         });
-        (sc, out, bbox)
+        (sc, Arc::new(out), bbox)
     }
 }

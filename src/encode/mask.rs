@@ -88,8 +88,9 @@ pub struct BinaryMask<W: Word> {
     /// Words per depth row.
     nw: usize,
     words: Vec<W>,
-    /// Unsheared super-cell codes, slice-major.
-    codes: Vec<u8>,
+    /// Unsheared super-cell codes, slice-major (at cell size 1, the
+    /// [`CellCodes`]' own array, shared).
+    codes: std::sync::Arc<Vec<u8>>,
     /// Per-slice bounding box of non-zero super cells `[si0, si1, sj0, sj1]`.
     bbox: Vec<Option<[usize; 4]>>,
     /// Current grid offset of each slice along i and j: `PAD − F[k]`.
@@ -267,6 +268,11 @@ impl<W: Word> BinaryMask<W> {
     /// Bytes of the packed, sheared array.
     pub fn bytes(&self) -> usize {
         self.words.len() * W::BITS as usize / 8
+    }
+    /// Bytes this mask holds beyond the cell codes it shares: the words, plus
+    /// its own super-cell codes when the cell size is above 1.
+    pub fn held_bytes(&self) -> usize {
+        self.bytes() + if self.s > 1 { self.codes.len() } else { 0 }
     }
     /// The unsheared code of super cell `(si, sj, k)`.
     pub fn code(&self, si: usize, sj: usize, k: usize) -> u8 {

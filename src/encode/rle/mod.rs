@@ -132,6 +132,13 @@ impl RleCache {
         true
     }
 
+    /// Frees the encoding of principal axis `axis` (rebuilt when a view needs it).
+    pub fn drop_axis(&mut self, axis: usize) {
+        if let Some(a) = self.axes.get_mut(axis) {
+            *a = None;
+        }
+    }
+
     /// Bytes of each axis's encoding (0 where not built).
     pub fn bytes(&self) -> [usize; 3] {
         [0, 1, 2].map(|a| self.axes[a].as_ref().map_or(0, RleVolume::bytes))

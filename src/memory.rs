@@ -1,0 +1,112 @@
+//! Memory: what every structure of a renderer holds, and allocations that fail
+//! with an error instead of aborting.
+//!
+//! Owns [`Memory`] (bytes per structure and principal axis, as
+//! [`crate::Renderer::memory`] reports them and
+//! [`crate::render::estimate_axis`] predicts them before anything is built) and
+//! [`zeroed`], the fallible zero-filled allocation the large per-axis arrays
+//! use: a scan too large for the machine, or for an address-space limit, gets
+//! [`Error::Memory`] rather than a SIGABRT from the global allocator.
+
+use crate::error::{Error, Result};
+
+/// Bytes held per structure (per principal axis x, y, z where there is one).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Memory {
+    /// The volume's voxels, in their own type.
+    pub volume: u64,
+    /// The slice stacks (densities permuted for each principal axis).
+    pub stacks: [u64; 3],
+    /// The per-voxel normal codes (alone, or packed with the densities).
+    pub normals: [u64; 3],
+    /// The unsheared cell codes the masks are packed from.
+    pub cell_codes: [u64; 3],
+    /// The sheared masks' words, plus their super-cell codes when the cell size
+    /// is above 1 (at 1 they share the cell codes).
+    pub masks: [u64; 3],
+    /// The run-length encodings of the pre-classified path.
+    pub rle: [u64; 3],
+    /// The intermediate image (colour and depth planes).
+    pub intermediate: u64,
+}
+
+impl Memory {
+    /// Everything together.
+    pub fn total(&self) -> u64 {
+        let axes: u64 = (0..3).map(|a| self.axis_total(a)).sum();
+        self.volume + axes + self.intermediate
+    }
+    /// The structures of principal axis `a`.
+    pub fn axis_total(&self, a: usize) -> u64 {
+        self.stacks[a] + self.normals[a] + self.cell_codes[a] + self.masks[a] + self.rle[a]
+    }
+}
+
+/// Types whose all-zero bit pattern is a valid value.
+///
+/// # Safety
+/// Implement only for types for which every byte being 0 is a valid value.
+pub(crate) unsafe trait Zeroable: Copy {}
+// SAFETY: 0 is a valid value of every primitive integer and float type.
+unsafe impl Zeroable for u8 {}
+// SAFETY: as above.
+unsafe impl Zeroable for u16 {}
+// SAFETY: as above.
+unsafe impl Zeroable for u32 {}
+// SAFETY: as above.
+unsafe impl Zeroable for u64 {}
+// SAFETY: as above (0 bits are +0.0).
+unsafe impl Zeroable for f32 {}
+
+/// `n` zeros, or [`Error::Memory`] naming `what` when the allocation is refused
+/// or its size overflows. Pages are zeroed lazily by the system, as with
+/// `vec![0; n]`.
+pub(crate) fn zeroed<T: Zeroable>(n: usize, what: &str) -> Result<Vec<T>> {
+    let refused =
+        || Error::Memory { what: what.to_string(), needed: (n as u64).saturating_mul(std::mem::size_of::<T>() as u64), held: 0, budget: 0 };
+    if n == 0 || std::mem::size_of::<T>() == 0 {
+        return Ok(Vec::new());
+    }
+    let layout = std::alloc::Layout::array::<T>(n).map_err(|_| refused())?;
+    // SAFETY: `layout` has a non-zero size (n > 0 and T is not zero-sized).
+    let ptr = unsafe { std::alloc::alloc_zeroed(layout) } as *mut T;
+    if ptr.is_null() {
+        return Err(refused());
+    }
+    // SAFETY: `ptr` was allocated by the global allocator with the layout of
+    // `[T; n]` (so its alignment and size are those `Vec<T>` with capacity `n`
+    // uses), it is non-null, and all `n` elements are initialized: the memory
+    // is zeroed and the all-zero pattern is a valid `T` (`Zeroable`).
+    Ok(unsafe { Vec::from_raw_parts(ptr, n, n) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zeroed_gives_zeros_and_refuses_absurd_sizes() {
+        let v: Vec<u32> = zeroed(1 << 20, "test").unwrap();
+        assert_eq!(v.len(), 1 << 20);
+        assert_eq!(v.capacity(), 1 << 20);
+        assert!(v.iter().all(|&x| x == 0));
+        let mut v = v;
+        v.push(7); // a Vec like any other: grows, drops
+        assert_eq!(v[1 << 20], 7);
+        let f: Vec<f32> = zeroed(3, "test").unwrap();
+        assert_eq!(f, vec![0.0; 3]);
+        assert!(zeroed::<u8>(0, "test").unwrap().is_empty());
+        // larger than any address space: refused with an error, not an abort
+        let e = zeroed::<u64>(usize::MAX / 4, "the huge thing").unwrap_err().to_string();
+        assert!(e.contains("the huge thing"), "{e}");
+        let e = zeroed::<u64>(1 << 60, "a 8 EiB stack").unwrap_err().to_string();
+        assert!(e.contains("a 8 EiB stack"), "{e}");
+    }
+
+    #[test]
+    fn totals_add_up() {
+        let m = Memory { volume: 1, stacks: [2, 0, 4], normals: [8, 0, 0], masks: [16, 0, 32], intermediate: 64, ..Default::default() };
+        assert_eq!(m.total(), 127);
+        assert_eq!(m.axis_total(0), 26);
+    }
+}

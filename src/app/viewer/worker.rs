@@ -9,7 +9,8 @@
 //! with the renderer's statistics. Before a step that rebuilds a mask the worker
 //! reports [`Reply::Busy`], so the window can show it; after a rebuild it builds
 //! the other principal axes' masks while no request waits, so a later axis
-//! switch does not stall a drag.
+//! switch does not stall a drag, and reports [`Reply::Prefetched`] when they are
+//! all built.
 
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
@@ -32,8 +33,14 @@ pub struct Frame {
     /// `0RGB` pixels over black, row 0 at the top.
     pub pixels: Vec<u32>,
     pub stats: FrameStats,
-    /// Wall time of the request, including any mask rebuild.
+    /// Wall time of the request, including any mask rebuild and the conversion
+    /// to `0RGB`.
     pub total_ms: f64,
+    /// When the worker took the request from its mailbox.
+    pub started: Instant,
+    /// Whether the worker still has other principal axes' masks to build while
+    /// idle ([`Reply::Prefetched`] follows when they are built).
+    pub prefetch: bool,
     pub spec: Spec,
 }
 
@@ -47,6 +54,11 @@ pub enum Reply {
         what: String,
     },
     Frame(Box<Frame>),
+    /// The idle worker has built the masks of every principal axis (after a
+    /// frame that said [`Frame::prefetch`]): an axis switch no longer stalls.
+    Prefetched {
+        kind: Kind,
+    },
     /// A request failed.
     Failed {
         kind: Kind,
@@ -203,6 +215,9 @@ impl Worker {
                         // idle: build the other axes' masks, one per turn, before sleeping
                         let l = last.expect("checked above");
                         renderers.prepare_one(l.class, l.cell);
+                        if !renderers.stale.contains(&true) {
+                            reply(Reply::Prefetched { kind });
+                        }
                         continue;
                     };
                     let t = Instant::now();
@@ -219,7 +234,9 @@ impl Worker {
                             img.to_0rgb(&mut pixels);
                             let total_ms = t.elapsed().as_secs_f64() * 1e3;
                             let (width, height) = (img.width, img.height);
-                            reply(Reply::Frame(Box::new(Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, spec })));
+                            let prefetch = renderers.stale.contains(&true);
+                            let f = Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, started: t, prefetch, spec };
+                            reply(Reply::Frame(Box::new(f)));
                         }
                         Err(e) => reply(Reply::Failed { kind, seq: spec.seq, error: e.to_string() }),
                     }
@@ -290,7 +307,7 @@ mod tests {
             match rx.recv_timeout(Duration::from_secs(60)).expect("a reply") {
                 Reply::Frame(f) => return *f,
                 Reply::Failed { error, .. } => panic!("{error}"),
-                Reply::Busy { .. } => {}
+                Reply::Busy { .. } | Reply::Prefetched { .. } => {}
             }
         }
     }
@@ -342,6 +359,12 @@ mod tests {
         };
         assert!(busy, "the rebuild was reported first");
         assert_eq!(f.seq, 2);
+        // the new mask was built for one axis: the idle worker builds the others and says so
+        assert!(f.prefetch);
+        match rx.recv_timeout(Duration::from_secs(60)).unwrap() {
+            Reply::Prefetched { kind: Kind::Preview } => {}
+            m => panic!("{m:?}"),
+        }
         w.stop();
     }
 

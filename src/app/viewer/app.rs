@@ -289,6 +289,7 @@ impl App {
         }
         if !self.state.accept(f.seq, f.kind) {
             self.log(format!("frame seq={} kind={} discarded", f.seq, f.kind.name()));
+            self.recycle(f);
             self.dispatch();
             self.redraw();
             return;
@@ -324,9 +325,19 @@ impl App {
             s.build_ms,
             f.total_ms,
         ));
-        self.shown = Some(f);
+        if let Some(old) = self.shown.replace(f) {
+            self.recycle(old);
+        }
         self.dispatch();
         self.redraw();
+    }
+
+    /// Gives a frame's pixel buffer back to the worker that made it.
+    fn recycle(&self, f: Frame) {
+        match f.kind {
+            Kind::Preview => self.preview.recycle(f.pixels),
+            Kind::Blend => self.blend.recycle(f.pixels),
+        }
     }
 
     /// Saves the frame on screen (without the overlay) as the next free

@@ -6,7 +6,7 @@
 //! changes) and [`Worker`] (a thread with a one-slot mailbox: a new request
 //! replaces one that has not started, so requests coalesce and the worker always
 //! renders the latest state). Finished frames go to a callback as `0RGB` pixels,
-//! with the renderer's statistics. Before a step that rebuilds a mask the worker
+//! with the renderer's statistics; [`Worker::recycle`] gives their buffers back. Before a step that rebuilds a mask the worker
 //! reports [`Reply::Busy`], so the window can show it; after a rebuild it builds
 //! the other principal axes' masks while no request waits, so a later axis
 //! switch does not stall a drag, and reports [`Reply::Prefetched`] when they are
@@ -168,7 +168,12 @@ impl Renderers {
 struct Mailbox {
     job: Option<Spec>,
     quit: bool,
+    /// Pixel buffers of frames no longer on screen, for the next frames.
+    spare: Vec<Vec<u32>>,
 }
+
+/// How many returned pixel buffers a worker keeps.
+const SPARE_BUFFERS: usize = 2;
 
 /// A render thread with a one-slot mailbox.
 pub struct Worker {
@@ -203,7 +208,8 @@ impl Worker {
                                 return;
                             }
                             if let Some(s) = g.job.take() {
-                                break Some(s);
+                                // a recycled buffer: no fresh megabyte to fault in per frame
+                                break Some((s, g.spare.pop().unwrap_or_default()));
                             }
                             if last.is_some() && renderers.stale.contains(&true) {
                                 break None;
@@ -211,7 +217,7 @@ impl Worker {
                             g = cv.wait(g).unwrap_or_else(|e| e.into_inner());
                         }
                     };
-                    let Some(spec) = next else {
+                    let Some((spec, mut pixels)) = next else {
                         // idle: build the other axes' masks, one per turn, before sleeping
                         let l = last.expect("checked above");
                         renderers.prepare_one(l.class, l.cell);
@@ -230,7 +236,6 @@ impl Worker {
                     }
                     match renderers.render(&spec, &mut img) {
                         Ok(stats) => {
-                            let mut pixels = Vec::with_capacity(img.data.len());
                             img.to_0rgb(&mut pixels);
                             let total_ms = t.elapsed().as_secs_f64() * 1e3;
                             let (width, height) = (img.width, img.height);
@@ -252,6 +257,15 @@ impl Worker {
         let (lock, cv) = &*self.mail;
         lock.lock().unwrap_or_else(|e| e.into_inner()).job = Some(spec);
         cv.notify_one();
+    }
+
+    /// Gives the pixel buffer of a frame no longer shown back for later frames.
+    pub fn recycle(&self, pixels: Vec<u32>) {
+        let (lock, _) = &*self.mail;
+        let mut g = lock.lock().unwrap_or_else(|e| e.into_inner());
+        if g.spare.len() < SPARE_BUFFERS && pixels.capacity() > 0 {
+            g.spare.push(pixels);
+        }
     }
 
     /// Drops a request that has not started (one in progress still reports; its
@@ -365,6 +379,24 @@ mod tests {
             Reply::Prefetched { kind: Kind::Preview } => {}
             m => panic!("{m:?}"),
         }
+        w.stop();
+    }
+
+    #[test]
+    fn recycled_pixel_buffers_are_reused() {
+        let (r, spec) = setup(Mode::Iso);
+        let (tx, rx) = mpsc::channel();
+        let w = Worker::spawn(Kind::Preview, r, false, move |m| {
+            let _ = tx.send(m);
+        });
+        w.post(spec);
+        let f = frame(&rx);
+        let (ptr, pixels) = (f.pixels.as_ptr(), f.pixels.clone());
+        w.recycle(f.pixels);
+        w.post(Spec { seq: 2, ..spec });
+        let g = frame(&rx);
+        assert_eq!(g.pixels.as_ptr(), ptr, "the returned buffer holds the next frame");
+        assert_eq!(g.pixels, pixels, "the same view, the same picture");
         w.stop();
     }
 

@@ -239,7 +239,12 @@ impl App {
                     self.log(self.state.layout.describe());
                 }
                 self.dispatch();
-                self.redraw();
+                // a drag's move changes nothing on screen until its frame
+                // arrives (the overlay neither): presenting the old frame again
+                // would only take CPU from the render
+                if !(was_rotating && matches!(input, Input::Move { .. })) {
+                    self.redraw();
+                }
             }
             Outcome::Save => self.save(),
             Outcome::Quit => el.exit(),

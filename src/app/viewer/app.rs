@@ -442,11 +442,13 @@ impl App {
         if b.phase != Phase::Waiting || self.presented.is_none() || self.masks_pending {
             return;
         }
+        // the middle of the window, or in a small one the row nearest it that is not a control
         let [w, h] = self.state.size;
-        let (x, y) = ((w / 2) as f64, (h / 2) as f64);
-        if !matches!(self.state.layout.hit(x, y), Hit::View) {
-            return self.fail(el, anyhow!("--benchmark-drag: the {w}x{h} window has no room to drag in (its middle is a control)"));
-        }
+        let (x, mid) = ((w / 2) as f64, h / 2);
+        let mut rows = (0..=mid).flat_map(|d| [mid - d, mid + d]).filter(|&r| r < h).map(|r| r as f64);
+        let Some(y) = rows.find(|&y| matches!(self.state.layout.hit(x, y), Hit::View)) else {
+            return self.fail(el, anyhow!("--benchmark-drag: the {w}x{h} window has no room to drag in"));
+        };
         self.input(el, Input::Press { x, y });
         if !matches!(self.state.drag, Some(Drag::Rotate { .. })) {
             return self.fail(el, anyhow!("--benchmark-drag: the press at ({x}, {y}) did not start a drag"));

@@ -6,10 +6,12 @@
 #   - the view changed after the drag, after each tissue switch, after Space,
 #   - S saved a PNG, a resize re-rendered at the new size,
 #   - an idle window uses no CPU (measured from /proc over a few seconds),
-#   - Q quits and the process exits with status 0.
-# Screenshots and logs go to target/viewer-test/. Needs xvfb, xauth, xdotool and
-# ImageMagick; installs them with apt-get when missing (as root) and fails loudly
-# when it cannot. Usage: tests/viewer.sh
+#   - Q quits and the process exits with status 0,
+#   - `view --benchmark-drag 60` plays its scripted drag through the window, exits 0
+#     and prints one JSON object with the frame rate (printed here).
+# Screenshots and logs go to target/viewer-test/. Needs xvfb, xauth, xdotool,
+# ImageMagick and jq; installs them with apt-get when missing (as root) and fails
+# loudly when it cannot. Usage: tests/viewer.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=target/viewer-test
@@ -18,21 +20,21 @@ BIN=target/release/shearwarp
 if [[ "${1:-}" != --inner ]]; then
     have_tools() {
         local c
-        for c in xvfb-run Xvfb xauth xdotool import compare identify convert; do
+        for c in xvfb-run Xvfb xauth xdotool import compare identify convert jq; do
             command -v "$c" >/dev/null 2>&1 || return 1
         done
         # the real ImageMagick, not a stand-in
         import -version 2>/dev/null | grep -q ImageMagick
     }
     if ! have_tools; then
-        echo "test-viewer: installing xvfb xauth xdotool imagemagick"
+        echo "test-viewer: installing xvfb xauth xdotool imagemagick jq"
         if [[ $(id -u) -ne 0 ]] || ! command -v apt-get >/dev/null; then
-            echo "test-viewer: FAIL: xvfb, xauth, xdotool and imagemagick are missing and cannot be installed here (need root and apt-get)" >&2
+            echo "test-viewer: FAIL: xvfb, xauth, xdotool, imagemagick and jq are missing and cannot be installed here (need root and apt-get)" >&2
             exit 1
         fi
         export DEBIAN_FRONTEND=noninteractive
-        if ! { apt-get update -qq && apt-get install -y -qq xvfb xauth xdotool imagemagick >/dev/null; }; then
-            echo "test-viewer: FAIL: apt-get install xvfb xauth xdotool imagemagick failed" >&2
+        if ! { apt-get update -qq && apt-get install -y -qq xvfb xauth xdotool imagemagick jq >/dev/null; }; then
+            echo "test-viewer: FAIL: apt-get install xvfb xauth xdotool imagemagick jq failed" >&2
             exit 1
         fi
         have_tools || { echo "test-viewer: FAIL: the window-test tools are still missing after apt-get" >&2; exit 1; }
@@ -230,6 +232,22 @@ else
     check "Q quit the viewer (exit status $rc)" test "$rc" -eq 0
 fi
 trap - EXIT
+
+# 13. --benchmark-drag: a scripted drag of 60 frames through the window path
+# (state, preview worker, softbuffer present), then one JSON object on stdout
+BENCH=$OUT/benchmark.json
+rc=0
+timeout 120 "$BIN" view --benchmark-drag 60 --size 512 >"$BENCH" 2>"$OUT/benchmark.err" || rc=$?
+check "view --benchmark-drag 60 exited with status 0 within 120 s (status $rc)" test "$rc" -eq 0
+# jq -e fails on anything but a number; one line, one object
+num() { jq -er "select(type == \"object\") | .$1 | numbers" "$BENCH" 2>/dev/null || true; }
+fps=$(num fps)
+fms=$(num frame_ms_median)
+objects=$(jq -s 'length' "$BENCH" 2>/dev/null || echo invalid)
+echo "   benchmark drag (512x512, head phantom): fps $fps, frame_ms_median $fms, $(jq -r '"render \(.render_ms_median) ms, present \(.present_ms_median) ms, \(.frames) frames"' "$BENCH" 2>/dev/null || true)"
+check "--benchmark-drag printed one JSON object ($objects, $(wc -l <"$BENCH") line)" test "$objects" = 1 -a "$(wc -l <"$BENCH")" -eq 1
+check "--benchmark-drag reported fps > 0 ($fps) and frame_ms_median > 0 ($fms)" bash -c "$(declare -f gt); gt '$fps' 0 && gt '$fms' 0"
+check "--benchmark-drag rendered and presented all 60 frames, none skipped" test "$(num frames)/$(num skipped_frames)" = 60/0
 
 echo "screenshots and logs: $OUT/"
 echo "test-viewer: $PASS passed, $FAIL failed"

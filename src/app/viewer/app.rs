@@ -6,7 +6,8 @@
 //! requests go to the workers; their frames come back as user events and are
 //! presented with the overlay. The loop waits for events (`ControlFlow::Wait`),
 //! waking on a timer only while a mask rebuild is shown in progress or a message
-//! is about to expire: an idle window costs no CPU.
+//! is about to expire: an idle window costs no CPU. With `--benchmark-drag` the
+//! window drives a scripted drag through the same path (see [`super::bench`]).
 
 use std::io::Write;
 use std::num::NonZeroU32;
@@ -23,7 +24,8 @@ use winit::keyboard::{Key as WKey, NamedKey};
 use winit::window::{Window, WindowId};
 
 use super::ViewCmd;
-use super::overlay::{self, Canvas, Controls};
+use super::bench::{Bench, Info, Marks, Phase, Sample};
+use super::overlay::{self, Canvas, Controls, Hit};
 use super::state::{Class, Display, Drag, HELP, Hud, Input, Key, Kind, Meter, Outcome, Request, Start, State, TissueInfo, button_labels};
 use super::worker::{Frame, Renderers, Reply, Worker};
 use crate::app::cli::Usage;
@@ -40,12 +42,15 @@ const BACKGROUND: u32 = 0;
 
 /// Runs `shearwarp view`.
 pub fn run(cmd: &ViewCmd) -> Result<()> {
+    let t_start = Instant::now();
     if !(cmd.drag_speed.is_finite() && cmd.drag_speed > 0.0) {
         return Err(anyhow::Error::new(Usage(format!("--drag-speed must be > 0, got {}", cmd.drag_speed))));
     }
     // check the options before loading anything
     let settings = cmd.render.settings()?;
     let (vol, name) = cmd.volume.load()?;
+    let load_ms = t_start.elapsed().as_secs_f64() * 1e3;
+    let t_setup = Instant::now();
     let camera = cmd.render.camera(vol.frame())?;
     let d = vol.dims();
     let tissues = presets::tissues_for(&vol);
@@ -54,6 +59,19 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let sorted = preview.tissue_list();
     let class = initial_class(&cmd.render.tissue, cmd.render.iso, &sorted)?;
     let blend = Renderers::new(vol, &tissues, Settings { mode: Mode::Blend, ..settings })?;
+    let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
+    let info = Info {
+        volume: name.clone(),
+        dims: d,
+        size: camera.size,
+        threads: if settings.threads == 0 { rayon::current_num_threads() } else { settings.threads },
+        method: settings.method.name().to_string(),
+        tissue: String::new(),
+        iso: f32::NAN,
+        cell: settings.cell,
+        load_ms,
+        setup_ms,
+    };
 
     let event_loop = EventLoop::<Reply>::with_user_event()
         .build()
@@ -97,6 +115,11 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
         verbose: cmd.verbose,
         error: None,
         cursor: (0.0, 0.0),
+        t_start,
+        masks_pending: false,
+        received: None,
+        bench: cmd.benchmark_drag.map(|n| Bench::new(n, cmd.drag_speed)),
+        info,
     };
     event_loop.run_app(&mut app).map_err(|e| anyhow!("window event loop: {e}"))?;
     if cmd.verbose {
@@ -177,6 +200,16 @@ struct App {
     verbose: bool,
     error: Option<anyhow::Error>,
     cursor: (f64, f64),
+    /// When the command started.
+    t_start: Instant,
+    /// Whether the preview worker is still building other axes' masks.
+    masks_pending: bool,
+    /// The last frame received from a worker (sequence number) and when.
+    received: Option<(u64, Instant)>,
+    /// The scripted drag of `--benchmark-drag`.
+    bench: Option<Bench>,
+    /// What the benchmark report says about the run.
+    info: Info,
 }
 
 impl App {
@@ -206,7 +239,12 @@ impl App {
                     self.log(self.state.layout.describe());
                 }
                 self.dispatch();
-                self.redraw();
+                // a drag's move changes nothing on screen until its frame
+                // arrives (the overlay neither): presenting the old frame again
+                // would only take CPU from the render
+                if !(was_rotating && matches!(input, Input::Move { .. })) {
+                    self.redraw();
+                }
             }
             Outcome::Save => self.save(),
             Outcome::Quit => el.exit(),
@@ -244,8 +282,10 @@ impl App {
     }
 
     fn on_frame(&mut self, f: Frame) {
+        self.received = Some((f.seq, Instant::now()));
         if f.kind == Kind::Preview {
             self.busy = None;
+            self.masks_pending = f.prefetch;
         }
         // an unchanged frame the renderer skipped has no timings of its own
         if f.kind == Kind::Preview && !f.stats.skipped {
@@ -254,6 +294,7 @@ impl App {
         }
         if !self.state.accept(f.seq, f.kind) {
             self.log(format!("frame seq={} kind={} discarded", f.seq, f.kind.name()));
+            self.recycle(f);
             self.dispatch();
             self.redraw();
             return;
@@ -289,9 +330,19 @@ impl App {
             s.build_ms,
             f.total_ms,
         ));
-        self.shown = Some(f);
+        if let Some(old) = self.shown.replace(f) {
+            self.recycle(old);
+        }
         self.dispatch();
         self.redraw();
+    }
+
+    /// Gives a frame's pixel buffer back to the worker that made it.
+    fn recycle(&self, f: Frame) {
+        match f.kind {
+            Kind::Preview => self.preview.recycle(f.pixels),
+            Kind::Blend => self.blend.recycle(f.pixels),
+        }
     }
 
     /// Saves the frame on screen (without the overlay) as the next free
@@ -328,11 +379,12 @@ impl App {
         self.redraw();
     }
 
-    /// Draws the frame on screen and the overlay into the window.
-    fn present(&mut self) -> Result<()> {
-        let (Some(window), Some(surface)) = (&self.window, &mut self.surface) else { return Ok(()) };
+    /// Draws the frame on screen and the overlay into the window; returns the
+    /// sequence number of the frame if it is presented for the first time.
+    fn present(&mut self) -> Result<Option<u64>> {
+        let (Some(window), Some(surface)) = (&self.window, &mut self.surface) else { return Ok(None) };
         let size = window.inner_size();
-        let (Some(nw), Some(nh)) = (NonZeroU32::new(size.width), NonZeroU32::new(size.height)) else { return Ok(()) };
+        let (Some(nw), Some(nh)) = (NonZeroU32::new(size.width), NonZeroU32::new(size.height)) else { return Ok(None) };
         surface.resize(nw, nh).map_err(|e| anyhow!("cannot size the framebuffer: {e}"))?;
         let mut buf = surface.buffer_mut().map_err(|e| anyhow!("cannot get the framebuffer: {e}"))?;
         let (w, h) = (size.width as usize, size.height as usize);
@@ -346,8 +398,10 @@ impl App {
                 _ => row.fill(BACKGROUND),
             }
         }
+        let mut new = None;
         if let Some(f) = self.shown.as_ref().filter(|f| self.presented != Some((f.seq, f.kind))) {
             self.presented = Some((f.seq, f.kind));
+            new = Some(f.seq);
             if self.verbose {
                 let c = match f.spec.class {
                     Class::Tissue(i) => self.state.tissues.get(i).map_or("?".into(), |t| t.name.clone()),
@@ -376,7 +430,94 @@ impl App {
         };
         let ctl = Controls { labels: &labels, current, slider: self.state.slider_fraction(), value: self.state.iso(), help: HELP };
         overlay::draw_controls(&mut c, &self.state.layout, &ctl);
-        buf.present().map_err(|e| anyhow!("cannot present the frame: {e}"))
+        buf.present().map_err(|e| anyhow!("cannot present the frame: {e}"))?;
+        Ok(new)
+    }
+
+    /// Starts the benchmark drag once the first frame is on screen and the
+    /// preview worker has the masks of every principal axis: a press in the
+    /// middle of the view, then the first move.
+    fn bench_poll(&mut self, el: &ActiveEventLoop) {
+        let Some(b) = &self.bench else { return };
+        if b.phase != Phase::Waiting || self.presented.is_none() || self.masks_pending {
+            return;
+        }
+        // the middle of the window, or in a small one the row nearest it that is not a control
+        let [w, h] = self.state.size;
+        let (x, mid) = ((w / 2) as f64, h / 2);
+        let mut rows = (0..=mid).flat_map(|d| [mid - d, mid + d]).filter(|&r| r < h).map(|r| r as f64);
+        let Some(y) = rows.find(|&y| matches!(self.state.layout.hit(x, y), Hit::View)) else {
+            return self.fail(el, anyhow!("--benchmark-drag: the {w}x{h} window has no room to drag in"));
+        };
+        self.input(el, Input::Press { x, y });
+        if !matches!(self.state.drag, Some(Drag::Rotate { .. })) {
+            return self.fail(el, anyhow!("--benchmark-drag: the press at ({x}, {y}) did not start a drag"));
+        }
+        let now = Instant::now();
+        let b = self.bench.as_mut().expect("checked above");
+        b.ready_ms = Some(now.duration_since(self.t_start).as_secs_f64() * 1e3);
+        b.cursor = (x, y);
+        b.begun = Some(now);
+        let line = format!("benchmark drag: {} frames from ({x}, {y}), {} px each", b.frames, b.dx);
+        self.log(line);
+        self.bench_move(el);
+    }
+
+    /// The next move of the benchmark drag, as a cursor motion event would make it.
+    fn bench_move(&mut self, el: &ActiveEventLoop) {
+        let Some(b) = self.bench.as_mut() else { return };
+        let (x, y) = b.next_move();
+        let before = self.state.seq;
+        let at = Instant::now();
+        self.input(el, Input::Move { x, y });
+        if self.state.seq == before {
+            return self.fail(el, anyhow!("--benchmark-drag: the move to ({x}, {y}) did not change the view"));
+        }
+        if let Some(b) = self.bench.as_mut() {
+            b.phase = Phase::Pending { seq: self.state.seq, at };
+        }
+    }
+
+    /// After a present that began at `start` and newly showed frame `new`:
+    /// notes the first frame, or records the pending benchmark frame and makes
+    /// the next move (or reports, when all are done).
+    fn bench_presented(&mut self, el: &ActiveEventLoop, start: Instant, new: Option<u64>) {
+        let now = Instant::now();
+        let Some(b) = self.bench.as_mut() else { return };
+        match b.phase {
+            Phase::Waiting => {
+                if new.is_some() && b.first_frame_ms.is_none() {
+                    b.first_frame_ms = Some(now.duration_since(self.t_start).as_secs_f64() * 1e3);
+                }
+                self.bench_poll(el);
+            }
+            Phase::Pending { seq, at } => {
+                let Some(f) = self.shown.as_ref().filter(|f| new == Some(f.seq) && f.seq >= seq && f.kind == Kind::Preview) else { return };
+                let received = self.received.filter(|r| r.0 == f.seq).map_or(start, |r| r.1);
+                let m = Marks { requested: at, started: f.started, worker_ms: f.total_ms, received, present_start: start, presented: now };
+                if b.record(Sample::new(&m, f.stats), now) {
+                    self.bench_finish(el);
+                } else {
+                    self.bench_move(el);
+                }
+            }
+            Phase::Done => {}
+        }
+    }
+
+    /// Prints the benchmark's JSON report and quits.
+    fn bench_finish(&mut self, el: &ActiveEventLoop) {
+        let Some(b) = &self.bench else { return };
+        let info = Info {
+            size: self.state.size,
+            tissue: self.state.class_name(),
+            iso: self.state.iso(),
+            cell: self.state.cell,
+            ..self.info.clone()
+        };
+        println!("{}", b.report(&info));
+        let _ = std::io::stdout().flush();
+        el.exit();
     }
 }
 
@@ -429,7 +570,7 @@ impl ApplicationHandler<Reply> for App {
         }
     }
 
-    fn user_event(&mut self, _el: &ActiveEventLoop, reply: Reply) {
+    fn user_event(&mut self, el: &ActiveEventLoop, reply: Reply) {
         match reply {
             Reply::Busy { kind, seq, what } => {
                 self.log(format!("busy kind={} seq={seq} {what}", kind.name()));
@@ -439,7 +580,17 @@ impl ApplicationHandler<Reply> for App {
                 }
             }
             Reply::Frame(f) => self.on_frame(*f),
+            Reply::Prefetched { kind } => {
+                self.log(format!("masks ready kind={}", kind.name()));
+                if kind == Kind::Preview {
+                    self.masks_pending = false;
+                    self.bench_poll(el);
+                }
+            }
             Reply::Failed { kind, seq, error } => {
+                if self.bench.is_some() {
+                    return self.fail(el, anyhow!("--benchmark-drag: {} render of state {seq} failed: {error}", kind.name()));
+                }
                 eprintln!("error: {} render of state {seq}: {error}", kind.name());
                 if kind == Kind::Preview {
                     self.busy = None;
@@ -454,8 +605,10 @@ impl ApplicationHandler<Reply> for App {
         match event {
             WindowEvent::CloseRequested => el.exit(),
             WindowEvent::RedrawRequested => {
-                if let Err(e) = self.present() {
-                    self.fail(el, e);
+                let start = Instant::now();
+                match self.present() {
+                    Ok(new) => self.bench_presented(el, start, new),
+                    Err(e) => self.fail(el, e),
                 }
             }
             WindowEvent::Resized(s) => self.input(el, Input::Resize { w: s.width as usize, h: s.height as usize }),

@@ -16,6 +16,9 @@
 //!   full alpha-blended frame in the background once the view is still. Mask
 //!   rebuilds (a custom iso value, another cell size) run there too, so the
 //!   window stays responsive and shows them as progress.
+//! - [`bench`] (`--benchmark-drag N`) plays a scripted drag of N frames through
+//!   that same path once the first frame is on screen, one frame at a time, and
+//!   prints the frame rate and where each frame's time went as JSON.
 //! - [`overlay`] draws the statistics, the clickable tissue buttons and the iso
 //!   slider into the framebuffer with an embedded 8×8 bitmap font (no system
 //!   fonts).
@@ -31,6 +34,8 @@ use crate::app::cli::{RenderArgs, VolumeArgs};
 
 #[cfg(feature = "viewer")]
 mod app;
+#[cfg(feature = "viewer")]
+pub mod bench;
 #[cfg(feature = "viewer")]
 pub mod overlay;
 #[cfg(feature = "viewer")]
@@ -56,10 +61,22 @@ pub struct ViewCmd {
     /// Log every presented frame, the control layout and state changes to stderr.
     #[arg(long, short)]
     pub verbose: bool,
+    /// Measure the window's frame rate: once the first frame is shown, play a
+    /// horizontal drag of N frames (1 degree each, one frame presented before the
+    /// next move), print one JSON object (fps, frame_ms_median, the time of each
+    /// stage) on stdout and exit. N is 1..=100000.
+    #[arg(long, value_name = "N")]
+    pub benchmark_drag: Option<usize>,
 }
+
+/// The largest `--benchmark-drag`.
+pub const MAX_BENCH_FRAMES: usize = 100_000;
 
 /// Runs `shearwarp view`.
 pub fn run(cmd: &ViewCmd) -> anyhow::Result<()> {
+    if let Some(n) = cmd.benchmark_drag.filter(|n| !(1..=MAX_BENCH_FRAMES).contains(n)) {
+        return Err(anyhow::Error::new(crate::app::cli::Usage(format!("--benchmark-drag must be 1..={MAX_BENCH_FRAMES} frames, got {n}"))));
+    }
     #[cfg(feature = "viewer")]
     {
         app::run(cmd)
@@ -100,6 +117,23 @@ mod tests {
         assert_eq!(v.save_dir, std::path::PathBuf::from("shots"));
         assert!(v.verbose);
         assert_eq!(v.drag_speed, 0.5);
+        assert_eq!(v.benchmark_drag, None);
+    }
+
+    #[test]
+    fn benchmark_drag_counts_are_checked_before_any_window_opens() {
+        for n in ["0", "100001"] {
+            let cli = Cli::try_parse_from(["shearwarp", "view", "--benchmark-drag", n]).expect("parses");
+            let Command::View(v) = cli.command else { panic!("not the view command") };
+            let err = super::run(&v).expect_err("out of range");
+            assert!(err.chain().any(|e| e.downcast_ref::<crate::app::cli::Usage>().is_some()), "{err:#}");
+            assert!(format!("{err:#}").contains("--benchmark-drag must be 1..=100000 frames"), "{err:#}");
+        }
+        assert!(Cli::try_parse_from(["shearwarp", "view", "--benchmark-drag", "-3"]).is_err());
+        assert!(Cli::try_parse_from(["shearwarp", "view", "--benchmark-drag", "ten"]).is_err());
+        let cli = Cli::try_parse_from(["shearwarp", "view", "--benchmark-drag", "60"]).expect("parses");
+        let Command::View(v) = cli.command else { panic!("not the view command") };
+        assert_eq!(v.benchmark_drag, Some(60));
     }
 
     #[test]

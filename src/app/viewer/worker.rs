@@ -6,10 +6,11 @@
 //! changes) and [`Worker`] (a thread with a one-slot mailbox: a new request
 //! replaces one that has not started, so requests coalesce and the worker always
 //! renders the latest state). Finished frames go to a callback as `0RGB` pixels,
-//! with the renderer's statistics. Before a step that rebuilds a mask the worker
+//! with the renderer's statistics; [`Worker::recycle`] gives their buffers back. Before a step that rebuilds a mask the worker
 //! reports [`Reply::Busy`], so the window can show it; after a rebuild it builds
 //! the other principal axes' masks while no request waits, so a later axis
-//! switch does not stall a drag.
+//! switch does not stall a drag, and reports [`Reply::Prefetched`] when they are
+//! all built.
 
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
@@ -32,8 +33,14 @@ pub struct Frame {
     /// `0RGB` pixels over black, row 0 at the top.
     pub pixels: Vec<u32>,
     pub stats: FrameStats,
-    /// Wall time of the request, including any mask rebuild.
+    /// Wall time of the request, including any mask rebuild and the conversion
+    /// to `0RGB`.
     pub total_ms: f64,
+    /// When the worker took the request from its mailbox.
+    pub started: Instant,
+    /// Whether the worker still has other principal axes' masks to build while
+    /// idle ([`Reply::Prefetched`] follows when they are built).
+    pub prefetch: bool,
     pub spec: Spec,
 }
 
@@ -47,6 +54,11 @@ pub enum Reply {
         what: String,
     },
     Frame(Box<Frame>),
+    /// The idle worker has built the masks of every principal axis (after a
+    /// frame that said [`Frame::prefetch`]): an axis switch no longer stalls.
+    Prefetched {
+        kind: Kind,
+    },
     /// A request failed.
     Failed {
         kind: Kind,
@@ -156,7 +168,12 @@ impl Renderers {
 struct Mailbox {
     job: Option<Spec>,
     quit: bool,
+    /// Pixel buffers of frames no longer on screen, for the next frames.
+    spare: Vec<Vec<u32>>,
 }
+
+/// How many returned pixel buffers a worker keeps.
+const SPARE_BUFFERS: usize = 2;
 
 /// A render thread with a one-slot mailbox.
 pub struct Worker {
@@ -191,7 +208,8 @@ impl Worker {
                                 return;
                             }
                             if let Some(s) = g.job.take() {
-                                break Some(s);
+                                // a recycled buffer: no fresh megabyte to fault in per frame
+                                break Some((s, g.spare.pop().unwrap_or_default()));
                             }
                             if last.is_some() && renderers.stale.contains(&true) {
                                 break None;
@@ -199,10 +217,13 @@ impl Worker {
                             g = cv.wait(g).unwrap_or_else(|e| e.into_inner());
                         }
                     };
-                    let Some(spec) = next else {
+                    let Some((spec, mut pixels)) = next else {
                         // idle: build the other axes' masks, one per turn, before sleeping
                         let l = last.expect("checked above");
                         renderers.prepare_one(l.class, l.cell);
+                        if !renderers.stale.contains(&true) {
+                            reply(Reply::Prefetched { kind });
+                        }
                         continue;
                     };
                     let t = Instant::now();
@@ -215,11 +236,12 @@ impl Worker {
                     }
                     match renderers.render(&spec, &mut img) {
                         Ok(stats) => {
-                            let mut pixels = Vec::with_capacity(img.data.len());
                             img.to_0rgb(&mut pixels);
                             let total_ms = t.elapsed().as_secs_f64() * 1e3;
                             let (width, height) = (img.width, img.height);
-                            reply(Reply::Frame(Box::new(Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, spec })));
+                            let prefetch = renderers.stale.contains(&true);
+                            let f = Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, started: t, prefetch, spec };
+                            reply(Reply::Frame(Box::new(f)));
                         }
                         Err(e) => reply(Reply::Failed { kind, seq: spec.seq, error: e.to_string() }),
                     }
@@ -235,6 +257,15 @@ impl Worker {
         let (lock, cv) = &*self.mail;
         lock.lock().unwrap_or_else(|e| e.into_inner()).job = Some(spec);
         cv.notify_one();
+    }
+
+    /// Gives the pixel buffer of a frame no longer shown back for later frames.
+    pub fn recycle(&self, pixels: Vec<u32>) {
+        let (lock, _) = &*self.mail;
+        let mut g = lock.lock().unwrap_or_else(|e| e.into_inner());
+        if g.spare.len() < SPARE_BUFFERS && pixels.capacity() > 0 {
+            g.spare.push(pixels);
+        }
     }
 
     /// Drops a request that has not started (one in progress still reports; its
@@ -290,7 +321,7 @@ mod tests {
             match rx.recv_timeout(Duration::from_secs(60)).expect("a reply") {
                 Reply::Frame(f) => return *f,
                 Reply::Failed { error, .. } => panic!("{error}"),
-                Reply::Busy { .. } => {}
+                Reply::Busy { .. } | Reply::Prefetched { .. } => {}
             }
         }
     }
@@ -342,6 +373,30 @@ mod tests {
         };
         assert!(busy, "the rebuild was reported first");
         assert_eq!(f.seq, 2);
+        // the new mask was built for one axis: the idle worker builds the others and says so
+        assert!(f.prefetch);
+        match rx.recv_timeout(Duration::from_secs(60)).unwrap() {
+            Reply::Prefetched { kind: Kind::Preview } => {}
+            m => panic!("{m:?}"),
+        }
+        w.stop();
+    }
+
+    #[test]
+    fn recycled_pixel_buffers_are_reused() {
+        let (r, spec) = setup(Mode::Iso);
+        let (tx, rx) = mpsc::channel();
+        let w = Worker::spawn(Kind::Preview, r, false, move |m| {
+            let _ = tx.send(m);
+        });
+        w.post(spec);
+        let f = frame(&rx);
+        let (ptr, pixels) = (f.pixels.as_ptr(), f.pixels.clone());
+        w.recycle(f.pixels);
+        w.post(Spec { seq: 2, ..spec });
+        let g = frame(&rx);
+        assert_eq!(g.pixels.as_ptr(), ptr, "the returned buffer holds the next frame");
+        assert_eq!(g.pixels, pixels, "the same view, the same picture");
         w.stop();
     }
 

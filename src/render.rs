@@ -174,6 +174,22 @@ impl Default for Settings {
     }
 }
 
+/// Milliseconds the last build of each structure took, per principal axis
+/// (0 where it was never built).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct BuildTimes {
+    /// The f32 slice stacks.
+    pub stacks: [f64; 3],
+    /// The normal codes (with the packed densities on the binary path of 8- and 16-bit scans).
+    pub normals: [f64; 3],
+    /// The cell codes.
+    pub cell_codes: [f64; 3],
+    /// Packing and first shear of the masks.
+    pub masks: [f64; 3],
+    /// The run-length encodings.
+    pub rle: [f64; 3],
+}
+
 /// Timings and work of one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct FrameStats {
@@ -295,6 +311,8 @@ pub struct Renderer {
     rle: RleCache,
     /// Largest total of [`Renderer::memory`] a new structure may bring about.
     budget: Option<u64>,
+    /// How long each structure took to build.
+    build_times: BuildTimes,
 }
 
 impl Renderer {
@@ -326,6 +344,7 @@ impl Renderer {
             pool,
             rle: RleCache::new(),
             budget: None,
+            build_times: BuildTimes::default(),
         })
     }
 
@@ -485,6 +504,11 @@ impl Renderer {
     /// The pre-classified state (classification and encodings) of the RLE paths.
     pub fn rle_cache(&self) -> &RleCache {
         &self.rle
+    }
+
+    /// How long the last build of each structure took, per axis.
+    pub fn build_times(&self) -> BuildTimes {
+        self.build_times
     }
 
     /// Bytes held now, per structure and axis.
@@ -665,23 +689,30 @@ impl Renderer {
         let t = Instant::now();
         let compact = compact_binary(&self.volume, &self.settings);
         let raycast = matches!(self.settings.method, Method::Binary | Method::Brute);
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         if compact && self.normals[axis].is_none() {
             // the packed cells straight from the volume: no f32 stack at all
+            let t = Instant::now();
             let (vol, spacing) = (&self.volume, self.volume.spacing());
             let ns = self.pool.install(|| NormalStack::try_packed_from_volume(vol, axis, spacing))?;
             self.normals[axis] = Some(ns.expect("compact_binary checked that the volume packs"));
             if self.stacks[axis].is_none() {
                 self.stacks[axis] = Some(SliceStack::shell(vol, axis));
             }
+            self.build_times.normals[axis] = ms(t);
         }
         if !compact && self.stacks[axis].as_ref().is_none_or(|s| !s.is_resident()) {
+            let t = Instant::now();
             let vol = &self.volume;
             self.stacks[axis] = Some(self.pool.install(|| SliceStack::try_new(vol, axis))?);
+            self.build_times.stacks[axis] = ms(t);
         }
         if raycast && self.settings.normals == Normals::Codes && self.normals[axis].is_none() {
+            let t = Instant::now();
             let (stack, spacing, pack) =
                 (self.stacks[axis].as_ref().expect("stack built above"), self.volume.spacing(), self.settings.pack);
             self.normals[axis] = Some(self.pool.install(|| NormalStack::try_with_packing(stack, spacing, pack))?);
+            self.build_times.normals[axis] = ms(t);
         }
         if self.settings.method == Method::Binary {
             let key = self.mask_key();
@@ -695,6 +726,7 @@ impl Renderer {
                 // cell codes depend only on the classification; cell size and word size reuse them
                 let codes_key = key.generation * 2 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64);
                 if self.codes[axis].as_ref().map(|c| c.0) != Some(codes_key) {
+                    let t = Instant::now();
                     let codes = self.pool.install(|| match (&self.tissues, self.settings.mode) {
                         (Some(ts), _) => CellCodes::thresholds(stack, &ts.thresholds).expect("thresholds validated in with_tissues"),
                         (None, Mode::Iso) => {
@@ -707,13 +739,16 @@ impl Renderer {
                         }
                     });
                     self.codes[axis] = Some((codes_key, codes));
+                    self.build_times.cell_codes[axis] = ms(t);
                 }
+                let t = Instant::now();
                 let codes = &self.codes[axis].as_ref().expect("built above").1;
                 let mask = self.pool.install(|| match key.word {
                     WordSize::U32 => AnyMask::W32(BinaryMask::from_codes(codes, key.cell)),
                     WordSize::U64 => AnyMask::W64(BinaryMask::from_codes(codes, key.cell)),
                 });
                 self.masks[axis] = Some(AxisMask { key, mask });
+                self.build_times.masks[axis] = ms(t);
             }
             // the mask carries the settings' CPU level to its shear kernels and to
             // the ray loop's bit scan (`render_binary`); a mask outlives a settings change
@@ -728,8 +763,10 @@ impl Renderer {
                 self.rle.reset(key, &cls, self.volume.spacing());
             }
             if self.settings.method == Method::Rle && self.rle.axis(axis).is_none() {
+                let t = Instant::now();
                 let (rle, stack) = (&mut self.rle, self.stacks[axis].as_ref().expect("stack built above"));
                 self.pool.install(|| rle.ensure_axis(stack));
+                self.build_times.rle[axis] = ms(t);
             }
         }
         Ok(t.elapsed().as_secs_f64() * 1e3)

@@ -573,6 +573,22 @@ fn memory_json(r: &Renderer) -> serde_json::Value {
     })
 }
 
+/// Milliseconds of the last build of each structure, per axis x, y, z.
+fn build_json(r: &Renderer) -> serde_json::Value {
+    serde_json::to_value(r.build_times()).unwrap_or_default()
+}
+
+/// Builds what the first view of `cam` needs, with a spinner on a terminal
+/// (a clinical-size scan takes about a second). Returns the milliseconds.
+fn prepare_first(r: &mut Renderer, cam: &Camera) -> Result<f64> {
+    let v = r.volume();
+    let axis = shearwarp::view::Factorization::new(cam, v.dims(), v.spacing())?.axis;
+    let sp = spinner(&format!("building what a view along {} needs", AXES[axis]));
+    let ms = r.prepare_axis(axis)?;
+    sp.finish_and_clear();
+    Ok(ms)
+}
+
 /// The code width of a mask for `tissues` presets.
 fn code_bits(tissues: usize) -> u32 {
     shearwarp::encode::depth::code_width_for(tissues.max(1)).unwrap_or(4)
@@ -604,6 +620,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let cam = cmd.render.camera(vol.frame())?;
     let mut r = cmd.render.renderer(vol)?;
     let mut img = Image::new(cam.size[0], cam.size[1]);
+    let build_ms = prepare_first(&mut r, &cam)?;
     let stats = r.render(&cam, &mut img)?;
     img.save_png(&cmd.output)?;
     let first_frame_ms = crate::app::since_start_ms();
@@ -616,10 +633,10 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
-            "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": stats.build_ms, "shear_ms": stats.shear_ms,
+            "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": build_ms + stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,
-            "load_ms": load_ms, "first_frame_ms": first_frame_ms, "memory": memory_json(&r),
+            "load_ms": load_ms, "first_frame_ms": first_frame_ms, "memory": memory_json(&r), "build": build_json(&r),
         });
         say!("{j}");
     } else {
@@ -634,7 +651,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             r.settings().method.name(),
             r.settings().mode.name(),
             r.classification_name(),
-            stats.build_ms,
+            build_ms + stats.build_ms,
             stats.shear_ms,
             stats.render_ms,
             stats.warp_ms
@@ -672,9 +689,10 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     // classification (per principal axis), the binary path only swaps a table.
     let reencodes = matches!(r.settings().method, shearwarp::render::Method::Rle | shearwarp::render::Method::BruteRle);
     let (mut select_ns, mut switch_ms, mut after_switch_ms): (Vec<f64>, Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new(), Vec::new());
-    // nothing is built before the first frame asks for it: each frame builds
-    // what its view needs (its principal axis), reported as its build_ms
+    // only what the first view needs is built before it (its principal axis);
+    // a later frame whose view needs another axis builds it (its build_ms)
     let mut first_frame_ms = None;
+    let build_ms_first = prepare_first(&mut r, &cam0)?;
     if let Some(d) = &cmd.frames_dir {
         std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create directory", d.display()))?;
     }
@@ -726,8 +744,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let loop_ms = loop_start.elapsed().as_secs_f64() * 1e3;
     pb.finish_and_clear();
     let frames_ms_total: f64 = all.iter().map(|s| s.build_ms + s.frame_ms()).sum();
-    let build_ms: f64 = all.iter().map(|s| s.build_ms).sum();
-    let build_ms_first = all.first().map_or(0.0, |s| s.build_ms);
+    let build_ms: f64 = build_ms_first + all.iter().map(|s| s.build_ms).sum::<f64>();
     let switch_ms_total: f64 = switch_ms.iter().fold(0.0, |a, b| a + b); // not sum(): an empty sum is -0.0
     let warnings = shearwarp::checks::frame_warnings(&r, img.coverage());
     for w in &warnings {
@@ -773,8 +790,12 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             "shear_ms_median": shear, "render_ms_median": render, "warp_ms_median": warp, "frame_ms_median": frame,
             "fps": fps, "degrees_per_second": fps * step, "mask_bytes": r.mask_bytes(), "rle_bytes": r.rle_bytes(),
             "rle_axis_bytes": r.rle_axis_bytes(),
-            "load_ms": load_ms, "first_frame_ms": first_frame_ms, "build_ms_first": build_ms_first, "memory": memory_json(&r),
+            "load_ms": load_ms, "first_frame_ms": first_frame_ms, "build_ms_first": build_ms_first,
         });
+        // added apart: one json! of all the fields exceeds the macro's recursion limit
+        let mut j = j;
+        j["memory"] = memory_json(&r);
+        j["build"] = build_json(&r);
         say!("{j}");
     } else {
         say!(

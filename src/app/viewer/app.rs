@@ -419,6 +419,7 @@ impl App {
             degps,
             busy: self.busy.as_ref().filter(|(t, _)| t.elapsed() >= BUSY_TICK).map(|(t, s)| (s.clone(), t.elapsed().as_secs_f64())),
             message: self.message.as_ref().map(|m| m.1.clone()),
+            background: self.masks_pending,
         };
         let lines = self.state.overlay_lines(&hud);
         let labels = button_labels(&self.state.tissues);
@@ -584,6 +585,9 @@ impl ApplicationHandler<Reply> for App {
                 self.log(format!("masks ready kind={}", kind.name()));
                 if kind == Kind::Preview {
                     self.masks_pending = false;
+                    if self.bench.is_none() {
+                        self.redraw(); // the overlay's background line goes
+                    }
                     self.bench_poll(el);
                 }
             }

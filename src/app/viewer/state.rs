@@ -492,6 +492,9 @@ pub struct Hud {
     pub busy: Option<(String, f64)>,
     /// A short-lived message (e.g. where a PNG went).
     pub message: Option<String>,
+    /// The other principal axes are being built in the background (a turn
+    /// onto one of them would wait for its build until they are done).
+    pub background: bool,
 }
 
 impl State {
@@ -520,6 +523,9 @@ impl State {
             Class::Tissue(_) => format!("tissue {} (iso {})", self.class_name(), short(self.iso())),
             Class::Custom(v) => format!("custom iso {v:.1}"),
         });
+        if hud.background {
+            l.push("building the other axes in the background ...".into());
+        }
         if let Some((what, secs)) = &hud.busy {
             l.push(format!("{what}... {secs:.1} s"));
         }

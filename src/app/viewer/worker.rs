@@ -84,7 +84,8 @@ impl Renderers {
     /// rendering in `settings.mode`.
     pub fn new(volume: Volume, tissues: &[Tissue], settings: Settings) -> shearwarp::Result<Self> {
         let hi = volume.value_range().1;
-        let r = Renderer::with_tissues(volume, tissues, settings)?;
+        let mut r = Renderer::with_tissues(volume, tissues, settings)?;
+        r.set_memory_budget(crate::app::budget());
         Ok(Renderers { tissues: r, custom: None, mode: settings.mode, hi, cells: [settings.cell; 2], stale: [true; 3] })
     }
 
@@ -99,12 +100,6 @@ impl Renderers {
             Class::Tissue(_) => self.cells[0] != cell,
             Class::Custom(v) => self.custom.as_ref().is_none_or(|r| r.iso() != v) || self.cells[1] != cell,
         }
-    }
-
-    /// Builds the masks of every principal axis of the tissue renderer (at start).
-    pub fn prepare(&mut self) -> f64 {
-        self.stale = [false; 3];
-        self.tissues.prepare_all_axes()
     }
 
     /// The renderer for `class` at `cell`, switched to it.
@@ -127,7 +122,9 @@ impl Renderers {
                     }
                     None => {
                         let s = Settings { cell, ..self.tissues.settings() };
-                        self.custom = Some(Renderer::new(self.tissues.volume().clone(), &tf, s)?);
+                        let mut c = Renderer::new(self.tissues.volume().clone(), &tf, s)?;
+                        c.set_memory_budget(crate::app::budget());
+                        self.custom = Some(c);
                         self.cells[1] = cell;
                     }
                 }
@@ -185,7 +182,9 @@ pub struct Worker {
 
 impl Worker {
     /// Starts a worker that renders with `renderers` and reports through `reply`.
-    /// With `prepare`, it first builds every axis's masks (reported as busy).
+    /// With `prepare`, it says it is busy building the first view (which the
+    /// first request builds: one principal axis); whenever it is idle it builds
+    /// the other axes, one per turn, and then says [`Reply::Prefetched`].
     pub fn spawn(kind: Kind, mut renderers: Renderers, prepare: bool, reply: impl Fn(Reply) + Send + 'static) -> Self {
         let mail: Arc<(Mutex<Mailbox>, Condvar)> = Arc::default();
         let m = mail.clone();
@@ -193,8 +192,9 @@ impl Worker {
             .name(format!("shearwarp-{}", kind.name()))
             .spawn(move || {
                 if prepare {
-                    reply(Reply::Busy { kind, seq: 0, what: "building masks".into() });
-                    renderers.prepare();
+                    // the first frame builds only what its view needs (one axis);
+                    // the idle worker builds the other axes after it
+                    reply(Reply::Busy { kind, seq: 0, what: "building the first view".into() });
                 }
                 // rounded to 8 bits by the warp: what the window shows
                 let mut img = Image8::new(1, 1);

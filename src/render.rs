@@ -984,16 +984,19 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
     }
     if settings.method == Method::Binary {
         let s = settings.cell.clamp(1, MAX_CELL) as u64;
-        m.cell_codes[a] = cells[0] as u64 * cells[1] as u64 * n[2] as u64;
+        let nb = code_bits.max(1) as u64;
+        // nb-bit codes, each row of cells padded to whole u64 words
+        let packed = |len: u64, rows: u64| len.div_ceil(64 / nb) * 8 * rows;
+        m.cell_codes[a] = packed(cells[0] as u64, cells[1] as u64 * n[2] as u64);
         let bits = match settings.word {
             WordSize::U32 => 32u64,
             WordSize::U64 => 64,
         };
-        let nb = code_bits.max(1) as u64;
         let pad = (grid.pad as u64).div_ceil(s) + 1;
         let g = cells.map(|c| (c as u64).div_ceil(s) + 1 + 2 * pad);
         let words = g[0] * g[1] * (n[2] as u64).div_ceil(bits / nb).max(1) * (bits / 8);
-        let super_codes = if s > 1 { cells.map(|c| (c as u64).div_ceil(s) + 1).iter().product::<u64>() * n[2] as u64 } else { 0 };
+        let sc = cells.map(|c| if c == 0 { 0 } else { (c as u64 + s - 2) / s + 1 });
+        let super_codes = if s > 1 { packed(sc[0], sc[1] * n[2] as u64) } else { 0 };
         m.masks[a] = words + super_codes;
     }
     m

@@ -77,6 +77,19 @@ fn the_prediction_matches_what_a_frame_builds() {
 }
 
 #[test]
+fn the_prediction_holds_for_super_cells() {
+    for cell in [2, 3, 8] {
+        let mut r = renderer(Method::Binary);
+        r.set_settings(Settings { cell, ..r.settings() }).unwrap();
+        let est = estimate_axis(r.volume(), &r.settings(), bits(&r), 1);
+        r.render(&along(1), &mut Image::new(48, 48)).unwrap();
+        let m = r.memory();
+        assert_eq!(m.cell_codes, est.cell_codes, "cell {cell}");
+        assert!(m.masks[1] <= est.masks[1] && est.masks[1] as f64 <= 1.1 * m.masks[1] as f64, "cell {cell}: {:?} {:?}", m.masks, est.masks);
+    }
+}
+
+#[test]
 fn a_budget_too_small_fails_before_allocating() {
     let mut r = renderer(Method::Binary);
     let volume_bytes = r.memory().volume;

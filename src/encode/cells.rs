@@ -15,6 +15,118 @@ use crate::data::slices::Densities;
 use crate::encode::depth::code_width_for;
 use crate::error::{Error, Result};
 
+/// `nb`-bit codes (`nb` ∈ 1, 2, 4) of `rows` rows of `len` cells, each row
+/// padded to whole u64 words: cell `i` of row `r` sits in the bits
+/// `[(i % per)·nb, (i % per + 1)·nb)` of word `r·row_words + i / per`, with
+/// `per = 64 / nb`. An eighth (1-bit codes) to a half (4-bit) of a byte per
+/// cell, and a row's non-zero cells are found a word at a time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackedCodes {
+    nb: u32,
+    len: usize,
+    row_words: usize,
+    words: Vec<u64>,
+}
+
+impl PackedCodes {
+    /// All-zero codes.
+    pub fn new(nb: u32, len: usize, rows: usize) -> Self {
+        assert!(matches!(nb, 1 | 2 | 4), "code width {nb}");
+        let row_words = (len * nb as usize).div_ceil(64);
+        PackedCodes { nb, len, row_words, words: vec![0; row_words * rows] }
+    }
+    /// Cells per row.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+    /// True when rows hold no cells.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.words.len() * 8
+    }
+    /// Codes per word.
+    fn per(&self) -> usize {
+        64 / self.nb as usize
+    }
+    /// The code of cell `i` of row `r`.
+    #[inline]
+    pub fn get(&self, r: usize, i: usize) -> u8 {
+        let per = self.per();
+        let w = self.words[r * self.row_words + i / per];
+        ((w >> ((i % per) as u32 * self.nb)) & ((1u64 << self.nb) - 1)) as u8
+    }
+    /// The words of every `rows_per_chunk` rows, mutably, for filling in parallel.
+    fn chunks_mut(&mut self, rows_per_chunk: usize) -> impl IndexedParallelIterator<Item = &mut [u64]> {
+        let n = (self.row_words * rows_per_chunk).max(1);
+        self.words.par_chunks_mut(n)
+    }
+    /// Packs `codes` (one row, each `< 2^nb`) into `out` (that row's words).
+    fn pack_row(nb: u32, codes: &[u8], out: &mut [u64]) {
+        let per = 64 / nb as usize;
+        for (w, c) in out.iter_mut().zip(codes.chunks(per)) {
+            *w = c.iter().enumerate().fold(0u64, |acc, (t, &x)| acc | (x as u64) << (t as u32 * nb));
+        }
+    }
+    /// Unpacks row `r` into `out` (`len` codes).
+    pub fn unpack_row(&self, r: usize, out: &mut [u8]) {
+        for (i, o) in out.iter_mut().enumerate().take(self.len) {
+            *o = self.get(r, i);
+        }
+    }
+    /// Calls `f(i, code)` for every non-zero cell `i` in `[from, to]` of row `r`,
+    /// in order, a word at a time (all-zero words cost one test).
+    #[inline]
+    pub fn for_each_nonzero(&self, r: usize, from: usize, to: usize, mut f: impl FnMut(usize, u8)) {
+        if from > to || self.len == 0 {
+            return;
+        }
+        let (nb, per) = (self.nb, self.per());
+        let to = to.min(self.len - 1);
+        let row = &self.words[r * self.row_words..(r + 1) * self.row_words];
+        let low: u64 = match nb {
+            1 => !0,
+            2 => 0x5555_5555_5555_5555,
+            _ => 0x1111_1111_1111_1111,
+        };
+        for wi in from / per..=to / per {
+            let w = row[wi];
+            if w == 0 {
+                continue;
+            }
+            // one bit per non-zero code, at the code's lowest bit
+            let mut any = w;
+            if nb >= 2 {
+                any |= any >> 1;
+            }
+            if nb >= 4 {
+                any |= any >> 2;
+            }
+            let mut m = any & low;
+            while m != 0 {
+                let b = m.trailing_zeros();
+                m &= m - 1;
+                let i = wi * per + (b / nb) as usize;
+                if i >= from && i <= to {
+                    f(i, ((w >> b) & ((1u64 << nb) - 1)) as u8);
+                }
+            }
+        }
+    }
+    /// The first and last non-zero cell of row `r`, if any.
+    pub fn nonzero_span(&self, r: usize) -> Option<(usize, usize)> {
+        let (nb, per) = (self.nb, self.per());
+        let row = &self.words[r * self.row_words..(r + 1) * self.row_words];
+        let first = row.iter().position(|&w| w != 0)?;
+        let last = row.iter().rposition(|&w| w != 0)?;
+        let a = first * per + (row[first].trailing_zeros() / nb) as usize;
+        let b = last * per + ((63 - row[last].leading_zeros()) / nb) as usize;
+        Some((a, b))
+    }
+}
+
 /// Unsheared per-cell codes of one principal axis.
 #[derive(Clone, Debug)]
 pub struct CellCodes {
@@ -24,9 +136,9 @@ pub struct CellCodes {
     pub nk: usize,
     /// Bits per code.
     pub nb: u32,
-    /// Code of cell `(ci, cj, k)` at `(k · cells_j + cj) · cells_i + ci`;
+    /// Code of cell `(ci, cj, k)`: cell `ci` of row `k · cells_j + cj`;
     /// shared with the masks packed from it at cell size 1 (no copy).
-    pub codes: Arc<Vec<u8>>,
+    pub codes: Arc<PackedCodes>,
 }
 
 impl CellCodes {
@@ -36,9 +148,11 @@ impl CellCodes {
         let [ci_n, cj_n] = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
         let nk = n[2];
         let per = ci_n * cj_n;
-        let mut codes = vec![0u8; per * nk];
+        let mut codes = PackedCodes::new(nb, ci_n, cj_n * nk);
         if per > 0 {
-            codes.par_chunks_mut(per).enumerate().for_each(|(k, out)| {
+            let rw = codes.row_words;
+            codes.chunks_mut(cj_n).enumerate().for_each(|(k, out)| {
+                let mut line = vec![0u8; ci_n];
                 // a row's column minima/maxima are shared by neighbouring cells
                 let mut colmin = vec![0f32; ci_n + 1];
                 let mut colmax = vec![0f32; ci_n + 1];
@@ -55,12 +169,12 @@ impl CellCodes {
                         *mn = a.min(b);
                         *mx = a.max(b);
                     }
-                    let row = &mut out[cj * ci_n..(cj + 1) * ci_n];
-                    for (ci, o) in row.iter_mut().enumerate() {
+                    for (ci, o) in line.iter_mut().enumerate() {
                         let lo = colmin[ci].min(colmin[ci + 1]);
                         let hi = colmax[ci].max(colmax[ci + 1]);
                         *o = code(lo, hi);
                     }
+                    PackedCodes::pack_row(nb, &line, &mut out[cj * rw..(cj + 1) * rw]);
                 }
             });
         }
@@ -88,18 +202,18 @@ impl CellCodes {
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        self.codes.len()
+        self.codes.bytes()
     }
 
     /// The code of cell `(ci, cj, k)`.
     #[inline]
     pub fn code(&self, ci: usize, cj: usize, k: usize) -> u8 {
-        self.codes[(k * self.cells[1] + cj) * self.cells[0] + ci]
+        self.codes.get(k * self.cells[1] + cj, ci)
     }
 
     /// Super-cell codes for cell size `s` (dilated: see the module docs), with
     /// each slice's bounding box of non-zero super cells.
-    pub(crate) fn supercells(&self, s: usize) -> ([usize; 2], Arc<Vec<u8>>, Vec<Option<[usize; 4]>>) {
+    pub(crate) fn supercells(&self, s: usize) -> ([usize; 2], Arc<PackedCodes>, Vec<Option<[usize; 4]>>) {
         let [ci_n, cj_n] = self.cells;
         // super cell SI covers cells [s·SI − (s − 1), s·SI + (s − 1)]; count those that cover any cell
         let count = |c: usize| if c == 0 { 0 } else { (c + s - 2) / s + 1 };
@@ -109,11 +223,11 @@ impl CellCodes {
         let mut bbox: Vec<Option<[usize; 4]>> = vec![None; self.nk];
         if s == 1 {
             // no dilation: the codes themselves, plus each slice's bounding box
-            let out = self.codes.clone();
             if per > 0 {
-                out.par_chunks(per).zip(bbox.par_iter_mut()).for_each(|(o, bb)| {
-                    for (cj, line) in o.chunks_exact(ci_n).enumerate() {
-                        let (Some(a), Some(b)) = (line.iter().position(|&c| c != 0), line.iter().rposition(|&c| c != 0)) else { continue };
+                let codes = &self.codes;
+                bbox.par_iter_mut().enumerate().for_each(|(k, bb)| {
+                    for cj in 0..cj_n {
+                        let Some((a, b)) = codes.nonzero_span(k * cj_n + cj) else { continue };
                         *bb = Some(match *bb {
                             None => [a, b, cj, cj],
                             Some([p, q, r, _]) => [p.min(a), q.max(b), r, cj],
@@ -121,37 +235,87 @@ impl CellCodes {
                     }
                 });
             }
-            return (sc, out, bbox);
+            return (sc, self.codes.clone(), bbox);
         }
-        let mut out = vec![0u8; per * self.nk];
+        let mut out = PackedCodes::new(self.nb, sc[0], sc[1] * self.nk);
         if per == 0 {
             return (sc, Arc::new(out), bbox);
         }
-        out.par_chunks_mut(per).zip(bbox.par_iter_mut()).enumerate().for_each(|(k, (o, bb))| {
-            let slice = &self.codes[k * ci_n * cj_n..(k + 1) * ci_n * cj_n];
+        let (nb, rw) = (self.nb, out.row_words);
+        out.chunks_mut(sc[1]).zip(bbox.par_iter_mut()).enumerate().for_each(|(k, (o, bb))| {
             // max over the span along i, then along j
+            let mut line = vec![0u8; ci_n];
             let mut rows = vec![0u8; sc[0] * cj_n];
             for cj in 0..cj_n {
-                let r = &slice[cj * ci_n..(cj + 1) * ci_n];
+                self.codes.unpack_row(k * cj_n + cj, &mut line);
                 for si in 0..sc[0] {
                     let (a, b) = span(si, ci_n);
-                    rows[cj * sc[0] + si] = r[a..b].iter().copied().max().unwrap_or(0);
+                    rows[cj * sc[0] + si] = line[a..b].iter().copied().max().unwrap_or(0);
                 }
             }
+            let mut sline = vec![0u8; sc[0]];
             for sj in 0..sc[1] {
                 let (a, b) = span(sj, cj_n);
-                for si in 0..sc[0] {
-                    let m = (a..b).map(|cj| rows[cj * sc[0] + si]).max().unwrap_or(0);
-                    o[sj * sc[0] + si] = m;
-                    if m != 0 {
+                for (si, m) in sline.iter_mut().enumerate() {
+                    *m = (a..b).map(|cj| rows[cj * sc[0] + si]).max().unwrap_or(0);
+                    if *m != 0 {
                         *bb = Some(match *bb {
                             None => [si, si, sj, sj],
                             Some([p, q, r, t]) => [p.min(si), q.max(si), r.min(sj), t.max(sj)],
                         });
                     }
                 }
+                PackedCodes::pack_row(nb, &sline, &mut o[sj * rw..(sj + 1) * rw]);
             }
         });
         (sc, Arc::new(out), bbox)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Packing, reading and the non-zero walk agree with plain byte codes, for
+    /// every width, row length (word boundaries included) and sub-range.
+    #[test]
+    fn packed_codes_equal_plain_codes() {
+        let mut st = 0x243F6A8885A308D3u64;
+        let mut rnd = move || {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            st
+        };
+        for nb in [1u32, 2, 4] {
+            for len in [1usize, 7, 15, 16, 31, 32, 33, 63, 64, 65, 130, 200] {
+                let rows = 5;
+                let plain: Vec<Vec<u8>> = (0..rows)
+                    .map(|r| (0..len).map(|_| if r == 2 || rnd() % 3 == 0 { 0 } else { (rnd() % (1 << nb)) as u8 }).collect())
+                    .collect();
+                let mut p = PackedCodes::new(nb, len, rows);
+                let rw = p.row_words;
+                p.chunks_mut(1).enumerate().for_each(|(r, o)| {
+                    assert_eq!(o.len(), rw);
+                    PackedCodes::pack_row(nb, &plain[r], o);
+                });
+                assert_eq!(p.bytes(), rows * len.div_ceil(64 / nb as usize) * 8);
+                let mut line = vec![0u8; len];
+                for (r, want) in plain.iter().enumerate() {
+                    p.unpack_row(r, &mut line);
+                    assert_eq!(&line, want);
+                    assert!((0..len).all(|i| p.get(r, i) == want[i]));
+                    let nz: Vec<usize> = (0..len).filter(|&i| want[i] != 0).collect();
+                    assert_eq!(p.nonzero_span(r), nz.first().map(|&a| (a, *nz.last().unwrap())), "nb {nb} len {len} row {r}");
+                    for _ in 0..20 {
+                        let (a, b) = ((rnd() as usize) % (len + 2), (rnd() as usize) % (len + 2));
+                        let mut got = vec![];
+                        p.for_each_nonzero(r, a, b, |i, c| got.push((i, c)));
+                        let expect: Vec<(usize, u8)> = (a..=b.min(len - 1)).filter(|&i| want[i] != 0).map(|i| (i, want[i])).collect();
+                        assert_eq!(got, expect, "nb {nb} len {len} row {r} [{a}, {b}]");
+                    }
+                }
+            }
+        }
     }
 }

@@ -32,7 +32,7 @@ use rayon::prelude::*;
 
 use crate::composite::Rect;
 use crate::data::slices::SliceStack;
-pub use crate::encode::cells::CellCodes;
+pub use crate::encode::cells::{CellCodes, PackedCodes};
 use crate::encode::depth::{Word, slot_shift};
 use crate::encode::shear::{ShearState, shift_vectors, shift_vectors2};
 use crate::encode::shift::*;
@@ -90,7 +90,7 @@ pub struct BinaryMask<W: Word> {
     words: Vec<W>,
     /// Unsheared super-cell codes, slice-major (at cell size 1, the
     /// [`CellCodes`]' own array, shared).
-    codes: std::sync::Arc<Vec<u8>>,
+    codes: std::sync::Arc<PackedCodes>,
     /// Per-slice bounding box of non-zero super cells `[si0, si1, sj0, sj1]`.
     bbox: Vec<Option<[usize; 4]>>,
     /// Current grid offset of each slice along i and j: `PAD − F[k]`.
@@ -272,11 +272,11 @@ impl<W: Word> BinaryMask<W> {
     /// Bytes this mask holds beyond the cell codes it shares: the words, plus
     /// its own super-cell codes when the cell size is above 1.
     pub fn held_bytes(&self) -> usize {
-        self.bytes() + if self.s > 1 { self.codes.len() } else { 0 }
+        self.bytes() + if self.s > 1 { self.codes.bytes() } else { 0 }
     }
     /// The unsheared code of super cell `(si, sj, k)`.
     pub fn code(&self, si: usize, sj: usize, k: usize) -> u8 {
-        self.codes[(k * self.cells[1] + sj) * self.cells[0] + si]
+        self.codes.get(k * self.cells[1] + sj, si)
     }
     /// True when the unsheared super cell has a non-zero code.
     pub fn cell(&self, si: usize, sj: usize, k: usize) -> bool {
@@ -395,7 +395,7 @@ impl<W: Word> BinaryMask<W> {
 
     /// Writes every code at its current offset (the grid must be clear there).
     fn scatter(&mut self) {
-        let [ci_n, cj_n] = self.cells;
+        let [_, cj_n] = self.cells;
         let (gw, nw, nk, nb) = (self.grid[0], self.nw, self.nk, self.nb);
         let slots = (W::BITS / nb) as usize;
         let (codes, off, bbox) = (&self.codes, &self.off, &self.bbox);
@@ -411,13 +411,11 @@ impl<W: Word> BinaryMask<W> {
                 debug_assert!(cj < cj_n);
                 let shift = slot_shift::<W>(nb, (k % slots) as u32);
                 let w = k / slots;
-                let line = &codes[(k * cj_n + cj) * ci_n..(k * cj_n + cj + 1) * ci_n];
-                for (ci, &c) in line.iter().enumerate().take(i1 + 1).skip(i0) {
-                    if c != 0 {
-                        let p = (ci as i32 + off[0][k]) as usize;
-                        row[p * nw + w] |= W::from_u64(c as u64) << shift;
-                    }
-                }
+                let o = off[0][k];
+                codes.for_each_nonzero(k * cj_n + cj, i0, i1, |ci, c| {
+                    let p = (ci as i32 + o) as usize;
+                    row[p * nw + w] |= W::from_u64(c as u64) << shift;
+                });
             }
         });
     }

@@ -231,7 +231,12 @@ impl Sample {
 
 /// Decodes `bytes` (a whole number of samples) into voxels: u8, u16 and i16
 /// are kept, i8 widens to i16 losslessly, and everything else becomes f32.
-pub(crate) fn decode_samples(bytes: &[u8], sample: Sample, big_endian: bool) -> VoxelData {
+pub(crate) fn decode_samples(bytes: impl AsRef<[u8]> + Into<Vec<u8>>, sample: Sample, big_endian: bool) -> VoxelData {
+    // 8-bit voxels keep the bytes as they are: no second copy of the volume
+    if let Sample::U8 = sample {
+        return VoxelData::U8(bytes.into());
+    }
+    let bytes = bytes.as_ref();
     macro_rules! words {
         ($t:ty, $n:expr) => {
             bytes.chunks_exact($n).map(move |c| {

@@ -219,7 +219,7 @@ pub fn load_nrrd(path: &Path) -> Result<Volume> {
             read_capped(&data_path, gz, expected, "NRRD gzip data")?
         }
     };
-    let data = decode_samples(&bytes, h.sample, h.big_endian.unwrap_or(false));
+    let data = decode_samples(bytes, h.sample, h.big_endian.unwrap_or(false));
     let frame = patient_frame(path, &h, &axes)?;
     Ok(make_volume(path, dims, spacing, data)?.with_frame(frame))
 }

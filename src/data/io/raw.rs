@@ -136,7 +136,7 @@ fn unit_spacing() -> [f32; 3] {
 pub fn load_raw(path: &Path, spec: &RawSpec) -> Result<Volume> {
     let len = spec.data_bytes().map_err(|e| Error::file(path, e.to_string()))?;
     let bytes = read_region(path, spec.header_bytes, len, false)?;
-    let data = decode_samples(&bytes, Sample::from_voxel_type(spec.voxel_type), spec.big_endian);
+    let data = decode_samples(bytes, Sample::from_voxel_type(spec.voxel_type), spec.big_endian);
     make_volume(path, spec.dims, spec.spacing, data)
 }
 

@@ -125,7 +125,9 @@ pub fn check_dims(dims: [u64; 3]) -> Result<[usize; 3]> {
 pub struct Volume {
     dims: [usize; 3],
     spacing: [f32; 3],
-    data: VoxelData,
+    /// Shared between clones (a clone costs no second copy of the voxels;
+    /// [`Volume::reverse_axis`] copies on write).
+    data: std::sync::Arc<VoxelData>,
     frame: Option<PatientFrame>,
     /// The value statistics, computed on first use (the voxel values never
     /// change after construction: [`Volume::reverse_axis`] only reorders them).
@@ -160,7 +162,7 @@ impl Volume {
                 return Err(Error::NonFinite { index, value });
             }
         }
-        Ok(Volume { dims: d, spacing, data, frame: None, stats: StatsCache::default() })
+        Ok(Volume { dims: d, spacing, data: std::sync::Arc::new(data), frame: None, stats: StatsCache::default() })
     }
 
     /// Builds an f32 volume by evaluating `f(x, y, z)` at every voxel.
@@ -242,7 +244,7 @@ impl Volume {
                 }
             }
         }
-        match &mut self.data {
+        match std::sync::Arc::make_mut(&mut self.data) {
             VoxelData::U8(v) => rev(v, axis, nx, ny, nz),
             VoxelData::U16(v) => rev(v, axis, nx, ny, nz),
             VoxelData::I16(v) => rev(v, axis, nx, ny, nz),
@@ -355,6 +357,17 @@ fn check_spacing(spacing: [f32; 3]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn clones_share_voxels_and_copy_on_write() {
+        let a = Volume::from_fn([4, 3, 2], [1.0; 3], |x, y, z| (x + 10 * y + 100 * z) as f32).unwrap();
+        let mut b = a.clone();
+        assert!(std::ptr::eq(a.data(), b.data()), "a clone shares the voxels");
+        b.reverse_axis(0);
+        assert!(!std::ptr::eq(a.data(), b.data()));
+        assert_eq!((a.get(0, 1, 1), b.get(0, 1, 1)), (110.0, 113.0), "the original is untouched");
+        assert_eq!(a.value_range(), b.value_range());
+    }
 
     #[test]
     fn rejects_zero_and_absurd_dims_without_allocating() {

@@ -42,3 +42,17 @@ pub use memory::Memory;
 pub use render::{FrameStats, Method, Renderer, Settings};
 pub use view::{Camera, NamedView};
 pub use warp::{Image, Image8};
+
+/// Helpers shared by the unit tests.
+#[cfg(test)]
+pub(crate) mod testing {
+    /// Deterministic pseudo-random u64s (xorshift64) from a non-zero `seed`.
+    pub fn xorshift(mut s: u64) -> impl FnMut() -> u64 {
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        }
+    }
+}

@@ -587,13 +587,8 @@ mod tests {
 
     #[test]
     fn branchless_encoder_equals_encode_normal() {
-        let mut st = 0x9E3779B97F4A7C15u64;
-        let mut r = move || {
-            st ^= st << 13;
-            st ^= st >> 7;
-            st ^= st << 17;
-            (st >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut next = crate::testing::xorshift(0x9E3779B97F4A7C15);
+        let mut r = move || (next() >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0;
         let special = [
             0.0,
             -0.0,

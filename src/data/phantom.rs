@@ -1229,13 +1229,8 @@ mod tests {
     fn layer_ranges_hold_everything_a_layer_covers() {
         // Voxels just outside a layer's (or the skin's) index range must have
         // zero coverage, at every resolution.
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::testing::xorshift(0x9e37_79b9_7f4a_7c15);
+        let mut rnd = move || (next() >> 11) as f64 / (1u64 << 53) as f64;
         for dims in [[16, 16, 16], [40, 96, 30], [128, 128, 113], [512, 512, 512], [1024, 1024, 1024]] {
             let m = HeadModel::new(dims);
             let checks = m.anatomy.layers.iter().zip(&m.layer_ranges).map(|(l, r)| (l.shape, l.inset, *r));

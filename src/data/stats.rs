@@ -139,13 +139,7 @@ mod tests {
     /// The statistics equal a plain scan, for every voxel type.
     #[test]
     fn stats_equal_a_plain_scan() {
-        let mut s = 0x2545F4914F6CDD1Du64;
-        let mut rnd = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            s
-        };
+        let mut rnd = crate::testing::xorshift(0x2545F4914F6CDD1D);
         let n = 3 * CHUNK + 12345;
         let sets = [
             VoxelData::U8((0..n).map(|_| (rnd() % 7) as u8 * 30 + 5).collect()),

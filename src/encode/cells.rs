@@ -280,13 +280,7 @@ mod tests {
     /// every width, row length (word boundaries included) and sub-range.
     #[test]
     fn packed_codes_equal_plain_codes() {
-        let mut st = 0x243F6A8885A308D3u64;
-        let mut rnd = move || {
-            st ^= st << 13;
-            st ^= st >> 7;
-            st ^= st << 17;
-            st
-        };
+        let mut rnd = crate::testing::xorshift(0x243F6A8885A308D3);
         for nb in [1u32, 2, 4] {
             for len in [1usize, 7, 15, 16, 31, 32, 33, 63, 64, 65, 130, 200] {
                 let rows = 5;

@@ -949,20 +949,18 @@ fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
     settings.method == Method::Binary
         && settings.normals == Normals::Codes
         && settings.pack
-        && volume.data().voxel_type() != crate::data::volume::VoxelType::F32
-        && {
-            let (lo, hi) = volume.value_range();
-            hi - lo <= u16::MAX as f32
-        }
+        && crate::data::normals::volume_packing_offset(volume).is_some()
 }
 
 /// The bytes a renderer with `settings` holds for principal axis `axis` of
 /// `volume` once a frame along it is rendered (with a mask of `code_bits`-bit
-/// codes: 1 for one transfer function, 3 for the CT presets), before anything
-/// is built: the volume, the slice stack, the normal codes (4 bytes a voxel
-/// when packed with integer densities, else 2), the cell codes and the mask's
-/// words (binary path) and the intermediate image. The run-length encoding
-/// (RLE paths) depends on the data and is not predicted (0).
+/// codes: 1 for one transfer function, 2 for up to three tissue presets, 4 for
+/// up to fifteen), before anything is built: the volume, the slice stack (none
+/// on the binary path of an 8/16-bit scan), the normal codes (4 bytes a voxel
+/// when packed with the densities, else 2; for f32 voxels 4 is an upper
+/// bound), the cell codes and the mask's words (binary path; the words are
+/// allocated, the pages touched are fewer) and the intermediate image. The
+/// run-length encoding (RLE paths) depends on the data and is not predicted (0).
 pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis: usize) -> Memory {
     let dims = volume.dims();
     let p = crate::view::permutation(axis.min(2));
@@ -979,8 +977,10 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
     m.stacks[a] = if compact_binary(volume, settings) { 0 } else { voxels * 4 };
     let raycast = matches!(settings.method, Method::Binary | Method::Brute);
     if raycast && settings.normals == Normals::Codes {
-        let integer = volume.data().voxel_type() != crate::data::volume::VoxelType::F32;
-        m.normals[a] = voxels * if settings.pack && integer { 4 } else { 2 };
+        // packed with the densities when they are integers spanning at most
+        // 65 535: always for 8- and 16-bit voxels; for f32 voxels it depends on
+        // the values, so 4 is an upper bound there
+        m.normals[a] = voxels * if settings.pack { 4 } else { 2 };
     }
     if settings.method == Method::Binary {
         let s = settings.cell.clamp(1, MAX_CELL) as u64;

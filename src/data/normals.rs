@@ -181,7 +181,7 @@ impl NormalStack {
     /// voxel instead of 8. `None` when the densities cannot be packed (f32
     /// voxels, or integers spanning more than 65 535).
     pub fn try_packed_from_volume(vol: &Volume, axis: usize, spacing: [f32; 3]) -> crate::Result<Option<Self>> {
-        let Some(offset) = packable(vol) else { return Ok(None) };
+        let Some(offset) = volume_packing_offset(vol) else { return Ok(None) };
         let shell = SliceStack::shell(vol, axis);
         let n = shell.n;
         let n01 = n[0] * n[1];
@@ -366,8 +366,9 @@ fn encode_normal_branchless(g: [f32; 3]) -> u16 {
 }
 
 /// [`packing_offset`] of any stack of `vol`, from its value statistics: the
-/// smallest value when the voxels are integers spanning at most 65 535.
-fn packable(vol: &Volume) -> Option<f32> {
+/// smallest value when the voxels are integers spanning at most 65 535 (`None`:
+/// [`NormalStack::try_packed_from_volume`] cannot pack this volume).
+pub fn volume_packing_offset(vol: &Volume) -> Option<f32> {
     if vol.data().voxel_type() == VoxelType::F32 {
         return None;
     }

@@ -787,6 +787,21 @@ impl Renderer {
         self.ensure_axis(axis.min(2))
     }
 
+    /// Builds principal axis `axis` ahead of need, but only if it fits the
+    /// memory budget beside everything held now: unlike [`Renderer::prepare_axis`]
+    /// it never frees another axis to make room (a prefetch that evicted the
+    /// axis on screen would make the next frame rebuild it). Returns whether
+    /// the axis is built now.
+    pub fn prefetch_axis(&mut self, axis: usize) -> Result<bool> {
+        let axis = axis.min(2);
+        if let Some(budget) = self.budget {
+            if self.memory().total() + self.missing_bytes(axis).total() > budget {
+                return Ok(false);
+            }
+        }
+        self.ensure_axis(axis).map(|_| true)
+    }
+
     /// Renders one frame of `camera` into `out` (resized if needed).
     ///
     /// When the camera, settings and classification are those of the frame this

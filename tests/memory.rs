@@ -126,6 +126,13 @@ fn other_axes_are_freed_to_fit_the_budget() {
             assert_eq!(m.axis_total(a), 0, "axis {a} freed while rendering along {axis}");
         }
     }
+    // a prefetch never evicts: with room for one axis it builds nothing more
+    assert!(!r.prefetch_axis(2).unwrap());
+    assert!(r.memory().axis_total(0) > 0 && r.memory().axis_total(2) == 0);
+    // with room for all three it builds them
+    r.set_memory_budget(Some(3 * one));
+    assert!(r.prefetch_axis(2).unwrap() && r.prefetch_axis(1).unwrap());
+    assert!((0..3).all(|a| r.memory().axis_total(a) > 0));
     // with no budget all three stay
     let mut r = renderer(Method::Binary);
     for axis in 0..3 {

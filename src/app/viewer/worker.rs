@@ -153,9 +153,9 @@ impl Renderers {
         let Some(axis) = self.stale.iter().position(|&s| s) else { return false };
         self.stale[axis] = false;
         if let Ok(r) = self.select(class, cell) {
-            // an axis beyond the memory limits is left for the frame that needs
-            // it, which reports the error
-            let _ = r.prepare_axis(axis);
+            // an axis that does not fit the memory budget beside the others is
+            // left for the frame that needs it (never evicting the one on screen)
+            let _ = r.prefetch_axis(axis);
         }
         true
     }

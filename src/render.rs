@@ -25,7 +25,7 @@ use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
 use crate::data::slices::{Densities, SliceStack};
 use crate::data::volume::Volume;
 use crate::encode::depth::{Matcher, Search, binary_matcher};
-use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, ShearWork};
+use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, PackedCodes, ShearWork};
 use crate::encode::rle::{ClassKey, RleCache};
 use crate::error::{Error, Result};
 use crate::memory::Memory;
@@ -515,7 +515,7 @@ impl Renderer {
     pub fn memory(&self) -> Memory {
         let per = |f: &dyn Fn(usize) -> usize| [0, 1, 2].map(|a| f(a) as u64);
         Memory {
-            volume: self.volume_bytes(),
+            volume: self.volume.bytes(),
             stacks: per(&|a| self.stacks[a].as_ref().map_or(0, SliceStack::bytes)),
             normals: per(&|a| self.normals[a].as_ref().map_or(0, NormalStack::bytes)),
             cell_codes: per(&|a| self.codes[a].as_ref().map_or(0, |c| c.1.bytes())),
@@ -528,10 +528,6 @@ impl Renderer {
             rle: self.rle.bytes().map(|b| b as u64),
             intermediate: self.inter.bytes() as u64,
         }
-    }
-
-    fn volume_bytes(&self) -> u64 {
-        (self.volume.len() * self.volume.data().voxel_type().size()) as u64
     }
 
     /// Limits what the renderer may hold ([`Renderer::memory`]'s total): before
@@ -558,7 +554,7 @@ impl Renderer {
     /// and are current count 0), and the intermediate image's growth.
     fn missing_bytes(&self, axis: usize) -> Memory {
         let mut m = estimate_axis(&self.volume, &self.settings, self.code_bits(), axis);
-        if self.stacks[axis].is_some() {
+        if self.stacks[axis].as_ref().is_some_and(SliceStack::is_resident) {
             m.stacks[axis] = 0;
         }
         if self.normals[axis].is_some() {
@@ -582,21 +578,24 @@ impl Renderer {
         self.rle.drop_axis(axis);
     }
 
+    /// True when building `axis` now fits the budget beside everything held.
+    fn fits_budget(&self, axis: usize) -> bool {
+        let needed = self.missing_bytes(axis).total();
+        needed == 0 || self.budget.is_none_or(|b| self.memory().total() + needed <= b)
+    }
+
     /// Checks the budget for building `axis` now; frees the other axes first
     /// if that makes it fit.
     fn fit_budget(&mut self, axis: usize) -> Result<()> {
         let Some(budget) = self.budget else { return Ok(()) };
-        let needed = self.missing_bytes(axis).total();
-        if needed == 0 {
+        if self.fits_budget(axis) {
             return Ok(());
         }
-        if self.memory().total() + needed > budget {
-            for a in (0..3).filter(|&a| a != axis) {
-                self.drop_axis(a);
-            }
+        for a in (0..3).filter(|&a| a != axis) {
+            self.drop_axis(a);
         }
-        let held = self.memory().total();
-        if held + needed > budget {
+        if !self.fits_budget(axis) {
+            let (needed, held) = (self.missing_bytes(axis).total(), self.memory().total());
             let d = self.volume.dims();
             return Err(Error::Memory {
                 what: format!(
@@ -794,10 +793,8 @@ impl Renderer {
     /// the axis is built now.
     pub fn prefetch_axis(&mut self, axis: usize) -> Result<bool> {
         let axis = axis.min(2);
-        if let Some(budget) = self.budget {
-            if self.memory().total() + self.missing_bytes(axis).total() > budget {
-                return Ok(false);
-            }
+        if !self.fits_budget(axis) {
+            return Ok(false);
         }
         self.ensure_axis(axis).map(|_| true)
     }
@@ -983,11 +980,7 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
     let voxels = (n[0] * n[1] * n[2]) as u64;
     let cells = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
     let grid = Grid::parallel(cells, n[2]);
-    let mut m = Memory {
-        volume: voxels * volume.data().voxel_type().size() as u64,
-        intermediate: grid.size[0] as u64 * grid.size[1] as u64 * 20,
-        ..Default::default()
-    };
+    let mut m = Memory { volume: volume.bytes(), intermediate: grid.size[0] as u64 * grid.size[1] as u64 * 20, ..Default::default() };
     let a = axis.min(2);
     m.stacks[a] = if compact_binary(volume, settings) { 0 } else { voxels * 4 };
     let raycast = matches!(settings.method, Method::Binary | Method::Brute);
@@ -998,21 +991,12 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
         m.normals[a] = voxels * if settings.pack { 4 } else { 2 };
     }
     if settings.method == Method::Binary {
-        let s = settings.cell.clamp(1, MAX_CELL) as u64;
-        let nb = code_bits.max(1) as u64;
-        // nb-bit codes, each row of cells padded to whole u64 words
-        let packed = |len: u64, rows: u64| len.div_ceil(64 / nb) * 8 * rows;
-        m.cell_codes[a] = packed(cells[0] as u64, cells[1] as u64 * n[2] as u64);
-        let bits = match settings.word {
-            WordSize::U32 => 32u64,
-            WordSize::U64 => 64,
+        let nb = code_bits.max(1);
+        m.cell_codes[a] = PackedCodes::bytes_for(nb, cells[0], cells[1] * n[2]);
+        m.masks[a] = match settings.word {
+            WordSize::U32 => BinaryMask::<u32>::bytes_for(cells, n[2], nb, settings.cell),
+            WordSize::U64 => BinaryMask::<u64>::bytes_for(cells, n[2], nb, settings.cell),
         };
-        let pad = (grid.pad as u64).div_ceil(s) + 1;
-        let g = cells.map(|c| (c as u64).div_ceil(s) + 1 + 2 * pad);
-        let words = g[0] * g[1] * (n[2] as u64).div_ceil(bits / nb).max(1) * (bits / 8);
-        let sc = cells.map(|c| if c == 0 { 0 } else { (c as u64 + s - 2) / s + 1 });
-        let super_codes = if s > 1 { packed(sc[0], sc[1] * n[2] as u64) } else { 0 };
-        m.masks[a] = words + super_codes;
     }
     m
 }

@@ -385,7 +385,7 @@ impl VolumeArgs {
     pub fn load(&self) -> Result<(Volume, String)> {
         crate::app::set_budget(self.max_memory);
         let (vol, name) = self.load_inner().map_err(|e| anyhow::Error::new(Usage(format!("{e:#}"))))?;
-        let bytes = (vol.len() * vol.data().voxel_type().size()) as u64;
+        let bytes = vol.bytes();
         if let Some(b) = crate::app::budget().filter(|&b| bytes > b) {
             let f = shearwarp::checks::fmt_bytes;
             usage!("{name}: the volume alone holds {}, over the memory budget of {} (--max-memory)", f(bytes), f(b));
@@ -607,7 +607,7 @@ fn memory_estimate(vol: &Volume, tissues: usize) -> serde_json::Value {
         })
         .collect();
     serde_json::json!({
-        "volume": (vol.len() * vol.data().voxel_type().size()) as u64, "binary_iso_per_axis": per,
+        "volume": vol.bytes(), "binary_iso_per_axis": per,
         "budget": crate::app::budget(),
     })
 }
@@ -900,7 +900,7 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
     {
         let est: Vec<u64> = (0..3).map(|a| estimate_axis(&vol, &Settings::default(), code_bits(tissues.len()), a).total()).collect();
         let f = shearwarp::checks::fmt_bytes;
-        let volume = (vol.len() * vol.data().voxel_type().size()) as u64;
+        let volume = vol.bytes();
         say!(
             "  memory    {} of voxels; the binary iso preview holds about {} along x / {} along y / {} along z (volume included), budget {}",
             f(volume),

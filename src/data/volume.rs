@@ -259,6 +259,10 @@ impl Volume {
     pub fn len(&self) -> usize {
         self.data.len()
     }
+    /// Bytes of the voxels, in their own type.
+    pub fn bytes(&self) -> u64 {
+        (self.len() * self.data.voxel_type().size()) as u64
+    }
     /// Always false: a volume has at least one voxel.
     pub fn is_empty(&self) -> bool {
         false

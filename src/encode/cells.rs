@@ -32,8 +32,16 @@ impl PackedCodes {
     /// All-zero codes.
     pub fn new(nb: u32, len: usize, rows: usize) -> Self {
         assert!(matches!(nb, 1 | 2 | 4), "code width {nb}");
-        let row_words = (len * nb as usize).div_ceil(64);
+        let row_words = Self::row_words(nb, len);
         PackedCodes { nb, len, row_words, words: vec![0; row_words * rows] }
+    }
+    /// Words of one row of `len` codes of `nb` bits.
+    fn row_words(nb: u32, len: usize) -> usize {
+        (len * nb as usize).div_ceil(64)
+    }
+    /// The bytes [`PackedCodes::new`] allocates.
+    pub fn bytes_for(nb: u32, len: usize, rows: usize) -> u64 {
+        (Self::row_words(nb, len) * rows * 8) as u64
     }
     /// Cells per row.
     pub fn len(&self) -> usize {
@@ -127,6 +135,12 @@ impl PackedCodes {
     }
 }
 
+/// Super cells of size `s` along i and j for `cells` cells: super cell `SI`
+/// covers cells `[s·SI − (s − 1), s·SI + (s − 1)]`; those that cover any cell.
+pub fn super_cells(cells: [usize; 2], s: usize) -> [usize; 2] {
+    cells.map(|c| if c == 0 { 0 } else { (c + s - 2) / s + 1 })
+}
+
 /// Unsheared per-cell codes of one principal axis.
 #[derive(Clone, Debug)]
 pub struct CellCodes {
@@ -215,10 +229,8 @@ impl CellCodes {
     /// each slice's bounding box of non-zero super cells.
     pub(crate) fn supercells(&self, s: usize) -> ([usize; 2], Arc<PackedCodes>, Vec<Option<[usize; 4]>>) {
         let [ci_n, cj_n] = self.cells;
-        // super cell SI covers cells [s·SI − (s − 1), s·SI + (s − 1)]; count those that cover any cell
-        let count = |c: usize| if c == 0 { 0 } else { (c + s - 2) / s + 1 };
         let span = |si: usize, c: usize| ((s * si).saturating_sub(s - 1), (s * si + s).min(c));
-        let sc = [count(ci_n), count(cj_n)];
+        let sc = super_cells(self.cells, s);
         let per = sc[0] * sc[1];
         let mut bbox: Vec<Option<[usize; 4]>> = vec![None; self.nk];
         if s == 1 {

@@ -149,16 +149,35 @@ impl<W: Word> BinaryMask<W> {
         Self::from_codes(&CellCodes::binary(stack, visible), 1)
     }
 
+    /// The layout of the mask of `cells` cells and `nk` slices with `nb`-bit
+    /// codes at super-cell size `s`: the view grid's padding, the padding in
+    /// super cells, the grid in super columns and the words per depth row.
+    fn layout(cells: [usize; 2], nk: usize, nb: u32, s: usize) -> (usize, usize, [usize; 2], usize) {
+        let vpad = crate::view::plan::Grid::parallel(cells, nk).pad;
+        let sc = crate::encode::cells::super_cells(cells, s);
+        let pad = vpad.div_ceil(s) + 1;
+        let nw = nk.div_ceil((W::BITS / nb) as usize).max(1);
+        (vpad, pad, [sc[0] + 2 * pad, sc[1] + 2 * pad], nw)
+    }
+
+    /// The bytes [`BinaryMask::from_codes`] allocates for `cells` cells and
+    /// `nk` slices of `nb`-bit codes at super-cell size `s`: the words, plus
+    /// the packed super-cell codes when `s` is above 1 (at 1 the mask shares
+    /// the cell codes).
+    pub fn bytes_for(cells: [usize; 2], nk: usize, nb: u32, s: usize) -> u64 {
+        let s = s.clamp(1, MAX_CELL);
+        let (_, _, grid, nw) = Self::layout(cells, nk, nb, s);
+        let sc = crate::encode::cells::super_cells(cells, s);
+        let words = (grid[0] * grid[1] * nw) as u64 * (W::BITS / 8) as u64;
+        words + if s > 1 { PackedCodes::bytes_for(nb, sc[0], sc[1] * nk) } else { 0 }
+    }
+
     /// Packs `codes` with super-cell size `s` (1..=[`MAX_CELL`]), unsheared.
     pub fn from_codes(codes: &CellCodes, s: usize) -> Self {
         let s = s.clamp(1, MAX_CELL);
-        let vpad = crate::view::plan::Grid::parallel(codes.cells, codes.nk).pad;
+        let (vpad, pad, grid, nw) = Self::layout(codes.cells, codes.nk, codes.nb, s);
         let (cells, sc, bbox) = codes.supercells(s);
-        let pad = vpad.div_ceil(s) + 1;
-        let grid = [cells[0] + 2 * pad, cells[1] + 2 * pad];
         let nb = codes.nb;
-        let slots = (W::BITS / nb) as usize;
-        let nw = codes.nk.div_ceil(slots).max(1);
         let nk = codes.nk;
         let mut m = BinaryMask {
             s,

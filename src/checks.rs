@@ -97,7 +97,7 @@ pub fn parse_bytes(s: &str) -> Result<u64> {
 
 pub fn frame_warnings(r: &Renderer, coverage: f64) -> Vec<String> {
     let mut w = Vec::new();
-    let (lo, hi) = r.volume().value_range();
+    let (lo, hi) = r.value_range();
     let n = fmt_density;
     if r.settings().mode == Mode::Iso {
         let iso = r.iso();

@@ -22,7 +22,7 @@ use crate::composite::Mode;
 use crate::composite::raycast::{RayContext, render_binary, render_brute, volume_rect};
 use crate::composite::{Intermediate, Rect};
 use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
-use crate::data::slices::{Densities, SliceStack};
+use crate::data::slices::{Densities, DensityStack, SliceStack};
 use crate::data::volume::Volume;
 use crate::encode::depth::{Matcher, Search, binary_matcher};
 use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, PackedCodes, ShearWork};
@@ -403,9 +403,64 @@ impl Renderer {
         self.select_tissue(i.ok_or_else(|| Error::value("tissue", format!("'{name}' is not in this renderer's presets")))?)
     }
 
-    /// The volume.
-    pub fn volume(&self) -> &Volume {
-        &self.volume
+    /// The volume: borrowed, or rebuilt from a density stack when this
+    /// renderer let go of its voxels (see [`Renderer::memory`]; then this
+    /// allocates a copy, or fails with [`Error::Memory`]).
+    pub fn volume(&self) -> Result<std::borrow::Cow<'_, Volume>> {
+        if !self.volume.is_parked() {
+            return Ok(std::borrow::Cow::Borrowed(&self.volume));
+        }
+        let mut v = self.volume.clone();
+        v.unpark(self.parked_voxels()?);
+        Ok(std::borrow::Cow::Owned(v))
+    }
+    /// The volume's size in voxels.
+    pub fn dims(&self) -> [usize; 3] {
+        self.volume.dims()
+    }
+    /// The volume's voxel spacing.
+    pub fn spacing(&self) -> [f32; 3] {
+        self.volume.spacing()
+    }
+    /// The volume's smallest and largest density.
+    pub fn value_range(&self) -> (f32, f32) {
+        self.range
+    }
+
+    /// The voxels of a parked volume, from any density stack held.
+    fn parked_voxels(&self) -> Result<std::sync::Arc<crate::data::volume::VoxelData>> {
+        let dens = self.normals.iter().flatten().find_map(NormalStack::density_stack);
+        dens.ok_or_else(|| Error::Other("internal: the volume's voxels were let go with no density stack holding them".into()))?
+            .to_volume_order()
+    }
+
+    /// Gives the volume its voxels back if this renderer let go of them.
+    fn unpark(&mut self) -> Result<()> {
+        if self.volume.is_parked() {
+            let data = self.pool.install(|| self.parked_voxels())?;
+            self.volume.unpark(data);
+        }
+        Ok(())
+    }
+
+    /// Lets go of the volume's voxels when a density stack of this renderer
+    /// holds them and nothing outside it shares them: the binary path of an
+    /// integer scan then holds the voxels once, in slicing order, instead of
+    /// twice ([`Renderer::volume`] and the builds of other axes and paths get
+    /// them back from the stack).
+    /// `building` is a density stack not yet in a normal stack.
+    fn park(&mut self, building: Option<&DensityStack>) {
+        if self.volume.is_parked() {
+            return;
+        }
+        let data = self.volume.shared_data();
+        let stacks = || self.normals.iter().flatten().filter_map(NormalStack::density_stack).chain(building);
+        let ours = stacks().filter(|d| d.shares(&data)).count();
+        let held = stacks().next().is_some();
+        drop(data);
+        if held && self.volume.data_handles() == 1 + ours {
+            self.volume.park();
+        }
     }
     /// Current settings.
     pub fn settings(&self) -> Settings {
@@ -420,6 +475,7 @@ impl Renderer {
             self.pool = build_pool(s.threads)?;
         }
         if s.pack != self.settings.pack {
+            self.unpark()?;
             self.normals = [None, None, None];
         }
         self.settings = s;
@@ -514,10 +570,13 @@ impl Renderer {
     /// Bytes held now, per structure and axis.
     pub fn memory(&self) -> Memory {
         let per = |f: &dyn Fn(usize) -> usize| [0, 1, 2].map(|a| f(a) as u64);
+        let data = self.volume.shared_data();
+        // a density stack along z that shares the resident volume's voxels costs nothing more
+        let shared = |ns: &NormalStack| ns.density_stack().filter(|d| d.shares(&data)).map_or(0, DensityStack::bytes);
         Memory {
             volume: self.volume.bytes(),
             stacks: per(&|a| self.stacks[a].as_ref().map_or(0, SliceStack::bytes)),
-            normals: per(&|a| self.normals[a].as_ref().map_or(0, NormalStack::bytes)),
+            normals: per(&|a| self.normals[a].as_ref().map_or(0, |ns| ns.bytes() - shared(ns))),
             cell_codes: per(&|a| self.codes[a].as_ref().map_or(0, |c| c.1.bytes())),
             masks: per(&|a| {
                 self.masks[a].as_ref().map_or(0, |m| match &m.mask {
@@ -569,19 +628,40 @@ impl Renderer {
         m
     }
 
-    /// Frees every structure of principal axis `axis`.
-    fn drop_axis(&mut self, axis: usize) {
+    /// Frees every structure of principal axis `axis` (first giving the volume
+    /// its voxels back if they were let go).
+    fn drop_axis(&mut self, axis: usize) -> Result<()> {
+        if self.normals[axis].is_some() {
+            self.unpark()?;
+        }
         self.stacks[axis] = None;
         self.normals[axis] = None;
         self.codes[axis] = None;
         self.masks[axis] = None;
         self.rle.drop_axis(axis);
+        Ok(())
     }
 
-    /// True when building `axis` now fits the budget beside everything held.
+    /// True when building `axis` now fits the budget beside everything held
+    /// (less the volume, when the build lets go of it: the build's transient
+    /// peak, the volume beside the density stack, is below that total since
+    /// the codes alone are at least as large as the volume).
     fn fits_budget(&self, axis: usize) -> bool {
         let needed = self.missing_bytes(axis).total();
-        needed == 0 || self.budget.is_none_or(|b| self.memory().total() + needed <= b)
+        needed == 0 || self.budget.is_none_or(|b| (self.memory().total() + needed).saturating_sub(self.releasable(axis)) <= b)
+    }
+
+    /// The bytes of volume that building `axis` lets go of: all of it when the
+    /// compact binary path builds its first density stack and nothing outside
+    /// this renderer shares the voxels.
+    fn releasable(&self, axis: usize) -> u64 {
+        if !compact_binary(&self.volume, &self.settings) || self.normals[axis].is_some() || self.volume.is_parked() {
+            return 0;
+        }
+        let data = self.volume.shared_data();
+        let ours = self.normals.iter().flatten().filter_map(NormalStack::density_stack).filter(|d| d.shares(&data)).count();
+        drop(data);
+        if self.volume.data_handles() == 1 + ours { self.volume.bytes() } else { 0 }
     }
 
     /// Checks the budget for building `axis` now; frees the other axes first
@@ -592,7 +672,7 @@ impl Renderer {
             return Ok(());
         }
         for a in (0..3).filter(|&a| a != axis) {
-            self.drop_axis(a);
+            self.drop_axis(a)?;
         }
         if !self.fits_budget(axis) {
             let (needed, held) = (self.missing_bytes(axis).total(), self.memory().total());
@@ -690,18 +770,36 @@ impl Renderer {
         let raycast = matches!(self.settings.method, Method::Binary | Method::Brute);
         let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         if compact && self.normals[axis].is_none() {
-            // the packed cells straight from the volume: no f32 stack at all
+            // the densities in their own type and the codes beside them: no f32
+            // stack, and the volume's voxels let go once the stack holds them
             let t = Instant::now();
-            let (vol, spacing) = (&self.volume, self.volume.spacing());
-            let ns = self.pool.install(|| NormalStack::try_packed_from_volume(vol, axis, spacing))?;
-            self.normals[axis] = Some(ns.expect("compact_binary checked that the volume packs"));
+            let vol = &self.volume;
+            let dens = match self.normals.iter().flatten().find_map(NormalStack::density_stack) {
+                // the volume was let go: permute another axis's stack
+                Some(d) if vol.is_parked() => self.pool.install(|| d.to_axis(axis))?,
+                _ => self.pool.install(|| DensityStack::try_new(vol, axis))?.ok_or_else(|| missing("the density stack", axis))?,
+            };
             if self.stacks[axis].is_none() {
                 self.stacks[axis] = Some(SliceStack::shell(vol, axis));
+            }
+            // let go of the volume before the codes are allocated: the peak is
+            // then the stack and the codes, not the volume beside them
+            let spacing = self.volume.spacing();
+            self.park(Some(&dens));
+            match self.pool.install(|| NormalStack::try_split(dens.clone(), spacing)) {
+                Ok(ns) => self.normals[axis] = Some(ns),
+                Err(e) => {
+                    if self.volume.is_parked() {
+                        self.volume.unpark(dens.to_volume_order()?);
+                    }
+                    return Err(e);
+                }
             }
             self.build_times.normals[axis] = ms(t);
         }
         if !compact && self.stacks[axis].as_ref().is_none_or(|s| !s.is_resident()) {
             let t = Instant::now();
+            self.unpark()?;
             let vol = &self.volume;
             self.stacks[axis] = Some(self.pool.install(|| SliceStack::try_new(vol, axis))?);
             self.build_times.stacks[axis] = ms(t);
@@ -961,18 +1059,21 @@ fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
     settings.method == Method::Binary
         && settings.normals == Normals::Codes
         && settings.pack
-        && crate::data::normals::volume_packing_offset(volume).is_some()
+        && volume.data().voxel_type() != crate::data::volume::VoxelType::F32
 }
 
 /// The bytes a renderer with `settings` holds for principal axis `axis` of
 /// `volume` once a frame along it is rendered (with a mask of `code_bits`-bit
 /// codes: 1 for one transfer function, 2 for up to three tissue presets, 4 for
-/// up to fifteen), before anything is built: the volume, the slice stack (none
-/// on the binary path of an 8/16-bit scan), the normal codes (4 bytes a voxel
-/// when packed with the densities, else 2; for f32 voxels 4 is an upper
-/// bound), the cell codes and the mask's words (binary path; the words are
-/// allocated, the pages touched are fewer) and the intermediate image. The
-/// run-length encoding (RLE paths) depends on the data and is not predicted (0).
+/// up to fifteen), before anything is built: the volume (none on the binary
+/// path of an 8/16-bit scan, which lets go of it once the density stack holds
+/// its voxels — if the renderer holds the only handle of them), the slice
+/// stack (none on that path either), the normal codes (there: 2 bytes a voxel
+/// beside the densities in their own type; otherwise 4 bytes when packed with
+/// the densities of an f32 stack, an upper bound, else 2), the cell codes and
+/// the mask's words (binary path; the words are allocated, the pages touched
+/// are fewer) and the intermediate image. The run-length encoding (RLE
+/// paths) depends on the data and is not predicted (0).
 pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis: usize) -> Memory {
     let dims = volume.dims();
     let p = crate::view::permutation(axis.min(2));
@@ -980,15 +1081,26 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
     let voxels = (n[0] * n[1] * n[2]) as u64;
     let cells = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
     let grid = Grid::parallel(cells, n[2]);
-    let mut m = Memory { volume: volume.bytes(), intermediate: grid.size[0] as u64 * grid.size[1] as u64 * 20, ..Default::default() };
+    let compact = compact_binary(volume, settings);
+    let mut m = Memory {
+        // the compact path lets go of the volume once its density stack holds the voxels
+        volume: if compact { 0 } else { volume.bytes() },
+        intermediate: grid.size[0] as u64 * grid.size[1] as u64 * 20,
+        ..Default::default()
+    };
     let a = axis.min(2);
-    m.stacks[a] = if compact_binary(volume, settings) { 0 } else { voxels * 4 };
+    m.stacks[a] = if compact { 0 } else { voxels * 4 };
     let raycast = matches!(settings.method, Method::Binary | Method::Brute);
     if raycast && settings.normals == Normals::Codes {
-        // packed with the densities when they are integers spanning at most
-        // 65 535: always for 8- and 16-bit voxels; for f32 voxels it depends on
-        // the values, so 4 is an upper bound there
-        m.normals[a] = voxels * if settings.pack { 4 } else { 2 };
+        m.normals[a] = if compact {
+            // the densities in their own type beside 2-byte codes
+            voxels * (2 + volume.data().voxel_type().size() as u64)
+        } else {
+            // an f32 stack's codes are packed with its densities when they are
+            // integers spanning at most 65 535, which depends on the values,
+            // so 4 is an upper bound
+            voxels * if settings.pack { 4 } else { 2 }
+        };
     }
     if settings.method == Method::Binary {
         let nb = code_bits.max(1);

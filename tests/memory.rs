@@ -49,7 +49,7 @@ fn the_prediction_matches_what_a_frame_builds() {
             let before = r.memory();
             assert_eq!(before.total(), before.volume, "{method:?}: nothing but the volume before the first frame");
             assert_eq!(before.volume, 40 * 36 * 30);
-            let est = estimate_axis(r.volume(), &r.settings(), bits(&r), axis);
+            let est = estimate_axis(&r.volume().unwrap(), &r.settings(), bits(&r), axis);
             let mut img = Image::new(48, 48);
             let st = r.render(&along(axis), &mut img).unwrap();
             assert_eq!(st.axis, axis);
@@ -81,7 +81,7 @@ fn the_prediction_holds_for_super_cells() {
     for cell in [2, 3, 8] {
         let mut r = renderer(Method::Binary);
         r.set_settings(Settings { cell, ..r.settings() }).unwrap();
-        let est = estimate_axis(r.volume(), &r.settings(), bits(&r), 1);
+        let est = estimate_axis(&r.volume().unwrap(), &r.settings(), bits(&r), 1);
         r.render(&along(1), &mut Image::new(48, 48)).unwrap();
         let m = r.memory();
         assert_eq!(m.cell_codes, est.cell_codes, "cell {cell}");
@@ -101,7 +101,7 @@ fn a_budget_too_small_fails_before_allocating() {
     assert!(msg.contains("memory budget") && msg.contains("along z"), "{msg}");
     assert_eq!(r.memory().total(), volume_bytes, "nothing was allocated");
     // a budget that holds the view renders it, the same image as no budget
-    let need = volume_bytes + estimate_axis(r.volume(), &r.settings(), bits(&r), 2).total() - volume_bytes;
+    let need = volume_bytes + estimate_axis(&r.volume().unwrap(), &r.settings(), bits(&r), 2).total() - volume_bytes;
     r.set_memory_budget(Some(need));
     r.render(&along(2), &mut img).unwrap();
     let mut free = renderer(Method::Binary);
@@ -113,7 +113,7 @@ fn a_budget_too_small_fails_before_allocating() {
 #[test]
 fn other_axes_are_freed_to_fit_the_budget() {
     let mut r = renderer(Method::Binary);
-    let one = (0..3).map(|a| estimate_axis(r.volume(), &r.settings(), bits(&r), a).total()).max().unwrap();
+    let one = (0..3).map(|a| estimate_axis(&r.volume().unwrap(), &r.settings(), bits(&r), a).total()).max().unwrap();
     // room for the volume and one axis, not two
     r.set_memory_budget(Some(one + 1000));
     let mut img = Image::new(48, 48);
@@ -167,10 +167,13 @@ fn max_memory_on_the_command_line() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let m = &j["memory"];
-    assert_eq!(m["volume"], 64 * 64 * 48 * 2);
+    // the binary path let go of the volume: its density stack holds the voxels
+    // (2 bytes each) beside their 2-byte normal codes
+    assert_eq!(m["volume"], 0);
+    assert_eq!(m["normals"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).sum::<u64>(), 64 * 64 * 48 * 4);
     assert_eq!(m["budget"], 64 << 20);
     let total = m["total"].as_u64().unwrap();
-    assert!(total > m["volume"].as_u64().unwrap() && total <= 64 << 20);
+    assert!(total > 64 * 64 * 48 * 4 && total <= 64 << 20);
     for k in ["stacks", "normals", "cell_codes", "masks", "rle"] {
         assert_eq!(m[k].as_array().unwrap().len(), 3, "{k}");
     }
@@ -198,8 +201,12 @@ fn the_binary_path_of_an_integer_scan_holds_no_f32_stack_and_renders_the_same() 
         let mut r = renderer(Method::Binary);
         r.render(&along(axis), &mut img).unwrap();
         let m = r.memory();
-        assert_eq!(m.stacks, [0; 3], "no f32 stack on the packed binary path");
-        assert_eq!(m.normals[axis], 4 * 40 * 36 * 30);
+        assert_eq!(m.stacks, [0; 3], "no f32 stack on the binary path of an integer scan");
+        // the u8 densities in slicing order beside 2-byte codes, and no volume beside them
+        assert_eq!(m.normals[axis], 3 * 40 * 36 * 30);
+        assert_eq!(m.volume, 0);
+        // the volume comes back, voxel for voxel
+        assert_eq!(*r.volume().unwrap(), volume(), "axis {axis}");
         // the layout with the f32 stack and the codes apart gives the same image
         let mut apart = renderer(Method::Binary);
         apart.set_settings(Settings { pack: false, ..apart.settings() }).unwrap();
@@ -225,5 +232,34 @@ fn the_binary_path_of_an_integer_scan_holds_no_f32_stack_and_renders_the_same() 
         fresh.render(&along(axis), &mut reference).unwrap();
         assert_eq!(img, reference, "axis {axis}, iso 140");
         assert_eq!(r.memory().stacks, [0; 3]);
+    }
+}
+
+#[test]
+fn a_volume_shared_outside_the_renderer_is_kept_and_counted_once() {
+    for axis in 0..3 {
+        let v = volume();
+        let tissues = presets::tissues_for(&v);
+        // the caller keeps a handle of the voxels: the renderer cannot free them, so it keeps its own
+        let mut r = Renderer::with_tissues(v.clone(), &tissues, Settings { threads: 2, ..Settings::default() }).unwrap();
+        let mut img = Image::new(48, 48);
+        r.render(&along(axis), &mut img).unwrap();
+        let m = r.memory();
+        assert_eq!(m.volume, 40 * 36 * 30, "axis {axis}");
+        // along z the density stack is the volume's own voxels: counted once
+        assert_eq!(m.normals[axis], if axis == 2 { 2 } else { 3 } * 40 * 36 * 30, "axis {axis}");
+        let mut alone = renderer(Method::Binary);
+        let mut img2 = Image::new(48, 48);
+        alone.render(&along(axis), &mut img2).unwrap();
+        assert_eq!(img, img2, "axis {axis}");
+        // a renderer that let go of its volume builds the other axes and paths from its density stacks
+        for (a, method) in [(0, Method::Binary), (1, Method::Rle), (2, Method::Binary), (axis, Method::Brute)] {
+            alone.set_settings(Settings { method, ..alone.settings() }).unwrap();
+            r.set_settings(Settings { method, ..r.settings() }).unwrap();
+            alone.render(&along(a), &mut img2).unwrap();
+            r.render(&along(a), &mut img).unwrap();
+            assert_eq!(img, img2, "axis {axis} then {a} {method:?}");
+        }
+        assert_eq!(*alone.volume().unwrap(), v);
     }
 }

@@ -8,11 +8,13 @@
 #
 #   benches/scripts/ab-binaries.sh /path/to/old/shearwarp target/release/shearwarp
 #   ROUNDS=7 FRAMES=120 SIZE=512 VOLUMES="brainsmall head256" benches/scripts/ab-binaries.sh OLD NEW
+#   CASES=binary-iso VOLUMES="chest chest512" benches/scripts/ab-binaries.sh OLD NEW
 #
 # The volumes are .den files written by NEW's `export` into OUT (default
 # target/ab): brainsmall (from $SHEARWARP_DATA or ../shared/data), brainsmall
 # resampled to 256×256×168, the head phantom at 256³ and the chest CT at
-# 256×256×207.
+# 256×256×207 (and, when asked for, at 512×512×413: chest512). CASES picks
+# among binary-iso, rle-iso and rle-blend (default: all three).
 set -euo pipefail
 OLD=$(realpath "$1")
 NEW=$(realpath "$2")
@@ -23,6 +25,7 @@ FRAMES=${FRAMES:-90}
 SIZE=${SIZE:-512}
 THREADS=${THREADS:-1 2}
 VOLUMES=${VOLUMES:-brainsmall brainsmall-up2 head256 chest}
+CASES=${CASES:-binary-iso rle-iso rle-blend}
 DATA=${SHEARWARP_DATA:-$ROOT/../shared/data}
 mkdir -p "$OUT"
 
@@ -39,6 +42,9 @@ for v in $VOLUMES; do
     chest)
         DEN[$v]=$OUT/chest256.den; THR[$v]=50
         [ -f "${DEN[$v]}" ] || "$NEW" export "$DATA/chest-ct-lung1.nrrd" --window -1000,1550 --max-dim 256 -o "${DEN[$v]}" >&2 ;;
+    chest512)
+        DEN[$v]=$OUT/chest512.den; THR[$v]=50
+        [ -f "${DEN[$v]}" ] || "$NEW" export "$DATA/chest-ct-lung1.nrrd" --window -1000,1550 --max-dim 512 -o "${DEN[$v]}" >&2 ;;
     *) echo "unknown volume $v" >&2; exit 1 ;;
     esac
 done
@@ -55,7 +61,7 @@ printf '| volume | case | threads | old ms | new ms | new/old |\n|---|---|---:|-
 for v in $VOLUMES; do
     den=${DEN[$v]}; t=${THR[$v]}
     cut=$(awk -v t="$t" 'BEGIN { printf "%.3f", t + (255 - t) * 0.05 / 0.3 }')
-    for c in binary-iso rle-iso rle-blend; do
+    for c in $CASES; do
         case $c in
         binary-iso) args=(--method binary --iso $((t + 2))) ;;
         rle-iso) args=(--method rle --iso $((t + 2))) ;;

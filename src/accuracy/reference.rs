@@ -545,13 +545,12 @@ impl Tracer<'_> {
 /// silhouette metric). The hit point is where the pixel's own ray meets that
 /// fractional slice ([`Factorization::sheared_to_voxel`]).
 pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>> {
-    let vol = renderer.volume();
     let plan = renderer.last_plan().ok_or_else(|| Error::value("fast path depth", "the renderer has not rendered a frame yet"))?;
     let f = &plan.view;
-    if *f != Factorization::new(camera, vol.dims(), vol.spacing())? {
+    if *f != Factorization::new(camera, renderer.dims(), renderer.spacing())? {
         return Err(Error::value("fast path depth", "the last frame was rendered with a different camera"));
     }
-    let rays = Rays::new(camera, vol.dims(), vol.spacing())?;
+    let rays = Rays::new(camera, renderer.dims(), renderer.spacing())?;
     let inter = renderer.intermediate();
     if inter.size != plan.grid.size {
         return Err(Error::value("fast path depth", "the intermediate image does not match the last frame's geometry"));

@@ -581,8 +581,7 @@ fn build_json(r: &Renderer) -> serde_json::Value {
 /// Builds what the first view of `cam` needs, with a spinner on a terminal
 /// (a clinical-size scan takes about a second). Returns the milliseconds.
 fn prepare_first(r: &mut Renderer, cam: &Camera) -> Result<f64> {
-    let v = r.volume();
-    let axis = shearwarp::view::Factorization::new(cam, v.dims(), v.spacing())?.axis;
+    let axis = shearwarp::view::Factorization::new(cam, r.dims(), r.spacing())?.axis;
     let sp = spinner(&format!("building what a view along {} needs", AXES[axis]));
     let ms = r.prepare_axis(axis)?;
     sp.finish_and_clear();
@@ -719,8 +718,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             r.select_tissue(next)?;
             select_ns.push(t.elapsed().as_secs_f64() * 1e9);
             // the rebuild the switch causes, for the principal axis of the coming frame
-            let v = r.volume();
-            let principal = shearwarp::view::Factorization::new(&cam, v.dims(), v.spacing())?.axis;
+            let principal = shearwarp::view::Factorization::new(&cam, r.dims(), r.spacing())?.axis;
             r.prepare_axis(principal)?;
             switch_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
@@ -902,7 +900,7 @@ pub fn run_info(cmd: &InfoCmd) -> Result<()> {
         let f = shearwarp::checks::fmt_bytes;
         let volume = vol.bytes();
         say!(
-            "  memory    {} of voxels; the binary iso preview holds about {} along x / {} along y / {} along z (volume included), budget {}",
+            "  memory    {} of voxels; the binary iso preview holds about {} along x / {} along y / {} along z (all it holds, the volume included), budget {}",
             f(volume),
             f(est[0]),
             f(est[1]),

@@ -27,8 +27,8 @@ use crate::classify::Classifier;
 use crate::classify::shading::{Shading, headlight_ndl};
 use crate::composite::Rect;
 use crate::composite::{Intermediate, Mode, composite, terminated};
-use crate::data::normals::{NormalStack, PackedCells, ShadeTable, apply_shade};
-use crate::data::slices::{SliceStack, bilinear};
+use crate::data::normals::{NormalStack, PackedCells, ShadeTable, SplitCells, TypedCells, apply_shade};
+use crate::data::slices::{SliceStack, Voxel, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
 use crate::view::plan::{FramePlan, MapKind, SliceMap};
@@ -73,16 +73,26 @@ const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN };
 
 /// How a ray reads one cell of slice memory at stack index `b`: its four corner
 /// densities, its four corner normal codes (table shading) and the cache hint
-/// for both. Two layouts: [`Split`] (the f32 stack and the u16 code array: two
-/// lines of each per cell) and [`PackedCells`] (both in one u32 array: two
-/// lines). The row loops are compiled once per layout, with no branch per access.
+/// for both. Three layouts: [`Split`] (the f32 stack and the u16 code array: two
+/// lines of each per cell), [`PackedCells`] (both in one u32 array: two lines)
+/// and [`TypedCells`] (the densities in the scan's own integer type beside the
+/// codes: two lines of densities, and two of codes at a hit). The row loops are
+/// compiled once per layout, with no branch per access.
 pub trait Cells: Sync {
     /// The corner densities `[v00, v10, v01, v11]` (exactly the stack's).
     fn densities(&self, b: usize) -> [f32; 4];
     /// The corner normal codes, same order (table shading only).
     fn codes(&self, b: usize) -> [u16; 4];
-    /// Hints the cache to fetch both rows of the cell (no effect on results).
+    /// Hints the cache to fetch both rows of the cell, densities and codes (no
+    /// effect on results).
     fn prefetch(&self, b: usize);
+    /// Hints the cache to fetch the cell's density rows (where only a sample
+    /// is likely: the slice after a candidate). The same as
+    /// [`Cells::prefetch`] where densities and codes share their lines.
+    #[inline(always)]
+    fn prefetch_densities(&self, b: usize) {
+        self.prefetch(b)
+    }
 }
 
 /// The stack's densities and the codes kept apart (no codes: gradient shading).
@@ -120,6 +130,43 @@ impl Cells for PackedCells<'_> {
     fn prefetch(&self, b: usize) {
         PackedCells::prefetch(self, b)
     }
+}
+
+impl<T: Voxel> Cells for TypedCells<'_, T> {
+    #[inline(always)]
+    fn densities(&self, b: usize) -> [f32; 4] {
+        TypedCells::densities(self, b)
+    }
+    #[inline(always)]
+    fn codes(&self, b: usize) -> [u16; 4] {
+        TypedCells::codes(self, b)
+    }
+    #[inline(always)]
+    fn prefetch(&self, b: usize) {
+        TypedCells::prefetch(self, b);
+        TypedCells::prefetch_codes(self, b);
+    }
+    #[inline(always)]
+    fn prefetch_densities(&self, b: usize) {
+        TypedCells::prefetch(self, b)
+    }
+}
+
+/// Runs `$body` with `$v` bound to the cells of `$ctx` in their layout (one
+/// monomorphized copy of the row loop per layout, no branch per access).
+macro_rules! with_cells {
+    ($ctx:expr, |$v:ident| $body:expr) => {
+        match ($ctx.packed(), $ctx.normals.and_then(|(ns, _)| ns.split_cells())) {
+            (Some($v), _) => $body,
+            (None, Some(SplitCells::U8($v))) => $body,
+            (None, Some(SplitCells::U16($v))) => $body,
+            (None, Some(SplitCells::I16($v))) => $body,
+            (None, None) => {
+                let $v = $ctx.split();
+                $body
+            }
+        }
+    };
 }
 
 impl<'a> RayContext<'a> {
@@ -231,9 +278,9 @@ impl<'a> RayContext<'a> {
                         // the slices before and after k in walking order (an index
                         // past either end wraps or overruns: the prefetch skips it)
                         let (before, after) = if self.ascending { (b.wrapping_sub(n01), b + n01) } else { (b + n01, b.wrapping_sub(n01)) };
-                        for c in [b, before, after] {
-                            v.prefetch(c);
-                        }
+                        v.prefetch(b);
+                        v.prefetch(before);
+                        v.prefetch_densities(after);
                     }
                     None => self.stack.prefetch_hit(ci, cj, k, self.ascending),
                 }
@@ -364,12 +411,10 @@ pub fn render_binary<W: Word>(
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
-    match (ctx.packed(), ctx.plan.limited()) {
-        (Some(v), false) => binary_rows::<W, _, false>(ctx, &v, mask, search, m, prefetch, rect, out),
-        (Some(v), true) => binary_rows::<W, _, true>(ctx, &v, mask, search, m, prefetch, rect, out),
-        (None, false) => binary_rows::<W, _, false>(ctx, &ctx.split(), mask, search, m, prefetch, rect, out),
-        (None, true) => binary_rows::<W, _, true>(ctx, &ctx.split(), mask, search, m, prefetch, rect, out),
-    }
+    with_cells!(ctx, |v| match ctx.plan.limited() {
+        false => binary_rows::<W, _, false>(ctx, &v, mask, search, m, prefetch, rect, out),
+        true => binary_rows::<W, _, true>(ctx, &v, mask, search, m, prefetch, rect, out),
+    })
 }
 
 /// [`render_binary`] for one cell layout, with (`LIMITED`) or without ray limits.
@@ -522,10 +567,7 @@ unsafe fn binary_row_lzcnt<W: Word, V: Cells, const LIMITED: bool>(
 /// The brute-force reference: every slice of every ray of `rect` (within the
 /// plan's slice range and ray limits), no mask.
 pub fn render_brute(ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate) {
-    match ctx.packed() {
-        Some(v) => brute_rows(ctx, &v, rect, out),
-        None => brute_rows(ctx, &ctx.split(), rect, out),
-    }
+    with_cells!(ctx, |v| brute_rows(ctx, &v, rect, out))
 }
 
 /// [`render_brute`] for one cell layout.

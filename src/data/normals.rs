@@ -24,8 +24,8 @@ use rayon::prelude::*;
 
 pub use crate::classify::shading::apply_shade;
 use crate::classify::shading::{ShadeEntry, Shading};
-use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch_cell};
-use crate::data::volume::{Volume, VoxelType};
+use crate::data::slices::{Densities, DensityStack, SliceStack, Voxel, cell_corners, prefetch_cell};
+use crate::data::volume::VoxelData;
 use crate::view::{Factorization, permutation};
 
 /// Cells per side of the hemi-octahedral normal grid.
@@ -109,16 +109,20 @@ fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
 }
 
 /// The normal code of every voxel of one [`SliceStack`], in its `(i, j, k)`
-/// layout (index [`SliceStack::index`]).
+/// layout (index [`SliceStack::index`]). Three layouts, the same image bit for
+/// bit:
 ///
-/// For a stack of integer densities spanning at most 65 535 (8- and 16-bit
-/// scans) the codes are *packed* with the densities: one u32 per voxel, the
-/// density minus an offset in the low half and the code in the high half
-/// ([`PackedCells`]). A ray then reads a cell's densities and its codes from the
-/// same two cache lines instead of two lines of each array, and the f32 stack
-/// is not touched at all. The densities come back exactly (integers below
-/// 2^24), so both layouts give the same image bit for bit. Otherwise: 2 bytes
-/// per voxel, codes only.
+/// - **split** ([`NormalStack::try_split`], the binary path of 8- and 16-bit
+///   scans): a [`DensityStack`] of the voxels in their own type beside one u16
+///   code per voxel ([`TypedCells`]). No f32 stack exists, and the renderer
+///   can let go of the volume, whose voxels the density stack then holds: 3
+///   bytes a voxel of a u8 scan in all;
+/// - **packed** ([`NormalStack::with_packing`] of an f32 stack whose densities
+///   are integers spanning at most 65 535): one u32 per voxel, the density
+///   minus an offset in the low half and the code in the high half
+///   ([`PackedCells`]), so a ray reads a cell's densities and codes from the
+///   same two cache lines;
+/// - **codes** only, 2 bytes per voxel, beside the f32 stack.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NormalStack {
     /// Principal axis of the stack it was built from.
@@ -135,6 +139,8 @@ enum Store {
     Codes(Vec<u16>),
     /// One u32 per voxel: `(density − offset) | code << 16`.
     Packed { words: Vec<u32>, offset: f32 },
+    /// The densities in their own type beside one u16 code per voxel.
+    Split { dens: DensityStack, codes: Vec<u16> },
 }
 
 impl NormalStack {
@@ -174,31 +180,25 @@ impl NormalStack {
         Ok(NormalStack { axis: stack.axis, n: stack.n, store })
     }
 
-    /// The packed stack of `vol` along `axis` ([`NormalStack::with_packing`]
-    /// with packing, the same words bit for bit) built straight from the
-    /// volume, a few slices at a time, so the whole f32 [`SliceStack`] never
-    /// exists: what the binary path needs of an 8- or 16-bit scan in 4 bytes a
-    /// voxel instead of 8. `None` when the densities cannot be packed (f32
-    /// voxels, or integers spanning more than 65 535).
-    pub fn try_packed_from_volume(vol: &Volume, axis: usize, spacing: [f32; 3]) -> crate::Result<Option<Self>> {
-        let Some(offset) = volume_packing_offset(vol) else { return Ok(None) };
-        let shell = SliceStack::shell(vol, axis);
-        let n = shell.n;
+    /// The codes of density stack `dens` (for a volume with voxel `spacing`),
+    /// kept beside it: what the binary path needs of an 8- or 16-bit scan, in
+    /// 2 bytes a voxel plus the densities in their own type, and no f32 stack.
+    /// The codes are made from windows of a few f32 slices at a time, the same
+    /// codes bit for bit as [`NormalStack::new`] of the whole f32 stack.
+    pub fn try_split(dens: DensityStack, spacing: [f32; 3]) -> crate::Result<Self> {
+        let n = dens.n;
         let n01 = n[0] * n[1];
-        let mut words: Vec<u32> = crate::memory::zeroed(n01 * n[2], "the packed densities and normal codes")?;
+        let mut codes: Vec<u16> = crate::memory::zeroed(n01 * n[2], "the normal codes")?;
         // blocks of slices, each coded from a window holding the slices on either side
         const BLOCK: usize = 8;
         let failed = std::sync::Mutex::new(None);
         if n01 > 0 {
-            words.par_chunks_mut(BLOCK * n01).enumerate().for_each(|(b, out)| {
+            codes.par_chunks_mut(BLOCK * n01).enumerate().for_each(|(b, out)| {
                 let k0 = b * BLOCK;
                 let k1 = k0 + out.len() / n01;
                 let w0 = k0.saturating_sub(1);
-                match SliceStack::try_window(vol, axis, w0..(k1 + 1).min(n[2])) {
-                    // exact: d − offset is an integer in 0..=65535
-                    Ok(win) => {
-                        code_slices(&win, k0 - w0..k1 - w0, spacing, out, |w, d, c| *w = (d - offset) as i32 as u32 | (c as u32) << 16)
-                    }
+                match dens.try_window(w0..(k1 + 1).min(n[2])) {
+                    Ok(win) => code_slices(&win, k0 - w0..k1 - w0, spacing, out, |w, _, c| *w = c),
                     Err(e) => *failed.lock().unwrap_or_else(|p| p.into_inner()) = Some(e),
                 }
             });
@@ -206,7 +206,7 @@ impl NormalStack {
         if let Some(e) = failed.into_inner().unwrap_or_else(|p| p.into_inner()) {
             return Err(e);
         }
-        Ok(Some(NormalStack { axis, n, store: Store::Packed { words, offset } }))
+        Ok(NormalStack { axis: dens.axis, n, store: Store::Split { dens, codes } })
     }
 
     /// The code of the voxel at stack index `index`.
@@ -215,6 +215,7 @@ impl NormalStack {
         match &self.store {
             Store::Codes(c) => c[index],
             Store::Packed { words, .. } => (words[index] >> 16) as u16,
+            Store::Split { codes, .. } => codes[index],
         }
     }
 
@@ -225,13 +226,14 @@ impl NormalStack {
         match &self.store {
             Store::Codes(c) => cell_corners(c, b, self.n[0]),
             Store::Packed { words, .. } => cell_corners(words, b, self.n[0]).map(|w| (w >> 16) as u16),
+            Store::Split { codes, .. } => cell_corners(codes, b, self.n[0]),
         }
     }
 
     /// The codes apart (empty when packed).
     pub fn codes(&self) -> &[u16] {
         match &self.store {
-            Store::Codes(c) => c,
+            Store::Codes(c) | Store::Split { codes: c, .. } => c,
             Store::Packed { .. } => &[],
         }
     }
@@ -239,9 +241,29 @@ impl NormalStack {
     /// The packed densities and codes, if this stack is packed.
     pub fn packed(&self) -> Option<PackedCells<'_>> {
         match &self.store {
-            Store::Codes(_) => None,
+            Store::Codes(_) | Store::Split { .. } => None,
             Store::Packed { words, offset } => Some(PackedCells { words, n0: self.n[0], offset: *offset }),
         }
+    }
+
+    /// The densities kept beside the codes (a [`NormalStack::try_split`] stack).
+    pub fn density_stack(&self) -> Option<&DensityStack> {
+        match &self.store {
+            Store::Split { dens, .. } => Some(dens),
+            _ => None,
+        }
+    }
+
+    /// The cells of a [`NormalStack::try_split`] stack as a ray reads them.
+    pub fn split_cells(&self) -> Option<SplitCells<'_>> {
+        let Store::Split { dens, codes } = &self.store else { return None };
+        let n0 = self.n[0];
+        Some(match dens.data() {
+            VoxelData::U8(d) => SplitCells::U8(TypedCells { dens: d, codes, n0 }),
+            VoxelData::U16(d) => SplitCells::U16(TypedCells { dens: d, codes, n0 }),
+            VoxelData::I16(d) => SplitCells::I16(TypedCells { dens: d, codes, n0 }),
+            VoxelData::F32(_) => unreachable!("DensityStack::try_new holds integer voxels only"),
+        })
     }
 
     /// Bytes held.
@@ -249,6 +271,7 @@ impl NormalStack {
         match &self.store {
             Store::Codes(c) => c.len() * 2,
             Store::Packed { words, .. } => words.len() * 4,
+            Store::Split { dens, codes } => dens.bytes() + codes.len() * 2,
         }
     }
 }
@@ -260,7 +283,10 @@ impl Densities for NormalStack {
     /// # Panics
     /// For codes kept apart (no densities): only packed stacks hold them.
     fn row(&self, j: usize, k: usize, out: &mut [f32]) {
-        let Store::Packed { words, offset } = &self.store else { panic!("a normal stack without packed densities") };
+        if let Store::Split { dens, .. } = &self.store {
+            return dens.row(j, k, out);
+        }
+        let Store::Packed { words, offset } = &self.store else { panic!("a normal stack without densities") };
         let b = self.n[0] * (j + self.n[1] * k);
         for (o, &w) in out.iter_mut().zip(&words[b..b + self.n[0]]) {
             *o = (w & 0xFFFF) as f32 + offset;
@@ -365,18 +391,6 @@ fn encode_normal_branchless(g: [f32; 3]) -> u16 {
     if !(len2 > 1e-30) { ZERO_NORMAL } else { code as u16 }
 }
 
-/// [`packing_offset`] of any stack of `vol`, from its value statistics: the
-/// smallest value when the voxels are integers spanning at most 65 535 (`None`:
-/// [`NormalStack::try_packed_from_volume`] cannot pack this volume).
-pub fn volume_packing_offset(vol: &Volume) -> Option<f32> {
-    if vol.data().voxel_type() == VoxelType::F32 {
-        return None;
-    }
-    let (lo, hi) = vol.value_range();
-    // integer voxel types hold integers of magnitude below 2^24
-    (hi - lo <= u16::MAX as f32).then_some(lo)
-}
-
 /// The offset that packs `data` into 16 bits exactly, if there is one: every
 /// value an integer, the smallest at least −2^24 and the largest at most
 /// 65 535 above it and below 2^24 (so `(v − offset) as u16 as f32 + offset == v`).
@@ -421,6 +435,49 @@ impl PackedCells<'_> {
     #[inline(always)]
     pub fn prefetch(&self, b: usize) {
         prefetch_cell(self.words, b, self.n0);
+    }
+}
+
+/// A [`NormalStack::try_split`] stack as a ray reads it, per voxel type.
+#[derive(Clone, Copy, Debug)]
+pub enum SplitCells<'a> {
+    U8(TypedCells<'a, u8>),
+    U16(TypedCells<'a, u16>),
+    I16(TypedCells<'a, i16>),
+}
+
+/// The densities of one voxel type beside the u16 codes: a cell reads two
+/// rows of each (the codes only at a hit).
+#[derive(Clone, Copy, Debug)]
+pub struct TypedCells<'a, T> {
+    dens: &'a [T],
+    codes: &'a [u16],
+    n0: usize,
+}
+
+impl<T: Voxel> TypedCells<'_, T> {
+    /// The four corner densities of the cell at stack index `b` (order of [`SliceStack::bilinear`]).
+    #[inline(always)]
+    pub fn densities(&self, b: usize) -> [f32; 4] {
+        cell_corners(self.dens, b, self.n0).map(Voxel::f32)
+    }
+
+    /// The four corner codes of the cell at stack index `b`.
+    #[inline(always)]
+    pub fn codes(&self, b: usize) -> [u16; 4] {
+        cell_corners(self.codes, b, self.n0)
+    }
+
+    /// Hints the cache to fetch both density rows of the cell at stack index `b`.
+    #[inline(always)]
+    pub fn prefetch(&self, b: usize) {
+        prefetch_cell(self.dens, b, self.n0);
+    }
+
+    /// Hints the cache to fetch both code rows of the cell at stack index `b`.
+    #[inline(always)]
+    pub fn prefetch_codes(&self, b: usize) {
+        prefetch_cell(self.codes, b, self.n0);
     }
 }
 
@@ -694,7 +751,7 @@ mod tests {
     }
 
     #[test]
-    fn packed_from_the_volume_equals_packed_from_the_stack() {
+    fn split_stacks_hold_the_stacks_densities_and_codes() {
         use crate::data::volume::VoxelData;
         let dims = [9, 7, 21]; // 21 slices: blocks of 8 with a partial last one, along z
         let n = 9 * 7 * 21;
@@ -708,12 +765,17 @@ mod tests {
         for (t, data) in vols.into_iter().enumerate() {
             let v = Volume::new(dims, [0.7, 1.1, 1.9], data).unwrap();
             for axis in 0..3 {
-                let want = NormalStack::new(&SliceStack::new(&v, axis), v.spacing());
-                let got = NormalStack::try_packed_from_volume(&v, axis, v.spacing()).unwrap().expect("integers pack");
-                assert!(got.packed().is_some());
-                assert_eq!(got, want, "type {t} axis {axis}");
-                // the rows it gives the cell codes are the stack's
                 let s = SliceStack::new(&v, axis);
+                let want = NormalStack::with_packing(&s, v.spacing(), false);
+                let dens = DensityStack::try_new(&v, axis).unwrap().expect("integer voxels");
+                // along z the stack is the volume's own voxels, not a copy
+                assert_eq!(dens.shares(&v.shared_data()), axis == 2);
+                // and it gives the volume back in the volume's order
+                assert_eq!(*dens.to_volume_order().unwrap(), *v.data(), "type {t} axis {axis}");
+                let got = NormalStack::try_split(dens, v.spacing()).unwrap();
+                assert!(got.packed().is_none() && got.split_cells().is_some());
+                assert_eq!(got.codes(), want.codes(), "type {t} axis {axis}");
+                // the rows it gives the cell codes and the cells a ray reads are the stack's
                 let (mut a, mut b) = (vec![0f32; s.n[0]], vec![0f32; s.n[0]]);
                 for k in [0, s.n[2] / 2, s.n[2] - 1] {
                     for j in 0..s.n[1] {
@@ -721,14 +783,26 @@ mod tests {
                         Densities::row(&s, j, k, &mut b);
                         assert_eq!(a, b);
                     }
+                    for j in 0..s.n[1] - 1 {
+                        for i in 0..s.n[0] - 1 {
+                            let bi = s.index(i, j, k);
+                            let (dc, cc) = match got.split_cells().unwrap() {
+                                SplitCells::U8(c) => (c.densities(bi), c.codes(bi)),
+                                SplitCells::U16(c) => (c.densities(bi), c.codes(bi)),
+                                SplitCells::I16(c) => (c.densities(bi), c.codes(bi)),
+                            };
+                            assert_eq!(dc, s.cell_at(bi));
+                            assert_eq!(cc, got.corners(bi));
+                        }
+                    }
                 }
                 let shell = SliceStack::shell(&v, axis);
                 assert_eq!((shell.n, shell.is_resident(), s.is_resident()), (s.n, false, true));
             }
         }
-        // f32 voxels are not packed from the volume
+        // f32 voxels have no density stack of their own type
         let f = Volume::from_fn([4, 4, 4], [1.0; 3], |x, _, _| x as f32).unwrap();
-        assert!(NormalStack::try_packed_from_volume(&f, 0, f.spacing()).unwrap().is_none());
+        assert!(DensityStack::try_new(&f, 0).unwrap().is_none());
     }
 
     #[test]

@@ -251,6 +251,42 @@ impl Volume {
             VoxelData::F32(v) => rev(v, axis, nx, ny, nz),
         }
     }
+    /// The voxels, shared (a [`crate::data::slices::DensityStack`] along z holds
+    /// them without a copy).
+    pub(crate) fn shared_data(&self) -> std::sync::Arc<VoxelData> {
+        self.data.clone()
+    }
+    /// How many handles share these voxels (this one included).
+    pub(crate) fn data_handles(&self) -> usize {
+        std::sync::Arc::strong_count(&self.data)
+    }
+    /// Lets go of this handle's voxels, keeping dims, spacing, frame and
+    /// statistics (computed first): what a renderer does once a density stack
+    /// holds them. A parked volume reads as having no voxels; only the
+    /// renderer holds one, and gives it back its voxels
+    /// ([`Volume::unpark`]) before anything reads them.
+    pub(crate) fn park(&mut self) {
+        self.stats();
+        let empty = match *self.data {
+            VoxelData::U8(_) => VoxelData::U8(Vec::new()),
+            VoxelData::U16(_) => VoxelData::U16(Vec::new()),
+            VoxelData::I16(_) => VoxelData::I16(Vec::new()),
+            VoxelData::F32(_) => VoxelData::F32(Vec::new()),
+        };
+        self.data = std::sync::Arc::new(empty);
+    }
+    /// True after [`Volume::park`] (until [`Volume::unpark`]).
+    pub(crate) fn is_parked(&self) -> bool {
+        self.data.len() != self.dims[0] * self.dims[1] * self.dims[2]
+    }
+    /// Gives a parked volume its voxels back (in its own order and type).
+    pub(crate) fn unpark(&mut self, data: std::sync::Arc<VoxelData>) {
+        assert!(
+            data.len() == self.dims[0] * self.dims[1] * self.dims[2] && data.voxel_type() == self.data.voxel_type(),
+            "the voxels of another volume"
+        );
+        self.data = data;
+    }
     /// The voxel storage.
     pub fn data(&self) -> &VoxelData {
         &self.data

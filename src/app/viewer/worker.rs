@@ -122,7 +122,7 @@ impl Renderers {
                     }
                     None => {
                         let s = Settings { cell, ..self.tissues.settings() };
-                        let mut c = Renderer::new(self.tissues.volume().clone(), &tf, s)?;
+                        let mut c = Renderer::new(self.tissues.volume()?.into_owned(), &tf, s)?;
                         c.set_memory_budget(crate::app::budget());
                         self.custom = Some(c);
                         self.cells[1] = cell;

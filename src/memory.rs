@@ -59,6 +59,8 @@ unsafe impl Zeroable for u32 {}
 unsafe impl Zeroable for u64 {}
 // SAFETY: as above (0 bits are +0.0).
 unsafe impl Zeroable for f32 {}
+// SAFETY: an array's bytes are its elements' bytes, each valid as all zeros.
+unsafe impl<T: Zeroable, const N: usize> Zeroable for [T; N] {}
 
 /// `n` zeros, or [`Error::Memory`] naming `what` when the allocation is refused
 /// or its size overflows. Pages are zeroed lazily by the system, as with

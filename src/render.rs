@@ -21,8 +21,9 @@ use crate::classify::{Classifier, TransferFunction};
 use crate::composite::Mode;
 use crate::composite::raycast::{RayContext, render_binary, render_brute, volume_rect};
 use crate::composite::{Intermediate, Rect};
+use crate::data::normals::CellSource;
 use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
-use crate::data::slices::{Densities, DensityStack, SliceStack};
+use crate::data::slices::{Densities, SliceStack};
 use crate::data::volume::Volume;
 use crate::encode::depth::{Matcher, Search, binary_matcher};
 use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, PackedCodes, ShearWork};
@@ -427,11 +428,11 @@ impl Renderer {
         self.range
     }
 
-    /// The voxels of a parked volume, from any density stack held.
+    /// The voxels of a parked volume, from any packed cells that hold them.
     fn parked_voxels(&self) -> Result<std::sync::Arc<crate::data::volume::VoxelData>> {
-        let dens = self.normals.iter().flatten().find_map(NormalStack::density_stack);
-        dens.ok_or_else(|| Error::Other("internal: the volume's voxels were let go with no density stack holding them".into()))?
-            .to_volume_order()
+        let lost = || Error::Other("internal: the volume's voxels were let go with no packed cells holding them".into());
+        let ns = self.normals.iter().flatten().find(|n| n.holds_voxels()).ok_or_else(lost)?;
+        Ok(std::sync::Arc::new(ns.voxels_in_volume_order()?.ok_or_else(lost)?))
     }
 
     /// Gives the volume its voxels back if this renderer let go of them.
@@ -443,22 +444,14 @@ impl Renderer {
         Ok(())
     }
 
-    /// Lets go of the volume's voxels when a density stack of this renderer
-    /// holds them and nothing outside it shares them: the binary path of an
-    /// integer scan then holds the voxels once, in slicing order, instead of
-    /// twice ([`Renderer::volume`] and the builds of other axes and paths get
-    /// them back from the stack).
-    /// `building` is a density stack not yet in a normal stack.
-    fn park(&mut self, building: Option<&DensityStack>) {
-        if self.volume.is_parked() {
-            return;
-        }
-        let data = self.volume.shared_data();
-        let stacks = || self.normals.iter().flatten().filter_map(NormalStack::density_stack).chain(building);
-        let ours = stacks().filter(|d| d.shares(&data)).count();
-        let held = stacks().next().is_some();
-        drop(data);
-        if held && self.volume.data_handles() == 1 + ours {
+    /// Lets go of the volume's voxels when packed cells of this renderer hold
+    /// them (or a build of them is under way: `building`) and nothing outside
+    /// it shares them: the binary path of an integer scan then holds the
+    /// voxels once, in its cells, instead of twice ([`Renderer::volume`] and
+    /// the builds of other paths get them back from the cells).
+    fn park(&mut self, building: bool) {
+        let held = building || self.normals.iter().flatten().any(NormalStack::holds_voxels);
+        if held && !self.volume.is_parked() && self.volume.data_handles() == 1 {
             self.volume.park();
         }
     }
@@ -570,13 +563,10 @@ impl Renderer {
     /// Bytes held now, per structure and axis.
     pub fn memory(&self) -> Memory {
         let per = |f: &dyn Fn(usize) -> usize| [0, 1, 2].map(|a| f(a) as u64);
-        let data = self.volume.shared_data();
-        // a density stack along z that shares the resident volume's voxels costs nothing more
-        let shared = |ns: &NormalStack| ns.density_stack().filter(|d| d.shares(&data)).map_or(0, DensityStack::bytes);
         Memory {
             volume: self.volume.bytes(),
             stacks: per(&|a| self.stacks[a].as_ref().map_or(0, SliceStack::bytes)),
-            normals: per(&|a| self.normals[a].as_ref().map_or(0, |ns| ns.bytes() - shared(ns))),
+            normals: per(&|a| self.normals[a].as_ref().map_or(0, NormalStack::bytes)),
             cell_codes: per(&|a| self.codes[a].as_ref().map_or(0, |c| c.1.bytes())),
             masks: per(&|a| {
                 self.masks[a].as_ref().map_or(0, |m| match &m.mask {
@@ -655,13 +645,8 @@ impl Renderer {
     /// compact binary path builds its first density stack and nothing outside
     /// this renderer shares the voxels.
     fn releasable(&self, axis: usize) -> u64 {
-        if !compact_binary(&self.volume, &self.settings) || self.normals[axis].is_some() || self.volume.is_parked() {
-            return 0;
-        }
-        let data = self.volume.shared_data();
-        let ours = self.normals.iter().flatten().filter_map(NormalStack::density_stack).filter(|d| d.shares(&data)).count();
-        drop(data);
-        if self.volume.data_handles() == 1 + ours { self.volume.bytes() } else { 0 }
+        let building = compact_binary(&self.volume, &self.settings) && self.normals[axis].is_none();
+        if building && !self.volume.is_parked() && self.volume.data_handles() == 1 { self.volume.bytes() } else { 0 }
     }
 
     /// Checks the budget for building `axis` now; frees the other axes first
@@ -770,31 +755,25 @@ impl Renderer {
         let raycast = matches!(self.settings.method, Method::Binary | Method::Brute);
         let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         if compact && self.normals[axis].is_none() {
-            // the densities in their own type and the codes beside them: no f32
-            // stack, and the volume's voxels let go once the stack holds them
+            // the densities and codes packed in 3 (8-bit) or 4 bytes a voxel,
+            // no f32 stack, and the volume let go once the cells hold its voxels
             let t = Instant::now();
+            let threads = self.pool.current_num_threads();
             let vol = &self.volume;
-            let dens = match self.normals.iter().flatten().find_map(NormalStack::density_stack) {
-                // the volume was let go: permute another axis's stack
-                Some(d) if vol.is_parked() => self.pool.install(|| d.to_axis(axis))?,
-                _ => self.pool.install(|| DensityStack::try_new(vol, axis))?.ok_or_else(|| missing("the density stack", axis))?,
+            let src = match self.normals.iter().flatten().find(|n| n.holds_voxels()) {
+                // the volume was let go: re-lay another axis's cells
+                Some(ns) if vol.is_parked() => CellSource::Cells(ns),
+                _ => CellSource::Volume(vol),
             };
+            let build =
+                self.pool.install(|| NormalStack::try_cells(src, axis, threads))?.ok_or_else(|| missing("the packed cells", axis))?;
             if self.stacks[axis].is_none() {
                 self.stacks[axis] = Some(SliceStack::shell(vol, axis));
             }
-            // let go of the volume before the codes are allocated: the peak is
-            // then the stack and the codes, not the volume beside them
+            // the build holds the voxels now: the volume can go before the codes are computed
+            self.park(true);
             let spacing = self.volume.spacing();
-            self.park(Some(&dens));
-            match self.pool.install(|| NormalStack::try_split(dens.clone(), spacing)) {
-                Ok(ns) => self.normals[axis] = Some(ns),
-                Err(e) => {
-                    if self.volume.is_parked() {
-                        self.volume.unpark(dens.to_volume_order()?);
-                    }
-                    return Err(e);
-                }
-            }
+            self.normals[axis] = Some(self.pool.install(|| build.finish(spacing)));
             self.build_times.normals[axis] = ms(t);
         }
         if !compact && self.stacks[axis].as_ref().is_none_or(|s| !s.is_resident()) {
@@ -1053,8 +1032,8 @@ mod tests {
 }
 
 /// True when the binary path keeps no f32 stack for `volume`: table shading
-/// with packed cells, whose 16-bit densities are all its rays read (8- and
-/// 16-bit scans). Every other path samples a resident [`SliceStack`].
+/// with packed cells, whose 8- or 16-bit densities are all its rays read (8-
+/// and 16-bit scans). Every other path samples a resident [`SliceStack`].
 fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
     settings.method == Method::Binary
         && settings.normals == Normals::Codes
@@ -1066,10 +1045,10 @@ fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
 /// `volume` once a frame along it is rendered (with a mask of `code_bits`-bit
 /// codes: 1 for one transfer function, 2 for up to three tissue presets, 4 for
 /// up to fifteen), before anything is built: the volume (none on the binary
-/// path of an 8/16-bit scan, which lets go of it once the density stack holds
-/// its voxels — if the renderer holds the only handle of them), the slice
+/// path of an 8/16-bit scan, which lets go of it once its packed cells hold
+/// the voxels — if the renderer holds the only handle of them), the slice
 /// stack (none on that path either), the normal codes (there: 2 bytes a voxel
-/// beside the densities in their own type; otherwise 4 bytes when packed with
+/// packed with the densities in their own type; otherwise 4 bytes when packed with
 /// the densities of an f32 stack, an upper bound, else 2), the cell codes and
 /// the mask's words (binary path; the words are allocated, the pages touched
 /// are fewer) and the intermediate image. The run-length encoding (RLE
@@ -1093,7 +1072,7 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
     let raycast = matches!(settings.method, Method::Binary | Method::Brute);
     if raycast && settings.normals == Normals::Codes {
         m.normals[a] = if compact {
-            // the densities in their own type beside 2-byte codes
+            // the densities in their own type packed with 2-byte codes
             voxels * (2 + volume.data().voxel_type().size() as u64)
         } else {
             // an f32 stack's codes are packed with its densities when they are

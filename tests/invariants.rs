@@ -171,10 +171,17 @@ proptest! {
     fn packed_cells_equal_split_cells(
         nx in 2usize..24, ny in 2usize..24, nz in 2usize..40, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, blend in any::<bool>(), brute in any::<bool>(), offset in -3000i32..3000,
+        bytes in any::<bool>(),
     ) {
-        // integer densities, some negative (CT-like): packed with an offset
+        // integer densities: 16-bit, some negative (CT-like), packed with an
+        // offset in two u16 a voxel; or 8-bit, packed in three bytes
         let vol = random_volume([nx, ny, nz], seed, [1.0, 0.8, 1.3]);
-        let vol = Volume::new(vol.dims(), vol.spacing(), VoxelData::I16(vol.to_f32().iter().map(|x| (x.round() as i32 + offset) as i16).collect())).unwrap();
+        let offset = if bytes { 0 } else { offset };
+        let data = match bytes {
+            true => VoxelData::U8(vol.to_f32().iter().map(|x| x.round().clamp(0.0, 255.0) as u8).collect()),
+            false => VoxelData::I16(vol.to_f32().iter().map(|x| (x.round() as i32 + offset) as i16).collect()),
+        };
+        let vol = Volume::new(vol.dims(), vol.spacing(), data).unwrap();
         let tf = random_tf(tfs);
         let o = offset as f32;
         let tf = TransferFunction::new(

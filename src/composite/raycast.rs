@@ -27,8 +27,8 @@ use crate::classify::Classifier;
 use crate::classify::shading::{Shading, headlight_ndl};
 use crate::composite::Rect;
 use crate::composite::{Intermediate, Mode, composite, terminated};
-use crate::data::normals::{NormalStack, PackedCells, ShadeTable, SplitCells, TypedCells, apply_shade};
-use crate::data::slices::{SliceStack, Voxel, bilinear};
+use crate::data::normals::{ByteCells, NormalStack, PackedCells, ShadeTable, apply_shade};
+use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
 use crate::view::plan::{FramePlan, MapKind, SliceMap};
@@ -74,10 +74,10 @@ const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN };
 /// How a ray reads one cell of slice memory at stack index `b`: its four corner
 /// densities, its four corner normal codes (table shading) and the cache hint
 /// for both. Three layouts: [`Split`] (the f32 stack and the u16 code array: two
-/// lines of each per cell), [`PackedCells`] (both in one u32 array: two lines)
-/// and [`TypedCells`] (the densities in the scan's own integer type beside the
-/// codes: two lines of densities, and two of codes at a hit). The row loops are
-/// compiled once per layout, with no branch per access.
+/// lines of each per cell), [`PackedCells`] (16-bit densities and codes in
+/// one array: two lines) and [`ByteCells`] (8-bit densities and codes in
+/// three bytes: two lines, now and then three). The row loops are compiled
+/// once per layout, with no branch per access.
 pub trait Cells: Sync {
     /// The corner densities `[v00, v10, v01, v11]` (exactly the stack's).
     fn densities(&self, b: usize) -> [f32; 4];
@@ -132,23 +132,18 @@ impl Cells for PackedCells<'_> {
     }
 }
 
-impl<T: Voxel> Cells for TypedCells<'_, T> {
+impl Cells for ByteCells<'_> {
     #[inline(always)]
     fn densities(&self, b: usize) -> [f32; 4] {
-        TypedCells::densities(self, b)
+        ByteCells::densities(self, b)
     }
     #[inline(always)]
     fn codes(&self, b: usize) -> [u16; 4] {
-        TypedCells::codes(self, b)
+        ByteCells::codes(self, b)
     }
     #[inline(always)]
     fn prefetch(&self, b: usize) {
-        TypedCells::prefetch(self, b);
-        TypedCells::prefetch_codes(self, b);
-    }
-    #[inline(always)]
-    fn prefetch_densities(&self, b: usize) {
-        TypedCells::prefetch(self, b)
+        ByteCells::prefetch(self, b)
     }
 }
 
@@ -156,11 +151,9 @@ impl<T: Voxel> Cells for TypedCells<'_, T> {
 /// monomorphized copy of the row loop per layout, no branch per access).
 macro_rules! with_cells {
     ($ctx:expr, |$v:ident| $body:expr) => {
-        match ($ctx.packed(), $ctx.normals.and_then(|(ns, _)| ns.split_cells())) {
+        match ($ctx.packed(), $ctx.normals.and_then(|(ns, _)| ns.bytes_cells())) {
             (Some($v), _) => $body,
-            (None, Some(SplitCells::U8($v))) => $body,
-            (None, Some(SplitCells::U16($v))) => $body,
-            (None, Some(SplitCells::I16($v))) => $body,
+            (None, Some($v)) => $body,
             (None, None) => {
                 let $v = $ctx.split();
                 $body

@@ -7,11 +7,13 @@
 //! phantoms ([`phantom`]), the per-axis slice stacks ([`slices`]: densities laid
 //! out along one principal axis, with the shared bilinear sample and gradient)
 //! and the per-axis normal codes ([`normals`]: VolPack's 14-bit quantized
-//! gradients, alone or packed with the densities).
+//! gradients, alone or packed with the densities; [`packing`] builds the
+//! packed cells of an integer scan in place, without the volume beside them).
 
 pub mod io;
 pub mod normals;
 pub mod orientation;
+pub mod packing;
 pub mod phantom;
 pub mod slices;
 pub mod stats;

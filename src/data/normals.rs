@@ -24,8 +24,9 @@ use rayon::prelude::*;
 
 pub use crate::classify::shading::apply_shade;
 use crate::classify::shading::{ShadeEntry, Shading};
-use crate::data::slices::{Densities, DensityStack, SliceStack, Voxel, cell_corners, prefetch_cell};
-use crate::data::volume::VoxelData;
+use crate::data::packing::{InPlace, restride};
+use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch_cell};
+use crate::data::volume::{Volume, VoxelData, VoxelType};
 use crate::view::{Factorization, permutation};
 
 /// Cells per side of the hemi-octahedral normal grid.
@@ -112,17 +113,19 @@ fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
 /// layout (index [`SliceStack::index`]). Three layouts, the same image bit for
 /// bit:
 ///
-/// - **split** ([`NormalStack::try_split`], the binary path of 8- and 16-bit
-///   scans): a [`DensityStack`] of the voxels in their own type beside one u16
-///   code per voxel ([`TypedCells`]). No f32 stack exists, and the renderer
-///   can let go of the volume, whose voxels the density stack then holds: 3
-///   bytes a voxel of a u8 scan in all;
-/// - **packed** ([`NormalStack::with_packing`] of an f32 stack whose densities
-///   are integers spanning at most 65 535): one u32 per voxel, the density
-///   minus an offset in the low half and the code in the high half
-///   ([`PackedCells`]), so a ray reads a cell's densities and codes from the
-///   same two cache lines;
+/// - **bytes** ([`NormalStack::try_cells`], the binary path of 8-bit scans):
+///   `[density, code]` in three bytes a voxel ([`ByteCells`]);
+/// - **packed** (the binary path of 16-bit scans, and
+///   [`NormalStack::with_packing`] of an f32 stack whose densities are
+///   integers spanning at most 65 535): `[density − offset, code]` in two u16
+///   ([`PackedCells`]);
 /// - **codes** only, 2 bytes per voxel, beside the f32 stack.
+///
+/// In the first two a ray reads a cell's densities and codes from the same two
+/// cache lines. Built by [`NormalStack::try_cells`], they hold every voxel
+/// exactly and need no f32 stack nor the volume beside them: the renderer lets
+/// go of the volume and gets it back from them
+/// ([`NormalStack::voxels_in_volume_order`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct NormalStack {
     /// Principal axis of the stack it was built from.
@@ -130,6 +133,47 @@ pub struct NormalStack {
     /// Sizes along `(i, j, k)`.
     pub n: [usize; 3],
     store: Store,
+    /// The scan's voxel type when the store holds every voxel exactly
+    /// (built by [`NormalStack::try_cells`]).
+    voxels: Option<VoxelType>,
+}
+
+/// Where [`NormalStack::try_cells`] takes the voxels from.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum CellSource<'a> {
+    /// The volume (8- or 16-bit voxels).
+    Volume(&'a Volume),
+    /// The cells of another axis that hold every voxel.
+    Cells(&'a NormalStack),
+}
+
+/// A [`NormalStack::try_cells`] build between its two phases: the voxels
+/// laid out, the codes not yet computed ([`CellBuild::finish`]).
+#[derive(Debug)]
+pub(crate) enum CellBuild {
+    U8(InPlace<u8, 3>),
+    U16 { cells: InPlace<u16, 2>, offset: f32, voxels: VoxelType },
+}
+
+impl CellBuild {
+    /// Computes the codes (for voxel `spacing`) into the cells: the same codes
+    /// bit for bit as [`NormalStack::new`] of the whole f32 stack. Cannot fail.
+    pub fn finish(self, spacing: [f32; 3]) -> NormalStack {
+        match self {
+            CellBuild::U8(b) => {
+                let (axis, n) = (b.axis, b.n);
+                // exact: d is a u8 value
+                let cells = b.finish(spacing, |e| e as f32, |d, c| [d as u8, c as u8, (c >> 8) as u8]);
+                NormalStack { axis, n, store: Store::Bytes(cells), voxels: Some(VoxelType::U8) }
+            }
+            CellBuild::U16 { cells, offset, voxels } => {
+                let (axis, n) = (cells.axis, cells.n);
+                // exact: d − offset is an integer in 0..=65535
+                let words = cells.finish(spacing, |e| e as f32 + offset, |d, c| [(d - offset) as u16, c]);
+                NormalStack { axis, n, store: Store::Packed { words, offset }, voxels: Some(voxels) }
+            }
+        }
+    }
 }
 
 /// How a [`NormalStack`] holds its codes.
@@ -137,10 +181,10 @@ pub struct NormalStack {
 enum Store {
     /// One u16 code per voxel.
     Codes(Vec<u16>),
-    /// One u32 per voxel: `(density − offset) | code << 16`.
-    Packed { words: Vec<u32>, offset: f32 },
-    /// The densities in their own type beside one u16 code per voxel.
-    Split { dens: DensityStack, codes: Vec<u16> },
+    /// Per voxel `[density − offset, code]`.
+    Packed { words: Vec<[u16; 2]>, offset: f32 },
+    /// Per voxel `[density, code low byte, code high byte]` (8-bit densities).
+    Bytes(Vec<[u8; 3]>),
 }
 
 impl NormalStack {
@@ -166,9 +210,9 @@ impl NormalStack {
         let len = stack.n[0] * stack.n[1] * stack.n[2];
         let store = match pack.then(|| packing_offset(stack.data())).flatten() {
             Some(offset) => {
-                let mut words: Vec<u32> = crate::memory::zeroed(len, "the packed densities and normal codes")?;
+                let mut words: Vec<[u16; 2]> = crate::memory::zeroed(len, "the packed densities and normal codes")?;
                 // exact: d − offset is an integer in 0..=65535 (checked)
-                code_slices(stack, 0..stack.n[2], spacing, &mut words, |w, d, c| *w = (d - offset) as u32 | (c as u32) << 16);
+                code_slices(stack, 0..stack.n[2], spacing, &mut words, |w, d, c| *w = [(d - offset) as u16, c]);
                 Store::Packed { words, offset }
             }
             None => {
@@ -177,36 +221,81 @@ impl NormalStack {
                 Store::Codes(codes)
             }
         };
-        Ok(NormalStack { axis: stack.axis, n: stack.n, store })
+        Ok(NormalStack { axis: stack.axis, n: stack.n, store, voxels: None })
     }
 
-    /// The codes of density stack `dens` (for a volume with voxel `spacing`),
-    /// kept beside it: what the binary path needs of an 8- or 16-bit scan, in
-    /// 2 bytes a voxel plus the densities in their own type, and no f32 stack.
-    /// The codes are made from windows of a few f32 slices at a time, the same
-    /// codes bit for bit as [`NormalStack::new`] of the whole f32 stack.
-    pub fn try_split(dens: DensityStack, spacing: [f32; 3]) -> crate::Result<Self> {
-        let n = dens.n;
-        let n01 = n[0] * n[1];
-        let mut codes: Vec<u16> = crate::memory::zeroed(n01 * n[2], "the normal codes")?;
-        // blocks of slices, each coded from a window holding the slices on either side
-        const BLOCK: usize = 8;
-        let failed = std::sync::Mutex::new(None);
-        if n01 > 0 {
-            codes.par_chunks_mut(BLOCK * n01).enumerate().for_each(|(b, out)| {
-                let k0 = b * BLOCK;
-                let k1 = k0 + out.len() / n01;
-                let w0 = k0.saturating_sub(1);
-                match dens.try_window(w0..(k1 + 1).min(n[2])) {
-                    Ok(win) => code_slices(&win, k0 - w0..k1 - w0, spacing, out, |w, _, c| *w = c),
-                    Err(e) => *failed.lock().unwrap_or_else(|p| p.into_inner()) = Some(e),
-                }
-            });
+    /// Phase 1 of the binary path's cells of an 8- or 16-bit scan along
+    /// `axis` (`None` for f32 voxels, or cells that do not hold every voxel):
+    /// the cell array with the voxels of `src` laid out in it, and the f32
+    /// windows phase 2 needs for `threads` workers ([`crate::data::packing`]).
+    /// The source may be let go before [`CellBuild::finish`], which computes
+    /// the codes and cannot fail: the volume and the cells are held together
+    /// only while the voxels are laid out.
+    pub(crate) fn try_cells(src: CellSource, axis: usize, threads: usize) -> crate::Result<Option<CellBuild>> {
+        match src {
+            CellSource::Volume(vol) => {
+                let (d, lo) = (vol.dims(), vol.value_range().0 as i32);
+                Ok(Some(match vol.data() {
+                    VoxelData::U8(v) => CellBuild::U8(InPlace::new(v, 2, d, axis, threads, |x| x)?),
+                    // exact: lo ≤ x ≤ lo + 65535 for every voxel of a 16-bit scan
+                    VoxelData::U16(v) => CellBuild::U16 {
+                        cells: InPlace::new(v, 2, d, axis, threads, |x| (x as i32 - lo) as u16)?,
+                        offset: lo as f32,
+                        voxels: VoxelType::U16,
+                    },
+                    VoxelData::I16(v) => CellBuild::U16 {
+                        cells: InPlace::new(v, 2, d, axis, threads, |x| (x as i32 - lo) as u16)?,
+                        offset: lo as f32,
+                        voxels: VoxelType::I16,
+                    },
+                    VoxelData::F32(_) => return Ok(None),
+                }))
+            }
+            CellSource::Cells(ns) => {
+                let (from, n) = (ns.axis, ns.n);
+                Ok(match (&ns.store, ns.voxels) {
+                    (Store::Bytes(c), Some(_)) => Some(CellBuild::U8(InPlace::new(c, from, n, axis, threads, |c| c[0])?)),
+                    (Store::Packed { words, offset }, Some(voxels)) => {
+                        Some(CellBuild::U16 { cells: InPlace::new(words, from, n, axis, threads, |w| w[0])?, offset: *offset, voxels })
+                    }
+                    _ => None,
+                })
+            }
         }
-        if let Some(e) = failed.into_inner().unwrap_or_else(|p| p.into_inner()) {
-            return Err(e);
+    }
+
+    /// True when this stack holds every voxel of the scan exactly (built by
+    /// [`NormalStack::try_cells`]).
+    pub fn holds_voxels(&self) -> bool {
+        self.voxels.is_some()
+    }
+
+    /// The scan's voxels back in the volume's order and type, when this stack
+    /// holds them ([`NormalStack::holds_voxels`]), or [`crate::Error::Memory`].
+    pub fn voxels_in_volume_order(&self) -> crate::Result<Option<VoxelData>> {
+        let (d, s) = restride(self.axis, self.n, 2);
+        fn go<T: Copy + Sync, U: crate::memory::Zeroable + Send>(
+            src: &[T],
+            d: [usize; 3],
+            s: [usize; 3],
+            f: impl Fn(T) -> U + Sync,
+        ) -> crate::Result<Vec<U>> {
+            let mut out = crate::memory::zeroed(d[0] * d[1] * d[2], "the volume")?;
+            crate::data::slices::gather(src, &mut out, d, s, f);
+            Ok(out)
         }
-        Ok(NormalStack { axis: dens.axis, n, store: Store::Split { dens, codes } })
+        Ok(match (&self.store, self.voxels) {
+            (Store::Bytes(c), Some(_)) => Some(VoxelData::U8(go(c, d, s, |c| c[0])?)),
+            (Store::Packed { words, offset }, Some(VoxelType::U16)) => {
+                let lo = *offset as i32;
+                Some(VoxelData::U16(go(words, d, s, |w| (w[0] as i32 + lo) as u16)?))
+            }
+            (Store::Packed { words, offset }, Some(VoxelType::I16)) => {
+                let lo = *offset as i32;
+                Some(VoxelData::I16(go(words, d, s, |w| (w[0] as i32 + lo) as i16)?))
+            }
+            _ => None,
+        })
     }
 
     /// The code of the voxel at stack index `index`.
@@ -214,8 +303,8 @@ impl NormalStack {
     pub fn at(&self, index: usize) -> u16 {
         match &self.store {
             Store::Codes(c) => c[index],
-            Store::Packed { words, .. } => (words[index] >> 16) as u16,
-            Store::Split { codes, .. } => codes[index],
+            Store::Packed { words, .. } => words[index][1],
+            Store::Bytes(c) => code_of(c[index]),
         }
     }
 
@@ -225,45 +314,33 @@ impl NormalStack {
     pub fn corners(&self, b: usize) -> [u16; 4] {
         match &self.store {
             Store::Codes(c) => cell_corners(c, b, self.n[0]),
-            Store::Packed { words, .. } => cell_corners(words, b, self.n[0]).map(|w| (w >> 16) as u16),
-            Store::Split { codes, .. } => cell_corners(codes, b, self.n[0]),
+            Store::Packed { words, .. } => cell_corners(words, b, self.n[0]).map(|w| w[1]),
+            Store::Bytes(c) => cell_corners(c, b, self.n[0]).map(code_of),
         }
     }
 
     /// The codes apart (empty when packed).
     pub fn codes(&self) -> &[u16] {
         match &self.store {
-            Store::Codes(c) | Store::Split { codes: c, .. } => c,
-            Store::Packed { .. } => &[],
+            Store::Codes(c) => c,
+            Store::Packed { .. } | Store::Bytes(_) => &[],
         }
     }
 
     /// The packed densities and codes, if this stack is packed.
     pub fn packed(&self) -> Option<PackedCells<'_>> {
         match &self.store {
-            Store::Codes(_) | Store::Split { .. } => None,
             Store::Packed { words, offset } => Some(PackedCells { words, n0: self.n[0], offset: *offset }),
-        }
-    }
-
-    /// The densities kept beside the codes (a [`NormalStack::try_split`] stack).
-    pub fn density_stack(&self) -> Option<&DensityStack> {
-        match &self.store {
-            Store::Split { dens, .. } => Some(dens),
             _ => None,
         }
     }
 
-    /// The cells of a [`NormalStack::try_split`] stack as a ray reads them.
-    pub fn split_cells(&self) -> Option<SplitCells<'_>> {
-        let Store::Split { dens, codes } = &self.store else { return None };
-        let n0 = self.n[0];
-        Some(match dens.data() {
-            VoxelData::U8(d) => SplitCells::U8(TypedCells { dens: d, codes, n0 }),
-            VoxelData::U16(d) => SplitCells::U16(TypedCells { dens: d, codes, n0 }),
-            VoxelData::I16(d) => SplitCells::I16(TypedCells { dens: d, codes, n0 }),
-            VoxelData::F32(_) => unreachable!("DensityStack::try_new holds integer voxels only"),
-        })
+    /// The 8-bit densities and codes, if this stack holds them.
+    pub fn bytes_cells(&self) -> Option<ByteCells<'_>> {
+        match &self.store {
+            Store::Bytes(cells) => Some(ByteCells { cells, n0: self.n[0] }),
+            _ => None,
+        }
     }
 
     /// Bytes held.
@@ -271,7 +348,7 @@ impl NormalStack {
         match &self.store {
             Store::Codes(c) => c.len() * 2,
             Store::Packed { words, .. } => words.len() * 4,
-            Store::Split { dens, codes } => dens.bytes() + codes.len() * 2,
+            Store::Bytes(c) => c.len() * 3,
         }
     }
 }
@@ -283,13 +360,19 @@ impl Densities for NormalStack {
     /// # Panics
     /// For codes kept apart (no densities): only packed stacks hold them.
     fn row(&self, j: usize, k: usize, out: &mut [f32]) {
-        if let Store::Split { dens, .. } = &self.store {
-            return dens.row(j, k, out);
-        }
-        let Store::Packed { words, offset } = &self.store else { panic!("a normal stack without densities") };
         let b = self.n[0] * (j + self.n[1] * k);
-        for (o, &w) in out.iter_mut().zip(&words[b..b + self.n[0]]) {
-            *o = (w & 0xFFFF) as f32 + offset;
+        match &self.store {
+            Store::Packed { words, offset } => {
+                for (o, &w) in out.iter_mut().zip(&words[b..b + self.n[0]]) {
+                    *o = w[0] as f32 + offset;
+                }
+            }
+            Store::Bytes(c) => {
+                for (o, &w) in out.iter_mut().zip(&c[b..b + self.n[0]]) {
+                    *o = w[0] as f32;
+                }
+            }
+            Store::Codes(_) => panic!("a normal stack without densities"),
         }
     }
 }
@@ -307,7 +390,7 @@ const PACK_CHUNK: usize = 1 << 16;
 /// window of a larger stack codes its inner slices exactly as the whole stack
 /// would when it also holds the slices next to them (or they are the volume's
 /// first or last).
-fn code_slices<T: Send>(
+pub(crate) fn code_slices<T: Send>(
     stack: &SliceStack,
     ks: std::ops::Range<usize>,
     spacing: [f32; 3],
@@ -412,7 +495,7 @@ fn packing_offset(data: &[f32]) -> Option<f32> {
 /// in the low 16 bits and the normal code in the high 16.
 #[derive(Clone, Copy, Debug)]
 pub struct PackedCells<'a> {
-    words: &'a [u32],
+    words: &'a [[u16; 2]],
     n0: usize,
     offset: f32,
 }
@@ -422,13 +505,13 @@ impl PackedCells<'_> {
     /// stack's values; order of [`SliceStack::bilinear`]).
     #[inline(always)]
     pub fn densities(&self, b: usize) -> [f32; 4] {
-        cell_corners(self.words, b, self.n0).map(|w| (w & 0xFFFF) as f32 + self.offset)
+        cell_corners(self.words, b, self.n0).map(|w| w[0] as f32 + self.offset)
     }
 
     /// The four corner codes of the cell at stack index `b`.
     #[inline(always)]
     pub fn codes(&self, b: usize) -> [u16; 4] {
-        cell_corners(self.words, b, self.n0).map(|w| (w >> 16) as u16)
+        cell_corners(self.words, b, self.n0).map(|w| w[1])
     }
 
     /// Hints the cache to fetch both rows of the cell at stack index `b`.
@@ -438,46 +521,37 @@ impl PackedCells<'_> {
     }
 }
 
-/// A [`NormalStack::try_split`] stack as a ray reads it, per voxel type.
-#[derive(Clone, Copy, Debug)]
-pub enum SplitCells<'a> {
-    U8(TypedCells<'a, u8>),
-    U16(TypedCells<'a, u16>),
-    I16(TypedCells<'a, i16>),
+/// The code of a `[density, code low byte, code high byte]` cell.
+#[inline(always)]
+fn code_of(c: [u8; 3]) -> u16 {
+    u16::from_le_bytes([c[1], c[2]])
 }
 
-/// The densities of one voxel type beside the u16 codes: a cell reads two
-/// rows of each (the codes only at a hit).
+/// A bytes [`NormalStack`] as a ray reads it: per voxel the 8-bit density and
+/// the normal code in three bytes.
 #[derive(Clone, Copy, Debug)]
-pub struct TypedCells<'a, T> {
-    dens: &'a [T],
-    codes: &'a [u16],
+pub struct ByteCells<'a> {
+    cells: &'a [[u8; 3]],
     n0: usize,
 }
 
-impl<T: Voxel> TypedCells<'_, T> {
+impl ByteCells<'_> {
     /// The four corner densities of the cell at stack index `b` (order of [`SliceStack::bilinear`]).
     #[inline(always)]
     pub fn densities(&self, b: usize) -> [f32; 4] {
-        cell_corners(self.dens, b, self.n0).map(Voxel::f32)
+        cell_corners(self.cells, b, self.n0).map(|c| c[0] as f32)
     }
 
     /// The four corner codes of the cell at stack index `b`.
     #[inline(always)]
     pub fn codes(&self, b: usize) -> [u16; 4] {
-        cell_corners(self.codes, b, self.n0)
+        cell_corners(self.cells, b, self.n0).map(code_of)
     }
 
-    /// Hints the cache to fetch both density rows of the cell at stack index `b`.
+    /// Hints the cache to fetch both rows of the cell at stack index `b`.
     #[inline(always)]
     pub fn prefetch(&self, b: usize) {
-        prefetch_cell(self.dens, b, self.n0);
-    }
-
-    /// Hints the cache to fetch both code rows of the cell at stack index `b`.
-    #[inline(always)]
-    pub fn prefetch_codes(&self, b: usize) {
-        prefetch_cell(self.codes, b, self.n0);
+        prefetch_cell(self.cells, b, self.n0);
     }
 }
 
@@ -751,9 +825,10 @@ mod tests {
     }
 
     #[test]
-    fn split_stacks_hold_the_stacks_densities_and_codes() {
-        use crate::data::volume::VoxelData;
-        let dims = [9, 7, 21]; // 21 slices: blocks of 8 with a partial last one, along z
+    fn cells_built_in_place_hold_the_stacks_densities_and_codes() {
+        // 21 slices: waves of blocks of 8 with a partial last one, along z;
+        // 1..=3 workers: waves of 1, 2 and 3 blocks
+        let dims = [9, 7, 21];
         let n = 9 * 7 * 21;
         let h = |i: usize| (i * 2_654_435_761usize) >> 7;
         let vols = [
@@ -767,42 +842,54 @@ mod tests {
             for axis in 0..3 {
                 let s = SliceStack::new(&v, axis);
                 let want = NormalStack::with_packing(&s, v.spacing(), false);
-                let dens = DensityStack::try_new(&v, axis).unwrap().expect("integer voxels");
-                // along z the stack is the volume's own voxels, not a copy
-                assert_eq!(dens.shares(&v.shared_data()), axis == 2);
-                // and it gives the volume back in the volume's order
-                assert_eq!(*dens.to_volume_order().unwrap(), *v.data(), "type {t} axis {axis}");
-                let got = NormalStack::try_split(dens, v.spacing()).unwrap();
-                assert!(got.packed().is_none() && got.split_cells().is_some());
-                assert_eq!(got.codes(), want.codes(), "type {t} axis {axis}");
-                // the rows it gives the cell codes and the cells a ray reads are the stack's
-                let (mut a, mut b) = (vec![0f32; s.n[0]], vec![0f32; s.n[0]]);
-                for k in [0, s.n[2] / 2, s.n[2] - 1] {
-                    for j in 0..s.n[1] {
-                        Densities::row(&got, j, k, &mut a);
-                        Densities::row(&s, j, k, &mut b);
-                        assert_eq!(a, b);
+                for threads in 1..=3 {
+                    let got =
+                        NormalStack::try_cells(CellSource::Volume(&v), axis, threads).unwrap().expect("integer voxels").finish(v.spacing());
+                    assert!(got.holds_voxels());
+                    assert_eq!(got.packed().is_some(), t > 0, "16-bit scans pack in two u16, 8-bit ones in three bytes");
+                    assert_eq!(got.bytes_cells().is_some(), t == 0);
+                    assert_eq!(got.bytes(), n * if t == 0 { 3 } else { 4 });
+                    // the volume comes back from them, voxel for voxel
+                    assert_eq!(got.voxels_in_volume_order().unwrap().as_ref(), Some(v.data()), "type {t} axis {axis}");
+                    // and so do the cells of every other axis, from these
+                    for other in 0..3 {
+                        let again = NormalStack::try_cells(CellSource::Cells(&got), other, threads).unwrap().unwrap().finish(v.spacing());
+                        assert_eq!(again.voxels_in_volume_order().unwrap().as_ref(), Some(v.data()), "type {t} axis {axis} to {other}");
+                        assert_eq!((again.axis, again.n), (other, SliceStack::new(&v, other).n));
                     }
-                    for j in 0..s.n[1] - 1 {
-                        for i in 0..s.n[0] - 1 {
-                            let bi = s.index(i, j, k);
-                            let (dc, cc) = match got.split_cells().unwrap() {
-                                SplitCells::U8(c) => (c.densities(bi), c.codes(bi)),
-                                SplitCells::U16(c) => (c.densities(bi), c.codes(bi)),
-                                SplitCells::I16(c) => (c.densities(bi), c.codes(bi)),
-                            };
-                            assert_eq!(dc, s.cell_at(bi));
-                            assert_eq!(cc, got.corners(bi));
+                    // every code, every row of densities and every cell a ray reads are the f32 stack's
+                    for i in 0..n {
+                        assert_eq!(got.at(i), want.at(i), "type {t} axis {axis} voxel {i}");
+                    }
+                    let (mut a, mut b) = (vec![0f32; s.n[0]], vec![0f32; s.n[0]]);
+                    for k in 0..s.n[2] {
+                        for j in 0..s.n[1] {
+                            Densities::row(&got, j, k, &mut a);
+                            Densities::row(&s, j, k, &mut b);
+                            assert_eq!(a, b);
+                        }
+                        for j in 0..s.n[1] - 1 {
+                            for i in 0..s.n[0] - 1 {
+                                let bi = s.index(i, j, k);
+                                let (dc, cc) = match (got.packed(), got.bytes_cells()) {
+                                    (Some(c), _) => (c.densities(bi), c.codes(bi)),
+                                    (_, Some(c)) => (c.densities(bi), c.codes(bi)),
+                                    _ => unreachable!(),
+                                };
+                                assert_eq!(dc, s.cell_at(bi));
+                                assert_eq!(cc, want.corners(bi));
+                            }
                         }
                     }
                 }
-                let shell = SliceStack::shell(&v, axis);
-                assert_eq!((shell.n, shell.is_resident(), s.is_resident()), (s.n, false, true));
             }
         }
-        // f32 voxels have no density stack of their own type
+        // f32 voxels have no packed cells of their own type
         let f = Volume::from_fn([4, 4, 4], [1.0; 3], |x, _, _| x as f32).unwrap();
-        assert!(DensityStack::try_new(&f, 0).unwrap().is_none());
+        assert!(NormalStack::try_cells(CellSource::Volume(&f), 0, 2).unwrap().is_none());
+        // nor do cells built from an f32 stack (they may not hold every voxel)
+        let packed = NormalStack::new(&SliceStack::new(&f, 1), f.spacing());
+        assert!(!packed.holds_voxels() && NormalStack::try_cells(CellSource::Cells(&packed), 0, 2).unwrap().is_none());
     }
 
     #[test]

@@ -6,8 +6,6 @@
 //! inside one slice, its cell corners' range, and the central-difference gradient.
 //! A stack for an axis is built only when a view first needs it.
 
-use std::sync::Arc;
-
 use rayon::prelude::*;
 
 use crate::data::volume::{Volume, VoxelData};
@@ -58,8 +56,9 @@ impl Densities for SliceStack {
 
 /// Writes `f(src[i·s0 + j·s1 + k·s2])` to `data[i + n0·(j + n1·k)]` for every
 /// `(i, j, k) < n`, in parallel over slices: the permutation behind every stack
-/// ([`SliceStack`], [`DensityStack`] and back to the volume's order).
-fn gather<T: Copy + Sync, U: Send>(src: &[T], data: &mut [U], n: [usize; 3], s: [usize; 3], f: impl Fn(T) -> U + Sync) {
+/// ([`SliceStack`], the packed cells of [`crate::data::packing`] and back to
+/// the volume's order).
+pub(crate) fn gather<T: Copy + Sync, U: Send>(src: &[T], data: &mut [U], n: [usize; 3], s: [usize; 3], f: impl Fn(T) -> U + Sync) {
     let [si, sj, sk] = s;
     let n01 = n[0] * n[1];
     if sk == 1 && n01 > 0 {
@@ -142,9 +141,20 @@ impl SliceStack {
         self.data.len() * 4
     }
 
+    /// A stack of `n` densities `data` (in `(i, j, k)` order) along `axis`.
+    pub(crate) fn from_parts(axis: usize, n: [usize; 3], data: Vec<f32>) -> Self {
+        assert_eq!(data.len(), n[0] * n[1] * n[2], "densities of another size");
+        SliceStack { axis, n, data }
+    }
+
+    /// The densities, given back.
+    pub(crate) fn into_data(self) -> Vec<f32> {
+        self.data
+    }
+
     /// The geometry of the stack of `vol` along `axis` without its densities:
     /// what a path that reads its samples from elsewhere (the binary path from
-    /// densities beside the codes, [`crate::data::normals::NormalStack::try_split`])
+    /// packed cells, [`crate::data::normals::NormalStack::try_cells`])
     /// needs. Reading a density from it panics; [`SliceStack::is_resident`] says which it is.
     pub fn shell(vol: &Volume, axis: usize) -> Self {
         let (perm, d) = (permutation(axis), vol.dims());
@@ -304,171 +314,6 @@ impl SliceStack {
         }
         g
     }
-}
-
-/// The voxels of a volume permuted for one principal axis in their own integer
-/// type (u8, u16 or i16): the binary path's densities, a quarter (u8) or half
-/// of an f32 [`SliceStack`]. Along z the slicing order is the volume's own, so
-/// the stack shares the volume's voxels instead of copying them; along x and
-/// y it holds the one copy a renderer may keep in place of the volume
-/// ([`DensityStack::to_volume_order`] gives the volume's order back).
-#[derive(Clone, Debug)]
-pub struct DensityStack {
-    /// Principal axis (0 = x, 1 = y, 2 = z).
-    pub axis: usize,
-    /// Sizes along `(i, j, k)`.
-    pub n: [usize; 3],
-    data: Arc<VoxelData>,
-}
-
-/// A voxel type a [`DensityStack`] holds: read as f32 exactly.
-pub trait Voxel: Copy + Send + Sync + 'static {
-    /// The value as f32 (exact for every value of the type).
-    fn f32(self) -> f32;
-}
-impl Voxel for u8 {
-    #[inline(always)]
-    fn f32(self) -> f32 {
-        self as f32
-    }
-}
-impl Voxel for u16 {
-    #[inline(always)]
-    fn f32(self) -> f32 {
-        self as f32
-    }
-}
-impl Voxel for i16 {
-    #[inline(always)]
-    fn f32(self) -> f32 {
-        self as f32
-    }
-}
-impl Voxel for f32 {
-    #[inline(always)]
-    fn f32(self) -> f32 {
-        self
-    }
-}
-
-impl PartialEq for DensityStack {
-    fn eq(&self, o: &Self) -> bool {
-        self.axis == o.axis && self.n == o.n && self.data == o.data
-    }
-}
-
-impl DensityStack {
-    /// The voxels of `vol` along `axis`; `None` for f32 voxels (their stack is
-    /// a [`SliceStack`]). Along z this shares `vol`'s voxels (no copy).
-    pub fn try_new(vol: &Volume, axis: usize) -> crate::Result<Option<Self>> {
-        if vol.data().voxel_type() == crate::data::volume::VoxelType::F32 {
-            return Ok(None);
-        }
-        // the volume's own order is the stack along z
-        DensityStack { axis: 2, n: vol.dims(), data: vol.shared_data() }.to_axis(axis).map(Some)
-    }
-
-    /// The same voxels along principal axis `axis`: shared when it is this
-    /// stack's, else a permuted copy (or [`crate::Error::Memory`]). What builds
-    /// another axis when the renderer no longer holds the volume.
-    pub fn to_axis(&self, axis: usize) -> crate::Result<Self> {
-        if axis == self.axis {
-            return Ok(self.clone());
-        }
-        let (from, to) = (permutation(self.axis), permutation(axis));
-        // per object axis: its size and its stride in this stack (object axis from[t] is this stack's t)
-        let own = [1usize, self.n[0], self.n[0] * self.n[1]];
-        let (mut d, mut stride) = ([0usize; 3], [0usize; 3]);
-        for t in 0..3 {
-            d[from[t]] = self.n[t];
-            stride[from[t]] = own[t];
-        }
-        let n = [d[to[0]], d[to[1]], d[to[2]]];
-        let s = [stride[to[0]], stride[to[1]], stride[to[2]]];
-        Ok(DensityStack { axis, n, data: Arc::new(permuted(&self.data, n, s, "the density stack")?) })
-    }
-
-    /// The voxels in `(i, j, k)` order (i fastest).
-    pub fn data(&self) -> &VoxelData {
-        &self.data
-    }
-
-    /// True when this stack holds `data` itself (the volume's voxels along z).
-    pub(crate) fn shares(&self, data: &Arc<VoxelData>) -> bool {
-        Arc::ptr_eq(&self.data, data)
-    }
-
-    /// Bytes held (shared or not).
-    pub fn bytes(&self) -> usize {
-        self.data.len() * self.data.voxel_type().size()
-    }
-
-    /// The voxels back in the volume's order (x fastest): shared along z, a
-    /// permuted copy otherwise (or [`crate::Error::Memory`]).
-    pub fn to_volume_order(&self) -> crate::Result<Arc<VoxelData>> {
-        Ok(self.to_axis(2)?.data)
-    }
-
-    /// Slices `ks` as an f32 [`SliceStack`] of the same axis (its slice `k` is
-    /// this stack's slice `ks.start + k`): what builds normal codes a few slices
-    /// at a time.
-    pub fn try_window(&self, ks: std::ops::Range<usize>) -> crate::Result<SliceStack> {
-        let ks = ks.start.min(self.n[2])..ks.end.min(self.n[2]);
-        let n01 = self.n[0] * self.n[1];
-        let n = [self.n[0], self.n[1], ks.len()];
-        let mut data: Vec<f32> = crate::memory::zeroed(n01 * n[2], "a window of the slice stack")?;
-        let r = ks.start * n01..ks.end * n01;
-        fn copy<T: Voxel>(src: &[T], out: &mut [f32]) {
-            out.par_chunks_mut(1 << 14).zip(src.par_chunks(1 << 14)).for_each(|(o, s)| {
-                for (o, &v) in o.iter_mut().zip(s) {
-                    *o = v.f32();
-                }
-            });
-        }
-        match &*self.data {
-            VoxelData::U8(v) => copy(&v[r], &mut data),
-            VoxelData::U16(v) => copy(&v[r], &mut data),
-            VoxelData::I16(v) => copy(&v[r], &mut data),
-            VoxelData::F32(v) => data.copy_from_slice(&v[r]),
-        }
-        Ok(SliceStack { axis: self.axis, n, data })
-    }
-}
-
-impl Densities for DensityStack {
-    fn dims(&self) -> [usize; 3] {
-        self.n
-    }
-    fn row(&self, j: usize, k: usize, out: &mut [f32]) {
-        let b = self.n[0] * (j + self.n[1] * k);
-        fn conv<T: Voxel>(src: &[T], out: &mut [f32]) {
-            for (o, &v) in out.iter_mut().zip(src) {
-                *o = v.f32();
-            }
-        }
-        let r = b..b + self.n[0];
-        match &*self.data {
-            VoxelData::U8(v) => conv(&v[r], out),
-            VoxelData::U16(v) => conv(&v[r], out),
-            VoxelData::I16(v) => conv(&v[r], out),
-            VoxelData::F32(v) => out.copy_from_slice(&v[r]),
-        }
-    }
-}
-
-/// `src` permuted by [`gather`] into a new array of its own type.
-fn permuted(src: &VoxelData, n: [usize; 3], s: [usize; 3], what: &str) -> crate::Result<VoxelData> {
-    fn go<T: crate::memory::Zeroable + Send + Sync>(src: &[T], n: [usize; 3], s: [usize; 3], what: &str) -> crate::Result<Vec<T>> {
-        let mut out = crate::memory::zeroed(n[0] * n[1] * n[2], what)?;
-        gather(src, &mut out, n, s, |x| x);
-        Ok(out)
-    }
-    Ok(match src {
-        VoxelData::U8(v) => VoxelData::U8(go(v, n, s, what)?),
-        VoxelData::U16(v) => VoxelData::U16(go(v, n, s, what)?),
-        VoxelData::I16(v) => VoxelData::I16(go(v, n, s, what)?),
-        VoxelData::F32(v) => VoxelData::F32(go(v, n, s, what)?),
-    })
 }
 
 /// The smaller of two densities: one `minss` (`f32::min` adds NaN handling;

@@ -251,18 +251,13 @@ impl Volume {
             VoxelData::F32(v) => rev(v, axis, nx, ny, nz),
         }
     }
-    /// The voxels, shared (a [`crate::data::slices::DensityStack`] along z holds
-    /// them without a copy).
-    pub(crate) fn shared_data(&self) -> std::sync::Arc<VoxelData> {
-        self.data.clone()
-    }
     /// How many handles share these voxels (this one included).
     pub(crate) fn data_handles(&self) -> usize {
         std::sync::Arc::strong_count(&self.data)
     }
     /// Lets go of this handle's voxels, keeping dims, spacing, frame and
-    /// statistics (computed first): what a renderer does once a density stack
-    /// holds them. A parked volume reads as having no voxels; only the
+    /// statistics (computed first): what a renderer does once its packed cells
+    /// hold them. A parked volume reads as having no voxels; only the
     /// renderer holds one, and gives it back its voxels
     /// ([`Volume::unpark`]) before anything reads them.
     pub(crate) fn park(&mut self) {

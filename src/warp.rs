@@ -195,8 +195,15 @@ impl Texel for [u8; 4] {
 /// [`Image8`]: each channel rounded by [`to8`], the same bytes as
 /// [`Image::to_rgba8`] of the f32 warp). The affine warp of a parallel view
 /// steps along each row in fixed point.
+///
+/// A projective warp (a perspective plan) back-projects every output pixel
+/// through the inverse homography: where the back-projected `w ≤ 0` (behind the
+/// eye) the pixel is background, never a mirrored image; elsewhere it is the
+/// bilinear sample at `(a/w, b/w)` ([`warp_projective`]).
 pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>) {
-    assert!(plan.warp.is_affine() && plan.grid.pitch == 1.0, "the warp kernel maps affine warps onto a one-voxel grid");
+    if !plan.warp.is_affine() || plan.grid.pitch != 1.0 {
+        return warp_projective(inter, plan, out);
+    }
     let m = &plan.warp.inverse;
     let (inv, it) = ([[m.x_axis.x, m.y_axis.x], [m.x_axis.y, m.y_axis.y]], [m.z_axis.x, m.z_axis.y]);
     let origin = [plan.grid.pad as f64; 2];
@@ -253,9 +260,87 @@ pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T
     });
 }
 
+/// The warp of a projective (or any non-unit-pitch) plan: per output pixel,
+/// the homogeneous back-projection `(a·w, b·w, w) = inverse · (u, v, 1)` steps
+/// along the row; `w ≤ 0` (or not finite) is background; otherwise the
+/// bilinear sample of `inter` at the intermediate pixel of `(a, b)`, taps
+/// outside the valid rectangle transparent. Writes every pixel of every row.
+pub fn warp_projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>) {
+    let m = plan.warp.inverse;
+    let w = out.width;
+    let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
+    out.data.par_chunks_mut(w).zip(out.spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
+        *span = (0, w as u32);
+        let Some(r) = inter.valid else {
+            row.fill(T::CLEAR);
+            return;
+        };
+        let vf = v as f64;
+        for (u, px) in row.iter_mut().enumerate() {
+            let h = m * glam::DVec3::new(u as f64, vf, 1.0);
+            if !(h.z > 0.0 && h.z.is_finite()) {
+                *px = T::CLEAR;
+                continue;
+            }
+            let (p, q) = (h.x / h.z / pitch + pad, h.y / h.z / pitch + pad);
+            // taps outside [p0 − 1, p1 + 1] × [q0 − 1, q1 + 1] are all transparent
+            if !(p > r.p0 as f64 - 1.0 && p < r.p1 as f64 + 1.0 && q > r.q0 as f64 - 1.0 && q < r.q1 as f64 + 1.0) {
+                *px = T::CLEAR;
+                continue;
+            }
+            let (x0, y0) = (p.floor(), q.floor());
+            let (fx, fy) = ((p - x0) as f32, (q - y0) as f32);
+            let (x0, y0) = (x0 as isize, y0 as isize);
+            let tap = |x: isize, y: isize| Vec4::from_array(inter.get(x, y));
+            let t = tap(x0, y0).lerp(tap(x0 + 1, y0), fx);
+            let b = tap(x0, y0 + 1).lerp(tap(x0 + 1, y0 + 1), fx);
+            *px = T::from_rgba(t.lerp(b, fy));
+        }
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Virvo's warp never checks the back-projected w: pixels whose ray meets
+    /// the base plane behind the eye showed a mirrored image. Here they are
+    /// background, and the pixels in front are the bilinear sample.
+    #[test]
+    fn perspective_warp_behind_the_eye_is_background() {
+        use crate::view::plan::{Grid, Warp};
+        use glam::{DMat3, DVec3};
+        let f = crate::view::Factorization::new(&crate::view::Camera::new(DMat3::IDENTITY, [8, 8]), [4, 4, 4], [1.0; 3]).unwrap();
+        let mut plan = FramePlan::parallel(&f, [1.0; 3]);
+        plan.grid = Grid { size: [8, 8], pad: 0, pitch: 1.0 };
+        // w = 1 − u/4: positive for u < 4, zero at 4, negative beyond; (a, b) = (u, v)/w
+        let inverse = DMat3::from_cols(DVec3::new(1.0, 0.0, -0.25), DVec3::new(0.0, 1.0, 0.0), DVec3::new(0.0, 0.0, 1.0));
+        plan.warp = Warp { forward: inverse.inverse(), inverse };
+        let mut inter = Intermediate::default();
+        inter.prepare([8, 8]);
+        inter.rgba.fill([0.5, 0.25, 0.125, 0.5]);
+        inter.valid = Some(crate::composite::Rect { p0: 0, p1: 7, q0: 0, q1: 7 });
+        let mut out = Image::new(8, 8);
+        warp(&inter, &plan, &mut out);
+        for v in 0..8 {
+            for u in 0..8 {
+                let w = 1.0 - u as f64 / 4.0;
+                let got = out.at(u, v);
+                if w <= 0.0 {
+                    assert_eq!(got, [0.0; 4], "({u}, {v}) is behind the eye");
+                } else if (u as f64 / w) < 6.5 && (v as f64 / w) < 6.5 {
+                    assert_eq!(got, [0.5, 0.25, 0.125, 0.5], "({u}, {v})");
+                }
+            }
+        }
+        // w = 4 − u, (a, b) = (u − 8, 4 − u)/w: in front of the eye a < 0 (off
+        // the grid); behind it a = 3, 1, 0.33 and b = 1, inside the grid, so a
+        // warp that ignored the sign of w would draw a mirrored image there
+        let inverse = DMat3::from_cols(DVec3::new(1.0, -1.0, -1.0), DVec3::ZERO, DVec3::new(-8.0, 4.0, 4.0));
+        plan.warp = Warp { forward: DMat3::IDENTITY, inverse };
+        warp(&inter, &plan, &mut out);
+        assert!(out.data.iter().all(|&c| c == [0.0; 4]), "nothing is in front of the eye");
+    }
 
     /// Every value the 8-bit texel can meet: NaN, ±∞, out of range, and both
     /// sides of every rounding boundary `(k + 0.5)/255` and of every `k/255`.

@@ -72,6 +72,22 @@ pub fn composite_premultiplied(acc: &mut [f32; 4], s: [f32; 4]) {
     acc[3] += t * s[3];
 }
 
+/// The opacity correction of a premultiplied sample `s` already corrected to
+/// one sample spacing, to a ray whose spacing is `e` times that:
+/// `α' = 1 − (1 − α)^e`, the colour scaled with it (`c·α'/α`, so premultiplied
+/// colour is attenuated once). `e = 1` (every ray of a parallel view) returns
+/// `s` unchanged, bit for bit; so do `α = 0` and `α = 1`.
+#[inline(always)]
+pub fn correct_opacity(s: [f32; 4], e: f32) -> [f32; 4] {
+    let a = s[3];
+    if e == 1.0 || !(a > 0.0 && a < 1.0) {
+        return s;
+    }
+    let a2 = 1.0 - (1.0 - a).powf(e);
+    let f = a2 / a;
+    [s[0] * f, s[1] * f, s[2] * f, a2]
+}
+
 /// Inclusive rectangle `[p0, p1] × [q0, q1]` of grid columns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Rect {
@@ -180,5 +196,21 @@ mod tests {
         assert_eq!(acc[3], 1.0);
         composite(&mut acc, [1.0, 1.0, 1.0], 1.0);
         assert_eq!(acc, [0.5, 0.25, 0.25, 1.0]);
+    }
+
+    /// Two samples at one spacing through a homogeneous medium equal one at
+    /// twice the spacing, colour included (premultiplied colour attenuated once).
+    #[test]
+    fn perspective_opacity_correction_is_the_spacing_law() {
+        let s = [0.3 * 0.6, 0.3 * 0.2, 0.0, 0.3];
+        assert_eq!(correct_opacity(s, 1.0), s);
+        let mut two = [0.0; 4];
+        composite_premultiplied(&mut two, s);
+        composite_premultiplied(&mut two, s);
+        let one = correct_opacity(s, 2.0);
+        for c in 0..4 {
+            assert!((one[c] - two[c]).abs() < 1e-6, "{one:?} vs {two:?}");
+        }
+        assert_eq!(correct_opacity([0.5, 0.5, 0.5, 1.0], 1.7), [0.5, 0.5, 0.5, 1.0]);
     }
 }

@@ -144,7 +144,10 @@ impl PerspectiveView {
         } else if e[2] > last {
             (n[2] - 1, false)
         } else {
-            return Err(Error::value("perspective view", "the eye is between the first and last slice: it needs the pyramid split"));
+            return Err(Error::value(
+                "perspective view",
+                "the eye is inside the volume's slab (between its first and last slice along the principal axis): that needs the pyramid split, not yet done; move the eye farther (--eye-distance)",
+            ));
         };
         // one pyramid only if every ray into the box has an in-slice slope of at
         // most MAX_RAY_SLOPE: the conditions are linear over the box, so its

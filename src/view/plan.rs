@@ -53,9 +53,14 @@ pub struct ScaledMap {
 /// What a perspective plan keeps to give each ray its own sample spacing.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PerspectiveRays {
-    /// The eye's foot `(E_i, E_j)` on the slices (voxel units), and `κ`: the
-    /// ray of sheared point `(a, b)` moves by `κ · ((a, b) − E)` per slice.
+    /// The eye's foot `(E_i, E_j)` on the slices (voxel units, in the plan's
+    /// sheared coordinates), and `κ`: the ray of sheared point `(a, b)` moves
+    /// by `κ · ((a, b) − E)` per slice.
     pub foot: [f64; 2],
+    /// The plan's sheared point `(a, b)` is the view's base-plane point
+    /// `(a, b) + shift` ([`PerspectiveView::sheared_to_voxel`]): see
+    /// [`FramePlan::set_perspective`].
+    pub shift: [f64; 2],
     pub kappa: f64,
     /// Voxel spacing along `(i, j, k)` over the spacing opacities are defined
     /// at (the smallest voxel spacing).
@@ -335,7 +340,13 @@ impl FramePlan {
     ///   ring the warp's bilinear taps may read), so no slice is ever cut off.
     ///   One `pad` serves both axes: the axis with the smaller low margin keeps
     ///   some unused pixels (never composited: the occupied rectangle skips them).
-    /// - **Warp.** The projective map of `pv` and its inverse.
+    /// - **Rays.** The intermediate pixels' rays are those of the parallel view's
+    ///   pixels in the limit: pixel `(p, q)` is the base-plane point
+    ///   `(p − pad, q − pad) + shift`, with `shift` chosen so the ray of sheared
+    ///   `(0, 0)` meets the centre slice `kc` at a voxel column, as every parallel
+    ///   ray does. As the eye recedes the samples become the parallel plan's,
+    ///   exactly (not only the same rays resampled on another lattice).
+    /// - **Warp.** The projective map of `pv` (after the shift) and its inverse.
     /// - **Opacity.** Each ray's sample spacing is constant along it
     ///   ([`PerspectiveRays::ratio`]); [`FramePlan::opacity_ratio`] is the smallest
     ///   possible one (the ray along k) and [`FramePlan::opacity_exponent`] the rest.
@@ -349,8 +360,15 @@ impl FramePlan {
         // the binary rotator does not read perspective plans (the renderer refuses it)
         self.shear.set_view(f);
         let nk = pv.n[2];
+        // the shift that puts sheared (0, 0)'s sample in the centre slice on a voxel column
+        let kc = (nk as f64 - 1.0) / 2.0;
+        let (sc, tc) = (pv.scale(kc), pv.trans(kc));
+        let shift = tc.map(|t| (t.round() - t) / sc);
         self.scaled.clear();
-        self.scaled.extend((0..nk).map(|k| ScaledMap { scale: pv.scale(k as f64), trans: pv.trans(k as f64) }));
+        self.scaled.extend((0..nk).map(|k| {
+            let (s, t) = (pv.scale(k as f64), pv.trans(k as f64));
+            ScaledMap { scale: s, trans: [s * shift[0] + t[0], s * shift[1] + t[1]] }
+        }));
         self.maps.clear();
         self.maps.extend(self.scaled.iter().map(|m| {
             let fl = m.trans.map(|t| t.floor());
@@ -381,16 +399,20 @@ impl FramePlan {
             // pixel p samples a = p − pad: the first pixel at or after lo is
             // ceil(lo) + pad = 2 − floor(−lo) + floor(max(−lo)) ≥ 2, the last before
             // hi is ceil(hi) − 1 + pad ≤ size − 3
-            let pad = (-lo[0]).max(-lo[1]).max(0.0).floor() as usize + 2;
+            // (lo ≤ |shift| ≤ 1/2: the front slice starts at sheared 0 − shift)
+            let pad = ((-lo[0]).max(-lo[1]).floor() as i64 + 2).max(0) as usize;
             (pad, [0, 1].map(|a| (pad as f64 + hi[a].ceil()) as usize + 2))
         };
         self.grid = Grid { size, pad, pitch: 1.0 };
-        self.warp = pv.warp;
+        let to_base = DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(shift[0], shift[1], 1.0));
+        let from_base = DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(-shift[0], -shift[1], 1.0));
+        self.warp = Warp { forward: pv.warp.forward * to_base, inverse: from_base * pv.warp.inverse };
         self.limits = None;
         let min_sp = spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
         let p = pv.perm;
         let rays = PerspectiveRays {
-            foot: [pv.eye[0], pv.eye[1]],
+            foot: [pv.eye[0] - shift[0], pv.eye[1] - shift[1]],
+            shift,
             kappa: pv.kappa,
             rel_spacing: [0, 1, 2].map(|c| spacing[p[c]] as f64 / min_sp),
         };
@@ -664,7 +686,12 @@ mod tests {
             for k in [0, pv.n[2] / 2, pv.n[2] - 1] {
                 for (p, q) in [(3usize, 4usize), (17, 9), (plan.grid.size[0] - 2, plan.grid.size[1] - 3)] {
                     let [a, b] = plan.intermediate_to_sheared(p as f64, q as f64);
-                    let x = pv.sheared_to_voxel(a, b, k as f64);
+                    let sh = plan.perspective.unwrap().shift;
+                    let x = pv.sheared_to_voxel(a + sh[0], b + sh[1], k as f64);
+                    // and the warp takes the pixel where the view takes that point
+                    let want = pv.warp.to_output(a + sh[0], b + sh[1]).unwrap();
+                    let got = plan.warp.to_output(a, b).unwrap();
+                    assert!((want[0] - got[0]).abs() < 1e-9 && (want[1] - got[1]).abs() < 1e-9);
                     let (ci, wi) = plan.cell_of(k, 0, p);
                     let (cj, wj) = plan.cell_of(k, 1, q);
                     assert!((ci as f64 + wi as f64 - x[pv.perm[0]]).abs() < 1e-5);
@@ -683,8 +710,9 @@ mod tests {
         for (pv, plan) in perspective_plans(50, 0.5) {
             for (p, q) in [(3usize, 4usize), (17, 9), (plan.grid.size[0] - 2, plan.grid.size[1] - 3)] {
                 let [a, b] = plan.intermediate_to_sheared(p as f64, q as f64);
-                let x0 = DVec3::from_array(pv.sheared_to_voxel(a, b, 3.0));
-                let x1 = DVec3::from_array(pv.sheared_to_voxel(a, b, 4.0));
+                let sh = plan.perspective.unwrap().shift;
+                let x0 = DVec3::from_array(pv.sheared_to_voxel(a + sh[0], b + sh[1], 3.0));
+                let x1 = DVec3::from_array(pv.sheared_to_voxel(a + sh[0], b + sh[1], 4.0));
                 let want = ((x1 - x0) * sp).length() / 0.8;
                 assert!((plan.opacity_ratio_at(p as f64, q as f64) - want).abs() < 1e-6 * want);
                 let e = plan.opacity_exponent(p, q);

@@ -260,40 +260,72 @@ pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T
     });
 }
 
-/// The warp of a projective (or any non-unit-pitch) plan: per output pixel,
-/// the homogeneous back-projection `(a·w, b·w, w) = inverse · (u, v, 1)` steps
-/// along the row; `w ≤ 0` (or not finite) is background; otherwise the
-/// bilinear sample of `inter` at the intermediate pixel of `(a, b)`, taps
-/// outside the valid rectangle transparent. Writes every pixel of every row.
+/// The span `(lo, hi)` of `u` where `a·u + b > 0`, intersected with `(lo, hi)`.
+fn clip_positive(lo: f64, hi: f64, a: f64, b: f64) -> (f64, f64) {
+    if a == 0.0 {
+        return if b > 0.0 { (lo, hi) } else { (1.0, 0.0) };
+    }
+    let x = -b / a;
+    if a > 0.0 { (lo.max(x), hi) } else { (lo, hi.min(x)) }
+}
+
+/// The warp of a projective (or any non-unit-pitch) plan. Along output row
+/// `v` the homogeneous back-projection `(X, Y, W) = inverse · (u, v, 1)` is
+/// linear in `u`, and so is each condition for a pixel to read the
+/// intermediate image: `W > 0` (in front of the eye; elsewhere background)
+/// and `p0 − 1 < X/W + pad < p1 + 1`, the same for `q` (valid rectangle and its
+/// cleared ring). Their intersection is one span of the row, solved exactly;
+/// only it is resampled (bilinear at `(X/W, Y/W)`, the coordinate clamped into
+/// the ring so rounding at the span's ends cannot reach past it), and only
+/// what the last frame wrote outside it is cleared.
 pub fn warp_projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>) {
     let m = plan.warp.inverse;
     let w = out.width;
     let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
+    let (iw, rgba) = (inter.size[0], &inter.rgba);
     out.data.par_chunks_mut(w).zip(out.spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
-        *span = (0, w as u32);
+        let (old0, old1) = (span.0 as usize, span.1 as usize);
         let Some(r) = inter.valid else {
-            row.fill(T::CLEAR);
+            row[old0..old1].fill(T::CLEAR);
+            *span = (0, 0);
             return;
         };
         let vf = v as f64;
-        for (u, px) in row.iter_mut().enumerate() {
-            let h = m * glam::DVec3::new(u as f64, vf, 1.0);
-            if !(h.z > 0.0 && h.z.is_finite()) {
-                *px = T::CLEAR;
-                continue;
-            }
-            let (p, q) = (h.x / h.z / pitch + pad, h.y / h.z / pitch + pad);
-            // taps outside [p0 − 1, p1 + 1] × [q0 − 1, q1 + 1] are all transparent
-            if !(p > r.p0 as f64 - 1.0 && p < r.p1 as f64 + 1.0 && q > r.q0 as f64 - 1.0 && q < r.q1 as f64 + 1.0) {
-                *px = T::CLEAR;
-                continue;
-            }
+        // X(u) = xa·u + xb, Y, W likewise; p = X/(W·pitch) + pad
+        let (xa, xb) = (m.x_axis.x / pitch, (m.y_axis.x * vf + m.z_axis.x) / pitch);
+        let (ya, yb) = (m.x_axis.y / pitch, (m.y_axis.y * vf + m.z_axis.y) / pitch);
+        let (wa, wb) = (m.x_axis.z, m.y_axis.z * vf + m.z_axis.z);
+        let (plo, phi) = (r.p0 as f64 - 1.0 - pad, r.p1 as f64 + 1.0 - pad);
+        let (qlo, qhi) = (r.q0 as f64 - 1.0 - pad, r.q1 as f64 + 1.0 - pad);
+        let (mut lo, mut hi) = clip_positive(0.0, (w - 1) as f64, wa, wb);
+        // X − plo·W > 0, phi·W − X > 0, and for Y
+        (lo, hi) = clip_positive(lo, hi, xa - plo * wa, xb - plo * wb);
+        (lo, hi) = clip_positive(lo, hi, phi * wa - xa, phi * wb - xb);
+        (lo, hi) = clip_positive(lo, hi, ya - qlo * wa, yb - qlo * wb);
+        (lo, hi) = clip_positive(lo, hi, qhi * wa - ya, qhi * wb - yb);
+        let (u0, u1) = if lo <= hi && hi >= 0.0 { (lo.ceil().max(0.0) as usize, (hi.floor() as usize).min(w - 1) + 1) } else { (0, 0) };
+        let (u0, u1) = if u0 < u1 { (u0, u1) } else { (0, 0) };
+        if old0 < old1 {
+            row[old0..old1.min(u0).max(old0)].fill(T::CLEAR);
+            row[u1.max(old0).min(old1)..old1].fill(T::CLEAR);
+        }
+        *span = (u0 as u32, u1 as u32);
+        // inside the span every tap is in the valid rectangle or its ring
+        // (clamped into the grid too: x0 and x0 + 1 are always pixels)
+        let ih = inter.size[1];
+        let (pmin, pmax) = ((r.p0 as f64 - 1.0).max(0.0), (r.p1 + 1).min(iw - 1) as f64 - 1e-9);
+        let (qmin, qmax) = ((r.q0 as f64 - 1.0).max(0.0), (r.q1 + 1).min(ih - 1) as f64 - 1e-9);
+        for (u, px) in row.iter_mut().enumerate().take(u1).skip(u0) {
+            let uf = u as f64;
+            let inv_w = 1.0 / (wa * uf + wb);
+            let p = ((xa * uf + xb) * inv_w + pad).clamp(pmin, pmax);
+            let q = ((ya * uf + yb) * inv_w + pad).clamp(qmin, qmax);
             let (x0, y0) = (p.floor(), q.floor());
             let (fx, fy) = ((p - x0) as f32, (q - y0) as f32);
-            let (x0, y0) = (x0 as isize, y0 as isize);
-            let tap = |x: isize, y: isize| Vec4::from_array(inter.get(x, y));
-            let t = tap(x0, y0).lerp(tap(x0 + 1, y0), fx);
-            let b = tap(x0, y0 + 1).lerp(tap(x0 + 1, y0 + 1), fx);
+            let i = y0 as usize * iw + x0 as usize;
+            let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
+            let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
+            let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);
             *px = T::from_rgba(t.lerp(b, fy));
         }
     });

@@ -312,3 +312,27 @@ fn perspective_errors_are_clear() {
     let e = r.render(&cam, &mut Image::new(32, 32)).unwrap_err().to_string();
     assert!(e.contains("pyramid"), "{e}");
 }
+
+/// One image reused across perspective and parallel frames (the warps clear
+/// only what they no longer cover) holds exactly what a fresh image gets.
+#[test]
+fn perspective_and_parallel_frames_share_an_image_cleanly() {
+    let vol = phantom::sphere([30, 30, 30]).unwrap();
+    let tf = presets::generic(SPHERE_ISO, 200.0).tf;
+    let mut r = renderer(&vol, &tf, Method::Rle, Mode::Blend, Projection::Parallel);
+    let mut img = Image::new(64, 64);
+    let frames = [
+        (Projection::perspective(30.0, 1.5).unwrap(), rotate_eye(DMat3::IDENTITY, 1, 20.0)),
+        (Projection::Parallel, rotate_eye(DMat3::IDENTITY, 0, 50.0)),
+        (Projection::perspective(60.0, 3.0).unwrap(), rotate_eye(DMat3::IDENTITY, 1, -70.0)),
+        (Projection::perspective(20.0, 1.5).unwrap(), rotate_eye(DMat3::IDENTITY, 2, 10.0)),
+        (Projection::Parallel, DMat3::IDENTITY),
+    ];
+    for (proj, rot) in frames {
+        r.set_projection(proj).unwrap();
+        let cam = Camera::new(rot, [64, 64]);
+        r.render(&cam, &mut img).unwrap();
+        let fresh = render(&mut r, &cam);
+        assert_eq!(bits(&img), bits(&fresh), "{proj:?}");
+    }
+}

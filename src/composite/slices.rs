@@ -424,6 +424,9 @@ impl RleFrame<'_> {
             let (mut cb, mut ct) = (rle.cursor(s), rle.cursor(s + 1));
             // the first column the cursors may still be asked for
             let mut next = 0u32;
+            // the last pixel's right column (its index and two voxels): the next
+            // pixel's left column when the two cells are adjacent
+            let mut right = (INF, [0f32; 4], [0f32; 4]);
             let mut x = x0;
             loop {
                 // skip opaque pixels through the links
@@ -450,10 +453,11 @@ impl RleFrame<'_> {
                     x = xn.max(x + 1);
                     continue;
                 }
-                let (c00, c01) = (self.tables.get(cb.at(c)), self.tables.get(ct.at(c)));
+                let (c00, c01) = if right.0 == c { (right.1, right.2) } else { (self.tables.get(cb.at(c)), self.tables.get(ct.at(c))) };
                 cb.step(c + 1);
                 ct.step(c + 1);
                 let (c10, c11) = (self.tables.get(cb.at(c + 1)), self.tables.get(ct.at(c + 1)));
+                right = (c + 1, c10, c11);
                 next = c + 1;
                 let xr = (x - p0) as usize;
                 let inside = match &plan.limits {

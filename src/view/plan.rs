@@ -226,6 +226,16 @@ impl<F: Fn(&FramePlan, &mut RayLimits) + Send + Sync> Limiter for F {
     }
 }
 
+/// `floor(s)` of a finite `s` well inside the i64 range: a truncation and a
+/// correction, not a call to `floor` (the x86-64 baseline has no instruction
+/// for it). The one floor of every scaled map ([`FramePlan::cell_of`],
+/// [`FramePlan::pixels_of_cells`]).
+#[inline(always)]
+fn floor_i64(s: f64) -> i64 {
+    let c = s as i64;
+    if (c as f64) > s { c - 1 } else { c }
+}
+
 /// The geometry of one frame, read by every traversal and the warp.
 #[derive(Clone, Debug)]
 pub struct FramePlan {
@@ -471,8 +481,8 @@ impl FramePlan {
             MapKind::ScaleTranslate => {
                 let m = &self.scaled[k];
                 let s = m.scale * ((x as f64 - self.grid.pad as f64) * self.grid.pitch) + m.trans[axis];
-                let c = s.floor();
-                (c as i64, (s - c) as f32)
+                let c = floor_i64(s);
+                (c, (s - c as f64) as f32)
             }
         }
     }
@@ -491,7 +501,7 @@ impl FramePlan {
                 let pad = self.grid.pad as f64;
                 // the estimate from the inverse map, then exact by the map itself
                 // (monotone: σ > 0), over pixel indices that may be negative
-                let cell = |x: i64| (m.scale * ((x as f64 - pad) * self.grid.pitch) + m.trans[axis]).floor() as i64;
+                let cell = |x: i64| floor_i64(m.scale * ((x as f64 - pad) * self.grid.pitch) + m.trans[axis]);
                 let inv = |c: i64| ((c as f64 - m.trans[axis]) / m.scale / self.grid.pitch + pad).floor() as i64;
                 let mut x0 = inv(c0);
                 while cell(x0) >= c0 {

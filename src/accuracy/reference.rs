@@ -610,6 +610,9 @@ impl Tracer<'_> {
 pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>> {
     let vol = renderer.volume();
     let plan = renderer.last_plan().ok_or_else(|| Error::value("fast path depth", "the renderer has not rendered a frame yet"))?;
+    if renderer.projection().is_perspective() {
+        return Err(Error::value("fast path depth", "not yet computed under a perspective projection"));
+    }
     let f = &plan.view;
     if *f != Factorization::new(camera, vol.dims(), vol.spacing())? {
         return Err(Error::value("fast path depth", "the last frame was rendered with a different camera"));

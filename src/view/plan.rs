@@ -387,16 +387,18 @@ impl FramePlan {
         // the slices in front of the near plane
         let ek = pv.eye[2];
         let front = |k: usize| if pv.ascending { k as f64 - ek } else { ek - k as f64 };
-        let ks: Vec<usize> = (0..nk).filter(|&k| front(k) >= near).collect();
-        self.k_range = match (ks.first(), ks.last()) {
-            (Some(&a), Some(&b)) => [a, b],
+        // (front(k) is monotone in k: the slices kept are one range; no allocation)
+        let (first, last) = ((0..nk).find(|&k| front(k) >= near), (0..nk).rev().find(|&k| front(k) >= near));
+        self.k_range = match (first, last) {
+            (Some(a), Some(b)) => [a, b],
             _ => [1, 0],
         };
+        let ks = if first.is_some() { self.k_range[0]..self.k_range[1] + 1 } else { 0..0 };
         // the exact bounding box of every composited slice's cells, in sheared
         // coordinates: cell c of slice k covers sample positions [c, c + 1)
         let cells = [pv.n[0].saturating_sub(1), pv.n[1].saturating_sub(1)];
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for &k in &ks {
+        for k in ks.clone() {
             let m = self.scaled[k];
             for a in 0..2 {
                 lo[a] = lo[a].min((0.0 - m.trans[a]) / m.scale);

@@ -55,10 +55,14 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let d = vol.dims();
     let tissues = presets::tissues_for(&vol);
     let range = vol.value_range();
-    let preview = Renderers::new(vol.clone(), &tissues, Settings { mode: Mode::Iso, ..settings })?;
+    let mut preview = Renderers::new(vol.clone(), &tissues, Settings { mode: Mode::Iso, ..settings })?;
     let sorted = preview.tissue_list();
     let class = initial_class(&cmd.render.tissue, cmd.render.iso, &sorted)?;
-    let blend = Renderers::new(vol, &tissues, Settings { mode: Mode::Blend, ..settings })?;
+    let mut blend = Renderers::new(vol, &tissues, Settings { mode: Mode::Blend, ..settings })?;
+    // --perspective: both displays (a fixed eye distance; no fly-in yet)
+    let projection = cmd.render.projection()?;
+    preview.set_projection(projection)?;
+    blend.set_projection(projection)?;
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
     let info = Info {
         volume: name.clone(),

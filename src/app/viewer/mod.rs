@@ -74,11 +74,6 @@ pub const MAX_BENCH_FRAMES: usize = 100_000;
 
 /// Runs `shearwarp view`.
 pub fn run(cmd: &ViewCmd) -> anyhow::Result<()> {
-    if cmd.render.perspective.is_some() {
-        return Err(anyhow::Error::new(crate::app::cli::Usage(
-            "--perspective is not yet supported by the viewer (issue 21); use render or rotate".into(),
-        )));
-    }
     if let Some(n) = cmd.benchmark_drag.filter(|n| !(1..=MAX_BENCH_FRAMES).contains(n)) {
         return Err(anyhow::Error::new(crate::app::cli::Usage(format!("--benchmark-drag must be 1..={MAX_BENCH_FRAMES} frames, got {n}"))));
     }

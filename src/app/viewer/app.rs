@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, anyhow};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
-use winit::event::{ElementState, MouseButton, StartCause, WindowEvent};
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, StartCause, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key as WKey, NamedKey};
 use winit::window::{Window, WindowId};
@@ -99,6 +99,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
         },
         cell: settings.cell,
         drag_speed: cmd.drag_speed,
+        projection,
     });
     let mut app = App {
         state,
@@ -164,6 +165,7 @@ fn map_key(key: &WKey, repeat: bool) -> Option<Key> {
             "-" | "_" => Key::CellDown,
             " " => Key::ToggleDisplay,
             "r" | "R" => Key::Reset,
+            "p" | "P" => Key::ToggleProjection,
             "s" | "S" => Key::Save,
             "q" | "Q" => Key::Quit,
             d => match d.parse::<usize>() {
@@ -618,6 +620,13 @@ impl ApplicationHandler<Reply> for App {
                     Ok(new) => self.bench_presented(el, start, new),
                     Err(e) => self.fail(el, e),
                 }
+            }
+            WindowEvent::MouseWheel { delta, .. } => {
+                let lines = match delta {
+                    MouseScrollDelta::LineDelta(_, y) => y as f64,
+                    MouseScrollDelta::PixelDelta(p) => p.y / 40.0,
+                };
+                self.input(el, Input::Wheel { lines })
             }
             WindowEvent::Resized(s) => self.input(el, Input::Resize { w: s.width as usize, h: s.height as usize }),
             WindowEvent::CursorMoved { position, .. } => {

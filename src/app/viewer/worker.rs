@@ -164,6 +164,9 @@ impl Renderers {
 
     /// Renders `spec` into `img`.
     pub fn render<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats> {
+        if spec.projection != self.projection {
+            self.set_projection(spec.projection)?;
+        }
         let r = self.select(spec.class, spec.cell)?;
         let st = r.render(&spec.camera, img)?;
         self.stale[st.axis] = false;
@@ -336,7 +339,7 @@ mod tests {
         let tissues = presets::tissues_for(&vol);
         let r = Renderers::new(vol, &tissues, Settings { mode, threads: 1, ..Settings::default() }).unwrap();
         let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1 })
+        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel })
     }
 
     fn frame(rx: &mpsc::Receiver<Reply>) -> Frame {
@@ -359,13 +362,14 @@ mod tests {
             let s = Settings { mode, threads: 1, method: shearwarp::render::Method::Rle, ..Settings::default() };
             let mut r = Renderers::new(vol, &tissues, s).unwrap();
             let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1 };
+            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel };
             let mut par = Image::new(64, 48);
             r.render(&spec, &mut par).unwrap();
-            r.set_projection(Projection::perspective(40.0, 1.5).unwrap()).unwrap();
+            // the spec's projection is what renders
+            let persp = Projection::perspective(40.0, 1.5).unwrap();
             for class in [Class::Tissue(0), Class::Custom(100.0)] {
                 let mut img = Image::new(64, 48);
-                r.render(&Spec { class, ..spec }, &mut img).unwrap();
+                r.render(&Spec { class, projection: persp, ..spec }, &mut img).unwrap();
                 assert!(img.coverage() > 0.05, "{mode:?} {class:?}");
                 assert!(r.select(class, 1).unwrap().last_plan().unwrap().perspective.is_some());
             }

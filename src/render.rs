@@ -31,7 +31,7 @@ use crate::encode::rle::{ClassKey, RleCache};
 use crate::error::{Error, Result};
 use crate::memory::Memory;
 use crate::view::plan::{FramePlan, Grid, Limiter};
-use crate::view::{Camera, Factorization};
+use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::{Canvas, Texel, warp};
 
 /// Largest sheared mask, in bytes, a renderer builds for one axis. It is
@@ -39,6 +39,10 @@ use crate::warp::{Canvas, Texel, warp};
 pub const MAX_MASK_BYTES: u64 = 1 << 34;
 /// Largest intermediate image, in pixels, a renderer allocates.
 pub const MAX_INTERMEDIATE_PIXELS: u64 = 1 << 29;
+/// The near plane of a perspective frame, in slices in front of the eye:
+/// slices nearer the eye (where the per-slice scale grows without bound) are
+/// not composited.
+pub const NEAR_SLICES: f64 = 0.5;
 
 /// Which render path.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -273,6 +277,7 @@ struct TissueSet {
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct FrameKey {
     camera: Camera,
+    projection: Projection,
     settings: Settings,
     generation: u64,
     tissue: Option<usize>,
@@ -314,6 +319,8 @@ pub struct Renderer {
     budget: Option<u64>,
     /// How long each structure took to build.
     build_times: BuildTimes,
+    /// Parallel or perspective.
+    projection: Projection,
 }
 
 impl Renderer {
@@ -346,6 +353,7 @@ impl Renderer {
             rle: RleCache::new(),
             budget: None,
             build_times: BuildTimes::default(),
+            projection: Projection::Parallel,
         })
     }
 
@@ -516,6 +524,19 @@ impl Renderer {
             (Some(ts), Mode::Blend) => &ts.blend_cls[ts.current],
             (None, _) => &self.classifier,
         }
+    }
+    /// Sets the projection of the following frames (checked: a field of view
+    /// in (0°, 180°), an eye distance finite and > 0). A perspective frame
+    /// renders with [`Method::Rle`] or [`Method::BruteRle`]; the raycast paths
+    /// refuse it with an error.
+    pub fn set_projection(&mut self, projection: Projection) -> Result<()> {
+        projection.check()?;
+        self.projection = projection;
+        Ok(())
+    }
+    /// The projection of the following frames.
+    pub fn projection(&self) -> Projection {
+        self.projection
     }
     /// Sets (or, with `None`, removes) the producer of per-pixel ray limits
     /// that narrows every following frame's plan: a clip region or geometry.
@@ -887,6 +908,7 @@ impl Renderer {
     pub fn render<T: Texel>(&mut self, camera: &Camera, out: &mut Canvas<T>) -> Result<FrameStats> {
         let key = FrameKey {
             camera: *camera,
+            projection: self.projection,
             settings: self.settings,
             generation: self.generation,
             tissue: self.tissues.as_ref().map(|t| t.current),
@@ -897,14 +919,40 @@ impl Renderer {
                 return Ok(FrameStats { skipped: true, axis: self.plan.as_ref().map_or(0, |p| p.view.axis), ..Default::default() });
             }
         }
-        let f = Factorization::new(camera, self.volume.dims(), self.volume.spacing())?;
+        let (dims, spacing) = (self.volume.dims(), self.volume.spacing());
+        // a perspective frame: the camera scaled by its field of view, and its factorization
+        let persp = match self.projection.resolve(camera, dims, spacing)? {
+            None => None,
+            Some((cam, distance)) => {
+                if matches!(self.settings.method, Method::Binary | Method::Brute) {
+                    return Err(Error::value(
+                        "method",
+                        "perspective is not yet supported by the binary rotator (nor its brute force); use --method rle",
+                    ));
+                }
+                Some((cam, PerspectiveView::new(&cam, distance, dims, spacing)?))
+            }
+        };
+        let f = Factorization::new(persp.as_ref().map_or(camera, |p| &p.0), dims, spacing)?;
+        if let Some((_, pv)) = &persp {
+            // the eye lies on the view axis: same principal axis, same slice order
+            if (pv.axis, pv.ascending) != (f.axis, f.ascending) {
+                return Err(Error::Other("internal: the perspective and parallel factorizations disagree on the principal axis".into()));
+            }
+        }
         let mut stats = FrameStats { axis: f.axis, ..Default::default() };
         stats.build_ms = self.ensure_axis(f.axis)?;
-        // the frame plan (the parallel projection is its only producer so far)
-        let spacing = self.volume.spacing();
+        // the frame plan, from the projection's producer
         let plan = self.plan.get_or_insert_with(|| FramePlan::parallel(&f, spacing));
         let limits = plan.take_limits();
-        plan.set_parallel(&f, spacing);
+        match &persp {
+            None => plan.set_parallel(&f, spacing),
+            Some((_, pv)) => {
+                plan.set_perspective(pv, &f, spacing, NEAR_SLICES);
+                // iso opacities are 0 or 1: never corrected
+                plan.set_ray_opacity(self.settings.mode == Mode::Blend);
+            }
+        }
         if let Some((l, _)) = &self.limiter {
             plan.apply_limiter(l.as_ref(), limits.unwrap_or_default());
         }

@@ -195,8 +195,15 @@ impl Texel for [u8; 4] {
 /// [`Image8`]: each channel rounded by [`to8`], the same bytes as
 /// [`Image::to_rgba8`] of the f32 warp). The affine warp of a parallel view
 /// steps along each row in fixed point.
+///
+/// A projective warp (a perspective plan) back-projects every output pixel
+/// through the inverse homography: where the back-projected `w ≤ 0` (behind the
+/// eye) the pixel is background, never a mirrored image; elsewhere it is the
+/// bilinear sample at `(a/w, b/w)` ([`warp_projective`]).
 pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>) {
-    assert!(plan.warp.is_affine() && plan.grid.pitch == 1.0, "the warp kernel maps affine warps onto a one-voxel grid");
+    if !plan.warp.is_affine() || plan.grid.pitch != 1.0 {
+        return warp_projective(inter, plan, out);
+    }
     let m = &plan.warp.inverse;
     let (inv, it) = ([[m.x_axis.x, m.y_axis.x], [m.x_axis.y, m.y_axis.y]], [m.z_axis.x, m.z_axis.y]);
     let origin = [plan.grid.pad as f64; 2];
@@ -253,9 +260,119 @@ pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T
     });
 }
 
+/// The span `(lo, hi)` of `u` where `a·u + b > 0`, intersected with `(lo, hi)`.
+fn clip_positive(lo: f64, hi: f64, a: f64, b: f64) -> (f64, f64) {
+    if a == 0.0 {
+        return if b > 0.0 { (lo, hi) } else { (1.0, 0.0) };
+    }
+    let x = -b / a;
+    if a > 0.0 { (lo.max(x), hi) } else { (lo, hi.min(x)) }
+}
+
+/// The warp of a projective (or any non-unit-pitch) plan. Along output row
+/// `v` the homogeneous back-projection `(X, Y, W) = inverse · (u, v, 1)` is
+/// linear in `u`, and so is each condition for a pixel to read the
+/// intermediate image: `W > 0` (in front of the eye; elsewhere background)
+/// and `p0 − 1 < X/W + pad < p1 + 1`, the same for `q` (valid rectangle and its
+/// cleared ring). Their intersection is one span of the row, solved exactly;
+/// only it is resampled (bilinear at `(X/W, Y/W)`, the coordinate clamped into
+/// the ring so rounding at the span's ends cannot reach past it), and only
+/// what the last frame wrote outside it is cleared.
+pub fn warp_projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>) {
+    let m = plan.warp.inverse;
+    let w = out.width;
+    let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
+    let (iw, rgba) = (inter.size[0], &inter.rgba);
+    out.data.par_chunks_mut(w).zip(out.spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
+        let (old0, old1) = (span.0 as usize, span.1 as usize);
+        let Some(r) = inter.valid else {
+            row[old0..old1].fill(T::CLEAR);
+            *span = (0, 0);
+            return;
+        };
+        let vf = v as f64;
+        // X(u) = xa·u + xb, Y, W likewise; p = X/(W·pitch) + pad
+        let (xa, xb) = (m.x_axis.x / pitch, (m.y_axis.x * vf + m.z_axis.x) / pitch);
+        let (ya, yb) = (m.x_axis.y / pitch, (m.y_axis.y * vf + m.z_axis.y) / pitch);
+        let (wa, wb) = (m.x_axis.z, m.y_axis.z * vf + m.z_axis.z);
+        let (plo, phi) = (r.p0 as f64 - 1.0 - pad, r.p1 as f64 + 1.0 - pad);
+        let (qlo, qhi) = (r.q0 as f64 - 1.0 - pad, r.q1 as f64 + 1.0 - pad);
+        let (mut lo, mut hi) = clip_positive(0.0, (w - 1) as f64, wa, wb);
+        // X − plo·W > 0, phi·W − X > 0, and for Y
+        (lo, hi) = clip_positive(lo, hi, xa - plo * wa, xb - plo * wb);
+        (lo, hi) = clip_positive(lo, hi, phi * wa - xa, phi * wb - xb);
+        (lo, hi) = clip_positive(lo, hi, ya - qlo * wa, yb - qlo * wb);
+        (lo, hi) = clip_positive(lo, hi, qhi * wa - ya, qhi * wb - yb);
+        let (u0, u1) = if lo <= hi && hi >= 0.0 { (lo.ceil().max(0.0) as usize, (hi.floor() as usize).min(w - 1) + 1) } else { (0, 0) };
+        let (u0, u1) = if u0 < u1 { (u0, u1) } else { (0, 0) };
+        if old0 < old1 {
+            row[old0..old1.min(u0).max(old0)].fill(T::CLEAR);
+            row[u1.max(old0).min(old1)..old1].fill(T::CLEAR);
+        }
+        *span = (u0 as u32, u1 as u32);
+        // inside the span every tap is in the valid rectangle or its ring
+        // (clamped into the grid too: x0 and x0 + 1 are always pixels)
+        let ih = inter.size[1];
+        let (pmin, pmax) = ((r.p0 as f64 - 1.0).max(0.0), (r.p1 + 1).min(iw - 1) as f64 - 1e-9);
+        let (qmin, qmax) = ((r.q0 as f64 - 1.0).max(0.0), (r.q1 + 1).min(ih - 1) as f64 - 1e-9);
+        for (u, px) in row.iter_mut().enumerate().take(u1).skip(u0) {
+            let uf = u as f64;
+            let inv_w = 1.0 / (wa * uf + wb);
+            let p = ((xa * uf + xb) * inv_w + pad).clamp(pmin, pmax);
+            let q = ((ya * uf + yb) * inv_w + pad).clamp(qmin, qmax);
+            let (x0, y0) = (p.floor(), q.floor());
+            let (fx, fy) = ((p - x0) as f32, (q - y0) as f32);
+            let i = y0 as usize * iw + x0 as usize;
+            let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
+            let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
+            let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);
+            *px = T::from_rgba(t.lerp(b, fy));
+        }
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Virvo's warp never checks the back-projected w: pixels whose ray meets
+    /// the base plane behind the eye showed a mirrored image. Here they are
+    /// background, and the pixels in front are the bilinear sample.
+    #[test]
+    fn perspective_warp_behind_the_eye_is_background() {
+        use crate::view::plan::{Grid, Warp};
+        use glam::{DMat3, DVec3};
+        let f = crate::view::Factorization::new(&crate::view::Camera::new(DMat3::IDENTITY, [8, 8]), [4, 4, 4], [1.0; 3]).unwrap();
+        let mut plan = FramePlan::parallel(&f, [1.0; 3]);
+        plan.grid = Grid { size: [8, 8], pad: 0, pitch: 1.0 };
+        // w = 1 − u/4: positive for u < 4, zero at 4, negative beyond; (a, b) = (u, v)/w
+        let inverse = DMat3::from_cols(DVec3::new(1.0, 0.0, -0.25), DVec3::new(0.0, 1.0, 0.0), DVec3::new(0.0, 0.0, 1.0));
+        plan.warp = Warp { forward: inverse.inverse(), inverse };
+        let mut inter = Intermediate::default();
+        inter.prepare([8, 8]);
+        inter.rgba.fill([0.5, 0.25, 0.125, 0.5]);
+        inter.valid = Some(crate::composite::Rect { p0: 0, p1: 7, q0: 0, q1: 7 });
+        let mut out = Image::new(8, 8);
+        warp(&inter, &plan, &mut out);
+        for v in 0..8 {
+            for u in 0..8 {
+                let w = 1.0 - u as f64 / 4.0;
+                let got = out.at(u, v);
+                if w <= 0.0 {
+                    assert_eq!(got, [0.0; 4], "({u}, {v}) is behind the eye");
+                } else if (u as f64 / w) < 6.5 && (v as f64 / w) < 6.5 {
+                    assert_eq!(got, [0.5, 0.25, 0.125, 0.5], "({u}, {v})");
+                }
+            }
+        }
+        // w = 4 − u, (a, b) = (u − 8, 4 − u)/w: in front of the eye a < 0 (off
+        // the grid); behind it a = 3, 1, 0.33 and b = 1, inside the grid, so a
+        // warp that ignored the sign of w would draw a mirrored image there
+        let inverse = DMat3::from_cols(DVec3::new(1.0, -1.0, -1.0), DVec3::ZERO, DVec3::new(-8.0, 4.0, 4.0));
+        plan.warp = Warp { forward: DMat3::IDENTITY, inverse };
+        warp(&inter, &plan, &mut out);
+        assert!(out.data.iter().all(|&c| c == [0.0; 4]), "nothing is in front of the eye");
+    }
 
     /// Every value the 8-bit texel can meet: NaN, ±∞, out of range, and both
     /// sides of every rounding boundary `(k + 0.5)/255` and of every `k/255`.

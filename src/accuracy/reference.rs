@@ -57,7 +57,7 @@ use crate::composite::Mode;
 use crate::data::volume::Volume;
 use crate::error::{Error, Result};
 use crate::render::Renderer;
-use crate::view::{Camera, Factorization};
+use crate::view::{Camera, Factorization, Projection};
 use crate::warp::Image;
 
 /// Default reference step along a ray, in units of the smallest voxel spacing.
@@ -153,6 +153,9 @@ pub struct Rays {
     zoom: f64,
     size: [usize; 2],
     dir: DVec3,
+    /// Perspective: the eye in voxel coordinates and its distance from the
+    /// volume centre in world units (None: parallel rays).
+    eye: Option<(DVec3, f64)>,
 }
 
 impl Rays {
@@ -172,7 +175,51 @@ impl Rays {
             zoom: f.zoom,
             size: camera.size,
             dir: rot.transpose() * DVec3::NEG_Z / sp,
+            eye: None,
         })
+    }
+
+    /// The rays of `camera` under `projection`: for a perspective projection
+    /// the true perspective rays, from the eye through every output pixel,
+    /// with the image scale its field of view gives (as the fast paths
+    /// resolve it, [`Projection::resolve`]).
+    pub fn with_projection(camera: &Camera, projection: &Projection, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+        match projection.resolve(camera, dims, spacing)? {
+            None => Rays::new(camera, dims, spacing),
+            Some((cam, distance)) => {
+                let mut r = Rays::new(&cam, dims, spacing)?;
+                r.eye = Some((r.rot.transpose() * DVec3::new(0.0, 0.0, distance) / r.spacing + r.centre, distance));
+                Ok(r)
+            }
+        }
+    }
+
+    /// The ray of pixel `(u, v)`: `p(t) = o + t·d` in voxel coordinates, `t` in
+    /// world units (parallel: along the view from the plane through the centre;
+    /// perspective: from the eye along the ray).
+    pub fn ray(&self, u: f64, v: f64) -> (DVec3, DVec3) {
+        match self.eye {
+            None => (self.origin(u, v), self.dir),
+            Some((eye, distance)) => {
+                // the eye-space direction through the pixel: (x, y) at depth D
+                // in front of the eye lands on the pixel, as in the fast paths
+                let [w, h] = self.size;
+                let f = self.zoom * distance;
+                let e = DVec3::new((u - (w as f64 - 1.0) / 2.0) / f, ((h as f64 - 1.0) / 2.0 - v) / f, -1.0).normalize();
+                (eye, self.rot.transpose() * e / self.spacing)
+            }
+        }
+    }
+
+    /// The `t` interval where the ray `o + t·d` lies in the box of voxel
+    /// centres (and, for a perspective ray, in front of the eye), or `None`.
+    pub fn clip_ray(&self, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
+        let hi = DVec3::new(self.dims[0] as f64 - 1.0, self.dims[1] as f64 - 1.0, self.dims[2] as f64 - 1.0);
+        let (t0, t1) = clip_box(o, d, DVec3::ZERO, hi)?;
+        match self.eye {
+            None => Some((t0, t1)),
+            Some(_) => (t1 >= 0.0).then_some((t0.max(0.0), t1)),
+        }
     }
 
     /// Output image size.
@@ -360,11 +407,26 @@ impl ReferenceRenderer {
 
     /// Renders `scene` from `camera`.
     pub fn render(&self, scene: &Scene, camera: &Camera, opts: &ReferenceOptions) -> Result<ReferenceImage> {
+        self.render_projected(scene, camera, &Projection::Parallel, opts)
+    }
+
+    /// Renders `scene` from `camera` under `projection`: perspective rays from
+    /// the eye through each output pixel for a perspective projection (the
+    /// headlight stays the central view direction, as in the fast paths; the
+    /// iso depth is still measured along the view from the plane through the
+    /// volume centre).
+    pub fn render_projected(
+        &self,
+        scene: &Scene,
+        camera: &Camera,
+        projection: &Projection,
+        opts: &ReferenceOptions,
+    ) -> Result<ReferenceImage> {
         opts.check()?;
         if scene.iso.is_nan() {
             return Err(Error::value("iso value", "NaN"));
         }
-        let rays = Rays::new(camera, self.dims, self.spacing)?;
+        let rays = Rays::with_projection(camera, projection, self.dims, self.spacing)?;
         let sp = DVec3::new(self.spacing[0] as f64, self.spacing[1] as f64, self.spacing[2] as f64);
         let min_sp = sp.min_element();
         let cls = &scene.classifier;
@@ -447,9 +509,8 @@ impl Tracer<'_> {
 
     /// Colour, depth and sample count of the ray through pixel `(u, v)`.
     fn trace(&self, u: f64, v: f64) -> ([f32; 4], f64, u64) {
-        let o = self.rays.origin(u, v);
-        let d = self.rays.dir;
-        let Some((t0, t1)) = self.rays.clip(o) else {
+        let (o, d) = self.rays.ray(u, v);
+        let Some((t0, t1)) = self.rays.clip_ray(o, d) else {
             return ([0.0; 4], f64::NAN, 0);
         };
         let vol = self.vol;
@@ -486,7 +547,9 @@ impl Tracer<'_> {
                             let (th, ph) = if j == 0 { (t, p) } else { self.bisect(at(j - 1).0, t, o, d, hi) };
                             let ndl = self.ndl(vol.gradient(ph));
                             let [r, g, b] = self.scene.shading.shade(self.iso_rgb, ndl);
-                            return ([r, g, b, 1.0], th, samples);
+                            // the depth convention: along the view from the plane through the centre
+                            let depth = if self.rays.eye.is_some() { self.rays.depth_of(ph) } else { th };
+                            return ([r, g, b, 1.0], depth, samples);
                         }
                     }
                     Mode::Blend => {
@@ -546,6 +609,9 @@ impl Tracer<'_> {
 /// fractional slice ([`Factorization::sheared_to_voxel`]).
 pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>> {
     let plan = renderer.last_plan().ok_or_else(|| Error::value("fast path depth", "the renderer has not rendered a frame yet"))?;
+    if renderer.projection().is_perspective() {
+        return Err(Error::value("fast path depth", "not yet computed under a perspective projection"));
+    }
     let f = &plan.view;
     if *f != Factorization::new(camera, renderer.dims(), renderer.spacing())? {
         return Err(Error::value("fast path depth", "the last frame was rendered with a different camera"));

@@ -21,10 +21,12 @@ use shearwarp::data::volume::{Volume, VoxelType};
 use shearwarp::encode::depth::Search;
 use shearwarp::kernels;
 use shearwarp::render::{FrameStats, Method, Normals, Renderer, Settings, WordSize, estimate_axis};
-use shearwarp::view::{Camera, NamedView, one_bit_step_deg, rotate_eye};
+use shearwarp::view::{Camera, NamedView, Projection, one_bit_step_deg, rotate_eye};
 use shearwarp::warp::Image;
 
 const AXES: [&str; 3] = ["x", "y", "z"];
+/// `--eye-distance` when `--perspective` is given without it, in volume diagonals.
+pub const DEFAULT_EYE_DISTANCE: f64 = 2.0;
 
 /// A problem with the arguments or the input (exit code 2), as opposed to a
 /// failure while running (exit code 1).
@@ -72,6 +74,7 @@ Examples:
   shearwarp info --phantom head                        # size, range, histogram, thresholds
   shearwarp render scan.nrrd --tissue bone -o bone.png  # NRRD, NIfTI, DICOM directory, .den, raw
   shearwarp info brain.nii.gz                          # dims, spacing, histogram, thresholds
+  shearwarp render --method rle --perspective 40 --eye-distance 1.5 -o persp.png   # perspective
   shearwarp view                                       # interactive window: drag to rotate, keys 1-4 tissues
   shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
 
@@ -204,6 +207,18 @@ pub struct RenderArgs {
     /// Pixels per world unit (default: fit the bounding diagonal).
     #[arg(long)]
     pub zoom: Option<f64>,
+    /// Perspective projection with this vertical field of view, in degrees
+    /// (0 < FOV < 180), from an eye on the view axis --eye-distance volume
+    /// diagonals from the volume's centre (the field of view sets the scale:
+    /// no --zoom). Renders with --method rle or brute-rle; rays more than 63.4°
+    /// off the principal axis (the eye inside or very near the volume) are not
+    /// supported yet.
+    #[arg(long, value_name = "FOV_DEGREES", allow_negative_numbers = true, conflicts_with = "zoom")]
+    pub perspective: Option<f64>,
+    /// With --perspective: the eye's distance from the volume's centre, in
+    /// volume diagonals [default: 2].
+    #[arg(long, value_name = "D", allow_negative_numbers = true, requires = "perspective")]
+    pub eye_distance: Option<f64>,
     /// Starting view: anterior (face), posterior, left, right, superior, inferior.
     #[arg(long, value_enum, default_value = "anterior")]
     pub view: NamedView,
@@ -463,6 +478,7 @@ impl RenderArgs {
         let hi = vol.value_range().1;
         let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
         r.set_memory_budget(crate::app::budget());
+        r.set_projection(self.projection()?)?;
         match self.tissue.as_deref() {
             None | Some("auto") => {}
             Some(name) => {
@@ -489,6 +505,24 @@ impl RenderArgs {
             }
         }
         Ok(r)
+    }
+
+    /// The projection: `--perspective FOV` (with `--eye-distance D`, default
+    /// 2 diagonals), else parallel. Bad numbers, and a path that cannot render
+    /// perspective, are usage errors.
+    pub fn projection(&self) -> Result<Projection> {
+        let Some(fov) = self.perspective else { return Ok(Projection::Parallel) };
+        if !(fov > 0.0 && fov < 180.0) {
+            usage!("--perspective takes a vertical field of view in degrees, 0 < FOV < 180, got {fov}");
+        }
+        let d = self.eye_distance.unwrap_or(DEFAULT_EYE_DISTANCE);
+        if !(d.is_finite() && d > 0.0) {
+            usage!("--eye-distance must be a finite number of volume diagonals > 0, got {d}");
+        }
+        if matches!(self.method, Method::Binary | Method::Brute) {
+            usage!("perspective is not yet supported by the binary rotator (nor --method brute); use --method rle (or brute-rle)");
+        }
+        Ok(Projection::perspective(fov, d)?)
     }
 
     /// Render settings.
@@ -588,6 +622,14 @@ fn prepare_first(r: &mut Renderer, cam: &Camera) -> Result<f64> {
     Ok(ms)
 }
 
+/// The projection as JSON: `"parallel"`, or the field of view and eye distance.
+fn projection_json(p: Projection) -> serde_json::Value {
+    match p {
+        Projection::Parallel => serde_json::json!("parallel"),
+        Projection::Perspective { fov_deg, eye_distance } => serde_json::json!({"fov_deg": fov_deg, "eye_distance": eye_distance}),
+    }
+}
+
 /// The code width of a mask for `tissues` presets.
 fn code_bits(tissues: usize) -> u32 {
     shearwarp::encode::depth::code_width_for(tissues.max(1)).unwrap_or(4)
@@ -632,6 +674,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
+            "projection": projection_json(r.projection()),
             "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": build_ms + stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,
@@ -775,7 +818,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
-            "cpu": s.cpu.capped().name(), "tissue_switches": switch_ms.len(),
+            "cpu": s.cpu.capped().name(), "projection": projection_json(r.projection()), "tissue_switches": switch_ms.len(),
             // the full cost of a switch: selection plus the rebuild it causes (re-encoding on the RLE paths)
             "tissue_switch_ns_median": median(&mut switch_ms.clone()) * 1e6,
             "tissue_switch_ms_median": median(&mut switch_ms.clone()), "tissue_switch_ms_total": switch_ms_total,

@@ -597,14 +597,16 @@ fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(usize, u
 /// The rectangle of the intermediate grid that rays through the volume can reach
 /// under `plan`'s slice maps (geometry only, no mask): used by brute force.
 pub fn volume_rect(plan: &FramePlan, cells: [usize; 2]) -> Option<Rect> {
-    let (pad, grid) = (plan.grid.pad, plan.grid.size);
+    let grid = plan.grid.size;
     if cells[0] == 0 || cells[1] == 0 || plan.maps.is_empty() {
         return None;
     }
+    plan.front_to_back().next()?;
+    // the pixels whose samples fall in the cells of the slices composited
     let span = |a: usize| {
-        let floors = || plan.maps.iter().map(move |s| s.floor[a]);
-        let lo = floors().map(|f| pad as i32 - f).min().unwrap_or(0).max(0) as usize;
-        let hi = floors().map(|f| pad as i32 - f + cells[a] as i32 - 1).max().unwrap_or(0) as usize;
+        let xs = || plan.front_to_back().map(move |k| plan.pixels_of_cells(k, a, 0, cells[a] as i64 - 1));
+        let lo = xs().map(|x| x[0]).min().unwrap_or(0).max(0) as usize;
+        let hi = xs().map(|x| x[1]).max().unwrap_or(0).max(0) as usize;
         (lo, hi.min(grid[a] - 1))
     };
     let (p0, p1) = span(0);

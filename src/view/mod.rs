@@ -4,7 +4,8 @@
 //! factorization of the viewing transform into a shear of the slices and a
 //! warp of the intermediate image ([`factor`], re-exported here), and the
 //! per-frame plan every traversal reads ([`plan`]). [`perspective`] holds the
-//! perspective factorization (not yet a producer of plans).
+//! perspective projection and factorization, whose plans
+//! [`FramePlan::set_perspective`] makes.
 
 pub mod camera;
 mod factor;
@@ -13,4 +14,5 @@ pub mod plan;
 
 pub use camera::*;
 pub use factor::*;
+pub use perspective::{PerspectiveView, Projection};
 pub use plan::FramePlan;

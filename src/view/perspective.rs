@@ -17,10 +17,14 @@
 //! `σ_k ≥ 1` (compositing only minifies) and translated. The warp from the base
 //! plane to the output is the 3×3 projective map [`PerspectiveView::warp`].
 //!
-//! Not yet here (issue 21): views whose rays deviate more than 45° from the
-//! principal axis (a wide field of view, the eye inside the volume), which
-//! need Lacroute's pyramid split — [`PerspectiveView::new`] says so with an
-//! error — and the plan producer and traversals that read scaled maps.
+//! One pyramid only: the rays into the volume may leave the principal axis by
+//! up to `atan(MAX_RAY_SLOPE)` (63.4°) per in-slice axis, not only 45°, so
+//! the 45° views and the main diagonal render from an eye 1.5 volume diagonals
+//! away or farther (their far-side rays pass 45°: at slope 2 a ray samples a
+//! slice every 3 voxels at worst, its opacity corrected for it). Views past
+//! that — the eye inside or very near the volume — need Lacroute's pyramid
+//! split (issue 21, a later phase): [`PerspectiveView::new`] says so with an
+//! error. [`crate::view::plan::FramePlan::set_perspective`] makes the plan.
 
 use glam::{DMat3, DVec3};
 
@@ -28,6 +32,71 @@ use crate::error::{Error, Result};
 use crate::view::factor::{camera_zoom, unpermute};
 use crate::view::plan::Warp;
 use crate::view::{Camera, permutation, principal_axis};
+
+/// The projection of a frame: parallel (orthographic), or perspective from an
+/// eye on the view axis.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Projection {
+    /// Orthographic: the camera's zoom (or the fit of the bounding diagonal).
+    #[default]
+    Parallel,
+    /// Perspective: a vertical field of view of `fov_deg` degrees (in (0, 180))
+    /// over the image height, the eye `eye_distance` volume diagonals from the
+    /// volume's centre on the camera's +z axis (so 0.1 puts it inside). The
+    /// field of view sets the image scale: the camera's zoom is not used.
+    Perspective { fov_deg: f64, eye_distance: f64 },
+}
+
+impl Projection {
+    /// A checked perspective projection.
+    pub fn perspective(fov_deg: f64, eye_distance: f64) -> Result<Self> {
+        let p = Projection::Perspective { fov_deg, eye_distance };
+        p.check()?;
+        Ok(p)
+    }
+
+    /// Checks the numbers: a field of view in (0°, 180°) and a finite eye
+    /// distance > 0.
+    pub fn check(&self) -> Result<()> {
+        if let Projection::Perspective { fov_deg, eye_distance } = *self {
+            if !(fov_deg > 0.0 && fov_deg < 180.0) {
+                return Err(Error::value("field of view", format!("{fov_deg} degrees (must be in (0, 180))")));
+            }
+            if !(eye_distance.is_finite() && eye_distance > 0.0) {
+                return Err(Error::value("eye distance", format!("{eye_distance} volume diagonals (must be finite and > 0)")));
+            }
+        }
+        Ok(())
+    }
+
+    /// For a perspective projection: `camera` with the zoom its field of view
+    /// gives in the plane through the volume centre, and the eye's distance
+    /// from the centre in world units (volume diagonals, as the parallel fit
+    /// measures them, times `eye_distance`). `None` for a parallel projection.
+    pub fn resolve(&self, camera: &Camera, dims: [usize; 3], spacing: [f32; 3]) -> Result<Option<(Camera, f64)>> {
+        self.check()?;
+        let Projection::Perspective { fov_deg, eye_distance } = *self else { return Ok(None) };
+        let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
+        let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let distance = eye_distance * ((nd - 1.0).max(DVec3::ONE) * sp).length();
+        // f pixels per unit of e.x/(D − e.z): half the image height at half the field of view
+        let f = camera.size[1] as f64 / 2.0 / (fov_deg.to_radians() / 2.0).tan();
+        let zoom = f / distance;
+        if !(zoom.is_finite() && zoom > 0.0) {
+            return Err(Error::value("perspective view", format!("no finite image scale for {fov_deg}° at {eye_distance} diagonals")));
+        }
+        Ok(Some((Camera { zoom: Some(zoom), ..*camera }, distance)))
+    }
+
+    /// True for a perspective projection.
+    pub fn is_perspective(&self) -> bool {
+        matches!(self, Projection::Perspective { .. })
+    }
+}
+
+/// The largest in-slice slope (per axis, in voxels per slice) of a ray into
+/// the volume that one pyramid composites: `tan 63.4°`.
+pub const MAX_RAY_SLOPE: f64 = 2.0;
 
 /// A perspective view of one principal axis, factorized into scaled slices and
 /// a projective warp.
@@ -75,17 +144,25 @@ impl PerspectiveView {
         } else if e[2] > last {
             (n[2] - 1, false)
         } else {
-            return Err(Error::value("perspective view", "the eye is between the first and last slice: it needs the pyramid split"));
+            return Err(Error::value(
+                "perspective view",
+                "the eye is inside the volume's slab (between its first and last slice along the principal axis): that needs the pyramid split, not yet done; move the eye farther (--eye-distance)",
+            ));
         };
-        // one pyramid only if every ray into the box is within 45° of k: the
-        // conditions are linear over the box, so its corners decide
+        // one pyramid only if every ray into the box has an in-slice slope of at
+        // most MAX_RAY_SLOPE: the conditions are linear over the box, so its
+        // corners decide
         let mut corners = 0..8;
         if corners.any(|c| {
             let x = [0, 1, 2].map(|a| if c >> a & 1 == 1 { n[a].saturating_sub(1) as f64 } else { 0.0 });
             let dk = (x[2] - e[2]).abs();
-            (x[0] - e[0]).abs() > dk * (1.0 + 1e-12) || (x[1] - e[1]).abs() > dk * (1.0 + 1e-12)
+            let lim = dk * MAX_RAY_SLOPE * (1.0 + 1e-12);
+            (x[0] - e[0]).abs() > lim || (x[1] - e[1]).abs() > lim
         }) {
-            return Err(Error::value("perspective view", "rays deviate more than 45° from the principal axis: it needs the pyramid split"));
+            return Err(Error::value(
+                "perspective view",
+                "rays deviate more than 63.4° from the principal axis (the eye too near the volume): it needs the pyramid split, not yet done; move the eye farther (--eye-distance)",
+            ));
         }
         let kappa = 1.0 / (k_front as f64 - e[2]);
         // the warp: sheared (a, b) on the base plane is voxel (a, b, k_front)
@@ -228,8 +305,9 @@ mod tests {
         let cam = Camera::new(DMat3::IDENTITY, [64, 64]);
         // the eye inside the volume
         assert!(PerspectiveView::new(&cam, 2.0, [20, 20, 20], [1.0; 3]).is_err());
-        // close enough that the corner rays pass 45°
-        assert!(PerspectiveView::new(&cam, 18.0, [20, 20, 20], [1.0; 3]).is_err());
+        // close enough that the corner rays pass slope 2 (9.5 across, 4.5 deep), and not
+        assert!(PerspectiveView::new(&cam, 14.0, [20, 20, 20], [1.0; 3]).is_err());
+        assert!(PerspectiveView::new(&cam, 15.0, [20, 20, 20], [1.0; 3]).is_ok());
         assert!(PerspectiveView::new(&cam, 40.0, [20, 20, 20], [1.0; 3]).is_ok());
         assert!(PerspectiveView::new(&cam, f64::NAN, [20, 20, 20], [1.0; 3]).is_err());
         assert!(PerspectiveView::new(&cam, -5.0, [20, 20, 20], [1.0; 3]).is_err());

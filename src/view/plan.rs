@@ -28,12 +28,53 @@ use glam::{DMat3, DVec3};
 
 use crate::encode::shear::ShearState;
 use crate::view::Factorization;
+use crate::view::perspective::PerspectiveView;
 
 /// How the slices' sample maps are built.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MapKind {
     /// Every slice is the intermediate grid translated: `(i, j) = (p − pad, q − pad) + trans[k]`.
     Translate,
+    /// Every slice is the intermediate grid scaled and translated (a
+    /// perspective view, [`FramePlan::set_perspective`]):
+    /// `(i, j) = σ_k · (a, b) + τ_k` for the sheared point `(a, b)` of pixel
+    /// `(p, q)`, with `σ_k ≥ 1` ([`ScaledMap`], [`FramePlan::scaled`]).
+    ScaleTranslate,
+}
+
+/// One slice's map under [`MapKind::ScaleTranslate`]: the ray of sheared point
+/// `(a, b)` meets slice `k` at in-slice position `scale · (a, b) + trans`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ScaledMap {
+    pub scale: f64,
+    pub trans: [f64; 2],
+}
+
+/// What a perspective plan keeps to give each ray its own sample spacing.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PerspectiveRays {
+    /// The eye's foot `(E_i, E_j)` on the slices (voxel units, in the plan's
+    /// sheared coordinates), and `κ`: the ray of sheared point `(a, b)` moves
+    /// by `κ · ((a, b) − E)` per slice.
+    pub foot: [f64; 2],
+    /// The plan's sheared point `(a, b)` is the view's base-plane point
+    /// `(a, b) + shift` ([`PerspectiveView::sheared_to_voxel`]): see
+    /// [`FramePlan::set_perspective`].
+    pub shift: [f64; 2],
+    pub kappa: f64,
+    /// Voxel spacing along `(i, j, k)` over the spacing opacities are defined
+    /// at (the smallest voxel spacing).
+    pub rel_spacing: [f64; 3],
+}
+
+impl PerspectiveRays {
+    /// The real sample spacing (one slice along the ray) of the ray through
+    /// sheared point `(a, b)`, over the spacing opacities are defined at.
+    pub fn ratio(&self, a: f64, b: f64) -> f64 {
+        let [si, sj, sk] = self.rel_spacing;
+        let (di, dj) = (self.kappa * (a - self.foot[0]) * si, self.kappa * (b - self.foot[1]) * sj);
+        (di * di + dj * dj + sk * sk).sqrt()
+    }
 }
 
 /// One slice's translation map, as a ray reads it in one 16-byte load: the
@@ -185,6 +226,16 @@ impl<F: Fn(&FramePlan, &mut RayLimits) + Send + Sync> Limiter for F {
     }
 }
 
+/// `floor(s)` of a finite `s` well inside the i64 range: a truncation and a
+/// correction, not a call to `floor` (the x86-64 baseline has no instruction
+/// for it). The one floor of every scaled map ([`FramePlan::cell_of`],
+/// [`FramePlan::pixels_of_cells`]).
+#[inline(always)]
+fn floor_i64(s: f64) -> i64 {
+    let c = s as i64;
+    if (c as f64) > s { c - 1 } else { c }
+}
+
 /// The geometry of one frame, read by every traversal and the warp.
 #[derive(Clone, Debug)]
 pub struct FramePlan {
@@ -204,8 +255,23 @@ pub struct FramePlan {
     /// Optional per-pixel limits within `k_range`.
     pub limits: Option<RayLimits>,
     /// Real sample spacing over the spacing opacities are defined at (the
-    /// smallest voxel spacing): `α' = 1 − (1 − α)^ratio`.
+    /// smallest voxel spacing): `α' = 1 − (1 − α)^ratio`. In a perspective
+    /// plan each ray has its own spacing; this is the smallest of them (the
+    /// classification tables are corrected to it) and
+    /// [`FramePlan::opacity_exponent`] gives each pixel the rest.
     pub opacity_ratio: f32,
+    /// Per slice, the scaled map ([`MapKind::ScaleTranslate`] only; empty for a
+    /// parallel plan, whose [`FramePlan::maps`] are exact). In a perspective
+    /// plan `maps[k]` is the split of `scaled[k].trans` alone.
+    pub scaled: Vec<ScaledMap>,
+    /// The perspective rays' geometry (None: a parallel plan).
+    pub perspective: Option<PerspectiveRays>,
+    /// Per intermediate pixel (row-major over the grid), the exponent that takes
+    /// an opacity corrected to [`FramePlan::opacity_ratio`] to the pixel's own
+    /// ray spacing: `α'' = 1 − (1 − α')^e`, `e ≥ 1`. Empty when every ray has the
+    /// uniform ratio (parallel plans, and perspective plans in iso mode: see
+    /// [`FramePlan::set_ray_opacity`]).
+    exponents: Vec<f32>,
 }
 
 impl FramePlan {
@@ -221,8 +287,18 @@ impl FramePlan {
             k_range: [0, 0],
             limits: None,
             opacity_ratio: 1.0,
+            scaled: vec![],
+            perspective: None,
+            exponents: vec![],
         };
         p.set_parallel(f, spacing);
+        p
+    }
+
+    /// The plan of perspective view `pv` (see [`FramePlan::set_perspective`]).
+    pub fn perspective(pv: &PerspectiveView, f: &Factorization, spacing: [f32; 3], near: f64) -> Self {
+        let mut p = FramePlan::parallel(f, spacing);
+        p.set_perspective(pv, f, spacing, near);
         p
     }
 
@@ -253,6 +329,199 @@ impl FramePlan {
         self.limits = None;
         let min_sp = spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
         self.opacity_ratio = (f.sample_spacing / min_sp) as f32;
+        self.scaled.clear();
+        self.perspective = None;
+        self.exponents.clear();
+    }
+
+    /// Overwrites this plan with that of perspective view `pv`, reusing its
+    /// arrays. `f` is the parallel factorization of the same camera (same
+    /// principal axis and slice order): the plan's [`FramePlan::view`], read for
+    /// the axis, the permutation and the shading directions (the headlight is
+    /// the central view direction); its affine warp is not used.
+    ///
+    /// - **Maps.** Slice `k` is sampled at `σ_k · (a, b) + τ_k`
+    ///   ([`MapKind::ScaleTranslate`], [`FramePlan::scaled`]).
+    /// - **Slices.** `k_range` holds the slices at least `near` slices in front
+    ///   of the eye (a slice on or behind the near plane is never composited).
+    /// - **Grid.** One pixel per voxel at the base plane (the slice nearest the
+    ///   eye, `σ = 1`), so compositing only minifies; its size and origin are the
+    ///   exact bounding box of every composited slice's cells (plus the one-pixel
+    ///   ring the warp's bilinear taps may read), so no slice is ever cut off.
+    ///   One `pad` serves both axes: the axis with the smaller low margin keeps
+    ///   some unused pixels (never composited: the occupied rectangle skips them).
+    /// - **Rays.** The intermediate pixels' rays are those of the parallel view's
+    ///   pixels in the limit: pixel `(p, q)` is the base-plane point
+    ///   `(p − pad, q − pad) + shift`, with `shift` chosen so the ray of sheared
+    ///   `(0, 0)` meets the centre slice `kc` at a voxel column, as every parallel
+    ///   ray does. As the eye recedes the samples become the parallel plan's,
+    ///   exactly (not only the same rays resampled on another lattice).
+    /// - **Warp.** The projective map of `pv` (after the shift) and its inverse.
+    /// - **Opacity.** Each ray's sample spacing is constant along it
+    ///   ([`PerspectiveRays::ratio`]); [`FramePlan::opacity_ratio`] is the smallest
+    ///   possible one (the ray along k) and [`FramePlan::opacity_exponent`] the rest.
+    ///
+    /// Clears any ray limits.
+    pub fn set_perspective(&mut self, pv: &PerspectiveView, f: &Factorization, spacing: [f32; 3], near: f64) {
+        debug_assert_eq!((pv.axis, pv.n, pv.ascending), (f.axis, f.n, f.ascending));
+        self.view.clone_from(f);
+        self.view.ascending = pv.ascending;
+        self.kind = MapKind::ScaleTranslate;
+        // the binary rotator does not read perspective plans (the renderer refuses it)
+        self.shear.set_view(f);
+        let nk = pv.n[2];
+        // the shift that puts sheared (0, 0)'s sample in the centre slice on a voxel column
+        let kc = (nk as f64 - 1.0) / 2.0;
+        let (sc, tc) = (pv.scale(kc), pv.trans(kc));
+        let shift = tc.map(|t| (t.round() - t) / sc);
+        self.scaled.clear();
+        self.scaled.extend((0..nk).map(|k| {
+            let (s, t) = (pv.scale(k as f64), pv.trans(k as f64));
+            ScaledMap { scale: s, trans: [s * shift[0] + t[0], s * shift[1] + t[1]] }
+        }));
+        self.maps.clear();
+        self.maps.extend(self.scaled.iter().map(|m| {
+            let fl = m.trans.map(|t| t.floor());
+            SliceMap { floor: fl.map(|x| x as i32), weight: [(m.trans[0] - fl[0]) as f32, (m.trans[1] - fl[1]) as f32] }
+        }));
+        // the slices in front of the near plane
+        let ek = pv.eye[2];
+        let front = |k: usize| if pv.ascending { k as f64 - ek } else { ek - k as f64 };
+        // (front(k) is monotone in k: the slices kept are one range; no allocation)
+        let (first, last) = ((0..nk).find(|&k| front(k) >= near), (0..nk).rev().find(|&k| front(k) >= near));
+        self.k_range = match (first, last) {
+            (Some(a), Some(b)) => [a, b],
+            _ => [1, 0],
+        };
+        let ks = if first.is_some() { self.k_range[0]..self.k_range[1] + 1 } else { 0..0 };
+        // the exact bounding box of every composited slice's cells, in sheared
+        // coordinates: cell c of slice k covers sample positions [c, c + 1)
+        let cells = [pv.n[0].saturating_sub(1), pv.n[1].saturating_sub(1)];
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for k in ks.clone() {
+            let m = self.scaled[k];
+            for a in 0..2 {
+                lo[a] = lo[a].min((0.0 - m.trans[a]) / m.scale);
+                hi[a] = hi[a].max((cells[a] as f64 - m.trans[a]) / m.scale);
+            }
+        }
+        let (pad, size) = if ks.is_empty() || cells[0] == 0 || cells[1] == 0 {
+            (1, [2, 2])
+        } else {
+            // pixel p samples a = p − pad: the first pixel at or after lo is
+            // ceil(lo) + pad = 2 − floor(−lo) + floor(max(−lo)) ≥ 2, the last before
+            // hi is ceil(hi) − 1 + pad ≤ size − 3
+            // (lo ≤ |shift| ≤ 1/2: the front slice starts at sheared 0 − shift)
+            let pad = ((-lo[0]).max(-lo[1]).floor() as i64 + 2).max(0) as usize;
+            (pad, [0, 1].map(|a| (pad as f64 + hi[a].ceil()) as usize + 2))
+        };
+        self.grid = Grid { size, pad, pitch: 1.0 };
+        let to_base = DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(shift[0], shift[1], 1.0));
+        let from_base = DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(-shift[0], -shift[1], 1.0));
+        self.warp = Warp { forward: pv.warp.forward * to_base, inverse: from_base * pv.warp.inverse };
+        self.limits = None;
+        let min_sp = spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
+        let p = pv.perm;
+        let rays = PerspectiveRays {
+            foot: [pv.eye[0] - shift[0], pv.eye[1] - shift[1]],
+            shift,
+            kappa: pv.kappa,
+            rel_spacing: [0, 1, 2].map(|c| spacing[p[c]] as f64 / min_sp),
+        };
+        self.perspective = Some(rays);
+        self.opacity_ratio = rays.rel_spacing[2] as f32;
+        self.set_ray_opacity(true);
+    }
+
+    /// Whether each ray's opacity is corrected to its own sample spacing
+    /// (perspective plans; a no-op for parallel ones). The renderer turns it
+    /// off in iso mode, whose opacities are 0 or 1 and never corrected.
+    pub fn set_ray_opacity(&mut self, on: bool) {
+        self.exponents.clear();
+        let Some(rays) = self.perspective.filter(|_| on) else { return };
+        let [w, h] = self.grid.size;
+        let base = self.opacity_ratio as f64;
+        for q in 0..h {
+            for p in 0..w {
+                let [a, b] = self.intermediate_to_sheared(p as f64, q as f64);
+                self.exponents.push((rays.ratio(a, b) / base).max(1.0) as f32);
+            }
+        }
+    }
+
+    /// The exponent `e ≥ 1` that takes an opacity corrected to
+    /// [`FramePlan::opacity_ratio`] to intermediate pixel `(p, q)`'s own ray:
+    /// `α'' = 1 − (1 − α')^e` ([`crate::composite::correct_opacity`]); 1 for
+    /// every pixel of a parallel plan.
+    #[inline(always)]
+    pub fn opacity_exponent(&self, p: usize, q: usize) -> f32 {
+        if self.exponents.is_empty() { 1.0 } else { self.exponents[q * self.grid.size[0] + p] }
+    }
+
+    /// The real sample spacing of intermediate pixel `(p, q)`'s ray over the
+    /// spacing opacities are defined at: uniform for a parallel plan.
+    pub fn opacity_ratio_at(&self, p: f64, q: f64) -> f64 {
+        match &self.perspective {
+            None => self.opacity_ratio as f64,
+            Some(r) => {
+                let [a, b] = self.intermediate_to_sheared(p, q);
+                r.ratio(a, b)
+            }
+        }
+    }
+
+    /// The cell (integer part) and in-cell weight along in-slice axis `axis`
+    /// (0 = i, 1 = j) of intermediate pixel column/row `x` in slice `k`: where
+    /// every traversal samples. Exactly the maps' numbers for a parallel plan.
+    #[inline(always)]
+    pub fn cell_of(&self, k: usize, axis: usize, x: usize) -> (i64, f32) {
+        match self.kind {
+            MapKind::Translate => {
+                let m = &self.maps[k];
+                (x as i64 - self.grid.pad as i64 + m.floor[axis] as i64, m.weight[axis])
+            }
+            MapKind::ScaleTranslate => {
+                let m = &self.scaled[k];
+                let s = m.scale * ((x as f64 - self.grid.pad as f64) * self.grid.pitch) + m.trans[axis];
+                let c = floor_i64(s);
+                (c, (s - c as f64) as f32)
+            }
+        }
+    }
+
+    /// The intermediate pixels `[x0, x1]` along in-slice axis `axis` whose
+    /// samples in slice `k` fall in cells `c0 ..= c1` ([`FramePlan::cell_of`]),
+    /// not clipped to the grid; `x0 > x1` when none do.
+    pub fn pixels_of_cells(&self, k: usize, axis: usize, c0: i64, c1: i64) -> [i64; 2] {
+        match self.kind {
+            MapKind::Translate => {
+                let off = self.grid.pad as i64 - self.maps[k].floor[axis] as i64;
+                [c0 + off, c1 + off]
+            }
+            MapKind::ScaleTranslate => {
+                let m = &self.scaled[k];
+                let pad = self.grid.pad as f64;
+                // the estimate from the inverse map, then exact by the map itself
+                // (monotone: σ > 0), over pixel indices that may be negative
+                let cell = |x: i64| floor_i64(m.scale * ((x as f64 - pad) * self.grid.pitch) + m.trans[axis]);
+                let inv = |c: i64| ((c as f64 - m.trans[axis]) / m.scale / self.grid.pitch + pad).floor() as i64;
+                let mut x0 = inv(c0);
+                while cell(x0) >= c0 {
+                    x0 -= 1;
+                }
+                while cell(x0) < c0 {
+                    x0 += 1;
+                }
+                let mut x1 = inv(c1 + 1);
+                while cell(x1) > c1 {
+                    x1 -= 1;
+                }
+                while cell(x1 + 1) <= c1 {
+                    x1 += 1;
+                }
+                [x0, x1]
+            }
+        }
     }
 
     /// Lets `limiter` narrow the rays of this plan, into `buf` (reused across
@@ -364,6 +633,123 @@ mod tests {
         assert_eq!(w.to_sheared(1.0, 2.0), None);
         let w = Warp { forward: DMat3::IDENTITY, inverse: DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(0.0, 0.0, 2.0)) };
         assert_eq!(w.to_sheared(1.0, 2.0), Some([0.5, 1.0]));
+    }
+
+    /// Random perspective views of one pyramid, with their plans.
+    fn perspective_plans(n: usize, near: f64) -> Vec<(PerspectiveView, FramePlan)> {
+        let mut seed = 11u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (dims, sp) = ([20, 26, 17], [1.0f32, 0.8, 1.5]);
+        let mut out = vec![];
+        while out.len() < n {
+            let r = DMat3::from_euler(glam::EulerRot::XYZ, rnd() * 7.0, rnd() * 7.0, rnd() * 7.0);
+            let cam = Camera { rotation: r, zoom: Some(2.0), size: [96, 80] };
+            let Ok(pv) = PerspectiveView::new(&cam, 45.0 + rnd() * 300.0, dims, sp) else { continue };
+            let f = Factorization::new(&cam, dims, sp).unwrap();
+            let plan = FramePlan::perspective(&pv, &f, sp, near);
+            out.push((pv, plan));
+        }
+        out
+    }
+
+    /// Virvo drops a slice that does not fit its fixed intermediate image. The
+    /// perspective grid is the exact bounding box of every slice's cells: each
+    /// slice's pixels lie inside it (with the one-pixel ring the warp reads),
+    /// the box's extreme pixels are reached by some slice, and no slice
+    /// composited is empty.
+    #[test]
+    fn perspective_grid_covers_every_slice_exactly() {
+        for (pv, plan) in perspective_plans(200, 0.5) {
+            assert_eq!(plan.kind, MapKind::ScaleTranslate);
+            assert!(!plan.warp.is_affine());
+            let [w, h] = plan.grid.size;
+            let cells = [pv.n[0] as i64 - 1, pv.n[1] as i64 - 1];
+            let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
+            for k in plan.front_to_back() {
+                for a in 0..2 {
+                    let [x0, x1] = plan.pixels_of_cells(k, a, 0, cells[a] - 1);
+                    assert!(x0 <= x1, "slice {k} has no pixel");
+                    assert!(x0 >= 1 && x1 <= [w, h][a] as i64 - 2, "slice {k} axis {a}: [{x0}, {x1}] in {:?}", plan.grid);
+                    // exact: the end pixels sample the end cells, their outer neighbours miss
+                    // (a minified slice's cell 0 itself may fall between two pixels)
+                    assert!(plan.cell_of(k, a, x0 as usize).0 >= 0);
+                    assert!(plan.cell_of(k, a, x0 as usize - 1).0 < 0);
+                    assert!((0..cells[a]).contains(&plan.cell_of(k, a, x1 as usize).0));
+                    assert!(plan.cell_of(k, a, x1 as usize + 1).0 > cells[a] - 1);
+                    lo[a] = lo[a].min(x0);
+                    hi[a] = hi[a].max(x1);
+                }
+            }
+            // the grid is the box plus its margins: 2 pixels on the high side,
+            // on the low side 2 for the axis with the larger low margin
+            assert_eq!([w as i64 - 3, h as i64 - 3], hi, "{:?}", plan.grid);
+            assert_eq!(lo[0].min(lo[1]), 2);
+        }
+    }
+
+    /// The maps follow the perspective rays: pixel (p, q)'s sample in slice k
+    /// is where the ray through its sheared point meets the slice.
+    #[test]
+    fn perspective_maps_follow_the_rays() {
+        for (pv, plan) in perspective_plans(50, 0.5) {
+            for k in [0, pv.n[2] / 2, pv.n[2] - 1] {
+                for (p, q) in [(3usize, 4usize), (17, 9), (plan.grid.size[0] - 2, plan.grid.size[1] - 3)] {
+                    let [a, b] = plan.intermediate_to_sheared(p as f64, q as f64);
+                    let sh = plan.perspective.unwrap().shift;
+                    let x = pv.sheared_to_voxel(a + sh[0], b + sh[1], k as f64);
+                    // and the warp takes the pixel where the view takes that point
+                    let want = pv.warp.to_output(a + sh[0], b + sh[1]).unwrap();
+                    let got = plan.warp.to_output(a, b).unwrap();
+                    assert!((want[0] - got[0]).abs() < 1e-9 && (want[1] - got[1]).abs() < 1e-9);
+                    let (ci, wi) = plan.cell_of(k, 0, p);
+                    let (cj, wj) = plan.cell_of(k, 1, q);
+                    assert!((ci as f64 + wi as f64 - x[pv.perm[0]]).abs() < 1e-5);
+                    assert!((cj as f64 + wj as f64 - x[pv.perm[1]]).abs() < 1e-5);
+                }
+            }
+        }
+    }
+
+    /// Each ray's opacity ratio is the world length of its step from one slice
+    /// to the next over the smallest spacing; the exponents are that over the
+    /// plan's uniform ratio, at least 1.
+    #[test]
+    fn perspective_opacity_ratio_is_each_rays_own_spacing() {
+        let sp = DVec3::new(1.0, 0.8, 1.5);
+        for (pv, plan) in perspective_plans(50, 0.5) {
+            for (p, q) in [(3usize, 4usize), (17, 9), (plan.grid.size[0] - 2, plan.grid.size[1] - 3)] {
+                let [a, b] = plan.intermediate_to_sheared(p as f64, q as f64);
+                let sh = plan.perspective.unwrap().shift;
+                let x0 = DVec3::from_array(pv.sheared_to_voxel(a + sh[0], b + sh[1], 3.0));
+                let x1 = DVec3::from_array(pv.sheared_to_voxel(a + sh[0], b + sh[1], 4.0));
+                let want = ((x1 - x0) * sp).length() / 0.8;
+                assert!((plan.opacity_ratio_at(p as f64, q as f64) - want).abs() < 1e-6 * want);
+                let e = plan.opacity_exponent(p, q);
+                assert!(e >= 1.0 && (e as f64 - want / plan.opacity_ratio as f64).abs() < 1e-5);
+            }
+        }
+    }
+
+    /// Slices on or behind the near plane are not composited.
+    #[test]
+    fn perspective_near_plane_excludes_slices() {
+        for (pv, plan) in perspective_plans(20, 0.5) {
+            let ahead = |k: usize| if pv.ascending { k as f64 - pv.eye[2] } else { pv.eye[2] - k as f64 };
+            assert!(plan.front_to_back().all(|k| ahead(k) >= 0.5));
+            let f = plan.view.clone();
+            // a near plane through the middle of the volume
+            let near = ahead(pv.n[2] / 2);
+            let p2 = FramePlan::perspective(&pv, &f, [1.0, 0.8, 1.5], near);
+            assert!(p2.front_to_back().all(|k| ahead(k) >= near));
+            assert_eq!(p2.front_to_back().count(), (0..pv.n[2]).filter(|&k| ahead(k) >= near).count());
+            assert!(p2.front_to_back().count() < pv.n[2] && p2.limited());
+            // beyond the volume: nothing
+            let p3 = FramePlan::perspective(&pv, &f, [1.0, 0.8, 1.5], 1e9);
+            assert_eq!(p3.front_to_back().count(), 0);
+        }
     }
 
     #[test]

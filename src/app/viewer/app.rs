@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, anyhow};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
-use winit::event::{ElementState, MouseButton, StartCause, WindowEvent};
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, StartCause, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key as WKey, NamedKey};
 use winit::window::{Window, WindowId};
@@ -55,10 +55,14 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let d = vol.dims();
     let tissues = presets::tissues_for(&vol);
     let range = vol.value_range();
-    let preview = Renderers::new(vol.clone(), &tissues, Settings { mode: Mode::Iso, ..settings })?;
+    let mut preview = Renderers::new(vol.clone(), &tissues, Settings { mode: Mode::Iso, ..settings })?;
     let sorted = preview.tissue_list();
     let class = initial_class(&cmd.render.tissue, cmd.render.iso, &sorted)?;
-    let blend = Renderers::new(vol, &tissues, Settings { mode: Mode::Blend, ..settings })?;
+    let mut blend = Renderers::new(vol, &tissues, Settings { mode: Mode::Blend, ..settings })?;
+    // --perspective: both displays (a fixed eye distance; no fly-in yet)
+    let projection = cmd.render.projection()?;
+    preview.set_projection(projection)?;
+    blend.set_projection(projection)?;
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
     let info = Info {
         volume: name.clone(),
@@ -95,6 +99,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
         },
         cell: settings.cell,
         drag_speed: cmd.drag_speed,
+        projection,
     });
     let mut app = App {
         state,
@@ -160,6 +165,7 @@ fn map_key(key: &WKey, repeat: bool) -> Option<Key> {
             "-" | "_" => Key::CellDown,
             " " => Key::ToggleDisplay,
             "r" | "R" => Key::Reset,
+            "p" | "P" => Key::ToggleProjection,
             "s" | "S" => Key::Save,
             "q" | "Q" => Key::Quit,
             d => match d.parse::<usize>() {
@@ -614,6 +620,13 @@ impl ApplicationHandler<Reply> for App {
                     Ok(new) => self.bench_presented(el, start, new),
                     Err(e) => self.fail(el, e),
                 }
+            }
+            WindowEvent::MouseWheel { delta, .. } => {
+                let lines = match delta {
+                    MouseScrollDelta::LineDelta(_, y) => y as f64,
+                    MouseScrollDelta::PixelDelta(p) => p.y / 40.0,
+                };
+                self.input(el, Input::Wheel { lines })
             }
             WindowEvent::Resized(s) => self.input(el, Input::Resize { w: s.width as usize, h: s.height as usize }),
             WindowEvent::CursorMoved { position, .. } => {

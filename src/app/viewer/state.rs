@@ -27,7 +27,7 @@ use glam::{DMat3, DQuat};
 use super::overlay::{Hit, Layout};
 use shearwarp::encode::mask::MAX_CELL;
 use shearwarp::render::FrameStats;
-use shearwarp::view::{Camera, rotate_eye};
+use shearwarp::view::{Camera, Projection, rotate_eye};
 
 /// The classification a frame uses.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,6 +70,7 @@ pub struct Spec {
     pub camera: Camera,
     pub class: Class,
     pub cell: usize,
+    pub projection: Projection,
 }
 
 /// User input, already in window pixels.
@@ -87,6 +88,11 @@ pub enum Input {
     },
     /// Left button released.
     Release,
+    /// The mouse wheel turned by `lines` (positive: away from the user, which
+    /// flies the perspective eye in).
+    Wheel {
+        lines: f64,
+    },
     /// The window's inner size changed.
     Resize {
         w: usize,
@@ -108,6 +114,8 @@ pub enum Key {
     CellDown,
     /// Space: iso preview ↔ alpha-blended display.
     ToggleDisplay,
+    /// P: parallel ↔ perspective projection.
+    ToggleProjection,
     /// R: back to the starting view.
     Reset,
     /// S: save the current view as PNG.
@@ -153,6 +161,8 @@ pub struct Start {
     pub cell: usize,
     /// Degrees per pixel of drag.
     pub drag_speed: f64,
+    /// The starting projection.
+    pub projection: Projection,
 }
 
 /// A drag in progress.
@@ -179,6 +189,9 @@ pub struct State {
     pub drag_speed: f64,
     pub drag: Option<Drag>,
     pub layout: Layout,
+    pub projection: Projection,
+    /// The perspective P switches to (the last one shown, or 40° from 2 diagonals).
+    perspective: Projection,
     /// Bumped by every change of the picture.
     pub seq: u64,
     cursor: (f64, f64),
@@ -203,6 +216,12 @@ impl State {
             drag_speed: s.drag_speed,
             drag: None,
             layout,
+            projection: s.projection,
+            perspective: if s.projection.is_perspective() {
+                s.projection
+            } else {
+                Projection::Perspective { fov_deg: 40.0, eye_distance: 2.0 }
+            },
             seq: 1,
             cursor: (0.0, 0.0),
             preview_posted: 0,
@@ -213,7 +232,7 @@ impl State {
 
     /// The frame the current state asks for.
     pub fn spec(&self) -> Spec {
-        Spec { seq: self.seq, camera: self.camera(), class: self.class, cell: self.cell }
+        Spec { seq: self.seq, camera: self.camera(), class: self.class, cell: self.cell, projection: self.projection }
     }
 
     /// The current camera.
@@ -328,6 +347,16 @@ impl State {
                     Outcome::Nothing
                 }
             }
+            Input::Wheel { lines } => {
+                let Projection::Perspective { fov_deg, eye_distance } = self.projection else { return Outcome::Nothing };
+                let d = (eye_distance * 0.9f64.powf(lines)).clamp(MIN_EYE_DISTANCE, MAX_EYE_DISTANCE);
+                if !d.is_finite() || d == eye_distance {
+                    return Outcome::Nothing;
+                }
+                self.projection = Projection::Perspective { fov_deg, eye_distance: d };
+                self.perspective = self.projection;
+                self.changed()
+            }
             Input::Resize { w, h } => {
                 if w == 0 || h == 0 || [w, h] == self.size {
                     return Outcome::Nothing;
@@ -357,6 +386,10 @@ impl State {
                         Display::Iso => Display::Blend,
                         Display::Blend => Display::Iso,
                     };
+                    self.changed()
+                }
+                Key::ToggleProjection => {
+                    self.projection = if self.projection.is_perspective() { Projection::Parallel } else { self.perspective };
                     self.changed()
                 }
                 Key::Reset => {
@@ -542,7 +575,11 @@ pub fn short(v: f32) -> String {
 }
 
 /// The key help line.
-pub const HELP: &str = "drag rotate 1-4 tissue [ ] iso +- cell spc blend R S Q";
+pub const HELP: &str = "drag rotate 1-4 tissue [ ] iso +- cell spc blend P persp wheel fly R S Q";
+
+/// The eye distances (volume diagonals) the mouse wheel keeps to.
+pub const MIN_EYE_DISTANCE: f64 = 0.05;
+pub const MAX_EYE_DISTANCE: f64 = 1000.0;
 
 #[cfg(test)]
 mod tests {
@@ -561,7 +598,34 @@ mod tests {
             display: Display::Blend,
             cell: 1,
             drag_speed: 0.5,
+            projection: Projection::Parallel,
         })
+    }
+
+    /// P toggles the projection; the wheel flies a perspective eye in and out
+    /// (and does nothing in parallel); each change is a new frame.
+    #[test]
+    fn perspective_key_and_wheel_fly_in() {
+        let mut s = start();
+        assert_eq!(s.handle(Input::Wheel { lines: 1.0 }), Outcome::Nothing, "parallel: no eye to move");
+        let seq = s.seq;
+        assert_eq!(s.handle(Input::Key(Key::ToggleProjection)), Outcome::Redraw);
+        assert_eq!(s.spec().projection, Projection::Perspective { fov_deg: 40.0, eye_distance: 2.0 });
+        assert!(s.seq > seq);
+        s.handle(Input::Wheel { lines: 2.0 });
+        let Projection::Perspective { eye_distance, .. } = s.spec().projection else { panic!() };
+        assert!((eye_distance - 2.0 * 0.81).abs() < 1e-12, "{eye_distance}");
+        // far out and back: clamped, never zero or infinite
+        s.handle(Input::Wheel { lines: -1e6 });
+        assert_eq!(s.spec().projection, Projection::Perspective { fov_deg: 40.0, eye_distance: MAX_EYE_DISTANCE });
+        s.handle(Input::Wheel { lines: 1e6 });
+        assert_eq!(s.spec().projection, Projection::Perspective { fov_deg: 40.0, eye_distance: MIN_EYE_DISTANCE });
+        assert_eq!(s.handle(Input::Wheel { lines: f64::NAN }), Outcome::Nothing);
+        // P back to parallel, and again to the perspective last shown
+        s.handle(Input::Key(Key::ToggleProjection));
+        assert_eq!(s.spec().projection, Projection::Parallel);
+        s.handle(Input::Key(Key::ToggleProjection));
+        assert_eq!(s.spec().projection, Projection::Perspective { fov_deg: 40.0, eye_distance: MIN_EYE_DISTANCE });
     }
 
     fn previews(r: &[Request]) -> Vec<u64> {

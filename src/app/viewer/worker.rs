@@ -21,6 +21,7 @@ use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
 use shearwarp::render::{FrameStats, Renderer, Settings};
+use shearwarp::view::Projection;
 use shearwarp::warp::{Canvas, Image8, Texel};
 
 /// A finished frame.
@@ -77,6 +78,8 @@ pub struct Renderers {
     cells: [usize; 2],
     /// Principal axes whose masks may be stale after the last rebuild.
     stale: [bool; 3],
+    /// The projection of every renderer.
+    projection: Projection,
 }
 
 impl Renderers {
@@ -86,7 +89,26 @@ impl Renderers {
         let hi = volume.value_range().1;
         let mut r = Renderer::with_tissues(volume, tissues, settings)?;
         r.set_memory_budget(crate::app::budget());
-        Ok(Renderers { tissues: r, custom: None, mode: settings.mode, hi, cells: [settings.cell; 2], stale: [true; 3] })
+        Ok(Renderers {
+            tissues: r,
+            custom: None,
+            mode: settings.mode,
+            hi,
+            cells: [settings.cell; 2],
+            stale: [true; 3],
+            projection: Projection::Parallel,
+        })
+    }
+
+    /// Sets the projection of every renderer (a perspective one renders only
+    /// with the RLE paths).
+    pub fn set_projection(&mut self, projection: Projection) -> shearwarp::Result<()> {
+        self.tissues.set_projection(projection)?;
+        if let Some(c) = &mut self.custom {
+            c.set_projection(projection)?;
+        }
+        self.projection = projection;
+        Ok(())
     }
 
     /// The tissue presets, sorted by threshold as [`Renderer::with_tissues`] keeps them.
@@ -124,6 +146,7 @@ impl Renderers {
                         let s = Settings { cell, ..self.tissues.settings() };
                         let mut c = Renderer::new(self.tissues.volume()?.into_owned(), &tf, s)?;
                         c.set_memory_budget(crate::app::budget());
+                        c.set_projection(self.projection)?;
                         self.custom = Some(c);
                         self.cells[1] = cell;
                     }
@@ -141,6 +164,9 @@ impl Renderers {
 
     /// Renders `spec` into `img`.
     pub fn render<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats> {
+        if spec.projection != self.projection {
+            self.set_projection(spec.projection)?;
+        }
         let r = self.select(spec.class, spec.cell)?;
         let st = r.render(&spec.camera, img)?;
         self.stale[st.axis] = false;
@@ -313,7 +339,7 @@ mod tests {
         let tissues = presets::tissues_for(&vol);
         let r = Renderers::new(vol, &tissues, Settings { mode, threads: 1, ..Settings::default() }).unwrap();
         let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1 })
+        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel })
     }
 
     fn frame(rx: &mpsc::Receiver<Reply>) -> Frame {
@@ -322,6 +348,30 @@ mod tests {
                 Reply::Frame(f) => return *f,
                 Reply::Failed { error, .. } => panic!("{error}"),
                 Reply::Busy { .. } | Reply::Prefetched { .. } => {}
+            }
+        }
+    }
+
+    /// `view --method rle --perspective FOV`: the preview, the blend display
+    /// and a custom iso all render the perspective projection.
+    #[test]
+    fn renderers_render_perspective() {
+        for mode in [Mode::Iso, Mode::Blend] {
+            let vol = Phantom::Head.build([40, 40, 36]).unwrap();
+            let tissues = presets::tissues_for(&vol);
+            let s = Settings { mode, threads: 1, method: shearwarp::render::Method::Rle, ..Settings::default() };
+            let mut r = Renderers::new(vol, &tissues, s).unwrap();
+            let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
+            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel };
+            let mut par = Image::new(64, 48);
+            r.render(&spec, &mut par).unwrap();
+            // the spec's projection is what renders
+            let persp = Projection::perspective(40.0, 1.5).unwrap();
+            for class in [Class::Tissue(0), Class::Custom(100.0)] {
+                let mut img = Image::new(64, 48);
+                r.render(&Spec { class, projection: persp, ..spec }, &mut img).unwrap();
+                assert!(img.coverage() > 0.05, "{mode:?} {class:?}");
+                assert!(r.select(class, 1).unwrap().last_plan().unwrap().perspective.is_some());
             }
         }
     }

@@ -210,25 +210,28 @@ impl RleVolume {
     /// The rectangle of the intermediate grid this view can write: the union over
     /// slices of the pixels whose cell touches a non-transparent voxel.
     pub fn rect(&self, plan: &FramePlan) -> Option<Rect> {
-        let (pad, grid) = (plan.grid.pad, plan.grid.size);
+        let grid = plan.grid.size;
         let [ni, nj, _] = self.n;
         if ni < 2 || nj < 2 {
             return None;
         }
         let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
-        for (k, b) in self.bbox.iter().enumerate() {
+        for k in plan.front_to_back() {
+            let b = self.bbox[k];
             if b[0] > b[1] {
                 continue;
             }
             // voxel v touches cells v − 1 and v
             let span = [(b[0], b[1], ni), (b[2], b[3], nj)];
             for (a, &(v0, v1, n)) in span.iter().enumerate() {
-                let off = pad as i64 - plan.maps[k].floor[a] as i64;
-                lo[a] = lo[a].min((v0 as i64 - 1).max(0) + off);
-                hi[a] = hi[a].max((v1 as i64).min(n as i64 - 2) + off);
+                let [x0, x1] = plan.pixels_of_cells(k, a, (v0 as i64 - 1).max(0), (v1 as i64).min(n as i64 - 2));
+                if x0 <= x1 {
+                    lo[a] = lo[a].min(x0);
+                    hi[a] = hi[a].max(x1);
+                }
             }
         }
-        if lo[0] > hi[0] {
+        if lo[0] > hi[0] || lo[1] > hi[1] {
             return None;
         }
         let clamp = |x: i64, a: usize| x.clamp(0, grid[a] as i64 - 1) as usize;

@@ -412,7 +412,7 @@ impl Renderer {
         self.select_tissue(i.ok_or_else(|| Error::value("tissue", format!("'{name}' is not in this renderer's presets")))?)
     }
 
-    /// The volume: borrowed, or rebuilt from a density stack when this
+    /// The volume: borrowed, or rebuilt from the packed cells when this
     /// renderer let go of its voxels (see [`Renderer::memory`]; then this
     /// allocates a copy, or fails with [`Error::Memory`]).
     pub fn volume(&self) -> Result<std::borrow::Cow<'_, Volume>> {
@@ -654,17 +654,20 @@ impl Renderer {
     }
 
     /// True when building `axis` now fits the budget beside everything held
-    /// (less the volume, when the build lets go of it: the build's transient
-    /// peak, the volume beside the density stack, is below that total since
-    /// the codes alone are at least as large as the volume).
+    /// (less the volume, when the build lets go of it). The build allocates
+    /// the cell array while the volume is still held, but touches only its
+    /// last third (one byte a voxel of an 8-bit scan) before the volume goes,
+    /// so what is resident stays below the total counted here; under a
+    /// virtual-memory limit (`ulimit -v`) the allocation itself may be refused,
+    /// which is [`Error::Memory`], never an abort.
     fn fits_budget(&self, axis: usize) -> bool {
         let needed = self.missing_bytes(axis).total();
         needed == 0 || self.budget.is_none_or(|b| (self.memory().total() + needed).saturating_sub(self.releasable(axis)) <= b)
     }
 
     /// The bytes of volume that building `axis` lets go of: all of it when the
-    /// compact binary path builds its first density stack and nothing outside
-    /// this renderer shares the voxels.
+    /// compact binary path builds packed cells while the volume is resident
+    /// and nothing outside this renderer shares the voxels.
     fn releasable(&self, axis: usize) -> u64 {
         let building = compact_binary(&self.volume, &self.settings) && self.normals[axis].is_none();
         if building && !self.volume.is_parked() && self.volume.data_handles() == 1 { self.volume.bytes() } else { 0 }
@@ -1110,7 +1113,7 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
     let grid = Grid::parallel(cells, n[2]);
     let compact = compact_binary(volume, settings);
     let mut m = Memory {
-        // the compact path lets go of the volume once its density stack holds the voxels
+        // the compact path lets go of the volume once its packed cells hold the voxels
         volume: if compact { 0 } else { volume.bytes() },
         intermediate: grid.size[0] as u64 * grid.size[1] as u64 * 20,
         ..Default::default()

@@ -167,7 +167,7 @@ fn max_memory_on_the_command_line() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let m = &j["memory"];
-    // the binary path let go of the volume: its density stack holds the voxels
+    // the binary path let go of the volume: its packed cells hold the voxels
     // (2 bytes each) beside their 2-byte normal codes
     assert_eq!(m["volume"], 0);
     assert_eq!(m["normals"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).sum::<u64>(), 64 * 64 * 48 * 4);

@@ -6,6 +6,8 @@
 //! * the reference converges as its step shrinks;
 //! * the binary iso preview finds the sphere phantom's surface within half a voxel.
 
+mod common;
+
 use glam::{DMat3, DVec3};
 use shearwarp::accuracy::metrics::{compare, depth_error, rmse};
 use shearwarp::accuracy::reference::{Rays, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
@@ -14,7 +16,7 @@ use shearwarp::classify::TransferFunction;
 use shearwarp::classify::presets;
 use shearwarp::composite::Mode;
 use shearwarp::data::phantom::{self, SPHERE_ISO, sphere_geometry};
-use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::data::volume::Volume;
 use shearwarp::encode::depth::Search;
 use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
 use shearwarp::view::Camera;
@@ -22,34 +24,9 @@ use shearwarp::view::NamedView;
 use shearwarp::view::standard_views;
 use shearwarp::warp::Image;
 
-/// Blobs plus sparse noise, anisotropic spacing.
+/// [`common::blobs`] at the spacing these tests use.
 fn blobs(dims: [usize; 3], seed: u64) -> Volume {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        s
-    };
-    let centres: Vec<([f32; 3], f32)> =
-        (0..4).map(|_| ([0, 1, 2].map(|a| (next() % 1000) as f32 / 1000.0 * dims[a] as f32), 2.0 + (next() % 8) as f32)).collect();
-    let mut data = vec![0f32; dims[0] * dims[1] * dims[2]];
-    for z in 0..dims[2] {
-        for y in 0..dims[1] {
-            for x in 0..dims[0] {
-                let mut v = 0f32;
-                for (c, r) in &centres {
-                    let d = ((x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2) + (z as f32 - c[2]).powi(2)).sqrt();
-                    v = v.max((200.0 * (1.0 - d / r)).max(0.0));
-                }
-                if (x * 73 + y * 19 + z * 83) % 29 == 0 {
-                    v += 60.0;
-                }
-                data[x + dims[0] * (y + dims[1] * z)] = v;
-            }
-        }
-    }
-    Volume::new(dims, [1.0, 0.7, 1.6], VoxelData::F32(data)).unwrap()
+    common::blobs(dims, seed, [1.0, 0.7, 1.6])
 }
 
 /// The small matrix: volumes with a transfer function each.

@@ -3,6 +3,9 @@
 //! the eye recedes, the perspective reference ray caster, and regression tests
 //! for the defects of the public implementations (Virvo).
 
+mod common;
+
+use common::blobs;
 use glam::{DMat3, EulerRot};
 use shearwarp::accuracy::metrics::{max_abs_error, rmse};
 use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
@@ -11,40 +14,10 @@ use shearwarp::classify::presets;
 use shearwarp::classify::shading::Shading;
 use shearwarp::composite::Mode;
 use shearwarp::data::phantom::{self, SPHERE_ISO};
-use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::data::volume::Volume;
 use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::{Camera, Projection, rotate_eye};
 use shearwarp::warp::Image;
-
-/// Blobs plus sparse noise, anisotropic spacing.
-fn blobs(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        s
-    };
-    let centres: Vec<([f32; 3], f32)> =
-        (0..4).map(|_| ([0, 1, 2].map(|a| (next() % 1000) as f32 / 1000.0 * dims[a] as f32), 2.0 + (next() % 8) as f32)).collect();
-    let mut data = vec![0f32; dims[0] * dims[1] * dims[2]];
-    for z in 0..dims[2] {
-        for y in 0..dims[1] {
-            for x in 0..dims[0] {
-                let mut v = 0f32;
-                for (c, r) in &centres {
-                    let d = ((x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2) + (z as f32 - c[2]).powi(2)).sqrt();
-                    v = v.max((200.0 * (1.0 - d / r)).max(0.0));
-                }
-                if (x * 73 + y * 19 + z * 83) % 29 == 0 {
-                    v += 60.0;
-                }
-                data[x + dims[0] * (y + dims[1] * z)] = v;
-            }
-        }
-    }
-    Volume::new(dims, spacing, VoxelData::F32(data)).unwrap()
-}
 
 fn renderer(vol: &Volume, tf: &TransferFunction, method: Method, mode: Mode, projection: Projection) -> Renderer {
     let s = Settings { method, mode, threads: 2, ..Settings::default() };

@@ -211,7 +211,7 @@ mod tests {
     fn plans() -> Vec<FramePlan> {
         let (dims, sp) = ([14, 17, 11], [1.0f32, 0.8, 1.5]);
         let mut out = vec![];
-        for (x, y, z) in [(0.0, 0.0, 0.0), (0.4, -0.9, 0.2), (-1.3, 2.1, 0.7), (0.7854, 0.6155, 0.0)] {
+        for (x, y, z) in [(0.0, 0.0, 0.0), (0.4, -0.9, 0.2), (-1.3, 2.1, 0.7), (std::f64::consts::FRAC_PI_4, 0.6155, 0.0)] {
             let cam = Camera { rotation: DMat3::from_euler(EulerRot::XYZ, x, y, z), zoom: Some(2.0), size: [64, 64] };
             let f = Factorization::new(&cam, dims, sp).unwrap();
             out.push(FramePlan::parallel(&f, sp));

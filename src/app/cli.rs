@@ -21,6 +21,7 @@ use shearwarp::data::volume::{Volume, VoxelType};
 use shearwarp::encode::depth::Search;
 use shearwarp::kernels;
 use shearwarp::render::{FrameStats, Method, Normals, Renderer, Settings, WordSize, estimate_axis};
+use shearwarp::view::clip::{ClipPlane, ClipPlanes};
 use shearwarp::view::{Camera, NamedView, Projection, one_bit_step_deg, rotate_eye};
 use shearwarp::warp::Image;
 
@@ -219,6 +220,13 @@ pub struct RenderArgs {
     /// volume diagonals [default: 2].
     #[arg(long, value_name = "D", allow_negative_numbers = true, requires = "perspective")]
     pub eye_distance: Option<f64>,
+    /// Clipping plane NX,NY,NZ,D (repeatable, at most 6): keeps the side
+    /// where NX·x + NY·y + NZ·z ≤ D, with (x, y, z) in millimetres from the
+    /// volume's centre along its x, y, z (index) axes; what is on the other
+    /// side is not rendered. E.g. 1,0,0,0 removes the half at larger x;
+    /// 0,0,-1,20 keeps z ≥ −20 mm.
+    #[arg(long, value_name = "NX,NY,NZ,D", value_parser = parse_clip_plane, allow_hyphen_values = true)]
+    pub clip_plane: Vec<ClipPlane>,
     /// Starting view: anterior (face), posterior, left, right, superior, inferior.
     #[arg(long, value_enum, default_value = "anterior")]
     pub view: NamedView,
@@ -386,6 +394,18 @@ fn parse_max_memory(s: &str) -> std::result::Result<u64, String> {
     shearwarp::checks::parse_bytes(s).map_err(|e| e.to_string())
 }
 
+fn parse_clip_plane(s: &str) -> std::result::Result<ClipPlane, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 4 {
+        return Err(format!("expected NX,NY,NZ,D (four numbers separated by commas), got '{s}'"));
+    }
+    let mut v = [0.0f64; 4];
+    for (o, p) in v.iter_mut().zip(&parts) {
+        *o = p.parse::<f64>().map_err(|_| format!("'{p}' is not a number"))?;
+    }
+    ClipPlane::new([v[0], v[1], v[2]], v[3]).map_err(|e| e.to_string())
+}
+
 fn parse_rotation(s: &str) -> std::result::Result<[f64; 3], String> {
     let r: [f64; 3] = parse_triple(s, "angles")?;
     if r.iter().any(|x| !x.is_finite()) {
@@ -479,6 +499,11 @@ impl RenderArgs {
         let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
         r.set_memory_budget(crate::app::budget());
         r.set_projection(self.projection()?)?;
+        if !self.clip_plane.is_empty() {
+            let clip =
+                ClipPlanes::new(&self.clip_plane, r.spacing()).map_err(|e| anyhow::Error::new(Usage(format!("--clip-plane: {e}"))))?;
+            r.set_limiter(Some(std::sync::Arc::new(clip)));
+        }
         match self.tissue.as_deref() {
             None | Some("auto") => {}
             Some(name) => {

@@ -5,9 +5,11 @@
 //! warp of the intermediate image ([`factor`], re-exported here), and the
 //! per-frame plan every traversal reads ([`plan`]). [`perspective`] holds the
 //! perspective projection and factorization, whose plans
-//! [`FramePlan::set_perspective`] makes.
+//! [`FramePlan::set_perspective`] makes. [`clip`] holds clipping planes: the
+//! half-spaces kept, as per-pixel ray limits of any plan.
 
 pub mod camera;
+pub mod clip;
 mod factor;
 pub mod perspective;
 pub mod plan;

@@ -1,0 +1,379 @@
+//! Clipping planes ([`shearwarp::view::clip`]) on every path, against analytic truth.
+//!
+//! - The sphere phantom cut by a plane through its centre: every intermediate
+//!   pixel whose ray meets the ball's support only in the removed half is
+//!   background (blend and iso; binary, brute, RLE parallel and perspective),
+//!   and the binary path's iso depth is the plane or the sphere, whichever the
+//!   ray meets first on the kept side, within 0.5 voxel of the first kept
+//!   slice (the plane quantized to slices, as the limits are).
+//! - Accelerated equals brute force with the same planes, bit for bit, over
+//!   random volumes, views and planes (binary vs brute parallel; RLE vs
+//!   brute-RLE parallel and perspective).
+//! - A plane keeping everything is the unclipped frame bit for bit; one
+//!   keeping nothing is an empty frame.
+//! - Zero / NaN normals are errors, in the library and on the command line.
+
+use std::sync::Arc;
+
+use assert_cmd::Command;
+use glam::{DMat3, DVec3, EulerRot};
+use predicates::prelude::*;
+use proptest::prelude::*;
+use shearwarp::Volume;
+use shearwarp::classify::TransferFunction;
+use shearwarp::composite::Mode;
+use shearwarp::data::phantom::{SPHERE_ISO, sphere, sphere_geometry};
+use shearwarp::render::{Method, Renderer, Settings};
+use shearwarp::view::clip::{ClipPlane, ClipPlanes};
+use shearwarp::view::plan::FramePlan;
+use shearwarp::view::{Camera, Projection};
+use shearwarp::warp::Image;
+
+fn tf() -> TransferFunction {
+    TransferFunction::ramp(40.0, 180.0, 0.7, [0.9, 0.7, 0.5])
+}
+
+fn settings(method: Method, mode: Mode, ert: f32) -> Settings {
+    Settings { method, mode, ert, threads: 2, ..Settings::default() }
+}
+
+/// A renderer with `planes` (none: no limiter) and its projection.
+fn renderer(vol: &Volume, s: Settings, iso: f32, planes: Option<&[ClipPlane]>, persp: Option<(f64, f64)>) -> Renderer {
+    let mut r = Renderer::new(vol.clone(), &tf(), s).unwrap();
+    if s.mode == Mode::Iso {
+        r.set_iso(iso).unwrap();
+    }
+    if let Some((fov, d)) = persp {
+        r.set_projection(Projection::perspective(fov, d).unwrap()).unwrap();
+    }
+    if let Some(pl) = planes {
+        r.set_limiter(Some(Arc::new(ClipPlanes::new(pl, vol.spacing()).unwrap())));
+    }
+    r
+}
+
+/// One frame: the final image and the intermediate image.
+#[allow(clippy::type_complexity)]
+fn frame(
+    vol: &Volume,
+    s: Settings,
+    rot: DMat3,
+    planes: Option<&[ClipPlane]>,
+    persp: Option<(f64, f64)>,
+    size: usize,
+) -> (Image, Vec<[f32; 4]>) {
+    try_frame(vol, s, rot, planes, persp, size).unwrap()
+}
+
+/// [`frame`], or `None` for a view the projection refuses (a perspective eye
+/// too near the volume).
+#[allow(clippy::type_complexity)]
+fn try_frame(
+    vol: &Volume,
+    s: Settings,
+    rot: DMat3,
+    planes: Option<&[ClipPlane]>,
+    persp: Option<(f64, f64)>,
+    size: usize,
+) -> Option<(Image, Vec<[f32; 4]>)> {
+    let mut r = renderer(vol, s, 90.0, planes, persp);
+    let mut img = Image::new(size, size);
+    r.render(&Camera::new(rot, [size, size]), &mut img).ok()?;
+    Some((img, r.intermediate().rgba.clone()))
+}
+
+/// The voxel position of pixel `(p, q)`'s sample in slice `k`, as the traversals sample it.
+fn sample(plan: &FramePlan, k: usize, p: usize, q: usize) -> DVec3 {
+    let (ci, wi) = plan.cell_of(k, 0, p);
+    let (cj, wj) = plan.cell_of(k, 1, q);
+    let mut v = [0.0; 3];
+    v[plan.view.perm[0]] = ci as f64 + wi as f64;
+    v[plan.view.perm[1]] = cj as f64 + wj as f64;
+    v[plan.view.perm[2]] = k as f64;
+    DVec3::from_array(v)
+}
+
+/// 0°, 45° about y, the cube diagonal, and an oblique view.
+fn views() -> Vec<DMat3> {
+    vec![
+        DMat3::IDENTITY,
+        DMat3::from_rotation_y(45f64.to_radians()),
+        DMat3::from_euler(EulerRot::XYZ, 35.264f64.to_radians(), 45f64.to_radians(), 0.0),
+        DMat3::from_euler(EulerRot::XYZ, 0.4, -0.9, 0.2),
+    ]
+}
+
+fn cut_normals() -> Vec<DVec3> {
+    vec![DVec3::X, DVec3::new(0.6, -0.3, 0.74).normalize(), DVec3::new(-0.2, 0.9, -0.5).normalize()]
+}
+
+#[test]
+fn clip_sphere_rays_in_the_removed_half_only_are_background() {
+    let dims = [44, 44, 44];
+    let vol = sphere(dims).unwrap();
+    let (c, radius) = sphere_geometry(dims);
+    let c = DVec3::from_array(c);
+    // density is nonzero within R + 4 of the centre; a sample reads its
+    // in-slice cell, √2 further at most
+    let support = radius + 4.0 + 1.5;
+    let cases: [(Method, Option<(f64, f64)>); 4] =
+        [(Method::Binary, None), (Method::Brute, None), (Method::Rle, None), (Method::Rle, Some((40.0, 1.5)))];
+    for n in cut_normals() {
+        let planes = [ClipPlane::new(n.to_array(), 0.0).unwrap()];
+        for rot in views() {
+            for (method, persp) in cases {
+                for mode in [Mode::Blend, Mode::Iso] {
+                    let mut r = renderer(&vol, settings(method, mode, 0.99), SPHERE_ISO, Some(&planes), persp);
+                    let mut img = Image::new(64, 64);
+                    r.render(&Camera::new(rot, [64, 64]), &mut img).unwrap();
+                    let plan = r.last_plan().unwrap();
+                    let inter = r.intermediate();
+                    let [w, h] = plan.grid.size;
+                    let (mut removed, mut kept) = (0, 0);
+                    for q in 0..h {
+                        for p in 0..w {
+                            let signed: Vec<(f64, f64)> =
+                                plan.front_to_back().map(|k| sample(plan, k, p, q) - c).map(|x| (x.length(), x.dot(n))).collect();
+                            let px = inter.get(p as isize, q as isize);
+                            if signed.iter().all(|&(r, s)| r > support || s > 1e-3) {
+                                assert_eq!(px, [0.0; 4], "{method:?} {persp:?} {mode:?} n {n} pixel ({p}, {q}) shows the removed half");
+                                removed += 1;
+                            } else if signed.iter().any(|&(r, s)| r < radius - 2.0 && s < -1e-3) {
+                                assert!(px[3] > 0.0, "{method:?} {persp:?} {mode:?} n {n} pixel ({p}, {q}) misses the kept half");
+                                kept += 1;
+                            }
+                        }
+                    }
+                    assert!(removed > 50 && kept > 50, "{removed} removed and {kept} kept pixels checked");
+                }
+            }
+        }
+    }
+}
+
+/// The first hit, in (fractional) slices, of the ray `x0 + k·dx` walking
+/// `ascending` (or not) on the ball of radius `radius` about `c`, over the
+/// slices `[ka, kb]` the plane keeps; `None` for none.
+fn first_hit(x0: DVec3, dx: DVec3, c: DVec3, radius: f64, ka: f64, kb: f64, ascending: bool) -> Option<f64> {
+    // |x0 − c + k dx|² = R²
+    let o = x0 - c;
+    let (a, b, cc) = (dx.dot(dx), 2.0 * o.dot(dx), o.dot(o) - radius * radius);
+    let disc = b * b - 4.0 * a * cc;
+    if disc <= 0.0 {
+        return None;
+    }
+    let (e0, e1) = ((-b - disc.sqrt()) / (2.0 * a), (-b + disc.sqrt()) / (2.0 * a));
+    let (lo, hi) = (e0.max(ka), e1.min(kb));
+    (lo <= hi).then_some(if ascending { lo } else { hi })
+}
+
+#[test]
+fn clip_sphere_iso_depth_is_the_plane_or_the_sphere() {
+    let dims = [44, 44, 44];
+    let vol = sphere(dims).unwrap();
+    let (c, radius) = sphere_geometry(dims);
+    let c = DVec3::from_array(c);
+    let mut plane_hits = 0;
+    for n in cut_normals() {
+        let planes = [ClipPlane::new(n.to_array(), 0.0).unwrap()];
+        for rot in views() {
+            let mut r = renderer(&vol, settings(Method::Binary, Mode::Iso, 0.99), SPHERE_ISO, Some(&planes), None);
+            let mut img = Image::new(64, 64);
+            r.render(&Camera::new(rot, [64, 64]), &mut img).unwrap();
+            let plan = r.last_plan().unwrap();
+            let inter = r.intermediate();
+            let last = plan.slices() - 1;
+            let [w, h] = plan.grid.size;
+            let (mut checked, mut on_plane, mut worst, mut worst_exact) = (0, 0, 0f64, 0f64);
+            for q in 0..h {
+                for p in 0..w {
+                    let x0 = sample(plan, 0, p, q);
+                    let dx = sample(plan, 1, p, q) - x0;
+                    // the plane n·(x − c) ≤ 0 along the ray: affine in k
+                    let (g0, g1) = (n.dot(x0 - c), n.dot(dx));
+                    let (ka, kb) = if g1.abs() < 1e-12 {
+                        if g0 <= 0.0 { (0.0, last as f64) } else { (1.0, 0.0) }
+                    } else if g1 > 0.0 {
+                        (0.0, (-g0 / g1).min(last as f64))
+                    } else {
+                        ((-g0 / g1).max(0.0), last as f64)
+                    };
+                    // the rays well inside the ball, whose kept chord is more than
+                    // two slices long (no grazing rays, no slivers)
+                    let closest = (x0 - c).reject_from(dx).length();
+                    let (Some(exact), Some(far)) = (
+                        first_hit(x0, dx, c, radius, ka, kb, plan.view.ascending),
+                        first_hit(x0, dx, c, radius, ka, kb, !plan.view.ascending),
+                    ) else {
+                        continue;
+                    };
+                    if closest > radius - 2.0 || (far - exact).abs() < 2.0 {
+                        continue;
+                    }
+                    // the plane quantized to the first kept slice, as the limits are
+                    // (a sample on the plane, to rounding, may go either way)
+                    let quant = first_hit(x0, dx, c, radius, (ka - 1e-6).ceil(), (kb + 1e-6).floor(), plan.view.ascending).unwrap();
+                    let d = inter.depth_at(p, q) as f64;
+                    assert!(d.is_finite(), "n {n}: pixel ({p}, {q}) has no hit, want slice {exact:.2}");
+                    let err = (d - quant).abs() * dx.length();
+                    worst = worst.max(err);
+                    worst_exact = worst_exact.max((d - exact).abs() * dx.length());
+                    assert!(
+                        err <= 0.5,
+                        "n {n}: pixel ({p}, {q}) hits slice {d:.3}, want {quant:.3} (exact {exact:.3}): {err:.3} voxels off"
+                    );
+                    checked += 1;
+                    let on = (exact - ka).abs() < 1e-9 || (exact - kb).abs() < 1e-9;
+                    on_plane += on as usize;
+                }
+            }
+            assert!(checked > 200, "{checked} pixels checked");
+            plane_hits += on_plane;
+            // the quantization to slices costs at most one slice step more
+            assert!(worst_exact <= 0.5 + 3f64.sqrt(), "n {n}: worst {worst_exact} voxels from the exact surface");
+            eprintln!(
+                "n {n}: {checked} pixels ({on_plane} on the plane), worst {worst:.3} voxels, {worst_exact:.3} from the unquantized plane"
+            );
+        }
+    }
+    assert!(plane_hits > 1000, "only {plane_hits} hits on the plane checked");
+}
+
+/// Blobs and hashed noise: structure at every depth.
+fn volume(dims: [usize; 3], seed: u64) -> Volume {
+    let c = [0.37, 0.55, 0.46].map(|x: f32| x + (seed % 7) as f32 * 0.01);
+    Volume::from_fn(dims, [1.0, 1.1, 0.9], |x, y, z| {
+        let p = [x as f32 / dims[0] as f32, y as f32 / dims[1] as f32, z as f32 / dims[2] as f32];
+        let d = ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt();
+        let shell = (200.0 * (1.0 - (d - 0.3).abs() * 8.0)).max(0.0);
+        let h = (x as u64 * 73_856_093) ^ (y as u64 * 19_349_663) ^ (z as u64 * 83_492_791) ^ seed;
+        shell + if h.is_multiple_of(13) { (h % 120) as f32 } else { 0.0 }
+    })
+    .unwrap()
+}
+
+fn cases(default: u32) -> u32 {
+    std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(cases(24)))]
+
+    /// Accelerated paths equal their brute-force references, bit for bit, under
+    /// the same clip planes.
+    #[test]
+    fn clip_accelerated_equals_brute_force(
+        nx in 6usize..20, ny in 6usize..20, nz in 6usize..20, seed in any::<u64>(),
+        rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2, blend in any::<bool>(),
+        planes in prop::collection::vec(((-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0), -6.0f64..6.0), 1..4),
+        fov in 20.0f64..70.0, dist in 1.2f64..3.0,
+    ) {
+        let planes: Vec<ClipPlane> = planes.into_iter().filter_map(|((a, b, c), d)| ClipPlane::new([a, b, c], d).ok()).collect();
+        prop_assume!(!planes.is_empty());
+        let vol = volume([nx, ny, nz], seed);
+        let rot = DMat3::from_euler(EulerRot::XYZ, rx, ry, rz);
+        let mode = if blend { Mode::Blend } else { Mode::Iso };
+        let fast = frame(&vol, settings(Method::Binary, mode, 0.95), rot, Some(&planes), None, 40);
+        let brute = frame(&vol, settings(Method::Brute, mode, 0.95), rot, Some(&planes), None, 40);
+        prop_assert!(fast == brute, "binary vs brute");
+        for persp in [None, Some((fov, dist))] {
+            let rle = try_frame(&vol, settings(Method::Rle, mode, 1.0), rot, Some(&planes), persp, 40);
+            let brute_rle = try_frame(&vol, settings(Method::BruteRle, mode, 1.0), rot, Some(&planes), persp, 40);
+            prop_assert!(rle.is_some() || persp.is_some(), "a parallel view failed");
+            prop_assert!(rle == brute_rle, "rle vs brute-rle {:?}", persp);
+        }
+    }
+}
+
+#[test]
+fn clip_keeping_everything_changes_nothing_and_keeping_nothing_leaves_nothing() {
+    let vol = volume([19, 21, 17], 4);
+    let all = [ClipPlane::new([0.3, -0.8, 0.5], 1e6).unwrap(), ClipPlane::new([0.0, 0.0, 1.0], 1e3).unwrap()];
+    let none = [ClipPlane::new([0.0, 0.0, 1.0], 1e3).unwrap(), ClipPlane::new([-0.7, 0.1, 0.2], -1e3).unwrap()];
+    let cases: [(Method, Option<(f64, f64)>); 6] = [
+        (Method::Binary, None),
+        (Method::Brute, None),
+        (Method::Rle, None),
+        (Method::BruteRle, None),
+        (Method::Rle, Some((40.0, 1.5))),
+        (Method::BruteRle, Some((40.0, 1.5))),
+    ];
+    for rot in views() {
+        for (method, persp) in cases {
+            for mode in [Mode::Iso, Mode::Blend] {
+                let s = settings(method, mode, 0.95);
+                let open = frame(&vol, s, rot, None, persp, 48);
+                assert!(open.0.coverage() > 0.05);
+                assert_eq!(frame(&vol, s, rot, Some(&all), persp, 48), open, "{method:?} {persp:?} {mode:?}");
+                let (img, inter) = frame(&vol, s, rot, Some(&none), persp, 48);
+                assert!(img.data.iter().all(|p| *p == [0.0; 4]), "{method:?} {persp:?} {mode:?}: clipped away, yet visible");
+                assert!(inter.iter().all(|p| *p == [0.0; 4]));
+            }
+        }
+    }
+}
+
+#[test]
+fn clip_zero_or_nan_normals_are_errors() {
+    for n in [[0.0; 3], [f64::NAN, 0.0, 1.0], [1.0, f64::INFINITY, 0.0]] {
+        let e = ClipPlane::new(n, 0.0).unwrap_err().to_string();
+        assert!(e.contains("normal"), "{e}");
+    }
+    assert!(ClipPlanes::new(&[ClipPlane { normal: [0.0; 3], offset: 1.0 }], [1.0; 3]).is_err());
+}
+
+#[test]
+fn clip_cli_renders_and_rejects_bad_planes_with_exit_code_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let sw = || Command::cargo_bin("shearwarp").unwrap();
+    let base = ["render", "--phantom", "sphere", "--phantom-dims", "40,40,40", "--size", "64", "--json"];
+    let out = dir.path().join("whole.png");
+    let whole = sw().args(base).arg("-o").arg(&out).output().unwrap();
+    assert!(whole.status.success());
+    let cov = |o: &std::process::Output| -> f64 {
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        j["coverage"].as_f64().unwrap()
+    };
+    // half the sphere (seen from the front: x is across the image) covers about half the pixels
+    let half = sw().args(base).args(["--clip-plane", "1,0,0,0", "-o"]).arg(dir.path().join("half.png")).output().unwrap();
+    assert!(half.status.success(), "{}", String::from_utf8_lossy(&half.stderr));
+    let ratio = cov(&half) / cov(&whole);
+    assert!((0.4..0.6).contains(&ratio), "half the sphere covers {ratio} of the whole");
+    // repeatable: two opposite half-spaces keep a slab
+    let slab = sw()
+        .args(base)
+        .args(["--clip-plane", "1,0,0,3", "--clip-plane", "-1,0,0,3", "-o"])
+        .arg(dir.path().join("slab.png"))
+        .output()
+        .unwrap();
+    assert!(slab.status.success() && cov(&slab) < 0.3 * cov(&whole));
+    for bad in ["0,0,0,1", "nan,0,1,0", "1,0,0", "1,0,0,x", "1,0,0,inf"] {
+        sw().args(base)
+            .args(["--clip-plane", bad, "-o"])
+            .arg(dir.path().join("bad.png"))
+            .assert()
+            .code(2)
+            .stderr(predicate::str::contains("clip-plane"));
+    }
+    let seven: Vec<&str> = (0..7).flat_map(|_| ["--clip-plane", "1,0,0,0"]).collect();
+    sw().args(base).args(&seven).arg("-o").arg(dir.path().join("bad.png")).assert().code(2).stderr(predicate::str::contains("at most 6"));
+    // rotate takes it too
+    sw().args([
+        "rotate",
+        "--phantom",
+        "sphere",
+        "--phantom-dims",
+        "32,32,32",
+        "--size",
+        "32",
+        "--degrees",
+        "4",
+        "--step-deg",
+        "2",
+        "--clip-plane",
+        "0,1,0,0",
+        "--json",
+    ])
+    .assert()
+    .success();
+}

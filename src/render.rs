@@ -957,7 +957,8 @@ impl Renderer {
             }
         }
         if let Some((l, _)) = &self.limiter {
-            plan.apply_limiter(l.as_ref(), limits.unwrap_or_default());
+            // on the renderer's pool: a limiter may work in parallel
+            self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
         }
         let mode = self.settings.mode;
         if mode == Mode::Blend {

@@ -22,6 +22,8 @@
 //! reads these limits through [`FramePlan::ray_range`]; a pixel with no
 //! slice left composites nothing and stays background.
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
 use crate::view::plan::{FramePlan, Limiter, MapKind, RayLimits};
 
@@ -182,11 +184,11 @@ impl Limiter for ClipPlanes {
             return;
         }
         let planes = self.in_voxels(plan);
-        let [w, h] = plan.grid.size;
-        for q in 0..h {
-            for p in 0..w {
-                let [c, d] = limits.get(p, q);
-                let (mut lo, mut hi) = (c as i64, d as i64);
+        // rows in parallel (on the caller's pool; each pixel's interval depends
+        // on that pixel alone, so the limits are the same for any thread count)
+        limits.par_rows_mut().enumerate().for_each(|(q, row)| {
+            for (p, l) in row.iter_mut().enumerate() {
+                let (mut lo, mut hi) = (l[0] as i64, l[1] as i64);
                 for &pl in &planes {
                     if lo > hi {
                         break;
@@ -195,9 +197,9 @@ impl Limiter for ClipPlanes {
                     lo = lo.max(a);
                     hi = hi.min(b);
                 }
-                limits.set(p, q, if lo > hi { [1, 0] } else { [lo as u32, hi as u32] });
+                *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
             }
-        }
+        });
     }
 }
 

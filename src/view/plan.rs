@@ -200,6 +200,13 @@ impl RayLimits {
         &self.limits[q * self.width..(q + 1) * self.width]
     }
 
+    /// The rows, mutable, as a parallel iterator (item `q` is row `q`), for a
+    /// [`Limiter`] that writes rows on several threads.
+    pub fn par_rows_mut(&mut self) -> rayon::slice::ChunksMut<'_, [u32; 2]> {
+        use rayon::prelude::*;
+        self.limits.par_chunks_mut(self.width.max(1))
+    }
+
     /// The grid width.
     pub fn width(&self) -> usize {
         self.width

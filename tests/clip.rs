@@ -13,6 +13,8 @@
 //!   keeping nothing is an empty frame.
 //! - Zero / NaN normals are errors, in the library and on the command line.
 
+mod common;
+
 use std::sync::Arc;
 
 use assert_cmd::Command;
@@ -28,6 +30,8 @@ use shearwarp::view::clip::{ClipPlane, ClipPlanes};
 use shearwarp::view::plan::FramePlan;
 use shearwarp::view::{Camera, Projection};
 use shearwarp::warp::Image;
+
+use common::shell_volume as volume;
 
 fn tf() -> TransferFunction {
     TransferFunction::ramp(40.0, 180.0, 0.7, [0.9, 0.7, 0.5])
@@ -237,19 +241,6 @@ fn clip_sphere_iso_depth_is_the_plane_or_the_sphere() {
         }
     }
     assert!(plane_hits > 1000, "only {plane_hits} hits on the plane checked");
-}
-
-/// Blobs and hashed noise: structure at every depth.
-fn volume(dims: [usize; 3], seed: u64) -> Volume {
-    let c = [0.37, 0.55, 0.46].map(|x: f32| x + (seed % 7) as f32 * 0.01);
-    Volume::from_fn(dims, [1.0, 1.1, 0.9], |x, y, z| {
-        let p = [x as f32 / dims[0] as f32, y as f32 / dims[1] as f32, z as f32 / dims[2] as f32];
-        let d = ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt();
-        let shell = (200.0 * (1.0 - (d - 0.3).abs() * 8.0)).max(0.0);
-        let h = (x as u64 * 73_856_093) ^ (y as u64 * 19_349_663) ^ (z as u64 * 83_492_791) ^ seed;
-        shell + if h.is_multiple_of(13) { (h % 120) as f32 } else { 0.0 }
-    })
-    .unwrap()
 }
 
 fn cases(default: u32) -> u32 {

@@ -8,6 +8,8 @@
 //!   each ray in front of a split composited over the part behind it is the
 //!   whole ray.
 
+mod common;
+
 use std::sync::Arc;
 
 use glam::{DMat3, EulerRot};
@@ -19,18 +21,7 @@ use shearwarp::view::Camera;
 use shearwarp::view::plan::{FramePlan, RayLimits};
 use shearwarp::warp::Image;
 
-/// Blobs and a little hashed noise: structure at every depth.
-fn volume(dims: [usize; 3], seed: u64) -> Volume {
-    let c = [0.37, 0.55, 0.46].map(|x: f32| x + (seed % 7) as f32 * 0.01);
-    Volume::from_fn(dims, [1.0, 1.1, 0.9], |x, y, z| {
-        let p = [x as f32 / dims[0] as f32, y as f32 / dims[1] as f32, z as f32 / dims[2] as f32];
-        let d = ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt();
-        let shell = (200.0 * (1.0 - (d - 0.3).abs() * 8.0)).max(0.0);
-        let h = (x as u64 * 73_856_093) ^ (y as u64 * 19_349_663) ^ (z as u64 * 83_492_791) ^ seed;
-        shell + if h % 13 == 0 { (h % 120) as f32 } else { 0.0 }
-    })
-    .unwrap()
-}
+use common::shell_volume as volume;
 
 fn tf() -> TransferFunction {
     TransferFunction::ramp(40.0, 180.0, 0.7, [0.9, 0.7, 0.5])

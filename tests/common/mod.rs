@@ -1,4 +1,6 @@
-//! Helpers shared by the integration tests (`mod common;`).
+//! Helpers shared by the integration tests (`mod common;`); each test uses
+//! some of them.
+#![allow(dead_code)]
 
 use shearwarp::data::volume::{Volume, VoxelData};
 
@@ -31,4 +33,17 @@ pub fn blobs(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
         }
     }
     Volume::new(dims, spacing, VoxelData::F32(data)).unwrap()
+}
+
+/// A spherical shell and a little hashed noise: structure at every depth.
+pub fn shell_volume(dims: [usize; 3], seed: u64) -> Volume {
+    let c = [0.37, 0.55, 0.46].map(|x: f32| x + (seed % 7) as f32 * 0.01);
+    Volume::from_fn(dims, [1.0, 1.1, 0.9], |x, y, z| {
+        let p = [x as f32 / dims[0] as f32, y as f32 / dims[1] as f32, z as f32 / dims[2] as f32];
+        let d = ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2)).sqrt();
+        let shell = (200.0 * (1.0 - (d - 0.3).abs() * 8.0)).max(0.0);
+        let h = (x as u64 * 73_856_093) ^ (y as u64 * 19_349_663) ^ (z as u64 * 83_492_791) ^ seed;
+        shell + if h.is_multiple_of(13) { (h % 120) as f32 } else { 0.0 }
+    })
+    .unwrap()
 }

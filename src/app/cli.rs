@@ -499,10 +499,8 @@ impl RenderArgs {
         let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
         r.set_memory_budget(crate::app::budget());
         r.set_projection(self.projection()?)?;
-        if !self.clip_plane.is_empty() {
-            let clip =
-                ClipPlanes::new(&self.clip_plane, r.spacing()).map_err(|e| anyhow::Error::new(Usage(format!("--clip-plane: {e}"))))?;
-            r.set_limiter(Some(std::sync::Arc::new(clip)));
+        if let Some(clip) = self.clip_planes(r.spacing())? {
+            r.set_limiter(Some(clip));
         }
         match self.tissue.as_deref() {
             None | Some("auto") => {}
@@ -530,6 +528,16 @@ impl RenderArgs {
             }
         }
         Ok(r)
+    }
+
+    /// The `--clip-plane` half-spaces as ray limits for a volume with voxel
+    /// `spacing` (`None` without any); a bad plane is a usage error.
+    pub fn clip_planes(&self, spacing: [f32; 3]) -> Result<Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>> {
+        if self.clip_plane.is_empty() {
+            return Ok(None);
+        }
+        let clip = ClipPlanes::new(&self.clip_plane, spacing).map_err(|e| anyhow::Error::new(Usage(format!("--clip-plane: {e}"))))?;
+        Ok(Some(std::sync::Arc::new(clip)))
     }
 
     /// The projection: `--perspective FOV` (with `--eye-distance D`, default

@@ -55,6 +55,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let d = vol.dims();
     let tissues = presets::tissues_for(&vol);
     let range = vol.value_range();
+    let spacing = vol.spacing();
     let mut preview = Renderers::new(vol.clone(), &tissues, Settings { mode: Mode::Iso, ..settings })?;
     let sorted = preview.tissue_list();
     let class = initial_class(&cmd.render.tissue, cmd.render.iso, &sorted)?;
@@ -63,6 +64,11 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let projection = cmd.render.projection()?;
     preview.set_projection(projection)?;
     blend.set_projection(projection)?;
+    // --clip-plane: both displays, every renderer they make
+    if let Some(clip) = cmd.render.clip_planes(spacing)? {
+        preview.set_limiter(Some(clip.clone()));
+        blend.set_limiter(Some(clip));
+    }
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
     let info = Info {
         volume: name.clone(),

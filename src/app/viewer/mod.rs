@@ -77,11 +77,6 @@ pub fn run(cmd: &ViewCmd) -> anyhow::Result<()> {
     if let Some(n) = cmd.benchmark_drag.filter(|n| !(1..=MAX_BENCH_FRAMES).contains(n)) {
         return Err(anyhow::Error::new(crate::app::cli::Usage(format!("--benchmark-drag must be 1..={MAX_BENCH_FRAMES} frames, got {n}"))));
     }
-    if !cmd.render.clip_plane.is_empty() {
-        return Err(anyhow::Error::new(crate::app::cli::Usage(
-            "--clip-plane is not yet supported by the viewer; use render or rotate".into(),
-        )));
-    }
     #[cfg(feature = "viewer")]
     {
         app::run(cmd)

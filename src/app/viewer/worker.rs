@@ -80,6 +80,8 @@ pub struct Renderers {
     stale: [bool; 3],
     /// The projection of every renderer.
     projection: Projection,
+    /// The ray limits of every renderer (clip planes), if any.
+    limiter: Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>,
 }
 
 impl Renderers {
@@ -97,6 +99,7 @@ impl Renderers {
             cells: [settings.cell; 2],
             stale: [true; 3],
             projection: Projection::Parallel,
+            limiter: None,
         })
     }
 
@@ -109,6 +112,16 @@ impl Renderers {
         }
         self.projection = projection;
         Ok(())
+    }
+
+    /// Sets the ray limits (clip planes) of every renderer, this one's and any
+    /// made later.
+    pub fn set_limiter(&mut self, limiter: Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>) {
+        self.tissues.set_limiter(limiter.clone());
+        if let Some(c) = &mut self.custom {
+            c.set_limiter(limiter.clone());
+        }
+        self.limiter = limiter;
     }
 
     /// The tissue presets, sorted by threshold as [`Renderer::with_tissues`] keeps them.
@@ -147,6 +160,7 @@ impl Renderers {
                         let mut c = Renderer::new(self.tissues.volume()?.into_owned(), &tf, s)?;
                         c.set_memory_budget(crate::app::budget());
                         c.set_projection(self.projection)?;
+                        c.set_limiter(self.limiter.clone());
                         self.custom = Some(c);
                         self.cells[1] = cell;
                     }
@@ -372,6 +386,36 @@ mod tests {
                 r.render(&Spec { class, projection: persp, ..spec }, &mut img).unwrap();
                 assert!(img.coverage() > 0.05, "{mode:?} {class:?}");
                 assert!(r.select(class, 1).unwrap().last_plan().unwrap().perspective.is_some());
+            }
+        }
+    }
+
+    /// `view --clip-plane`: the preview, a custom iso and the blend display
+    /// all render the clipped volume (a plane keeping nothing: an empty image).
+    #[test]
+    fn renderers_render_clip_planes() {
+        use shearwarp::view::clip::{ClipPlane, ClipPlanes};
+        for mode in [Mode::Iso, Mode::Blend] {
+            let vol = Phantom::Head.build([40, 40, 36]).unwrap();
+            let tissues = presets::tissues_for(&vol);
+            let s = Settings { mode, threads: 1, ..Settings::default() };
+            let sp = vol.spacing();
+            let mut r = Renderers::new(vol, &tissues, s).unwrap();
+            let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
+            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel };
+            let half = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], 0.0).unwrap()], sp).unwrap();
+            let none = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], -1e6).unwrap()], sp).unwrap();
+            for class in [Class::Tissue(0), Class::Custom(100.0)] {
+                let (mut full, mut cut, mut empty) = (Image::new(64, 48), Image::new(64, 48), Image::new(64, 48));
+                r.set_limiter(None);
+                r.render(&Spec { class, ..spec }, &mut full).unwrap();
+                r.set_limiter(Some(std::sync::Arc::new(half.clone())));
+                r.render(&Spec { class, ..spec }, &mut cut).unwrap();
+                r.set_limiter(Some(std::sync::Arc::new(none.clone())));
+                r.render(&Spec { class, ..spec }, &mut empty).unwrap();
+                assert!(full.coverage() > 0.05, "{mode:?} {class:?}");
+                assert!(cut.coverage() > 0.2 * full.coverage() && cut.coverage() < 0.8 * full.coverage(), "{mode:?} {class:?}");
+                assert_eq!(empty.coverage(), 0.0, "{mode:?} {class:?}");
             }
         }
     }

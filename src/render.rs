@@ -459,9 +459,14 @@ impl Renderer {
     /// the builds of other paths get them back from the cells).
     fn park(&mut self, building: bool) {
         let held = building || self.normals.iter().flatten().any(NormalStack::holds_voxels);
-        if held && !self.volume.is_parked() && self.volume.data_handles() == 1 {
+        if held && self.can_let_go() {
             self.volume.park();
         }
+    }
+
+    /// True when the volume's voxels are resident and only this renderer holds them.
+    fn can_let_go(&self) -> bool {
+        !self.volume.is_parked() && self.volume.data_handles() == 1
     }
     /// Current settings.
     pub fn settings(&self) -> Settings {
@@ -670,7 +675,7 @@ impl Renderer {
     /// and nothing outside this renderer shares the voxels.
     fn releasable(&self, axis: usize) -> u64 {
         let building = compact_binary(&self.volume, &self.settings) && self.normals[axis].is_none();
-        if building && !self.volume.is_parked() && self.volume.data_handles() == 1 { self.volume.bytes() } else { 0 }
+        if building && self.can_let_go() { self.volume.bytes() } else { 0 }
     }
 
     /// Checks the budget for building `axis` now; frees the other axes first

@@ -56,21 +56,8 @@ fn renderer(vol: &Volume, s: Settings, iso: f32, planes: Option<&[ClipPlane]>, p
     r
 }
 
-/// One frame: the final image and the intermediate image.
-#[allow(clippy::type_complexity)]
-fn frame(
-    vol: &Volume,
-    s: Settings,
-    rot: DMat3,
-    planes: Option<&[ClipPlane]>,
-    persp: Option<(f64, f64)>,
-    size: usize,
-) -> (Image, Vec<[f32; 4]>) {
-    try_frame(vol, s, rot, planes, persp, size).unwrap()
-}
-
-/// [`frame`], or `None` for a view the projection refuses (a perspective eye
-/// too near the volume).
+/// One frame: the final image and the intermediate image, or `None` for a
+/// view the projection refuses (a perspective eye too near the volume).
 #[allow(clippy::type_complexity)]
 fn try_frame(
     vol: &Volume,
@@ -264,8 +251,8 @@ proptest! {
         let vol = volume([nx, ny, nz], seed);
         let rot = DMat3::from_euler(EulerRot::XYZ, rx, ry, rz);
         let mode = if blend { Mode::Blend } else { Mode::Iso };
-        let fast = frame(&vol, settings(Method::Binary, mode, 0.95), rot, Some(&planes), None, 40);
-        let brute = frame(&vol, settings(Method::Brute, mode, 0.95), rot, Some(&planes), None, 40);
+        let fast = try_frame(&vol, settings(Method::Binary, mode, 0.95), rot, Some(&planes), None, 40).unwrap();
+        let brute = try_frame(&vol, settings(Method::Brute, mode, 0.95), rot, Some(&planes), None, 40).unwrap();
         prop_assert!(fast == brute, "binary vs brute");
         for persp in [None, Some((fov, dist))] {
             let rle = try_frame(&vol, settings(Method::Rle, mode, 1.0), rot, Some(&planes), persp, 40);
@@ -293,10 +280,10 @@ fn clip_keeping_everything_changes_nothing_and_keeping_nothing_leaves_nothing() 
         for (method, persp) in cases {
             for mode in [Mode::Iso, Mode::Blend] {
                 let s = settings(method, mode, 0.95);
-                let open = frame(&vol, s, rot, None, persp, 48);
+                let open = try_frame(&vol, s, rot, None, persp, 48).unwrap();
                 assert!(open.0.coverage() > 0.05);
-                assert_eq!(frame(&vol, s, rot, Some(&all), persp, 48), open, "{method:?} {persp:?} {mode:?}");
-                let (img, inter) = frame(&vol, s, rot, Some(&none), persp, 48);
+                assert_eq!(try_frame(&vol, s, rot, Some(&all), persp, 48).unwrap(), open, "{method:?} {persp:?} {mode:?}");
+                let (img, inter) = try_frame(&vol, s, rot, Some(&none), persp, 48).unwrap();
                 assert!(img.data.iter().all(|p| *p == [0.0; 4]), "{method:?} {persp:?} {mode:?}: clipped away, yet visible");
                 assert!(inter.iter().all(|p| *p == [0.0; 4]));
             }

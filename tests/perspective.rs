@@ -41,11 +41,7 @@ fn bits(img: &Image) -> Vec<u32> {
 /// distances, in both modes, with early termination, and for any thread count.
 #[test]
 fn perspective_rle_equals_brute_force_bit_for_bit() {
-    let mut seed = 5u64;
-    let mut rnd = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = common::uniform(5);
     let mut checked = 0;
     for case in 0..24 {
         let dims = [14 + (rnd() * 12.0) as usize, 12 + (rnd() * 12.0) as usize, 10 + (rnd() * 14.0) as usize];
@@ -339,11 +335,7 @@ fn perspective_has_no_seam_at_the_principal_axis_switch() {
 /// NaN and opacities in [0, 1], and RLE equals brute force bit for bit.
 #[test]
 fn perspective_random_views_render_or_refuse_cleanly() {
-    let mut seed = 99u64;
-    let mut rnd = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = common::uniform(99);
     let (mut rendered, mut refused) = (0, 0);
     for case in 0..120 {
         let dims = [2 + (rnd() * 10.0) as usize, 2 + (rnd() * 10.0) as usize, 2 + (rnd() * 10.0) as usize];

@@ -109,8 +109,10 @@ impl<E: Zeroable + Send + Sync, const K: usize> InPlace<E, K> {
             let (cells, done) = (self.cells.as_flattened(), s0 * n01);
             self.windows.par_iter_mut().zip(blocks.par_iter()).for_each(|(win, &(k0, k1))| {
                 let (w0, w1) = (k0.saturating_sub(1), (k1 + 1).min(n[2]));
+                let split = done.clamp(w0 * n01, w1 * n01);
                 win.truncate(0);
-                win.extend((w0 * n01..w1 * n01).map(|j| density(if j < done { cells[K * j] } else { cells[(K - 1) * len + j] })));
+                win.extend((w0 * n01..split).map(|j| density(cells[K * j])));
+                win.extend((split..w1 * n01).map(|j| density(cells[(K - 1) * len + j])));
             });
             // then write the wave's cells, a block per window
             let out = &mut self.cells[s0 * n01..s1 * n01];

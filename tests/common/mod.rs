@@ -47,3 +47,11 @@ pub fn shell_volume(dims: [usize; 3], seed: u64) -> Volume {
     })
     .unwrap()
 }
+
+/// Deterministic uniform numbers in [0, 1) from `seed` (a 64-bit LCG's top 53 bits).
+pub fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+    move || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+}

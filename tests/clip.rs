@@ -312,19 +312,27 @@ fn clip_cli_renders_and_rejects_bad_planes_with_exit_code_2() {
         let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         j["coverage"].as_f64().unwrap()
     };
-    // half the sphere (seen from the front: x is across the image) covers about half the pixels
-    let half = sw().args(base).args(["--clip-plane", "1,0,0,0", "-o"]).arg(dir.path().join("half.png")).output().unwrap();
+    // half the sphere (seen from the front: x is across the image) covers about
+    // half the pixels: the plane x = 19.5 in voxel indices is the centre of 40³
+    let half = sw().args(base).args(["--clip-plane", "1,0,0,19.5", "-o"]).arg(dir.path().join("half.png")).output().unwrap();
     assert!(half.status.success(), "{}", String::from_utf8_lossy(&half.stderr));
     let ratio = cov(&half) / cov(&whole);
     assert!((0.4..0.6).contains(&ratio), "half the sphere covers {ratio} of the whole");
     // repeatable: two opposite half-spaces keep a slab
     let slab = sw()
         .args(base)
-        .args(["--clip-plane", "1,0,0,3", "--clip-plane", "-1,0,0,3", "-o"])
+        .args(["--clip-plane", "1,0,0,22.5", "--clip-plane", "-1,0,0,-16.5", "-o"])
         .arg(dir.path().join("slab.png"))
         .output()
         .unwrap();
     assert!(slab.status.success() && cov(&slab) < 0.3 * cov(&whole));
+    // voxel coordinates: the plane x = 19.5 and its mirror keep complementary halves
+    // (each about half), and the plane x = 0 (the volume's first voxel column) keeps almost nothing
+    let other = sw().args(base).args(["--clip-plane", "-1,0,0,-19.5", "-o"]).arg(dir.path().join("other.png")).output().unwrap();
+    let r2 = cov(&other) / cov(&whole);
+    assert!((0.4..0.6).contains(&r2) && (ratio + r2 - 1.0).abs() < 0.1, "complementary halves cover {ratio} and {r2}");
+    let edge = sw().args(base).args(["--clip-plane", "1,0,0,0", "-o"]).arg(dir.path().join("edge.png")).output().unwrap();
+    assert!(edge.status.success() && cov(&edge) < 0.02 * cov(&whole), "the plane x = 0 keeps {}", cov(&edge) / cov(&whole));
     for bad in ["0,0,0,1", "nan,0,1,0", "1,0,0", "1,0,0,x", "1,0,0,inf"] {
         sw().args(base)
             .args(["--clip-plane", bad, "-o"])

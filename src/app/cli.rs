@@ -221,10 +221,10 @@ pub struct RenderArgs {
     #[arg(long, value_name = "D", allow_negative_numbers = true, requires = "perspective")]
     pub eye_distance: Option<f64>,
     /// Clipping plane NX,NY,NZ,D (repeatable, at most 6): keeps the side
-    /// where NX·x + NY·y + NZ·z ≤ D, with (x, y, z) in millimetres from the
-    /// volume's centre along its x, y, z (index) axes; what is on the other
-    /// side is not rendered. E.g. 1,0,0,0 removes the half at larger x;
-    /// 0,0,-1,20 keeps z ≥ −20 mm.
+    /// where NX·x + NY·y + NZ·z ≤ D, with (x, y, z) the volume's voxel
+    /// indices; what is on the other side is not rendered. E.g. on a 256³
+    /// volume 1,0,0,127.5 removes the half at larger x; 0,0,-1,-100 keeps
+    /// z ≥ 100.
     #[arg(long, value_name = "NX,NY,NZ,D", value_parser = parse_clip_plane, allow_hyphen_values = true)]
     pub clip_plane: Vec<ClipPlane>,
     /// Starting view: anterior (face), posterior, left, right, superior, inferior.
@@ -499,7 +499,7 @@ impl RenderArgs {
         let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
         r.set_memory_budget(crate::app::budget());
         r.set_projection(self.projection()?)?;
-        if let Some(clip) = self.clip_planes(r.spacing())? {
+        if let Some(clip) = self.clip_planes(r.dims(), r.spacing())? {
             r.set_limiter(Some(clip));
         }
         match self.tissue.as_deref() {
@@ -530,13 +530,21 @@ impl RenderArgs {
         Ok(r)
     }
 
-    /// The `--clip-plane` half-spaces as ray limits for a volume with voxel
-    /// `spacing` (`None` without any); a bad plane is a usage error.
-    pub fn clip_planes(&self, spacing: [f32; 3]) -> Result<Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>> {
+    /// The `--clip-plane` half-spaces (voxel index coordinates) as ray limits
+    /// for a volume of `dims` voxels with voxel `spacing` (`None` without
+    /// any); a bad plane is a usage error.
+    pub fn clip_planes(&self, dims: [usize; 3], spacing: [f32; 3]) -> Result<Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>> {
         if self.clip_plane.is_empty() {
             return Ok(None);
         }
-        let clip = ClipPlanes::new(&self.clip_plane, spacing).map_err(|e| anyhow::Error::new(Usage(format!("--clip-plane: {e}"))))?;
+        let usage = |e: shearwarp::Error| anyhow::Error::new(Usage(format!("--clip-plane: {e}")));
+        let planes = self
+            .clip_plane
+            .iter()
+            .map(|p| ClipPlane::in_voxel_coordinates(p.normal, p.offset, dims, spacing))
+            .collect::<std::result::Result<Vec<_>, _>>()
+            .map_err(usage)?;
+        let clip = ClipPlanes::new(&planes, spacing).map_err(usage)?;
         Ok(Some(std::sync::Arc::new(clip)))
     }
 

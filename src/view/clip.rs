@@ -55,6 +55,21 @@ impl ClipPlane {
         Ok(ClipPlane { normal, offset })
     }
 
+    /// The half-space `normal · v ≤ offset` given in **voxel index**
+    /// coordinates `v = (x, y, z)` of a volume of `dims` voxels with voxel
+    /// `spacing` (the CLI's `--clip-plane`), as the same half-space in world
+    /// millimetres from the volume centre: `v = w / S + c` with
+    /// `c = (dims − 1) / 2`, so `(normal / S) · w ≤ offset − normal · c`.
+    pub fn in_voxel_coordinates(normal: [f64; 3], offset: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+        Self::new(normal, offset)?;
+        if spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(Error::value("clip plane", format!("the voxel spacing must be finite and > 0, got {spacing:?}")));
+        }
+        let c = dims.map(|d| (d as f64 - 1.0) / 2.0);
+        let m = [0, 1, 2].map(|a| normal[a] / spacing[a] as f64);
+        Self::new(m, offset - (0..3).map(|a| normal[a] * c[a]).sum::<f64>())
+    }
+
     /// The half-space through `point` (mm) keeping the side opposite `normal`
     /// (`normal · (w − point) ≤ 0`).
     pub fn through(point: [f64; 3], normal: [f64; 3]) -> Result<Self> {

@@ -65,7 +65,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     preview.set_projection(projection)?;
     blend.set_projection(projection)?;
     // --clip-plane: both displays, every renderer they make
-    if let Some(clip) = cmd.render.clip_planes(spacing)? {
+    if let Some(clip) = cmd.render.clip_planes(d, spacing)? {
         preview.set_limiter(Some(clip.clone()));
         blend.set_limiter(Some(clip));
     }

@@ -39,6 +39,11 @@ use crate::warp::{Canvas, Texel, warp};
 pub const MAX_MASK_BYTES: u64 = 1 << 34;
 /// Largest intermediate image, in pixels, a renderer allocates.
 pub const MAX_INTERMEDIATE_PIXELS: u64 = 1 << 29;
+/// The smallest intermediate image resolution, in pixels per voxel ([`Renderer::set_quality`]).
+pub const MIN_QUALITY: f64 = 0.25;
+/// The largest intermediate image resolution, in pixels per voxel.
+pub const MAX_QUALITY: f64 = 2.0;
+
 /// The near plane of a perspective frame, in slices in front of the eye:
 /// slices nearer the eye (where the per-slice scale grows without bound) are
 /// not composited.
@@ -278,6 +283,7 @@ struct TissueSet {
 struct FrameKey {
     camera: Camera,
     projection: Projection,
+    quality: f64,
     settings: Settings,
     generation: u64,
     tissue: Option<usize>,
@@ -321,6 +327,8 @@ pub struct Renderer {
     build_times: BuildTimes,
     /// Parallel or perspective.
     projection: Projection,
+    /// Intermediate pixels per voxel (the adaptive image size; 1 by default).
+    quality: f64,
 }
 
 impl Renderer {
@@ -354,6 +362,7 @@ impl Renderer {
             budget: None,
             build_times: BuildTimes::default(),
             projection: Projection::Parallel,
+            quality: 1.0,
         })
     }
 
@@ -542,6 +551,27 @@ impl Renderer {
     /// The projection of the following frames.
     pub fn projection(&self) -> Projection {
         self.projection
+    }
+    /// Sets the intermediate image's resolution of the following frames:
+    /// `q` intermediate pixels per voxel, in `[MIN_QUALITY, MAX_QUALITY]`
+    /// (0.25–2; 1, the default, is the classic one pixel per voxel). Below 1
+    /// the frame composites fewer rays (a coarser, faster preview, each slice
+    /// point-sampled bilinearly at the coarser pitch); above 1 it samples the
+    /// slices finer (less blur where the output magnifies). Both projections;
+    /// the plan is the projection's own, resampled ([`FramePlan::set_pitch`]).
+    pub fn set_quality(&mut self, q: f64) -> Result<()> {
+        if !(q.is_finite() && (MIN_QUALITY..=MAX_QUALITY).contains(&q)) {
+            return Err(Error::value(
+                "quality",
+                format!("intermediate pixels per voxel must be in [{MIN_QUALITY}, {MAX_QUALITY}], got {q}"),
+            ));
+        }
+        self.quality = q;
+        Ok(())
+    }
+    /// Intermediate pixels per voxel of the following frames.
+    pub fn quality(&self) -> f64 {
+        self.quality
     }
     /// Sets (or, with `None`, removes) the producer of per-pixel ray limits
     /// that narrows every following frame's plan: a clip region or geometry.
@@ -917,6 +947,7 @@ impl Renderer {
         let key = FrameKey {
             camera: *camera,
             projection: self.projection,
+            quality: self.quality,
             settings: self.settings,
             generation: self.generation,
             tissue: self.tissues.as_ref().map(|t| t.current),
@@ -941,6 +972,12 @@ impl Renderer {
                 Some((cam, PerspectiveView::new(&cam, distance, dims, spacing)?))
             }
         };
+        if self.quality != 1.0 && matches!(self.settings.method, Method::Binary | Method::Brute) {
+            return Err(Error::value(
+                "quality",
+                "an intermediate image size other than one pixel per voxel is not yet supported by the binary rotator (nor its brute force); use --method rle",
+            ));
+        }
         let f = Factorization::new(persp.as_ref().map_or(camera, |p| &p.0), dims, spacing)?;
         if let Some((_, pv)) = &persp {
             // the eye lies on the view axis: same principal axis, same slice order
@@ -960,6 +997,10 @@ impl Renderer {
                 // iso opacities are 0 or 1: never corrected
                 plan.set_ray_opacity(self.settings.mode == Mode::Blend);
             }
+        }
+        if self.quality != 1.0 {
+            // the adaptive image size: the same rays, resampled at another pitch
+            plan.set_pitch(1.0 / self.quality);
         }
         if let Some((l, _)) = &self.limiter {
             // on the renderer's pool: a limiter may work in parallel

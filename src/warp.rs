@@ -201,11 +201,13 @@ impl Texel for [u8; 4] {
 /// eye) the pixel is background, never a mirrored image; elsewhere it is the
 /// bilinear sample at `(a/w, b/w)` ([`warp_projective`]).
 pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>) {
-    if !plan.warp.is_affine() || plan.grid.pitch != 1.0 {
+    if !plan.warp.is_affine() {
         return warp_projective(inter, plan, out);
     }
+    // intermediate pixel = sheared point / pitch + pad (pitch 1: exactly the matrix)
     let m = &plan.warp.inverse;
-    let (inv, it) = ([[m.x_axis.x, m.y_axis.x], [m.x_axis.y, m.y_axis.y]], [m.z_axis.x, m.z_axis.y]);
+    let g = 1.0 / plan.grid.pitch;
+    let (inv, it) = ([[m.x_axis.x * g, m.y_axis.x * g], [m.x_axis.y * g, m.y_axis.y * g]], [m.z_axis.x * g, m.z_axis.y * g]);
     let origin = [plan.grid.pad as f64; 2];
     let w = out.width;
     let valid = inter.valid;
@@ -269,7 +271,7 @@ fn clip_positive(lo: f64, hi: f64, a: f64, b: f64) -> (f64, f64) {
     if a > 0.0 { (lo.max(x), hi) } else { (lo, hi.min(x)) }
 }
 
-/// The warp of a projective (or any non-unit-pitch) plan. Along output row
+/// The warp of a projective plan. Along output row
 /// `v` the homogeneous back-projection `(X, Y, W) = inverse · (u, v, 1)` is
 /// linear in `u`, and so is each condition for a pixel to read the
 /// intermediate image: `W > 0` (in front of the eye; elsewhere background)

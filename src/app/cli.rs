@@ -227,6 +227,11 @@ pub struct RenderArgs {
     /// z ≥ 100.
     #[arg(long, value_name = "NX,NY,NZ,D", value_parser = parse_clip_plane, allow_hyphen_values = true)]
     pub clip_plane: Vec<ClipPlane>,
+    /// Intermediate image resolution Q in pixels per voxel (0.25–2; Schulze's
+    /// adaptive image size): below 1 a coarser, faster frame, above 1 finer
+    /// sampling of each slice. Both projections; --method rle or brute-rle.
+    #[arg(long, value_name = "Q", allow_negative_numbers = true)]
+    pub quality: Option<f64>,
     /// Starting view: anterior (face), posterior, left, right, superior, inferior.
     #[arg(long, value_enum, default_value = "anterior")]
     pub view: NamedView,
@@ -499,6 +504,9 @@ impl RenderArgs {
         let mut r = Renderer::with_tissues(vol, &tissues, settings)?;
         r.set_memory_budget(crate::app::budget());
         r.set_projection(self.projection()?)?;
+        if let Some(q) = self.quality()? {
+            r.set_quality(q)?;
+        }
         if let Some(clip) = self.clip_planes(r.dims(), r.spacing())? {
             r.set_limiter(Some(clip));
         }
@@ -528,6 +536,22 @@ impl RenderArgs {
             }
         }
         Ok(r)
+    }
+
+    /// `--quality Q`, checked (a bad value, or a path that cannot resample its
+    /// intermediate image, is a usage error).
+    pub fn quality(&self) -> Result<Option<f64>> {
+        let Some(q) = self.quality else { return Ok(None) };
+        let (lo, hi) = (shearwarp::render::MIN_QUALITY, shearwarp::render::MAX_QUALITY);
+        if !(q.is_finite() && (lo..=hi).contains(&q)) {
+            usage!("--quality must be {lo}..={hi} intermediate pixels per voxel, got {q}");
+        }
+        if q != 1.0 && matches!(self.method, Method::Binary | Method::Brute) {
+            usage!(
+                "--quality other than 1 is not yet supported by the binary rotator (nor --method brute); use --method rle (or brute-rle)"
+            );
+        }
+        Ok(Some(q))
     }
 
     /// The `--clip-plane` half-spaces (voxel index coordinates) as ray limits
@@ -715,7 +739,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
-            "projection": projection_json(r.projection()),
+            "projection": projection_json(r.projection()), "quality": r.quality(),
             "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": build_ms + stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,
@@ -878,6 +902,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         let mut j = j;
         j["memory"] = memory_json(&r);
         j["build"] = build_json(&r);
+        j["quality"] = r.quality().into();
         say!("{j}");
     } else {
         say!(

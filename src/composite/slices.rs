@@ -427,6 +427,8 @@ impl RleFrame<'_> {
             // the last pixel's right column (its index and two voxels): the next
             // pixel's left column when the two cells are adjacent
             let mut right = (INF, [0f32; 4], [0f32; 4]);
+            // the last cell sampled and its four voxels (c00, c10, c01, c11)
+            let mut cell = (INF, [[0f32; 4]; 4]);
             let mut x = x0;
             loop {
                 // skip opaque pixels through the links
@@ -436,6 +438,13 @@ impl RleFrame<'_> {
                 }
                 let (ci, wi) = plan.cell_of(k, 0, x as usize);
                 let c = ci as u32;
+                if c == cell.0 {
+                    // a magnified slice (pitch < 1): this pixel samples the last one's cell
+                    let [c00, c10, c01, c11] = cell.1;
+                    self.scaled_sample(k, x, q, wi, wj, [c00, c10, c01, c11], prow, lrow, p0);
+                    x += 1;
+                    continue;
+                }
                 if c < next {
                     // (rounding made two pixels share a cell: start the walk again)
                     (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
@@ -458,24 +467,47 @@ impl RleFrame<'_> {
                 ct.step(c + 1);
                 let (c10, c11) = (self.tables.get(cb.at(c + 1)), self.tables.get(ct.at(c + 1)));
                 right = (c + 1, c10, c11);
+                cell = (c, [c00, c10, c01, c11]);
                 next = c + 1;
-                let xr = (x - p0) as usize;
-                let inside = match &plan.limits {
-                    None => true,
-                    Some(l) => {
-                        let [k0, k1] = l.get(x as usize, q);
-                        k0 as usize <= k && k <= k1 as usize
-                    }
-                };
-                if inside {
-                    let smp = blend(c00, c10, c01, c11, &cell_weights(wi, wj));
-                    let acc = &mut prow[xr];
-                    composite_premultiplied(acc, correct_opacity(smp, plan.opacity_exponent(x as usize, q)));
-                    if terminated(acc[3], self.ert) {
-                        lrow[xr] = 1;
-                    }
-                }
+                self.scaled_sample(k, x, q, wi, wj, [c00, c10, c01, c11], prow, lrow, p0);
                 x += 1;
+            }
+        }
+    }
+
+    /// Composites pixel `(x, q)`'s sample of slice `k` (its cell's four
+    /// classified voxels `c00, c10, c01, c11` at weights `wi, wj`) if its ray
+    /// limits keep slice `k`, with the ray's own opacity correction; marks the
+    /// pixel in the links when it terminates.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn scaled_sample(
+        &self,
+        k: usize,
+        x: i64,
+        q: usize,
+        wi: f32,
+        wj: f32,
+        c: [[f32; 4]; 4],
+        prow: &mut [[f32; 4]],
+        lrow: &mut [u32],
+        p0: i64,
+    ) {
+        let plan = self.plan;
+        let inside = match &plan.limits {
+            None => true,
+            Some(l) => {
+                let [k0, k1] = l.get(x as usize, q);
+                k0 as usize <= k && k <= k1 as usize
+            }
+        };
+        if inside {
+            let xr = (x - p0) as usize;
+            let smp = blend(c[0], c[1], c[2], c[3], &cell_weights(wi, wj));
+            let acc = &mut prow[xr];
+            composite_premultiplied(acc, correct_opacity(smp, plan.opacity_exponent(x as usize, q)));
+            if terminated(acc[3], self.ert) {
+                lrow[xr] = 1;
             }
         }
     }

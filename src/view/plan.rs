@@ -440,6 +440,47 @@ impl FramePlan {
         self.set_ray_opacity(true);
     }
 
+    /// Resamples this plan's intermediate grid at `pitch` voxels per
+    /// intermediate pixel (the adaptive image size of Schulze et al.: quality
+    /// `q = 1 / pitch` intermediate pixels per voxel), keeping every ray's
+    /// geometry: pixel `(p, q)` becomes the sheared point
+    /// `((p − pad) · pitch, (q − pad) · pitch)`, and each slice samples it
+    /// through its map as before. A parallel plan becomes
+    /// [`MapKind::ScaleTranslate`] with `σ_k = 1` and `τ_k` its exact
+    /// translation; the grid keeps covering the same sheared rectangle (plus a
+    /// two-pixel ring); the warp (sheared → output) is unchanged, the
+    /// intermediate pixel of an output pixel divides by the pitch
+    /// ([`FramePlan::output_to_intermediate`]); the per-ray opacity exponents
+    /// are recomputed for the new pixels. Call it after the projection's
+    /// producer and before a [`Limiter`]; `pitch` 1 on a pitch-1 plan changes
+    /// nothing. `pitch` must be finite and > 0 (the renderer keeps it in
+    /// `[0.5, 4]`).
+    pub fn set_pitch(&mut self, pitch: f64) {
+        assert!(pitch.is_finite() && pitch > 0.0, "pitch {pitch}");
+        let old = self.grid.pitch;
+        if pitch == old {
+            return;
+        }
+        if self.kind == MapKind::Translate {
+            let st = &self.shear;
+            self.scaled.clear();
+            self.scaled.extend((0..st.slices()).map(|k| ScaledMap { scale: 1.0, trans: [st.trans[0][k], st.trans[1][k]] }));
+            self.kind = MapKind::ScaleTranslate;
+        }
+        // the sheared rectangle the old grid covered inside a one-pixel ring
+        let [w, h] = self.grid.size;
+        let pad = self.grid.pad as f64;
+        let lo = (1.0 - pad) * old;
+        let hi = [0, 1].map(|a| ([w, h][a] as f64 - 2.0 - pad) * old);
+        let new_pad = ((-lo / pitch).ceil().max(0.0) as usize) + 2;
+        let size = [0, 1].map(|a| new_pad + (hi[a] / pitch).ceil().max(0.0) as usize + 3);
+        self.grid = Grid { size, pad: new_pad, pitch };
+        self.limits = None;
+        if !self.exponents.is_empty() {
+            self.set_ray_opacity(true);
+        }
+    }
+
     /// Whether each ray's opacity is corrected to its own sample spacing
     /// (perspective plans; a no-op for parallel ones). The renderer turns it
     /// off in iso mode, whose opacities are 0 or 1 and never corrected.

@@ -26,7 +26,9 @@ use winit::window::{Window, WindowId};
 use super::ViewCmd;
 use super::bench::{Bench, Info, Marks, Phase, Sample};
 use super::overlay::{self, Canvas, Controls, Hit};
-use super::state::{Class, Display, Drag, HELP, Hud, Input, Key, Kind, Meter, Outcome, Request, Start, State, TissueInfo, button_labels};
+use super::state::{
+    Adaptive, Class, Display, Drag, HELP, Hud, Input, Key, Kind, Meter, Outcome, Request, Start, State, TissueInfo, button_labels,
+};
 use super::worker::{Frame, Renderers, Reply, Worker};
 use crate::app::cli::Usage;
 use shearwarp::classify::presets::{self, Tissue};
@@ -106,6 +108,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
         cell: settings.cell,
         drag_speed: cmd.drag_speed,
         projection,
+        adaptive: Adaptive::new(cmd.target_fps, cmd.render.quality()?.unwrap_or(1.0)),
     });
     let mut app = App {
         state,
@@ -313,6 +316,10 @@ impl App {
         }
         if matches!(self.state.drag, Some(Drag::Rotate { .. })) {
             self.meter.record(Instant::now(), f.spec.camera.rotation);
+            // the adaptive image size follows the previews' cost while dragging
+            if f.kind == Kind::Preview && !f.stats.skipped && self.state.adaptive.measured(f.quality, f.total_ms) {
+                self.log(format!("quality {} px/voxel while moving", self.state.adaptive.moving));
+            }
         }
         if f.kind == Kind::Blend && !f.stats.skipped {
             self.blend_stats = Some((f.stats, f.total_ms));

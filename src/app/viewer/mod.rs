@@ -67,6 +67,13 @@ pub struct ViewCmd {
     /// stage) on stdout and exit. N is 1..=100000.
     #[arg(long, value_name = "N")]
     pub benchmark_drag: Option<usize>,
+    /// Adaptive intermediate image size: while the view is dragged, the
+    /// preview's resolution (0.25–1 pixels per voxel) follows this frame rate
+    /// (Schulze et al.: q · sqrt(target / measured), with hysteresis); the frame
+    /// on release renders at --quality (at least 1). 1..=1000. Takes effect on
+    /// the paths that resample their intermediate image (--method rle).
+    #[arg(long, value_name = "FPS")]
+    pub target_fps: Option<f64>,
 }
 
 /// The largest `--benchmark-drag`.
@@ -76,6 +83,9 @@ pub const MAX_BENCH_FRAMES: usize = 100_000;
 pub fn run(cmd: &ViewCmd) -> anyhow::Result<()> {
     if let Some(n) = cmd.benchmark_drag.filter(|n| !(1..=MAX_BENCH_FRAMES).contains(n)) {
         return Err(anyhow::Error::new(crate::app::cli::Usage(format!("--benchmark-drag must be 1..={MAX_BENCH_FRAMES} frames, got {n}"))));
+    }
+    if let Some(f) = cmd.target_fps.filter(|f| !(f.is_finite() && (1.0..=1000.0).contains(f))) {
+        return Err(anyhow::Error::new(crate::app::cli::Usage(format!("--target-fps must be 1..=1000 frames a second, got {f}"))));
     }
     #[cfg(feature = "viewer")]
     {

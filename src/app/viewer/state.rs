@@ -26,7 +26,7 @@ use glam::{DMat3, DQuat};
 
 use super::overlay::{Hit, Layout};
 use shearwarp::encode::mask::MAX_CELL;
-use shearwarp::render::FrameStats;
+use shearwarp::render::{FrameStats, MAX_QUALITY, MIN_QUALITY};
 use shearwarp::view::{Camera, Projection, rotate_eye};
 
 /// The classification a frame uses.
@@ -71,6 +71,76 @@ pub struct Spec {
     pub class: Class,
     pub cell: usize,
     pub projection: Projection,
+    /// Intermediate pixels per voxel ([`shearwarp::Renderer::set_quality`]):
+    /// the adaptive value while the view is dragged, at least 1 once it is still.
+    pub quality: f64,
+}
+
+/// The adaptive intermediate image size (Schulze et al.): while the view is
+/// dragged, the preview's quality `q` (intermediate pixels per voxel) follows
+/// `q · sqrt(target / measured)` frame time — a frame's cost is about
+/// proportional to its `q²` rays — with hysteresis, so it settles instead of
+/// hunting: it moves only when the wanted value is more than [`Adaptive::BAND`]
+/// away, to a multiple of 1/16. It stays in `[MIN_QUALITY, still]`; the frame
+/// on release is rendered at `still ≥ 1`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Adaptive {
+    /// The wanted preview frame time (ms), from `--target-fps`; `None`: no adaptation.
+    pub target_ms: Option<f64>,
+    /// The quality while dragging.
+    pub moving: f64,
+    /// The quality of a still view (≥ 1).
+    pub still: f64,
+    /// Frame times (ms) measured at `moving` since it last changed (the last
+    /// [`Adaptive::WINDOW`]).
+    times: [f64; Adaptive::WINDOW],
+    count: usize,
+}
+
+impl Adaptive {
+    /// Relative change below which the quality stays put.
+    pub const BAND: f64 = 0.15;
+    /// Frames measured at one quality before it may change: their median
+    /// decides, so one slow or fast frame (a page fault, another process)
+    /// does not move it.
+    pub const WINDOW: usize = 3;
+
+    /// Adaptation to `target_fps` frames a second, starting at one pixel per
+    /// voxel; without a target, `quality` while moving. Still views render at
+    /// `quality` but at least 1.
+    pub fn new(target_fps: Option<f64>, quality: f64) -> Self {
+        let still = quality.clamp(1.0, MAX_QUALITY);
+        let moving = if target_fps.is_some() { 1.0 } else { quality.clamp(MIN_QUALITY, MAX_QUALITY) };
+        Adaptive { target_ms: target_fps.map(|f| 1000.0 / f), moving, still, times: [0.0; Self::WINDOW], count: 0 }
+    }
+
+    /// Takes the frame time `ms` of a preview rendered at quality `q` while
+    /// moving (frames of another quality than the current one, still in
+    /// flight when it changed, are ignored); once [`Adaptive::WINDOW`] frames
+    /// are in, their median decides. Returns whether the moving quality changed.
+    pub fn measured(&mut self, q: f64, ms: f64) -> bool {
+        let Some(target) = self.target_ms else { return false };
+        if !(ms.is_finite() && ms > 0.0) || q != self.moving {
+            return false;
+        }
+        self.times[self.count % Self::WINDOW] = ms;
+        self.count += 1;
+        if self.count < Self::WINDOW {
+            return false;
+        }
+        let mut t = self.times;
+        t.sort_by(f64::total_cmp);
+        let ms = t[Self::WINDOW / 2];
+        let want = (q * (target / ms).sqrt()).clamp(MIN_QUALITY, self.still);
+        if (want / self.moving - 1.0).abs() <= Self::BAND {
+            return false;
+        }
+        let next = ((want * 16.0).round() / 16.0).clamp(MIN_QUALITY, self.still);
+        let changed = next != self.moving;
+        self.moving = next;
+        self.count = 0;
+        changed
+    }
 }
 
 /// User input, already in window pixels.
@@ -163,6 +233,8 @@ pub struct Start {
     pub drag_speed: f64,
     /// The starting projection.
     pub projection: Projection,
+    /// The intermediate image size (`--target-fps`, `--quality`).
+    pub adaptive: Adaptive,
 }
 
 /// A drag in progress.
@@ -192,6 +264,8 @@ pub struct State {
     pub projection: Projection,
     /// The perspective P switches to (the last one shown, or 40° from 2 diagonals).
     perspective: Projection,
+    /// The intermediate image size while moving and when still.
+    pub adaptive: Adaptive,
     /// Bumped by every change of the picture.
     pub seq: u64,
     cursor: (f64, f64),
@@ -222,6 +296,7 @@ impl State {
             } else {
                 Projection::Perspective { fov_deg: 40.0, eye_distance: 2.0 }
             },
+            adaptive: s.adaptive,
             seq: 1,
             cursor: (0.0, 0.0),
             preview_posted: 0,
@@ -232,7 +307,8 @@ impl State {
 
     /// The frame the current state asks for.
     pub fn spec(&self) -> Spec {
-        Spec { seq: self.seq, camera: self.camera(), class: self.class, cell: self.cell, projection: self.projection }
+        let quality = if self.drag.is_some() { self.adaptive.moving } else { self.adaptive.still };
+        Spec { seq: self.seq, camera: self.camera(), class: self.class, cell: self.cell, projection: self.projection, quality }
     }
 
     /// The current camera.
@@ -342,6 +418,10 @@ impl State {
             }
             Input::Release => {
                 if self.drag.take().is_some() {
+                    if self.adaptive.moving != self.adaptive.still {
+                        // the frame on release: the still view's quality
+                        return self.changed();
+                    }
                     Outcome::Redraw
                 } else {
                     Outcome::Nothing
@@ -540,6 +620,14 @@ impl State {
                 let fps = if f > 0.0 { 1000.0 / f } else { 0.0 };
                 l.push(format!("{f:.2} ms/frame = shear {:.2} + render {:.2} + warp {:.2}", s.shear_ms, s.render_ms, s.warp_ms));
                 l.push(format!("{fps:.0} fps max; drag: {:.0} fps shown, {:.0} deg/s", hud.fps, hud.degps));
+                if let Some(t) = self.adaptive.target_ms {
+                    l.push(format!(
+                        "target {:.0} fps: {} px/voxel moving, {} still",
+                        1000.0 / t,
+                        self.adaptive.moving,
+                        self.adaptive.still
+                    ));
+                }
                 let axis = if *switched { " (axis switch)" } else { "" };
                 l.push(format!("axis {}{axis}, {}", AXES[s.axis.min(2)], shear_summary(s)));
             }
@@ -599,6 +687,7 @@ mod tests {
             cell: 1,
             drag_speed: 0.5,
             projection: Projection::Parallel,
+            adaptive: Adaptive::new(None, 1.0),
         })
     }
 
@@ -626,6 +715,69 @@ mod tests {
         assert_eq!(s.spec().projection, Projection::Parallel);
         s.handle(Input::Key(Key::ToggleProjection));
         assert_eq!(s.spec().projection, Projection::Perspective { fov_deg: 40.0, eye_distance: MIN_EYE_DISTANCE });
+    }
+
+    /// `--target-fps`: while dragging, the preview's quality follows
+    /// `q · sqrt(target / measured)` in 1/16 steps, inside its band it stays
+    /// put (no hunting on noisy timings), it never leaves [0.25, still]; the
+    /// release asks for a new preview at the still quality (≥ 1).
+    #[test]
+    fn adaptive_quality_follows_the_target_with_hysteresis() {
+        // `n` frames of `ms` at the current quality
+        fn feed(a: &mut Adaptive, ms: &[f64]) -> bool {
+            ms.iter().fold(false, |c, &m| a.measured(a.moving, m) || c)
+        }
+        let mut a = Adaptive::new(Some(50.0), 1.0);
+        assert_eq!((a.target_ms, a.moving, a.still), (Some(20.0), 1.0, 1.0));
+        // 80 ms at q 1 (the median of three, one outlier each way): a quarter
+        // of the rays wanted, q 0.5
+        assert!(!feed(&mut a, &[80.0, 5.0]));
+        assert!(a.measured(1.0, 300.0));
+        assert_eq!(a.moving, 0.5);
+        // a late frame of the old quality is ignored
+        assert!(!a.measured(1.0, 1e6));
+        // within the band: no change, whichever side
+        assert!(!feed(&mut a, &[22.0, 22.0, 22.0, 18.0, 18.0, 18.0]));
+        assert_eq!(a.moving, 0.5);
+        // one odd frame among steady ones does not move it
+        assert!(!feed(&mut a, &[20.0, 1000.0, 20.0]));
+        // a frame cost that scales with q² settles: 20 ms at 0.5 becomes the
+        // target, wherever it started
+        let cost = |q: f64| 80.0 * q * q;
+        let mut b = Adaptive::new(Some(50.0), 1.0);
+        for _ in 0..15 {
+            let m = cost(b.moving);
+            b.measured(b.moving, m);
+        }
+        assert!((cost(b.moving) - 20.0).abs() / 20.0 < 0.3, "settled at q {} ({} ms)", b.moving, cost(b.moving));
+        // clamped: very slow frames stop at 0.25, fast ones at the still quality
+        assert!(feed(&mut a, &[1e6; 3]));
+        assert_eq!(a.moving, MIN_QUALITY);
+        assert!(feed(&mut a, &[0.01; 3]));
+        assert_eq!(a.moving, 1.0);
+        for bad in [f64::NAN, 0.0, -1.0, f64::INFINITY] {
+            assert!(!feed(&mut a, &[bad; 3]));
+        }
+        // without a target nothing adapts; --quality sets the moving value and,
+        // at least 1, the still one
+        let mut n = Adaptive::new(None, 0.5);
+        assert!(!n.measured(0.5, 1e6));
+        assert_eq!((n.moving, n.still), (0.5, 1.0));
+        assert_eq!(Adaptive::new(None, 2.0).still, 2.0);
+        // the state: dragged frames at the moving quality, the release a new
+        // preview at the still one
+        let mut s = start();
+        s.adaptive = Adaptive::new(Some(50.0), 1.0);
+        feed(&mut s.adaptive, &[80.0; 3]);
+        s.requests();
+        s.handle(Input::Press { x: 200.0, y: 200.0 });
+        s.handle(Input::Move { x: 210.0, y: 200.0 });
+        assert_eq!(s.spec().quality, 0.5);
+        let seq = s.seq;
+        assert_eq!(s.handle(Input::Release), Outcome::Redraw);
+        assert!(s.seq > seq, "the release renders again");
+        assert_eq!(s.spec().quality, 1.0);
+        assert!(matches!(s.requests()[..], [Request::Preview(Spec { quality: 1.0, .. }), ..]));
     }
 
     fn previews(r: &[Request]) -> Vec<u64> {

@@ -20,7 +20,7 @@ use super::state::{Class, Kind, Spec};
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
-use shearwarp::render::{FrameStats, Renderer, Settings};
+use shearwarp::render::{FrameStats, Method, Renderer, Settings};
 use shearwarp::view::Projection;
 use shearwarp::warp::{Canvas, Image8, Texel};
 
@@ -43,6 +43,9 @@ pub struct Frame {
     /// idle ([`Reply::Prefetched`] follows when they are built).
     pub prefetch: bool,
     pub spec: Spec,
+    /// The intermediate pixels per voxel it was rendered at (its spec's, or 1
+    /// on a path that does not resample: [`Renderers::quality_for`]).
+    pub quality: f64,
 }
 
 /// What a worker reports.
@@ -181,10 +184,24 @@ impl Renderers {
         if spec.projection != self.projection {
             self.set_projection(spec.projection)?;
         }
+        let q = self.quality_for(spec.quality);
         let r = self.select(spec.class, spec.cell)?;
+        if r.quality() != q {
+            r.set_quality(q)?;
+        }
         let st = r.render(&spec.camera, img)?;
         self.stale[st.axis] = false;
         Ok(st)
+    }
+
+    /// The intermediate image size a frame asking for `q` renders at: `q` on
+    /// the paths that resample their intermediate image, 1 on the binary
+    /// rotator and its brute force (which do not yet).
+    pub fn quality_for(&self, q: f64) -> f64 {
+        match self.tissues.settings().method {
+            Method::Binary | Method::Brute => 1.0,
+            _ => q,
+        }
     }
 
     /// Builds the mask of one stale principal axis of the current renderer, if
@@ -274,13 +291,15 @@ impl Worker {
                         };
                         reply(Reply::Busy { kind, seq: spec.seq, what });
                     }
+                    let quality = renderers.quality_for(spec.quality);
                     match renderers.render(&spec, &mut img) {
                         Ok(stats) => {
                             img.to_0rgb(&mut pixels);
                             let total_ms = t.elapsed().as_secs_f64() * 1e3;
                             let (width, height) = (img.width, img.height);
                             let prefetch = renderers.stale.contains(&true);
-                            let f = Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, started: t, prefetch, spec };
+                            let f =
+                                Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, started: t, prefetch, spec, quality };
                             reply(Reply::Frame(Box::new(f)));
                         }
                         Err(e) => reply(Reply::Failed { kind, seq: spec.seq, error: e.to_string() }),
@@ -353,7 +372,7 @@ mod tests {
         let tissues = presets::tissues_for(&vol);
         let r = Renderers::new(vol, &tissues, Settings { mode, threads: 1, ..Settings::default() }).unwrap();
         let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel })
+        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0 })
     }
 
     fn frame(rx: &mpsc::Receiver<Reply>) -> Frame {
@@ -376,7 +395,7 @@ mod tests {
             let s = Settings { mode, threads: 1, method: shearwarp::render::Method::Rle, ..Settings::default() };
             let mut r = Renderers::new(vol, &tissues, s).unwrap();
             let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel };
+            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0 };
             let mut par = Image::new(64, 48);
             r.render(&spec, &mut par).unwrap();
             // the spec's projection is what renders
@@ -402,7 +421,7 @@ mod tests {
             let sp = vol.spacing();
             let mut r = Renderers::new(vol, &tissues, s).unwrap();
             let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel };
+            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0 };
             let half = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], 0.0).unwrap()], sp).unwrap();
             let none = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], -1e6).unwrap()], sp).unwrap();
             for class in [Class::Tissue(0), Class::Custom(100.0)] {

@@ -82,3 +82,46 @@ fn bad_arguments_are_usage_errors() {
     tiny().args(["--reps", "0"]).assert().code(2);
     tiny().args(["--tissue", "bone"]).assert().code(2).stderr(predicate::str::contains("unknown tissue"));
 }
+
+/// `bench --perspective` takes lists of fields of view and eye distances:
+/// each projection's variants (named with their field of view and distance)
+/// sit in the same table as the parallel ones, each accelerated path equals its
+/// brute force, and every view a path cannot render is listed with the reason
+/// instead of failing the run.
+#[test]
+fn perspective_lists_are_measured_or_listed_as_skipped() {
+    let out = bench("rle,persp").args(["--perspective", "40", "--eye-distance", "3,0.1", "--modes", "blend", "--json"]).assert().success();
+    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    let rs = json["records"].as_array().unwrap();
+    let skipped = json["skipped"].as_array().unwrap();
+    let views = json["views"].as_array().unwrap().len();
+    // every variant and view: measured or skipped, never both, never neither
+    for v in ["rle", "binary-persp", "brute-persp", "rle-persp", "brute-rle-persp"] {
+        for d in ["3", "0.1"] {
+            let name = if v == "rle" { v.to_string() } else { format!("{v}-f40-d{d}") };
+            let n = rs.iter().filter(|r| r["variant"] == name.as_str()).count();
+            let k = skipped.iter().filter(|r| r["variant"] == name.as_str()).count();
+            assert_eq!(n + k, views, "{name}: {n} records, {k} skipped");
+            for s in skipped.iter().filter(|r| r["variant"] == name.as_str()) {
+                assert!(!s["reason"].as_str().unwrap().is_empty());
+            }
+        }
+    }
+    // the RLE path renders the eye 3 diagonals away at every view, as its brute force does
+    let persp: Vec<&serde_json::Value> = rs.iter().filter(|r| r["variant"] == "rle-persp-f40-d3").collect();
+    assert_eq!(persp.len(), views);
+    for r in persp {
+        assert!(r["error"]["rmse"].as_f64().unwrap() < 0.1, "{r}");
+        let b = rs.iter().find(|b| b["variant"] == "brute-rle-persp-f40-d3" && b["view"] == r["view"]).unwrap();
+        assert_eq!(r["error"], b["error"], "{}", r["view"]);
+    }
+    // the Markdown report names the perspective / parallel ratio
+    bench("rle,rle-persp")
+        .args(["--perspective", "40", "--eye-distance", "3", "--modes", "blend"])
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("Perspective / parallel frame time").and(predicate::str::contains("rle-persp ")));
+    // bad lists are usage errors
+    bench("rle").args(["--perspective", "40,200"]).assert().code(2);
+    bench("rle").args(["--perspective", "40", "--eye-distance", "3,-1"]).assert().code(2);
+}

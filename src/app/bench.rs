@@ -103,16 +103,25 @@ pub struct BenchCmd {
     /// Also print one Markdown row per variant and view.
     #[arg(long)]
     pub per_view: bool,
-    /// Also benchmark the paths that render perspective (rle, brute-rle) under
-    /// a perspective projection with this vertical field of view in degrees,
-    /// beside the parallel rows ("rle-persp", "brute-rle-persp"; errors against
-    /// the perspective reference; no iso depth error yet).
-    #[arg(long, value_name = "FOV_DEGREES", allow_negative_numbers = true)]
-    pub perspective: Option<f64>,
-    /// With --perspective: the eye's distance from the volume's centre in
-    /// volume diagonals [default: 2].
-    #[arg(long, value_name = "D", allow_negative_numbers = true, requires = "perspective")]
-    pub eye_distance: Option<f64>,
+    /// Also benchmark every path under perspective projections with these
+    /// vertical fields of view in degrees (comma-separated or repeated), from
+    /// each of the --eye-distance values, beside the parallel rows: variants
+    /// "rle-persp", "brute-rle-persp", "binary-persp", "brute-persp" (suffixed
+    /// "-f<FOV>-d<D>" when more than one projection is measured); errors
+    /// against the perspective reference. A path that cannot render a view is
+    /// listed as skipped, with the reason.
+    #[arg(long, value_name = "FOV_DEGREES", allow_negative_numbers = true, value_delimiter = ',')]
+    pub perspective: Vec<f64>,
+    /// With --perspective: the eye's distances from the volume's centre in
+    /// volume diagonals (comma-separated or repeated) [default: 2].
+    #[arg(long, value_name = "D", allow_negative_numbers = true, value_delimiter = ',', requires = "perspective")]
+    pub eye_distance: Vec<f64>,
+    /// The perspective matrix of issue 21: fields of view 20°, 40° and 60°
+    /// from 3, 1.5 and 0.75 volume diagonals, and the eye inside the volume
+    /// (60° from 0.1 diagonals), beside the parallel rows (adds to any
+    /// --perspective).
+    #[arg(long)]
+    pub perspective_matrix: bool,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -161,11 +170,31 @@ pub fn registry(base: Settings) -> Vec<Variant> {
 }
 
 /// The variants that render `projection` (a perspective one): the RLE path
-/// and its brute force, named `rle-persp` and `brute-rle-persp`.
-pub fn perspective_variants(base: Settings, projection: Projection) -> Vec<Variant> {
-    [(Method::Rle, "rle-persp"), (Method::BruteRle, "brute-rle-persp")]
-        .map(|(method, name)| Variant { name: name.into(), settings: Settings { method, cell: 1, ..base }, projection })
-        .to_vec()
+/// and its brute force, the binary rotator (cell 1, u64 words, bit scan) and
+/// its brute force, named `rle-persp`, `brute-rle-persp`, `binary-persp` and
+/// `brute-persp`, each followed by `suffix`.
+pub fn perspective_variants(base: Settings, projection: Projection, suffix: &str) -> Vec<Variant> {
+    let binary = Settings { method: Method::Binary, cell: 1, word: WordSize::U64, search: Search::Bitscan, ..base };
+    [
+        (binary, "binary-persp"),
+        (Settings { method: Method::Brute, cell: 1, ..base }, "brute-persp"),
+        (Settings { method: Method::Rle, cell: 1, ..base }, "rle-persp"),
+        (Settings { method: Method::BruteRle, cell: 1, ..base }, "brute-rle-persp"),
+    ]
+    .map(|(settings, name)| Variant { name: format!("{name}{suffix}"), settings, projection })
+    .to_vec()
+}
+
+/// The perspective projections of `--perspective-matrix` (issue 21): fields
+/// of view 20°, 40°, 60° from 3, 1.5 and 0.75 volume diagonals, and 60° from
+/// 0.1 diagonals (the eye inside).
+pub fn perspective_matrix() -> Vec<Projection> {
+    let mut v: Vec<Projection> = [20.0, 40.0, 60.0]
+        .iter()
+        .flat_map(|&fov_deg| [3.0, 1.5, 0.75].map(|eye_distance| Projection::Perspective { fov_deg, eye_distance }))
+        .collect();
+    v.push(Projection::Perspective { fov_deg: 60.0, eye_distance: 0.1 });
+    v
 }
 
 /// One variant at one view.
@@ -218,6 +247,8 @@ struct Acc {
     axis: usize,
     error: Option<ImageError>,
     depth: Option<(&'static str, DepthError)>,
+    /// Why this variant cannot render this view (it is left out of the records).
+    skipped: Option<String>,
 }
 
 /// The reference of one mode and view.
@@ -264,7 +295,7 @@ impl BenchCmd {
                 return Err(usage("--iso must be a finite number".into()));
             }
         }
-        self.projection()?;
+        self.projections()?;
         ReferenceOptions { step: self.ref_step, ..Default::default() }.check().map_err(|e| usage(format!("--ref-step: {e}")))?;
         for p in &self.plot {
             plot_format(p)?;
@@ -272,17 +303,34 @@ impl BenchCmd {
         Ok(())
     }
 
-    /// The perspective of `--perspective`, if given.
-    fn projection(&self) -> Result<Option<Projection>> {
-        let Some(fov) = self.perspective else { return Ok(None) };
-        if !(fov > 0.0 && fov < 180.0) {
-            return Err(usage(format!("--perspective takes a vertical field of view in degrees, 0 < FOV < 180, got {fov}")));
+    /// The perspective projections measured: every `--perspective` field of
+    /// view from every `--eye-distance` (default 2 diagonals), then the
+    /// `--perspective-matrix`, without repeats.
+    fn projections(&self) -> Result<Vec<Projection>> {
+        let mut out: Vec<Projection> = vec![];
+        let default = [crate::app::cli::DEFAULT_EYE_DISTANCE];
+        let ds: &[f64] = if self.eye_distance.is_empty() { &default } else { &self.eye_distance };
+        for &fov in &self.perspective {
+            if !(fov > 0.0 && fov < 180.0) {
+                return Err(usage(format!("--perspective takes a vertical field of view in degrees, 0 < FOV < 180, got {fov}")));
+            }
+            for &d in ds {
+                if !(d.is_finite() && d > 0.0) {
+                    return Err(usage(format!("--eye-distance must be a finite number of volume diagonals > 0, got {d}")));
+                }
+                out.push(Projection::perspective(fov, d)?);
+            }
         }
-        let d = self.eye_distance.unwrap_or(crate::app::cli::DEFAULT_EYE_DISTANCE);
-        if !(d.is_finite() && d > 0.0) {
-            return Err(usage(format!("--eye-distance must be a finite number of volume diagonals > 0, got {d}")));
+        if self.perspective_matrix {
+            out.extend(perspective_matrix());
         }
-        Ok(Some(Projection::perspective(fov, d)?))
+        let mut uniq: Vec<Projection> = vec![];
+        for p in out {
+            if !uniq.contains(&p) {
+                uniq.push(p);
+            }
+        }
+        Ok(uniq)
     }
 
     /// The phantom the volume was built from (None for files).
@@ -367,6 +415,17 @@ pub struct Report {
     pub reference: Vec<ReferenceRecord>,
     pub records: Vec<Record>,
     pub summary: Vec<Summary>,
+    /// Variants and views that could not be rendered, and why.
+    pub skipped: Vec<Skipped>,
+}
+
+/// A variant that cannot render a view (a perspective the path does not do yet).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Skipped {
+    pub mode: &'static str,
+    pub variant: String,
+    pub view: String,
+    pub reason: String,
 }
 
 /// The reference's own cost and accuracy at one view.
@@ -429,8 +488,14 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
         .map(|&mode| {
             let base = Settings { mode, ert: cmd.ert, threads: cmd.threads, ..Settings::default() };
             let mut all = registry(base);
-            if let Ok(Some(p)) = cmd.projection() {
-                all.extend(perspective_variants(base, p));
+            let projections = cmd.projections().unwrap_or_default();
+            for p in &projections {
+                let suffix = match (p, projections.len()) {
+                    (_, 1) => String::new(),
+                    (Projection::Perspective { fov_deg, eye_distance }, _) => format!("-f{fov_deg}-d{eye_distance}"),
+                    _ => String::new(),
+                };
+                all.extend(perspective_variants(base, *p, &suffix));
             }
             let exact = |o: &str| all.iter().any(|v| v.name == o);
             let picked = |v: &Variant| cmd.only.iter().any(|o| if exact(o) { v.name == *o } else { v.name.contains(o.as_str()) });
@@ -461,6 +526,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
         reference: vec![],
         records: vec![],
         summary: vec![],
+        skipped: vec![],
     };
     let mut vol = Some(vol);
     for (mode, variants) in &per_mode {
@@ -478,12 +544,21 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                 projections.push(v.projection);
             }
         }
-        let mut refs: Vec<RefFrame> = Vec::with_capacity(views.len() * projections.len());
+        let mut refs: Vec<std::result::Result<RefFrame, String>> = Vec::with_capacity(views.len() * projections.len());
         for (proj, view) in projections.iter().flat_map(|p| views.iter().map(move |v| (p, v))) {
             pb.set_message(format!("{} reference {}", mode.name(), view.name));
             let cam = camera(view);
             let t = Instant::now();
-            let image = refr.render_projected(&scene, &cam, proj, &ropts)?;
+            let image = match refr.render_projected(&scene, &cam, proj, &ropts) {
+                Ok(i) => i,
+                // (a perspective the reference cannot trace: every variant skips this view)
+                Err(e) if proj.is_perspective() => {
+                    refs.push(Err(format!("reference: {e}")));
+                    pb.inc(1);
+                    continue;
+                }
+                Err(e) => return Err(e.into()),
+            };
             let ms = t.elapsed().as_secs_f64() * 1e3;
             let t = Instant::now();
             let analytic = match (mode, phantom) {
@@ -503,13 +578,11 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                 truth_ms,
             });
             let truth = match (mode, analytic) {
-                // (the fast paths' iso depth is not yet computed in perspective)
-                _ if proj.is_perspective() => None,
                 (Mode::Iso, Some(a)) => Some((a, "analytic")),
                 (Mode::Iso, None) => Some((image.depth.clone(), "reference")),
                 _ => None,
             };
-            refs.push(RefFrame { image, truth });
+            refs.push(Ok(RefFrame { image, truth }));
             pb.inc(1);
         }
         // frames alternate between two images: a renderer skips a frame identical to
@@ -528,7 +601,28 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                     pb.set_message(format!("{} {} {}", mode.name(), variant.name, view.name));
                     let a = &mut acc[vi * nv + wi];
                     let cam = camera(view);
-                    let cold = frame(&mut r, &cam, &mut imgs, &mut flip)?;
+                    if a.skipped.is_some() {
+                        pb.inc(1);
+                        continue;
+                    }
+                    let rf = match rf {
+                        Ok(rf) => rf,
+                        Err(why) => {
+                            a.skipped = Some(why.clone());
+                            pb.inc(1);
+                            continue;
+                        }
+                    };
+                    let cold = match frame(&mut r, &cam, &mut imgs, &mut flip) {
+                        Ok(c) => c,
+                        // a perspective view a path cannot render (yet): listed, not fatal
+                        Err(e) if variant.projection.is_perspective() => {
+                            a.skipped = Some(e.to_string());
+                            pb.inc(1);
+                            continue;
+                        }
+                        Err(e) => return Err(e),
+                    };
                     a.cold.push(cold.shear_ms);
                     a.axis = cold.axis;
                     for _ in 1..cmd.warmup {
@@ -542,7 +636,12 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                         let img = &imgs[flip];
                         a.error = Some(compare(img, &rf.image.image)?);
                         if let Some((t, what)) = &rf.truth {
-                            a.depth = Some((*what, depth_error(&fast_path_depth(&r, &cam)?, t, unit)?));
+                            match fast_path_depth(&r, &cam) {
+                                Ok(d) => a.depth = Some((*what, depth_error(&d, t, unit)?)),
+                                // (a path that keeps no depth in perspective: no depth column)
+                                Err(_) if variant.projection.is_perspective() => {}
+                                Err(e) => return Err(e.into()),
+                            }
                         }
                     }
                     pb.inc(1);
@@ -552,6 +651,10 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
         for (vi, variant) in variants.iter().enumerate() {
             for (wi, view) in views.iter().enumerate() {
                 let a = &mut acc[vi * nv + wi];
+                if let Some(why) = a.skipped.take() {
+                    report.skipped.push(Skipped { mode: mode.name(), variant: variant.name.clone(), view: view.name.clone(), reason: why });
+                    continue;
+                }
                 let col = |g: fn(&FrameStats) -> f64| median(&mut a.frames.iter().map(g).collect::<Vec<_>>());
                 report.records.push(Record {
                     mode: mode.name(),
@@ -667,9 +770,17 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
     );
     for (mode, tissue, iso) in &rep.classification {
         let rows: Vec<&Summary> = rep.summary.iter().filter(|x| x.mode == mode).collect();
-        let depth_what = rep.records.iter().find(|r| r.mode == mode).and_then(|r| r.depth_truth);
+        let depth_what: Option<String> = {
+            let mut w: Vec<&str> = vec![];
+            for t in rep.records.iter().filter(|r| r.mode == mode).filter_map(|r| r.depth_truth) {
+                if !w.contains(&t) {
+                    w.push(t);
+                }
+            }
+            (!w.is_empty()).then(|| w.join(" / "))
+        };
         let _ = writeln!(s, "## {mode} (tissue {tissue}, iso {iso})\n");
-        let dcol = match depth_what {
+        let dcol = match &depth_what {
             Some(w) => format!(" depth err vs {w} (vox): mean | p99 (worst view) |"),
             None => String::new(),
         };
@@ -697,6 +808,34 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
                 x.silhouette_max,
                 if x.pareto { "★" } else { "" }
             );
+        }
+        // perspective against parallel, side by side in this run
+        let ratios: Vec<String> = rep
+            .summary
+            .iter()
+            .filter(|x| x.mode == mode)
+            .filter_map(|x| {
+                let (base, _) = x.variant.split_once("-persp")?;
+                let par = rep.summary.iter().find(|p| p.mode == mode && p.variant == base_parallel(base))?;
+                Some(format!("{} {:.2}", x.variant, x.frame_ms / par.frame_ms))
+            })
+            .collect();
+        if !ratios.is_empty() {
+            let _ = writeln!(s, "\nPerspective / parallel frame time (same path, same run): {}.", ratios.join(", "));
+        }
+        // skipped views, one line per variant and reason
+        let mut skipped: Vec<(&str, &str, Vec<&str>)> = vec![];
+        for k in rep.skipped.iter().filter(|k| k.mode == mode) {
+            match skipped.iter_mut().find(|x| x.0 == k.variant && x.1 == k.reason) {
+                Some(x) => x.2.push(&k.view),
+                None => skipped.push((&k.variant, &k.reason, vec![&k.view])),
+            }
+        }
+        if !skipped.is_empty() {
+            let _ = writeln!(s, "\nSkipped (variant and views it cannot render):");
+            for (v, why, views) in skipped {
+                let _ = writeln!(s, "- {v} ({}): {why}", views.join(", "));
+            }
         }
         let refs: Vec<&ReferenceRecord> = rep.reference.iter().filter(|r| r.mode == mode).collect();
         if !refs.is_empty() {
@@ -738,6 +877,16 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
         }
     }
     s
+}
+
+/// The parallel variant a perspective one is compared with: `binary-persp`
+/// with the binary rotator at the same settings (cell 1, u64, bit scan),
+/// `brute-persp` with `brute`, the RLE ones with theirs.
+fn base_parallel(persp_base: &str) -> String {
+    match persp_base {
+        "binary" => "binary-c1-u64-bitscan".into(),
+        b => b.into(),
+    }
 }
 
 fn csv_field(s: &str) -> String {

@@ -1055,11 +1055,21 @@ mod tests {
         assert!(names.contains("rle") && names.contains("brute-rle"));
         assert!(v.iter().all(|x| x.projection == Projection::Parallel));
         let p = Projection::perspective(40.0, 2.0).unwrap();
-        let pv = perspective_variants(Settings::default(), p);
+        let pv = perspective_variants(Settings::default(), p, "-f40-d2");
         assert_eq!(
             pv.iter().map(|x| (x.name.as_str(), x.settings.method, x.projection)).collect::<Vec<_>>(),
-            [("rle-persp", Method::Rle, p), ("brute-rle-persp", Method::BruteRle, p)]
+            [
+                ("binary-persp-f40-d2", Method::Binary, p),
+                ("brute-persp-f40-d2", Method::Brute, p),
+                ("rle-persp-f40-d2", Method::Rle, p),
+                ("brute-rle-persp-f40-d2", Method::BruteRle, p)
+            ]
         );
+        // the matrix: 3 fields of view × 3 distances and the eye inside
+        let m = perspective_matrix();
+        assert_eq!(m.len(), 10);
+        assert!(m.contains(&Projection::Perspective { fov_deg: 20.0, eye_distance: 0.75 }));
+        assert!(m.iter().all(|p| p.check().is_ok()));
     }
 
     #[test]

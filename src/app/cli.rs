@@ -538,6 +538,20 @@ impl RenderArgs {
         Ok(r)
     }
 
+    /// The `--clip-plane` half-spaces in the library's frame (world
+    /// millimetres from the volume centre), checked (at most 6).
+    pub fn clip_plane_list(&self, dims: [usize; 3], spacing: [f32; 3]) -> Result<Vec<ClipPlane>> {
+        let usage = |e: shearwarp::Error| anyhow::Error::new(Usage(format!("--clip-plane: {e}")));
+        let planes = self
+            .clip_plane
+            .iter()
+            .map(|p| ClipPlane::in_voxel_coordinates(p.normal, p.offset, dims, spacing))
+            .collect::<std::result::Result<Vec<_>, _>>()
+            .map_err(usage)?;
+        ClipPlanes::new(&planes, spacing).map_err(usage)?;
+        Ok(planes)
+    }
+
     /// `--quality Q`, checked (a bad value, or a path that cannot resample its
     /// intermediate image, is a usage error).
     pub fn quality(&self) -> Result<Option<f64>> {
@@ -561,14 +575,8 @@ impl RenderArgs {
         if self.clip_plane.is_empty() {
             return Ok(None);
         }
-        let usage = |e: shearwarp::Error| anyhow::Error::new(Usage(format!("--clip-plane: {e}")));
-        let planes = self
-            .clip_plane
-            .iter()
-            .map(|p| ClipPlane::in_voxel_coordinates(p.normal, p.offset, dims, spacing))
-            .collect::<std::result::Result<Vec<_>, _>>()
-            .map_err(usage)?;
-        let clip = ClipPlanes::new(&planes, spacing).map_err(usage)?;
+        let planes = self.clip_plane_list(dims, spacing)?;
+        let clip = ClipPlanes::new(&planes, spacing).map_err(|e| anyhow::Error::new(Usage(format!("--clip-plane: {e}"))))?;
         Ok(Some(std::sync::Arc::new(clip)))
     }
 

@@ -67,10 +67,9 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     preview.set_projection(projection)?;
     blend.set_projection(projection)?;
     // --clip-plane: both displays, every renderer they make
-    if let Some(clip) = cmd.render.clip_planes(d, spacing)? {
-        preview.set_limiter(Some(clip.clone()));
-        blend.set_limiter(Some(clip));
-    }
+    let planes = cmd.render.clip_plane_list(d, spacing)?;
+    preview.set_clip_planes(planes.clone())?;
+    blend.set_clip_planes(planes)?;
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
     let info = Info {
         volume: name.clone(),
@@ -109,6 +108,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
         drag_speed: cmd.drag_speed,
         projection,
         adaptive: Adaptive::new(cmd.target_fps, cmd.render.quality()?.unwrap_or(1.0)),
+        diagonal_mm: (0..3).map(|a| ((d[a].max(1) - 1) as f64 * spacing[a] as f64).powi(2)).sum::<f64>().sqrt(),
     });
     let mut app = App {
         state,
@@ -175,6 +175,7 @@ fn map_key(key: &WKey, repeat: bool) -> Option<Key> {
             " " => Key::ToggleDisplay,
             "r" | "R" => Key::Reset,
             "p" | "P" => Key::ToggleProjection,
+            "c" | "C" => Key::ToggleClip,
             "s" | "S" => Key::Save,
             "q" | "Q" => Key::Quit,
             d => match d.parse::<usize>() {
@@ -645,6 +646,13 @@ impl ApplicationHandler<Reply> for App {
             WindowEvent::CursorMoved { position, .. } => {
                 self.cursor = (position.x, position.y);
                 self.input(el, Input::Move { x: position.x, y: position.y });
+            }
+            WindowEvent::MouseInput { state, button: MouseButton::Right, .. } => {
+                let input = match state {
+                    ElementState::Pressed => Input::PressRight { x: self.cursor.0, y: self.cursor.1 },
+                    ElementState::Released => Input::Release,
+                };
+                self.input(el, input);
             }
             WindowEvent::MouseInput { state, button: MouseButton::Left, .. } => {
                 let input = match state {

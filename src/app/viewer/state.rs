@@ -74,6 +74,17 @@ pub struct Spec {
     /// Intermediate pixels per voxel ([`shearwarp::Renderer::set_quality`]):
     /// the adaptive value while the view is dragged, at least 1 once it is still.
     pub quality: f64,
+    /// The interactive clip plane (C key): the half-space `normal · w ≤ offset`
+    /// in world millimetres from the volume centre, beside any `--clip-plane`.
+    pub clip: Option<Plane>,
+}
+
+/// A clip plane in world millimetres from the volume centre: the side kept is
+/// `normal · w ≤ offset` (the library's `ClipPlane` convention).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plane {
+    pub normal: [f64; 3],
+    pub offset: f64,
 }
 
 /// The adaptive intermediate image size (Schulze et al.): while the view is
@@ -151,6 +162,11 @@ pub enum Input {
         x: f64,
         y: f64,
     },
+    /// Right button pressed at `(x, y)` (drags the clip plane).
+    PressRight {
+        x: f64,
+        y: f64,
+    },
     /// Cursor moved to `(x, y)`.
     Move {
         x: f64,
@@ -186,6 +202,9 @@ pub enum Key {
     ToggleDisplay,
     /// P: parallel ↔ perspective projection.
     ToggleProjection,
+    /// C: a clip plane through the volume's centre facing the viewer (the
+    /// half nearer the viewer removed), or off again.
+    ToggleClip,
     /// R: back to the starting view.
     Reset,
     /// S: save the current view as PNG.
@@ -235,6 +254,9 @@ pub struct Start {
     pub projection: Projection,
     /// The intermediate image size (`--target-fps`, `--quality`).
     pub adaptive: Adaptive,
+    /// The volume's bounding diagonal in millimetres (how far a drag moves
+    /// the clip plane: the window's smaller side is one diagonal).
+    pub diagonal_mm: f64,
 }
 
 /// A drag in progress.
@@ -244,6 +266,9 @@ pub enum Drag {
     Rotate { x: f64, y: f64 },
     /// Moving the iso slider.
     Slider,
+    /// Moving the clip plane along its normal (right button): the press's
+    /// cursor row and the plane's offset then.
+    Clip { y: f64, offset: f64 },
 }
 
 /// The viewer state.
@@ -266,6 +291,9 @@ pub struct State {
     perspective: Projection,
     /// The intermediate image size while moving and when still.
     pub adaptive: Adaptive,
+    /// The interactive clip plane, if on.
+    pub clip: Option<Plane>,
+    pub diagonal_mm: f64,
     /// Bumped by every change of the picture.
     pub seq: u64,
     cursor: (f64, f64),
@@ -297,6 +325,8 @@ impl State {
                 Projection::Perspective { fov_deg: 40.0, eye_distance: 2.0 }
             },
             adaptive: s.adaptive,
+            clip: None,
+            diagonal_mm: if s.diagonal_mm.is_finite() && s.diagonal_mm > 0.0 { s.diagonal_mm } else { 1.0 },
             seq: 1,
             cursor: (0.0, 0.0),
             preview_posted: 0,
@@ -308,7 +338,15 @@ impl State {
     /// The frame the current state asks for.
     pub fn spec(&self) -> Spec {
         let quality = if self.drag.is_some() { self.adaptive.moving } else { self.adaptive.still };
-        Spec { seq: self.seq, camera: self.camera(), class: self.class, cell: self.cell, projection: self.projection, quality }
+        Spec {
+            seq: self.seq,
+            camera: self.camera(),
+            class: self.class,
+            cell: self.cell,
+            projection: self.projection,
+            quality,
+            clip: self.clip,
+        }
     }
 
     /// The current camera.
@@ -397,9 +435,30 @@ impl State {
                     }
                 }
             }
+            Input::PressRight { x, y } => {
+                self.cursor = (x, y);
+                match self.clip {
+                    Some(c) if matches!(self.layout.hit(x, y), Hit::View) => {
+                        self.drag = Some(Drag::Clip { y, offset: c.offset });
+                        Outcome::Redraw
+                    }
+                    _ => Outcome::Nothing,
+                }
+            }
             Input::Move { x, y } => {
                 self.cursor = (x, y);
                 match self.drag {
+                    Some(Drag::Clip { y: y0, offset }) => {
+                        let Some(c) = self.clip else { return Outcome::Nothing };
+                        // dragging up pushes the plane away from the viewer (more cut away)
+                        let mm_per_px = self.diagonal_mm / self.size[0].min(self.size[1]).max(1) as f64;
+                        let o = (offset - (y - y0) * mm_per_px).clamp(-self.diagonal_mm, self.diagonal_mm);
+                        if o == c.offset || !o.is_finite() {
+                            return Outcome::Nothing;
+                        }
+                        self.clip = Some(Plane { offset: o, ..c });
+                        self.changed()
+                    }
                     Some(Drag::Rotate { x: lx, y: ly }) => {
                         let (dx, dy) = (x - lx, y - ly);
                         if dx == 0.0 && dy == 0.0 {
@@ -465,6 +524,18 @@ impl State {
                     self.display = match self.display {
                         Display::Iso => Display::Blend,
                         Display::Blend => Display::Iso,
+                    };
+                    self.changed()
+                }
+                Key::ToggleClip => {
+                    self.clip = match self.clip {
+                        Some(_) => None,
+                        None => {
+                            // toward the viewer in world coordinates: eye e = R·w, viewer at +z
+                            let r = self.rotation;
+                            let n = [r.x_axis.z, r.y_axis.z, r.z_axis.z];
+                            Some(Plane { normal: n, offset: 0.0 })
+                        }
                     };
                     self.changed()
                 }
@@ -644,6 +715,9 @@ impl State {
             Class::Tissue(_) => format!("tissue {} (iso {})", self.class_name(), short(self.iso())),
             Class::Custom(v) => format!("custom iso {v:.1}"),
         });
+        if let Some(c) = self.clip {
+            l.push(format!("clip plane {:+.1} mm from the centre (right-drag moves it, C removes it)", c.offset));
+        }
         if hud.background {
             l.push("building the other axes in the background ...".into());
         }
@@ -663,7 +737,7 @@ pub fn short(v: f32) -> String {
 }
 
 /// The key help line.
-pub const HELP: &str = "drag rotate 1-4 tissue [ ] iso +- cell spc blend P persp wheel fly R S Q";
+pub const HELP: &str = "drag rotate 1-4 tissue [ ] iso +- cell spc blend P persp wheel fly C clip (right-drag) R S Q";
 
 /// The eye distances (volume diagonals) the mouse wheel keeps to.
 pub const MIN_EYE_DISTANCE: f64 = 0.05;
@@ -688,6 +762,7 @@ mod tests {
             drag_speed: 0.5,
             projection: Projection::Parallel,
             adaptive: Adaptive::new(None, 1.0),
+            diagonal_mm: 200.0,
         })
     }
 
@@ -778,6 +853,44 @@ mod tests {
         assert!(s.seq > seq, "the release renders again");
         assert_eq!(s.spec().quality, 1.0);
         assert!(matches!(s.requests()[..], [Request::Preview(Spec { quality: 1.0, .. }), ..]));
+    }
+
+    /// C places a plane through the centre facing the viewer (the near half
+    /// removed: the eye-space +z side), a right-drag moves it along its normal
+    /// (up: away from the viewer), C again removes it; every change is a new
+    /// frame and the spec carries the plane.
+    #[test]
+    fn clip_key_places_a_plane_facing_the_viewer_and_a_right_drag_moves_it() {
+        let mut s = start();
+        assert_eq!(s.handle(Input::PressRight { x: 200.0, y: 200.0 }), Outcome::Nothing, "no plane to drag");
+        s.rotation = rotate_eye(DMat3::IDENTITY, 1, 30.0);
+        let seq = s.seq;
+        assert_eq!(s.handle(Input::Key(Key::ToggleClip)), Outcome::Redraw);
+        assert!(s.seq > seq);
+        let c = s.spec().clip.expect("a plane");
+        // its normal is the direction toward the viewer: R · n = +z
+        let e = s.rotation * glam::DVec3::from_array(c.normal);
+        assert!((e - glam::DVec3::Z).length() < 1e-12, "{e:?}");
+        assert_eq!(c.offset, 0.0);
+        // rotating keeps the plane where it is in the volume
+        s.handle(Input::Press { x: 200.0, y: 200.0 });
+        s.handle(Input::Move { x: 230.0, y: 200.0 });
+        s.handle(Input::Release);
+        assert_eq!(s.spec().clip, Some(c));
+        // a right-drag up by 64 px moves it 200 mm · 64 / 512 = 25 mm away from the viewer
+        assert_eq!(s.handle(Input::PressRight { x: 200.0, y: 200.0 }), Outcome::Redraw);
+        let seq = s.seq;
+        assert_eq!(s.handle(Input::Move { x: 200.0, y: 136.0 }), Outcome::Redraw);
+        assert!(s.seq > seq);
+        assert!((s.spec().clip.unwrap().offset - 25.0).abs() < 1e-9, "{:?}", s.spec().clip);
+        assert_eq!(s.spec().clip.unwrap().normal, c.normal);
+        // clamped to a diagonal either way
+        s.handle(Input::Move { x: 200.0, y: -1e6 });
+        assert_eq!(s.spec().clip.unwrap().offset, 200.0);
+        s.handle(Input::Release);
+        assert_eq!(s.drag, None);
+        s.handle(Input::Key(Key::ToggleClip));
+        assert_eq!(s.spec().clip, None);
     }
 
     fn previews(r: &[Request]) -> Vec<u64> {

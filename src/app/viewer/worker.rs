@@ -16,12 +16,13 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::Instant;
 
-use super::state::{Class, Kind, Spec};
+use super::state::{Class, Kind, Plane, Spec};
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
 use shearwarp::render::{FrameStats, Method, Renderer, Settings};
 use shearwarp::view::Projection;
+use shearwarp::view::clip::{ClipPlane, ClipPlanes};
 use shearwarp::warp::{Canvas, Image8, Texel};
 
 /// A finished frame.
@@ -85,6 +86,11 @@ pub struct Renderers {
     projection: Projection,
     /// The ray limits of every renderer (clip planes), if any.
     limiter: Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>,
+    /// The `--clip-plane` half-spaces every frame keeps ([`Renderers::set_clip_planes`]).
+    planes: Vec<ClipPlane>,
+    /// The interactive plane the limiter was last built with.
+    interactive: Option<Plane>,
+    spacing: [f32; 3],
 }
 
 impl Renderers {
@@ -92,6 +98,7 @@ impl Renderers {
     /// rendering in `settings.mode`.
     pub fn new(volume: Volume, tissues: &[Tissue], settings: Settings) -> shearwarp::Result<Self> {
         let hi = volume.value_range().1;
+        let spacing = volume.spacing();
         let mut r = Renderer::with_tissues(volume, tissues, settings)?;
         r.set_memory_budget(crate::app::budget());
         Ok(Renderers {
@@ -103,6 +110,9 @@ impl Renderers {
             stale: [true; 3],
             projection: Projection::Parallel,
             limiter: None,
+            planes: vec![],
+            interactive: None,
+            spacing,
         })
     }
 
@@ -125,6 +135,31 @@ impl Renderers {
             c.set_limiter(limiter.clone());
         }
         self.limiter = limiter;
+    }
+
+    /// Sets the clip planes (world millimetres from the volume centre) every
+    /// frame keeps, beside the interactive plane of each frame's spec.
+    pub fn set_clip_planes(&mut self, planes: Vec<ClipPlane>) -> shearwarp::Result<()> {
+        ClipPlanes::new(&planes, self.spacing)?;
+        self.planes = planes;
+        self.build_limiter();
+        Ok(())
+    }
+
+    /// The limiter of the `--clip-plane` planes and the interactive one; when
+    /// there is no room for the interactive plane (six planes already), the
+    /// given ones alone.
+    fn build_limiter(&mut self) {
+        let mut all = self.planes.clone();
+        if let Some(p) = self.interactive.and_then(|p| ClipPlane::new(p.normal, p.offset).ok()) {
+            all.push(p);
+        }
+        let clip = ClipPlanes::new(&all, self.spacing).or_else(|_| ClipPlanes::new(&self.planes, self.spacing));
+        let limiter: Option<Arc<dyn shearwarp::view::plan::Limiter>> = match clip {
+            Ok(c) if !c.planes().is_empty() => Some(Arc::new(c)),
+            _ => None,
+        };
+        self.set_limiter(limiter);
     }
 
     /// The tissue presets, sorted by threshold as [`Renderer::with_tissues`] keeps them.
@@ -183,6 +218,10 @@ impl Renderers {
     pub fn render<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats> {
         if spec.projection != self.projection {
             self.set_projection(spec.projection)?;
+        }
+        if spec.clip != self.interactive {
+            self.interactive = spec.clip;
+            self.build_limiter();
         }
         let q = self.quality_for(spec.quality);
         let r = self.select(spec.class, spec.cell)?;
@@ -372,7 +411,7 @@ mod tests {
         let tissues = presets::tissues_for(&vol);
         let r = Renderers::new(vol, &tissues, Settings { mode, threads: 1, ..Settings::default() }).unwrap();
         let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0 })
+        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0, clip: None })
     }
 
     fn frame(rx: &mpsc::Receiver<Reply>) -> Frame {
@@ -395,7 +434,8 @@ mod tests {
             let s = Settings { mode, threads: 1, method: shearwarp::render::Method::Rle, ..Settings::default() };
             let mut r = Renderers::new(vol, &tissues, s).unwrap();
             let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0 };
+            let spec =
+                Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0, clip: None };
             let mut par = Image::new(64, 48);
             r.render(&spec, &mut par).unwrap();
             // the spec's projection is what renders
@@ -406,6 +446,36 @@ mod tests {
                 assert!(img.coverage() > 0.05, "{mode:?} {class:?}");
                 assert!(r.select(class, 1).unwrap().last_plan().unwrap().perspective.is_some());
             }
+        }
+    }
+
+    /// The C key's plane reaches every renderer through the spec: through the
+    /// centre facing the viewer it cuts away about half the head's pixels'
+    /// nearest surface; far behind the volume it removes everything; off
+    /// again, the whole image comes back bit for bit.
+    #[test]
+    fn renderers_render_the_interactive_clip_plane() {
+        for mode in [Mode::Iso, Mode::Blend] {
+            let vol = Phantom::Head.build([40, 40, 36]).unwrap();
+            let tissues = presets::tissues_for(&vol);
+            let s = Settings { mode, threads: 1, ..Settings::default() };
+            let mut r = Renderers::new(vol, &tissues, s).unwrap();
+            let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
+            let spec =
+                Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0, clip: None };
+            let mut whole = Image::new(64, 48);
+            r.render(&spec, &mut whole).unwrap();
+            let r3 = cam.rotation;
+            let toward = [r3.x_axis.z, r3.y_axis.z, r3.z_axis.z];
+            let mut cut = Image::new(64, 48);
+            r.render(&Spec { clip: Some(Plane { normal: toward, offset: 0.0 }), ..spec }, &mut cut).unwrap();
+            assert!(cut.coverage() > 0.0 && cut != whole, "{mode:?}: the plane changed nothing");
+            let mut none = Image::new(64, 48);
+            r.render(&Spec { clip: Some(Plane { normal: toward, offset: -1e4 }), ..spec }, &mut none).unwrap();
+            assert_eq!(none.coverage(), 0.0, "{mode:?}");
+            let mut back = Image::new(64, 48);
+            r.render(&spec, &mut back).unwrap();
+            assert!(back == whole, "{mode:?}: removing the plane did not restore the image");
         }
     }
 
@@ -421,7 +491,8 @@ mod tests {
             let sp = vol.spacing();
             let mut r = Renderers::new(vol, &tissues, s).unwrap();
             let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec = Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0 };
+            let spec =
+                Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0, clip: None };
             let half = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], 0.0).unwrap()], sp).unwrap();
             let none = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], -1e6).unwrap()], sp).unwrap();
             for class in [Class::Tissue(0), Class::Custom(100.0)] {

@@ -800,7 +800,11 @@ mod tests {
     fn adaptive_quality_follows_the_target_with_hysteresis() {
         // `n` frames of `ms` at the current quality
         fn feed(a: &mut Adaptive, ms: &[f64]) -> bool {
-            ms.iter().fold(false, |c, &m| a.measured(a.moving, m) || c)
+            let mut changed = false;
+            for &m in ms {
+                changed |= a.measured(a.moving, m);
+            }
+            changed
         }
         let mut a = Adaptive::new(Some(50.0), 1.0);
         assert_eq!((a.target_ms, a.moving, a.still), (Some(20.0), 1.0, 1.0));

@@ -166,6 +166,12 @@ def parse_args(argv):
                     help="write the frames listed by --save-frames as PNG into DIR")
     ap.add_argument("--save-frames", default="0,45", metavar="LIST",
                     help="comma-separated frame indices to save (default 0,45)")
+    ap.add_argument("--perspective", type=float, metavar="FOV",
+                    help="perspective camera with this vertical field of view in degrees "
+                         "(0 < FOV < 180) instead of the orthographic one")
+    ap.add_argument("--eye-distance", type=float, default=2.0, metavar="D",
+                    help="with --perspective: the eye's distance from the volume's centre "
+                         "in volume diagonals (default 2; shearwarp's --eye-distance)")
     ap.add_argument("--times", action="store_true",
                     help="also print every frame time in the JSON")
     a = ap.parse_args(argv)
@@ -178,6 +184,10 @@ def parse_args(argv):
         ap.error("--threads must be >= 0")
     if not math.isfinite(a.step_deg):
         ap.error("bad --step-deg")
+    if a.perspective is not None and not 0.0 < a.perspective < 180.0:
+        ap.error("--perspective must be in (0, 180) degrees")
+    if not (math.isfinite(a.eye_distance) and a.eye_distance > 0.0):
+        ap.error("--eye-distance must be a finite number of diagonals > 0")
     if a.tf == "ramp" and not a.ramp_end > a.threshold:
         ap.error("--ramp-end must exceed --threshold")
     try:
@@ -410,12 +420,24 @@ def main(argv):
     h = 0.5 / px_per_voxel
     dist = diag + 10.0
     cam = ren.GetActiveCamera()
-    cam.ParallelProjectionOn()
-    cam.SetFocalPoint(-h, -h, 0.0)
-    cam.SetPosition(-h, -h, -dist)
-    cam.SetViewUp(0.0, -1.0, 0.0)
-    cam.SetParallelScale(scale)
-    cam.SetClippingRange(dist - 0.5 * diag - 2.0, dist + 0.5 * diag + 2.0)
+    if a.perspective is None:
+        cam.ParallelProjectionOn()
+        cam.SetFocalPoint(-h, -h, 0.0)
+        cam.SetPosition(-h, -h, -dist)
+        cam.SetViewUp(0.0, -1.0, 0.0)
+        cam.SetParallelScale(scale)
+        cam.SetClippingRange(dist - 0.5 * diag - 2.0, dist + 0.5 * diag + 2.0)
+    else:
+        # shearwarp's perspective: the eye on the view axis eye_distance
+        # diagonals from the centre, the vertical field of view over the image
+        # height; near plane 0.5 voxel in front of the eye (or the volume)
+        eye = a.eye_distance * diag
+        cam.ParallelProjectionOff()
+        cam.SetFocalPoint(0.0, 0.0, 0.0)
+        cam.SetPosition(0.0, 0.0, -eye)
+        cam.SetViewUp(0.0, -1.0, 0.0)
+        cam.SetViewAngle(a.perspective)
+        cam.SetClippingRange(max(0.5, eye - 0.5 * diag - 2.0), eye + 0.5 * diag + 2.0)
 
     renwin = vtkRenderWindow()
     renwin.SetOffScreenRendering(1)
@@ -545,7 +567,9 @@ def main(argv):
         "tf_params": tf_params,
         "min_voxel_opacity": a.min_opacity,
         "max_ray_opacity": round(VTK_MAX_RAY_OPACITY, 6),
-        "view": {"projection": "orthographic", "axis": "y", "step_deg": a.step_deg,
+        "view": {"projection": "orthographic" if a.perspective is None else
+                 {"perspective": a.perspective, "eye_distance": a.eye_distance},
+                 "axis": "y", "step_deg": a.step_deg,
                  "fit": a.fit, "parallel_scale": round(scale, 6),
                  "px_per_voxel": round(px_per_voxel, 6), "warmup": a.warmup,
                  "rotation": "volume user matrix R_y (VolPack sign), about dims/2"},

@@ -738,6 +738,51 @@ mod tests {
         }
     }
 
+    /// A resampled grid (the adaptive image size) still holds every slice:
+    /// at pitches 0.25–4, for parallel and perspective plans, each slice's
+    /// pixels lie inside the grid with the one-pixel ring the warp reads, and
+    /// every pixel keeps its ray (its sample in a slice is the same map at
+    /// the new sheared point).
+    #[test]
+    fn resampled_grids_cover_every_slice() {
+        let mut plans: Vec<FramePlan> = perspective_plans(40, 0.5).into_iter().map(|x| x.1).collect();
+        for a in [0.0, 0.3, 0.8, 1.4] {
+            let r = rotate_eye(rotate_eye(DMat3::IDENTITY, 1, a * 40.0), 0, a * 25.0);
+            plans.push(plan(r, [20, 26, 17]));
+        }
+        for base in plans {
+            for pitch in [0.25, 0.5, 0.8, 2.0, 4.0] {
+                let mut p = base.clone();
+                p.set_pitch(pitch);
+                assert_eq!(p.kind, MapKind::ScaleTranslate);
+                assert_eq!(p.grid.pitch, pitch);
+                let [w, h] = p.grid.size;
+                let n = p.view.n;
+                for k in p.front_to_back() {
+                    for a in 0..2 {
+                        let [x0, x1] = p.pixels_of_cells(k, a, 0, n[a] as i64 - 2);
+                        if x0 > x1 {
+                            // a slice minified between two pixels of a coarse grid
+                            assert!(pitch > 1.0);
+                            continue;
+                        }
+                        assert!(x0 >= 1 && x1 <= [w, h][a] as i64 - 2, "pitch {pitch} slice {k} axis {a}: [{x0}, {x1}] in {:?}", p.grid);
+                    }
+                    // the same ray: the sample at sheared (a, b) is the base plan's map there
+                    let [sa, sb] = p.intermediate_to_sheared(3.0, 5.0);
+                    let (ci, wi) = p.cell_of(k, 0, 3);
+                    let want = match base.kind {
+                        MapKind::Translate => sa + base.shear.trans[0][k],
+                        MapKind::ScaleTranslate => base.scaled[k].scale * sa + base.scaled[k].trans[0],
+                    };
+                    assert!((ci as f64 + wi as f64 - want).abs() < 1e-5, "pitch {pitch} slice {k}: {ci} + {wi} vs {want} ({sb})");
+                }
+                // back to the base pitch: the base grid's coverage again (not larger than needed)
+                assert!(p.grid.size[0] as f64 <= (base.grid.size[0] as f64 / pitch).ceil() + 8.0);
+            }
+        }
+    }
+
     /// The maps follow the perspective rays: pixel (p, q)'s sample in slice k
     /// is where the ray through its sheared point meets the slice.
     #[test]

@@ -101,6 +101,32 @@ impl WordSize {
     }
 }
 
+/// How the RLE paths sample a slice whose intermediate pixels are wider than a
+/// voxel (the far slices of a perspective view, a grid coarser than one pixel
+/// per voxel: [`crate::view::plan::FramePlan::footprint`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Footprint {
+    /// The area average of the voxels under the pixel's box (no voxel falls
+    /// between two pixels; about 2–3× the bilinear sample's cost).
+    #[default]
+    Box,
+    /// The bilinear sample at the pixel's centre (faster; voxels between
+    /// pixels alias): for interaction.
+    Bilinear,
+}
+
+impl Footprint {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Footprint::Box => "box",
+            Footprint::Bilinear => "bilinear",
+        }
+    }
+}
+
 /// How the raycast paths ([`Method::Binary`], [`Method::Brute`]) shade a sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -162,6 +188,8 @@ pub struct Settings {
     /// the same image; lower levels run the plain references. Defaults to
     /// [`crate::kernels::level`] (the detected level, capped by `SHEARWARP_CPU`).
     pub cpu: crate::kernels::CpuLevel,
+    /// RLE paths: the footprint of a minified slice's pixel.
+    pub footprint: Footprint,
 }
 
 impl Default for Settings {
@@ -180,6 +208,7 @@ impl Default for Settings {
             normals: Normals::Codes,
             pack: true,
             cpu: crate::kernels::level(),
+            footprint: Footprint::Box,
         }
     }
 }
@@ -1002,6 +1031,7 @@ impl Renderer {
             // the adaptive image size: the same rays, resampled at another pitch
             plan.set_pitch(1.0 / self.quality);
         }
+        plan.set_box_footprint(self.settings.footprint == Footprint::Box);
         if let Some((l, _)) = &self.limiter {
             // on the renderer's pool: a limiter may work in parallel
             self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));

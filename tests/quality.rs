@@ -181,3 +181,41 @@ fn quality_cli_renders_and_rejects_bad_values() {
         .success()
         .stdout(predicate::str::contains("\"quality\":1.5"));
 }
+
+/// The box footprint of a minified slice (issue 21: "a box footprint over
+/// opacity-weighted colours where it is minified"): at a quarter pixel per
+/// voxel a one-voxel-thin slab contributes the same total opacity to the
+/// intermediate image wherever it sits between two pixels (one slice thick,
+/// so compositing adds no non-linearity) — no voxel falls
+/// between them — while the bilinear sample at each pixel's centre misses it
+/// at some positions. Both footprints: accelerated equals brute force.
+#[test]
+fn quality_box_footprint_sees_every_voxel() {
+    use shearwarp::render::Footprint;
+    let dims = [48, 40, 24];
+    let tf = TransferFunction::ramp(40.0, 160.0, 0.3, [0.9, 0.8, 0.7]);
+    let cam = Camera::new(DMat3::IDENTITY, [96, 96]);
+    let mut totals = vec![];
+    for footprint in [Footprint::Box, Footprint::Bilinear] {
+        let mut t = vec![];
+        for x0 in 20..24 {
+            let vol =
+                Volume::from_fn(dims, [1.0; 3], |x, y, z| if x == x0 && (4..36).contains(&y) && z == 10 { 200.0 } else { 0.0 }).unwrap();
+            let mut sums = vec![];
+            for method in [Method::Rle, Method::BruteRle] {
+                let s = Settings { method, mode: Mode::Blend, threads: 2, footprint, ..Settings::default() };
+                let mut r = Renderer::new(vol.clone(), &tf, s).unwrap();
+                r.set_quality(0.25).unwrap();
+                let img = render(&mut r, &cam);
+                sums.push((r.intermediate().rgba.iter().map(|p| p[3] as f64).sum::<f64>(), bits(&img)));
+            }
+            assert_eq!(sums[0].1, sums[1].1, "{footprint:?} slab at {x0}: RLE and brute force differ");
+            t.push(sums[0].0);
+        }
+        totals.push(t);
+    }
+    let spread = |t: &[f64]| t.iter().cloned().fold(f64::MIN, f64::max) / t.iter().cloned().fold(f64::MAX, f64::min);
+    eprintln!("total opacity by slab position: box {:?}, bilinear {:?}", totals[0], totals[1]);
+    assert!(totals[0].iter().all(|&x| x > 0.0) && spread(&totals[0]) < 1.001, "box: {:?}", totals[0]);
+    assert!(totals[1].iter().any(|&x| x == 0.0) || spread(&totals[1]) > 1.5, "bilinear: {:?}", totals[1]);
+}

@@ -232,6 +232,12 @@ pub struct RenderArgs {
     /// sampling of each slice. Both projections; --method rle or brute-rle.
     #[arg(long, value_name = "Q", allow_negative_numbers = true)]
     pub quality: Option<f64>,
+    /// RLE paths: how a slice whose intermediate pixels are wider than a voxel
+    /// (perspective's far slices, --quality below 1) is sampled: the box
+    /// average of the voxels under each pixel, or (faster, aliasing) the
+    /// bilinear sample at its centre.
+    #[arg(long, value_enum, default_value = "box")]
+    pub footprint: shearwarp::render::Footprint,
     /// Starting view: anterior (face), posterior, left, right, superior, inferior.
     #[arg(long, value_enum, default_value = "anterior")]
     pub view: NamedView,
@@ -616,6 +622,7 @@ impl RenderArgs {
             word: self.word,
             search: self.search,
             normals: self.normals,
+            footprint: self.footprint,
             ert: self.ert,
             cell: self.cell,
             threads: self.threads,

@@ -20,7 +20,7 @@ pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_no
 use crate::data::slices::SliceStack;
 use crate::encode::rle::runs::{Cursor, INF};
 use crate::encode::rle::{Preclass, RleVolume, RleVoxel, ViewTables};
-use crate::view::plan::{FramePlan, MapKind};
+use crate::view::plan::{FramePlan, MapKind, floor_i64};
 
 /// Intermediate rows per parallel band.
 const BAND: usize = 16;
@@ -50,6 +50,64 @@ fn blend(c00: [f32; 4], c10: [f32; 4], c01: [f32; 4], c11: [f32; 4], w: &Weights
 /// `links[x] == 0` means pixel `x` is not opaque; otherwise `x + links[x]` is a
 /// pixel further on to continue from. The row's last entry is a sentinel that
 /// never becomes opaque, so the walk always ends.
+/// Most voxels a box footprint ([`box_weights`]) spans along one axis.
+const MAXW: usize = 6;
+
+/// The box footprint of width `s` (1 < s ≤ [`crate::view::plan::MAX_FOOTPRINT`])
+/// centred on sample position `pos` along an axis of `n` voxels: the first
+/// voxel under it and how many, each weighted by the overlap of its cell
+/// `[i − ½, i + ½]` with `[pos − s/2, pos + s/2]`, over `s` (an area average
+/// of the voxels' opacity-weighted colours; at `s = 1` it would be the linear
+/// weights). Voxels outside the volume are left out (they are transparent).
+/// One function for the accelerated path and its brute force: the same
+/// weights, bit for bit.
+#[inline(always)]
+fn box_weights(pos: f64, s: f64, n: usize, w: &mut [f32; MAXW]) -> (usize, usize) {
+    let (a, b) = (pos - 0.5 * s, pos + 0.5 * s);
+    // (floor and ceil without a libm call: the baseline x86-64 has no instruction for them)
+    let first = floor_i64(a + 0.5).max(0);
+    let last = (-floor_i64(-(b + 0.5)) - 1).min(n as i64 - 1).min(first + MAXW as i64 - 1);
+    if last < first {
+        return (0, 0);
+    }
+    let inv = 1.0 / s;
+    for (t, i) in (first..=last).enumerate() {
+        let c = i as f64;
+        w[t] = (((c + 0.5).min(b) - (c - 0.5).max(a)).max(0.0) * inv) as f32;
+    }
+    (first as usize, (last - first + 1) as usize)
+}
+
+/// One column of a box footprint: `Σ_t wj[t] · voxel(t)` over its rows `t`
+/// in order (a row of the intermediate image has one `wj` for every pixel,
+/// so the accelerated path computes each column once and reuses it).
+#[inline(always)]
+fn box_column(wj: &[f32], mut voxel: impl FnMut(usize) -> [f32; 4]) -> [f32; 4] {
+    let mut col = [0f32; 4];
+    for (t, &wt) in wj.iter().enumerate() {
+        let v = voxel(t);
+        for c in 0..4 {
+            col[c] += wt * v[c];
+        }
+    }
+    col
+}
+
+/// The box-filtered sample `Σ_u wi[u] · column(u)` over the footprint's
+/// columns in order ([`box_column`]): the accelerated path and its brute force
+/// add the same numbers in the same order.
+#[inline(always)]
+fn box_sample(wi: &[f32], mut column: impl FnMut(usize) -> [f32; 4]) -> [f32; 4] {
+    let mut smp = [0f32; 4];
+    for (u, &wu) in wi.iter().enumerate() {
+        let v = column(u);
+        for c in 0..4 {
+            smp[c] += wu * v[c];
+        }
+    }
+    smp
+}
+
 #[inline(always)]
 fn find(links: &mut [u32], x: usize) -> usize {
     if links[x] == 0 {
@@ -318,7 +376,11 @@ impl RleFrame<'_> {
                 continue;
             }
             if self.plan.kind == MapKind::ScaleTranslate {
-                self.scaled_slice(k, q_first, px, links);
+                if self.plan.footprint(k) > 1.0 {
+                    self.box_slice(k, q_first, px, links);
+                } else {
+                    self.scaled_slice(k, q_first, px, links);
+                }
                 continue;
             }
             let sp = self.plan.maps[k];
@@ -384,11 +446,10 @@ impl RleFrame<'_> {
     /// the bilinear blend of its cell's four voxels, its opacity corrected to
     /// its ray's own spacing ([`FramePlan::opacity_exponent`]).
     ///
-    /// Footprint: a minified slice (`σ_k > 1`) is point-sampled bilinearly, so
-    /// where `σ_k` passes ~1.5 some voxels fall between samples (the paper's box
-    /// footprint over opacity-weighted colours is not done yet). Single-pyramid
-    /// views keep `σ_k` small: the eye 1.5 diagonals from a cube's centre gives
-    /// at most 1.48 at the back slice.
+    /// A slice whose pixels are wider than a voxel (a minified one,
+    /// [`FramePlan::footprint`] > 1) is box-filtered instead
+    /// ([`RleFrame::box_slice`]); this bilinear one serves the rest (the base
+    /// slice, magnified grids).
     #[inline(never)]
     fn scaled_slice(&self, k: usize, q_first: usize, px: &mut [[f32; 4]], links: &mut [u32]) {
         let (r, gw, lw, rle, plan) = (&self.r, self.gw, self.lw, self.rle, self.plan);
@@ -475,6 +536,108 @@ impl RleFrame<'_> {
         }
     }
 
+    /// Composites slice `k` of a scaled plan whose pixels are wider than a
+    /// voxel ([`FramePlan::footprint`] `s > 1`: the far slices of a perspective
+    /// view, any slice of a grid coarser than one pixel per voxel) with the
+    /// paper's box footprint: each pixel's sample is the area average of the
+    /// opacity-weighted colours of the voxels under an `s × s` box centred on
+    /// its sample position ([`box_weights`]), so no voxel falls between two
+    /// pixels. Pixels whose centre cell lies outside the slice composite
+    /// nothing (as with the bilinear sample). The same skips: opaque pixels
+    /// through the links, a pixel whose box holds only transparent voxels
+    /// (and the pixels after it up to the next non-transparent column in the
+    /// box's rows), rows of the box outside the slice's occupied box.
+    #[inline(never)]
+    fn box_slice(&self, k: usize, q_first: usize, px: &mut [[f32; 4]], links: &mut [u32]) {
+        let (r, gw, lw, rle, plan) = (&self.r, self.gw, self.lw, self.rle, self.plan);
+        let [ni, nj, _] = rle.n;
+        let bb = rle.bbox[k];
+        let s = plan.footprint(k);
+        let reach = plan.footprint_reach(k);
+        let nrows = px.len() / gw;
+        let p0 = r.p0 as i64;
+        let (mut wi, mut wj) = ([0f32; MAXW], [0f32; MAXW]);
+        for row in 0..nrows {
+            let q = q_first + row;
+            let (cj, _) = plan.cell_of(k, 1, q);
+            if cj < 0 || cj > nj as i64 - 2 {
+                continue;
+            }
+            let (j0, nb) = box_weights(plan.sample_at(k, 1, q), s, nj, &mut wj);
+            if nb == 0 || ((j0 + nb - 1) as u32) < bb[2] || j0 as u32 > bb[3] {
+                continue;
+            }
+            // the box's rows: their cursors and the columns they hold
+            let base = j0 + nj * k;
+            let mut curs = [rle.cursor(base); MAXW];
+            let (mut lo, mut hi) = (i64::MAX, i64::MIN);
+            for t in 0..nb {
+                curs[t] = rle.cursor(base + t);
+                let e = rle.extent[base + t];
+                if e[0] <= e[1] {
+                    lo = lo.min(e[0] as i64);
+                    hi = hi.max(e[1] as i64);
+                }
+            }
+            if lo > hi {
+                continue;
+            }
+            // the pixels whose centre cell is in the slice and whose box may reach [lo, hi]
+            let [x0, x1] = plan.pixels_of_cells(k, 0, (lo - reach).max(0), (hi + reach).min(ni as i64 - 2));
+            let (x0, x1) = (x0.max(p0), x1.min(r.p1 as i64));
+            if x0 > x1 {
+                continue;
+            }
+            let lrow = &mut links[row * lw..(row + 1) * lw];
+            let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
+            // the box's columns ([`box_column`]: this row's weights over its
+            // rows) in a ring at ring[c % RING]; columns come in increasing
+            // order, each decoded and summed once per row of the intermediate
+            // image (by cursors of their own, apart from the skip test's, since
+            // both only move forward)
+            const RING: usize = 8;
+            let mut ring = [[0f32; 4]; RING];
+            let mut dec = curs;
+            let mut decoded = 0usize;
+            let mut x = x0;
+            loop {
+                x = find(lrow, (x - p0) as usize) as i64 + p0;
+                if x > x1 {
+                    break;
+                }
+                let (i0, na) = box_weights(plan.sample_at(k, 0, x as usize), s, ni, &mut wi);
+                // the first non-transparent column at or after the box's first, over its rows
+                let mut next = INF;
+                for c in curs.iter_mut().take(nb) {
+                    c.seek(i0 as u32);
+                    next = next.min(c.first_from(i0 as u32));
+                }
+                if na == 0 || next as usize >= i0 + na {
+                    if next == INF || next as i64 > hi {
+                        break;
+                    }
+                    // on to the first pixel whose box may reach column `next`
+                    let c = (next as f64 - 0.5 * s - 1.5).floor() as i64;
+                    let [xn, _] = plan.pixels_of_cells(k, 0, c, c);
+                    x = xn.max(x + 1);
+                    continue;
+                }
+                for col in decoded.max(i0)..i0 + na {
+                    let c = col as u32;
+                    ring[col % RING] = box_column(&wj[..nb], |t| {
+                        let d = &mut dec[t];
+                        d.seek(c);
+                        self.tables.get(d.at(c))
+                    });
+                }
+                decoded = decoded.max(i0 + na);
+                let smp = box_sample(&wi[..na], |u| ring[(i0 + u) % RING]);
+                self.composite_sample(k, x, q, smp, prow, lrow, p0);
+                x += 1;
+            }
+        }
+    }
+
     /// Composites pixel `(x, q)`'s sample of slice `k` (its cell's four
     /// classified voxels `c00, c10, c01, c11` at weights `wi, wj`) if its ray
     /// limits keep slice `k`, with the ray's own opacity correction; marks the
@@ -502,8 +665,27 @@ impl RleFrame<'_> {
             }
         };
         if inside {
-            let xr = (x - p0) as usize;
             let smp = blend(c[0], c[1], c[2], c[3], &cell_weights(wi, wj));
+            self.composite_sample(k, x, q, smp, prow, lrow, p0);
+        }
+    }
+
+    /// Composites `smp`, pixel `(x, q)`'s sample of slice `k`, if its ray
+    /// limits keep slice `k`, with the ray's own opacity correction; marks the
+    /// pixel in the links when it terminates.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn composite_sample(&self, k: usize, x: i64, q: usize, smp: [f32; 4], prow: &mut [[f32; 4]], lrow: &mut [u32], p0: i64) {
+        let plan = self.plan;
+        let inside = match &plan.limits {
+            None => true,
+            Some(l) => {
+                let [k0, k1] = l.get(x as usize, q);
+                k0 as usize <= k && k <= k1 as usize
+            }
+        };
+        if inside {
+            let xr = (x - p0) as usize;
             let acc = &mut prow[xr];
             composite_premultiplied(acc, correct_opacity(smp, plan.opacity_exponent(x as usize, q)));
             if terminated(acc[3], self.ert) {
@@ -543,12 +725,15 @@ pub fn render_brute_preclassified(
             }
         });
         let buf = &slice_buf[..];
+        let fp = plan.footprint(k);
         px.par_chunks_mut(gw).enumerate().for_each(|(row, prow)| {
             let q = r.q0 + row;
             let (cj, wj) = plan.cell_of(k, 1, q);
             if cj < 0 || cj > nj as i64 - 2 {
                 return;
             }
+            let mut wjs = [0f32; MAXW];
+            let (j0, nb) = if fp > 1.0 { box_weights(plan.sample_at(k, 1, q), fp, nj, &mut wjs) } else { (0, 0) };
             for (p, acc) in prow.iter_mut().enumerate().take(r.p1 + 1).skip(r.p0) {
                 let (ci, wi) = plan.cell_of(k, 0, p);
                 if ci < 0 || ci > ni as i64 - 2 {
@@ -563,8 +748,15 @@ pub fn render_brute_preclassified(
                         continue;
                     }
                 }
-                let b = ci as usize + ni * cj as usize;
-                let smp = blend(buf[b], buf[b + 1], buf[b + ni], buf[b + ni + 1], &cell_weights(wi, wj));
+                let smp = if fp > 1.0 {
+                    // the box footprint of a minified slice (as RleFrame::box_slice)
+                    let mut wis = [0f32; MAXW];
+                    let (i0, na) = box_weights(plan.sample_at(k, 0, p), fp, ni, &mut wis);
+                    box_sample(&wis[..na], |u| box_column(&wjs[..nb], |t| buf[i0 + u + ni * (j0 + t)]))
+                } else {
+                    let b = ci as usize + ni * cj as usize;
+                    blend(buf[b], buf[b + 1], buf[b + ni], buf[b + ni + 1], &cell_weights(wi, wj))
+                };
                 composite_premultiplied(acc, correct_opacity(smp, plan.opacity_exponent(p, q)));
             }
         });

@@ -233,12 +233,19 @@ impl<F: Fn(&FramePlan, &mut RayLimits) + Send + Sync> Limiter for F {
     }
 }
 
+/// The widest box footprint, in voxels: a slice minified more than this is
+/// filtered at this width ([`FramePlan::footprint`]).
+pub const MAX_FOOTPRINT: f64 = 4.0;
+/// Pixels further apart than this many voxels of a slice are box-filtered
+/// ([`FramePlan::footprint`]); up to it, bilinearly sampled.
+pub const BOX_FROM: f64 = 2.0;
+
 /// `floor(s)` of a finite `s` well inside the i64 range: a truncation and a
 /// correction, not a call to `floor` (the x86-64 baseline has no instruction
 /// for it). The one floor of every scaled map ([`FramePlan::cell_of`],
 /// [`FramePlan::pixels_of_cells`]).
 #[inline(always)]
-fn floor_i64(s: f64) -> i64 {
+pub(crate) fn floor_i64(s: f64) -> i64 {
     let c = s as i64;
     if (c as f64) > s { c - 1 } else { c }
 }
@@ -279,6 +286,8 @@ pub struct FramePlan {
     /// uniform ratio (parallel plans, and perspective plans in iso mode: see
     /// [`FramePlan::set_ray_opacity`]).
     exponents: Vec<f32>,
+    /// Whether a minified slice's pixels are box-filtered ([`FramePlan::footprint`]).
+    box_footprint: bool,
 }
 
 impl FramePlan {
@@ -297,6 +306,7 @@ impl FramePlan {
             scaled: vec![],
             perspective: None,
             exponents: vec![],
+            box_footprint: true,
         };
         p.set_parallel(f, spacing);
         p
@@ -535,6 +545,53 @@ impl FramePlan {
                 (c, (s - c as f64) as f32)
             }
         }
+    }
+
+    /// The exact in-slice sample position (voxel units, before the floor)
+    /// along `axis` of intermediate pixel column/row `x` in slice `k`:
+    /// [`FramePlan::cell_of`]'s cell plus weight, in f64.
+    #[inline(always)]
+    pub fn sample_at(&self, k: usize, axis: usize, x: usize) -> f64 {
+        match self.kind {
+            MapKind::Translate => x as f64 - self.grid.pad as f64 + self.shear.trans[axis][k],
+            MapKind::ScaleTranslate => {
+                let m = &self.scaled[k];
+                m.scale * ((x as f64 - self.grid.pad as f64) * self.grid.pitch) + m.trans[axis]
+            }
+        }
+    }
+
+    /// The box footprint, in voxels of slice `k`, of one intermediate pixel
+    /// where its pixels are more than [`BOX_FROM`] voxels apart (a slice
+    /// minified that much: the far slices of a perspective eye near the
+    /// volume, a grid of half a pixel per voxel or coarser), capped at
+    /// [`MAX_FOOTPRINT`]; 1 where the slice is sampled bilinearly (parallel
+    /// slices, magnified ones, and those minified up to 2×, where the bilinear
+    /// tent, two voxels wide, already reaches every voxel between two pixels).
+    #[inline(always)]
+    pub fn footprint(&self, k: usize) -> f64 {
+        match self.kind {
+            _ if !self.box_footprint => 1.0,
+            MapKind::Translate => 1.0,
+            MapKind::ScaleTranslate => {
+                let s = self.scaled[k].scale * self.grid.pitch;
+                if s > BOX_FROM { s.min(MAX_FOOTPRINT) } else { 1.0 }
+            }
+        }
+    }
+
+    /// Box-filters minified slices (the default) or samples them bilinearly
+    /// at the pixel's centre ([`crate::render::Footprint`]).
+    pub fn set_box_footprint(&mut self, on: bool) {
+        self.box_footprint = on;
+    }
+
+    /// How many cells beyond its own a pixel's footprint in slice `k` may
+    /// reach on each side (0 for a bilinear sample).
+    #[inline(always)]
+    pub fn footprint_reach(&self, k: usize) -> i64 {
+        let s = self.footprint(k);
+        if s > 1.0 { (0.5 * s).ceil() as i64 + 1 } else { 0 }
     }
 
     /// The intermediate pixels `[x0, x1]` along in-slice axis `axis` whose

@@ -20,7 +20,7 @@ use super::state::{Class, Kind, Plane, Spec};
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
-use shearwarp::render::{FrameStats, Method, Renderer, Settings};
+use shearwarp::render::{Footprint, FrameStats, Method, Renderer, Settings};
 use shearwarp::view::Projection;
 use shearwarp::view::clip::{ClipPlane, ClipPlanes};
 use shearwarp::warp::{Canvas, Image8, Texel};
@@ -227,6 +227,11 @@ impl Renderers {
         let r = self.select(spec.class, spec.cell)?;
         if r.quality() != q {
             r.set_quality(q)?;
+            // a coarse grid while moving is for speed: sampled at pixel centres,
+            // the frame at one pixel per voxel or finer with the box footprint
+            // (and so a perspective's far slices)
+            let footprint = if q < 1.0 { Footprint::Bilinear } else { Footprint::Box };
+            r.set_settings(Settings { footprint, ..r.settings() })?;
         }
         let st = r.render(&spec.camera, img)?;
         self.stale[st.axis] = false;

@@ -571,8 +571,8 @@ impl RleFrame<'_> {
             let base = j0 + nj * k;
             let mut curs = [rle.cursor(base); MAXW];
             let (mut lo, mut hi) = (i64::MAX, i64::MIN);
-            for t in 0..nb {
-                curs[t] = rle.cursor(base + t);
+            for (t, c) in curs.iter_mut().enumerate().take(nb) {
+                *c = rle.cursor(base + t);
                 let e = rle.extent[base + t];
                 if e[0] <= e[1] {
                     lo = lo.min(e[0] as i64);

@@ -427,38 +427,50 @@ impl RleFrame<'_> {
             // the last pixel's right column (its index and two voxels): the next
             // pixel's left column when the two cells are adjacent
             let mut right = (INF, [0f32; 4], [0f32; 4]);
+            // the last cell sampled and its four voxels: a magnified slice
+            // (σ_k < 1, a pyramid of the split) gives it to the next pixels too
+            let mut last = (INF, [[0f32; 4]; 4]);
             let mut x = x0;
             loop {
                 // skip opaque pixels through the links
+                if x > x1 {
+                    break;
+                }
                 x = find(lrow, (x - p0) as usize) as i64 + p0;
                 if x > x1 {
                     break;
                 }
                 let (ci, wi) = plan.cell_of(k, 0, x as usize);
                 let c = ci as u32;
-                if c < next {
-                    // (rounding made two pixels share a cell: start the walk again)
-                    (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
-                }
-                cb.seek(c);
-                ct.seek(c);
-                // skip transparent voxels: the pixel reads columns c and c + 1
-                let nx = cb.first_from(c).min(ct.first_from(c));
-                if nx > c + 1 {
-                    if nx == INF || nx as i64 - 1 > hi {
-                        break;
+                let [c00, c10, c01, c11] = if c == last.0 {
+                    last.1
+                } else {
+                    if c < next {
+                        // (rounding made two pixels share a cell: start the walk again)
+                        (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
                     }
-                    next = c;
-                    let [xn, _] = plan.pixels_of_cells(k, 0, nx as i64 - 1, nx as i64 - 1);
-                    x = xn.max(x + 1);
-                    continue;
-                }
-                let (c00, c01) = if right.0 == c { (right.1, right.2) } else { (self.tables.get(cb.at(c)), self.tables.get(ct.at(c))) };
-                cb.step(c + 1);
-                ct.step(c + 1);
-                let (c10, c11) = (self.tables.get(cb.at(c + 1)), self.tables.get(ct.at(c + 1)));
-                right = (c + 1, c10, c11);
-                next = c + 1;
+                    cb.seek(c);
+                    ct.seek(c);
+                    // skip transparent voxels: the pixel reads columns c and c + 1
+                    let nx = cb.first_from(c).min(ct.first_from(c));
+                    if nx > c + 1 {
+                        if nx == INF || nx as i64 - 1 > hi {
+                            break;
+                        }
+                        next = c;
+                        let [xn, _] = plan.pixels_of_cells(k, 0, nx as i64 - 1, nx as i64 - 1);
+                        x = xn.max(x + 1);
+                        continue;
+                    }
+                    let (c00, c01) = if right.0 == c { (right.1, right.2) } else { (self.tables.get(cb.at(c)), self.tables.get(ct.at(c))) };
+                    cb.step(c + 1);
+                    ct.step(c + 1);
+                    let (c10, c11) = (self.tables.get(cb.at(c + 1)), self.tables.get(ct.at(c + 1)));
+                    right = (c + 1, c10, c11);
+                    next = c + 1;
+                    last = (c, [c00, c10, c01, c11]);
+                    last.1
+                };
                 let xr = (x - p0) as usize;
                 let inside = match &plan.limits {
                     None => true,

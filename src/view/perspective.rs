@@ -17,14 +17,22 @@
 //! `σ_k ≥ 1` (compositing only minifies) and translated. The warp from the base
 //! plane to the output is the 3×3 projective map [`PerspectiveView::warp`].
 //!
-//! One pyramid only: the rays into the volume may leave the principal axis by
+//! One pyramid: the rays into the volume may leave the principal axis by
 //! up to `atan(MAX_RAY_SLOPE)` (63.4°) per in-slice axis, not only 45°, so
 //! the 45° views and the main diagonal render from an eye 1.5 volume diagonals
 //! away or farther (their far-side rays pass 45°: at slope 2 a ray samples a
-//! slice every 3 voxels at worst, its opacity corrected for it). Views past
-//! that — the eye inside or very near the volume — need Lacroute's pyramid
-//! split (issue 21, a later phase): [`PerspectiveView::new`] says so with an
-//! error. [`crate::view::plan::FramePlan::set_perspective`] makes the plan.
+//! slice every 3 voxels at worst, its opacity corrected for it).
+//!
+//! Views past that — the eye inside or very near the volume, a wide field of
+//! view — get Lacroute's pyramid split ([`PerspectiveView::pyramids`],
+//! chosen by [`PerspectiveView::frame`]): the eye is the apex of six
+//! pyramids, one per signed axis of voxel space; each output pixel belongs to
+//! the pyramid of its ray's largest direction component ([`ray_owner`]), so
+//! every ray leaves its pyramid's axis by at most 45°. Each pyramid is a view
+//! of its own (its axis, its slices walked away from the eye, the farthest
+//! slice as base plane) with a window: the base-plane box of its pixels' rays.
+//! [`crate::view::plan::FramePlan::set_perspective`] makes each plan, and the
+//! renderer warps each pyramid into its own pixels only.
 
 use glam::{DMat3, DVec3};
 
@@ -109,7 +117,9 @@ pub struct PerspectiveView {
     pub n: [usize; 3],
     /// The eye in permuted voxel-index coordinates `(i, j, k)`.
     pub eye: [f64; 3],
-    /// The base plane: the slice nearest the eye.
+    /// The base plane (`σ = 1`): the slice nearest the eye for one pyramid
+    /// (compositing only minifies), the slice farthest from it for a pyramid
+    /// of the split (compositing only magnifies).
     pub k_front: usize,
     /// `κ = 1/(k_front − eye_k)`.
     pub kappa: f64,
@@ -117,36 +127,110 @@ pub struct PerspectiveView {
     pub ascending: bool,
     /// Base-plane sheared coordinates → output pixels.
     pub warp: Warp,
+    /// A pyramid of the split ([`PerspectiveView::pyramids`]): the box
+    /// `[lo, hi]` of base-plane points `(a, b)` whose rays the view must
+    /// composite (those of its output pixels, plus a margin). `None`: one
+    /// pyramid, every ray into the volume.
+    pub window: Option<[[f64; 2]; 2]>,
 }
 
-impl PerspectiveView {
-    /// Factorizes `camera` seen from `distance` world units in front of the
-    /// volume centre, for a volume of `dims` voxels with `spacing`.
-    pub fn new(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+/// The pyramid (principal axis, and `true` for rays going toward `+axis`)
+/// of a ray with voxel-space direction `d` (not zero): its largest component
+/// by magnitude, exact ties going to z, then y, then x (as
+/// [`crate::view::principal_axis`] prefers them). Every output pixel belongs
+/// to exactly one pyramid.
+#[inline(always)]
+pub fn ray_owner(d: DVec3) -> (usize, bool) {
+    let a = d.abs();
+    let axis = if a.z >= a.x && a.z >= a.y {
+        2
+    } else if a.y >= a.x {
+        1
+    } else {
+        0
+    };
+    (axis, d[axis] > 0.0)
+}
+
+/// The voxel-space ray directions of a perspective camera's output pixels:
+/// pixel `(u, v)`'s ray from the eye runs along `dirs · (u, v, 1)`, linear in
+/// the pixel (the warp of a pyramid of the split tests each pixel's owner
+/// with it, [`ray_owner`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayDirections {
+    pub dirs: DMat3,
+}
+
+impl RayDirections {
+    /// The direction of pixel `(u, v)`'s ray (voxel space, not normalized).
+    #[inline(always)]
+    pub fn at(&self, u: f64, v: f64) -> DVec3 {
+        self.dirs * DVec3::new(u, v, 1.0)
+    }
+
+    /// The pyramid of output pixel `(u, v)` ([`ray_owner`]).
+    #[inline(always)]
+    pub fn owner(&self, u: f64, v: f64) -> (usize, bool) {
+        ray_owner(self.at(u, v))
+    }
+}
+
+/// What every view of one perspective frame shares: the camera, the eye in
+/// voxel space and the output pixels' rays.
+struct EyeGeometry {
+    r: DMat3,
+    size: [usize; 2],
+    sp: DVec3,
+    centre: DVec3,
+    dims: [usize; 3],
+    /// The eye's distance from the centre (world units) and the image scale
+    /// `f` (pixels per unit of `e.x/(D − e.z)`).
+    distance: f64,
+    f: f64,
+    /// The eye in voxel-index coordinates.
+    eye_v: DVec3,
+    rays: RayDirections,
+}
+
+impl EyeGeometry {
+    fn new(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
         if !(distance.is_finite() && distance > 0.0) {
             return Err(Error::value("eye distance", format!("{distance} (must be finite and > 0)")));
         }
-        let [w, h] = camera.size;
         let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
         let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
         let centre = (nd - 1.0) / 2.0;
         let zoom = camera_zoom(camera, nd, sp)?;
         let r = camera.rotation;
-        // the eye in voxel space, and the principal axis of the direction to the centre
+        let f = zoom * distance;
         let eye_v = (r.transpose() * DVec3::new(0.0, 0.0, distance)) / sp + centre;
-        let axis = principal_axis(centre - eye_v);
+        // the eye-space direction through (u, v) is ((u − cu)/f, (cv − v)/f, −1)
+        let [w, h] = camera.size;
+        let (cu, cv) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+        let rt = r.transpose();
+        let to_vox = |e: DVec3| (rt * e) / sp;
+        let dirs = DMat3::from_cols(
+            to_vox(DVec3::new(1.0 / f, 0.0, 0.0)),
+            to_vox(DVec3::new(0.0, -1.0 / f, 0.0)),
+            to_vox(DVec3::new(-cu / f, cv / f, -1.0)),
+        );
+        Ok(EyeGeometry { r, size: camera.size, sp, centre, dims, distance, f, eye_v, rays: RayDirections { dirs } })
+    }
+
+    /// The one-pyramid view, or (inner `Err`) why the frame needs the split.
+    fn one_pyramid(&self) -> Result<std::result::Result<PerspectiveView, &'static str>> {
+        let axis = principal_axis(self.centre - self.eye_v);
         let perm = permutation(axis);
-        let e = [eye_v[perm[0]], eye_v[perm[1]], eye_v[perm[2]]];
-        let n = [dims[perm[0]], dims[perm[1]], dims[perm[2]]];
+        let e = [self.eye_v[perm[0]], self.eye_v[perm[1]], self.eye_v[perm[2]]];
+        let n = [self.dims[perm[0]], self.dims[perm[1]], self.dims[perm[2]]];
         let last = n[2].saturating_sub(1) as f64;
         let (k_front, ascending) = if e[2] < 0.0 {
             (0, true)
         } else if e[2] > last {
             (n[2] - 1, false)
         } else {
-            return Err(Error::value(
-                "perspective view",
-                "the eye is inside the volume's slab (between its first and last slice along the principal axis): that needs the pyramid split, not yet done; move the eye farther (--eye-distance)",
+            return Ok(Err(
+                "the eye is inside the volume's slab (between its first and last slice along the principal axis): that needs the pyramid split",
             ));
         };
         // one pyramid only if every ray into the box has an in-slice slope of at
@@ -159,18 +243,31 @@ impl PerspectiveView {
             let lim = dk * MAX_RAY_SLOPE * (1.0 + 1e-12);
             (x[0] - e[0]).abs() > lim || (x[1] - e[1]).abs() > lim
         }) {
-            return Err(Error::value(
-                "perspective view",
-                "rays deviate more than 63.4° from the principal axis (the eye too near the volume): it needs the pyramid split, not yet done; move the eye farther (--eye-distance)",
+            return Ok(Err(
+                "rays deviate more than 63.4° from the principal axis (the eye too near the volume): that needs the pyramid split",
             ));
         }
-        let kappa = 1.0 / (k_front as f64 - e[2]);
-        // the warp: sheared (a, b) on the base plane is voxel (a, b, k_front)
+        self.view(axis, ascending, k_front).map(Ok)
+    }
+
+    /// The view of principal axis `axis`, slices walked in ascending `k` or
+    /// not, with slice `k_base` as the base plane (`σ = 1`).
+    fn view(&self, axis: usize, ascending: bool, k_base: usize) -> Result<PerspectiveView> {
+        let perm = permutation(axis);
+        let e = [self.eye_v[perm[0]], self.eye_v[perm[1]], self.eye_v[perm[2]]];
+        let n = [self.dims[perm[0]], self.dims[perm[1]], self.dims[perm[2]]];
+        let kappa = 1.0 / (k_base as f64 - e[2]);
+        if !kappa.is_finite() {
+            return Err(Error::value("perspective view", "the eye lies on the base plane"));
+        }
+        let (r, sp, centre, distance, f) = (self.r, self.sp, self.centre, self.distance, self.f);
+        // the warp: sheared (a, b) on the base plane is voxel (a, b, k_base)
         let unperm = |ijk: DVec3| unpermute(perm, ijk);
         let to_eye = |v: DVec3| r * (v * sp);
-        let e0 = r * ((unperm(DVec3::new(0.0, 0.0, k_front as f64)) - centre) * sp);
+        let e0 = r * ((unperm(DVec3::new(0.0, 0.0, k_base as f64)) - centre) * sp);
         let (ea, eb) = (to_eye(unperm(DVec3::X)), to_eye(unperm(DVec3::Y)));
-        let (cu, cv, f) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0, zoom * distance);
+        let [w, h] = self.size;
+        let (cu, cv) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
         // rows (u·w, v·w, w) over columns (a, b, 1)
         let rw = DVec3::new(-ea.z, -eb.z, distance - e0.z);
         let ru = cu * rw + f * DVec3::new(ea.x, eb.x, e0.x);
@@ -183,7 +280,137 @@ impl PerspectiveView {
         // F⁻¹ itself: (a, b, 1)/h with h > 0 in front of the eye (a negative
         // multiple, such as adj(F) when det F < 0, would flip that test)
         let inverse = forward.inverse();
-        Ok(PerspectiveView { axis, perm, n, eye: e, k_front, kappa, ascending, warp: Warp { forward, inverse } })
+        Ok(PerspectiveView { axis, perm, n, eye: e, k_front: k_base, kappa, ascending, warp: Warp { forward, inverse }, window: None })
+    }
+
+    /// The pyramids of the split (see [`PerspectiveView::pyramids`]).
+    fn pyramids(&self, near: f64) -> Result<Vec<PerspectiveView>> {
+        let [w, h] = self.size;
+        // the output rectangle and a one-pixel ring, as a polygon
+        let (u1, v1) = (w as f64, h as f64);
+        let screen = vec![[-1.0, -1.0], [u1, -1.0], [u1, v1], [-1.0, v1]];
+        let mut out = vec![];
+        for axis in 0..3 {
+            for ascending in [false, true] {
+                let perm = permutation(axis);
+                let nk = self.dims[axis];
+                let ek = self.eye_v[axis];
+                let s = if ascending { 1.0 } else { -1.0 };
+                // the base plane: the slice farthest from the eye, at least `near` in front of it
+                let k_base = if ascending { nk - 1 } else { 0 };
+                if s * (k_base as f64 - ek) < near {
+                    continue;
+                }
+                // the pixels of this pyramid: s·d_k ≥ |d_i|, |d_j| (each linear in (u, v))
+                let dirs = self.rays.dirs;
+                let row = |c: usize| DVec3::new(dirs.x_axis[c], dirs.y_axis[c], dirs.z_axis[c]);
+                let dk = row(axis) * s;
+                let mut poly = screen.clone();
+                for c in [perm[0], perm[1]] {
+                    for t in [1.0, -1.0] {
+                        poly = clip_polygon(&poly, dk + row(c) * t);
+                    }
+                }
+                if poly.len() < 3 {
+                    continue;
+                }
+                let mut v = self.view(axis, ascending, k_base)?;
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for p in &poly {
+                    // in the pyramid, so in front of its base plane: w > 0
+                    let Some(ab) = v.warp.to_sheared(p[0], p[1]) else { continue };
+                    for a in 0..2 {
+                        lo[a] = lo[a].min(ab[a]);
+                        hi[a] = hi[a].max(ab[a]);
+                    }
+                }
+                if !(lo[0] <= hi[0] && lo[1] <= hi[1]) {
+                    continue;
+                }
+                // the warp's bilinear taps reach one intermediate pixel past the
+                // preimage of the pixels; two for safety
+                v.window = Some([lo.map(|x| x - WINDOW_MARGIN), hi.map(|x| x + WINDOW_MARGIN)]);
+                out.push(v);
+            }
+        }
+        // the pyramid of the image centre first
+        let c = self.rays.owner((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+        if let Some(i) = out.iter().position(|v| (v.axis, v.ascending) == c) {
+            let first = out.remove(i);
+            out.insert(0, first);
+        }
+        Ok(out)
+    }
+}
+
+/// Base-plane pixels a pyramid's window reaches past the preimage of its
+/// output pixels (the warp's bilinear taps need one).
+const WINDOW_MARGIN: f64 = 2.0;
+
+/// Sutherland–Hodgman: the part of convex polygon `poly` (output pixel
+/// coordinates) where `c · (u, v, 1) ≥ 0`.
+fn clip_polygon(poly: &[[f64; 2]], c: DVec3) -> Vec<[f64; 2]> {
+    let val = |p: &[f64; 2]| c.x * p[0] + c.y * p[1] + c.z;
+    let mut out = Vec::with_capacity(poly.len() + 1);
+    for i in 0..poly.len() {
+        let (p, q) = (&poly[i], &poly[(i + 1) % poly.len()]);
+        let (fp, fq) = (val(p), val(q));
+        if fp >= 0.0 {
+            out.push(*p);
+        }
+        if (fp >= 0.0) != (fq >= 0.0) {
+            let t = fp / (fp - fq);
+            out.push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
+        }
+    }
+    out
+}
+
+impl PerspectiveView {
+    /// The voxel-space ray directions of the output pixels of `camera` seen
+    /// from `distance` world units in front of the volume centre.
+    pub fn ray_directions(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<RayDirections> {
+        Ok(EyeGeometry::new(camera, distance, dims, spacing)?.rays)
+    }
+
+    /// Factorizes `camera` seen from `distance` world units in front of the
+    /// volume centre, for a volume of `dims` voxels with `spacing`: one
+    /// pyramid, or an error when the view needs the pyramid split
+    /// ([`PerspectiveView::frame`] makes the split instead).
+    pub fn new(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+        let g = EyeGeometry::new(camera, distance, dims, spacing)?;
+        match g.one_pyramid()? {
+            Ok(v) => Ok(v),
+            Err(why) => Err(Error::value("perspective view", why)),
+        }
+    }
+
+    /// The views of one perspective frame: the one pyramid of
+    /// [`PerspectiveView::new`] when every ray into the volume stays within
+    /// `atan(MAX_RAY_SLOPE)` of the principal axis; otherwise Lacroute's
+    /// pyramid split ([`PerspectiveView::pyramids`]). Empty when nothing of
+    /// the volume is in front of the near plane and on screen.
+    pub fn frame(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3], near: f64) -> Result<Vec<Self>> {
+        let g = EyeGeometry::new(camera, distance, dims, spacing)?;
+        match g.one_pyramid()? {
+            Ok(v) => Ok(vec![v]),
+            Err(_) => g.pyramids(near),
+        }
+    }
+
+    /// Lacroute's pyramid split of a perspective frame: the eye at the apex,
+    /// one pyramid per signed axis `±x, ±y, ±z` of voxel space (the rays whose
+    /// direction's largest component is along that axis, with that sign:
+    /// [`ray_owner`]), each factorized along its own axis with the slice
+    /// farthest from the eye as the base plane (`σ_k ≤ 1`: the slices nearer
+    /// the eye are magnified, bilinearly) and slices walked away from the eye.
+    /// Only the pyramids with a slice at least `near` in front of the eye and
+    /// some output pixel are kept; each one's [`PerspectiveView::window`] is
+    /// the base-plane box of the rays of its output pixels (plus a margin for
+    /// the warp's bilinear taps). The pyramid owning the image centre comes
+    /// first; the others follow in the order `−x, +x, −y, +y, −z, +z`.
+    pub fn pyramids(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3], near: f64) -> Result<Vec<Self>> {
+        EyeGeometry::new(camera, distance, dims, spacing)?.pyramids(near)
     }
 
     /// The scale `σ_k` of slice `k` (1 at the base plane, growing away from the eye).

@@ -183,9 +183,10 @@ struct EyeGeometry {
     sp: DVec3,
     centre: DVec3,
     dims: [usize; 3],
-    /// The eye's distance from the centre (world units) and the image scale
-    /// `f` (pixels per unit of `e.x/(D − e.z)`).
-    distance: f64,
+    /// The eye in eye coordinates (world units from the volume centre, the
+    /// camera's axes; `(0, 0, D)` for an eye `D` in front of the centre) and
+    /// the image scale `f` (pixels per unit of `(e.x − E.x)/(E.z − e.z)`).
+    eye_e: DVec3,
     f: f64,
     /// The eye in voxel-index coordinates.
     eye_v: DVec3,
@@ -199,11 +200,20 @@ impl EyeGeometry {
         }
         let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
         let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
-        let centre = (nd - 1.0) / 2.0;
         let zoom = camera_zoom(camera, nd, sp)?;
+        Self::at(camera, zoom * distance, DVec3::new(0.0, 0.0, distance), dims, spacing)
+    }
+
+    /// The eye at `eye_e` (eye coordinates), image scale `f`.
+    fn at(camera: &Camera, f: f64, eye_e: DVec3, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+        if !(f.is_finite() && f > 0.0 && eye_e.is_finite()) {
+            return Err(Error::value("perspective view", format!("image scale {f}, eye {eye_e} (must be finite, the scale > 0)")));
+        }
+        let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
+        let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let centre = (nd - 1.0) / 2.0;
         let r = camera.rotation;
-        let f = zoom * distance;
-        let eye_v = (r.transpose() * DVec3::new(0.0, 0.0, distance)) / sp + centre;
+        let eye_v = (r.transpose() * eye_e) / sp + centre;
         // the eye-space direction through (u, v) is ((u − cu)/f, (cv − v)/f, −1)
         let [w, h] = camera.size;
         let (cu, cv) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
@@ -214,7 +224,7 @@ impl EyeGeometry {
             to_vox(DVec3::new(0.0, -1.0 / f, 0.0)),
             to_vox(DVec3::new(-cu / f, cv / f, -1.0)),
         );
-        Ok(EyeGeometry { r, size: camera.size, sp, centre, dims, distance, f, eye_v, rays: RayDirections { dirs } })
+        Ok(EyeGeometry { r, size: camera.size, sp, centre, dims, eye_e, f, eye_v, rays: RayDirections { dirs } })
     }
 
     /// The one-pyramid view, or (inner `Err`) why the frame needs the split.
@@ -260,7 +270,7 @@ impl EyeGeometry {
         if !kappa.is_finite() {
             return Err(Error::value("perspective view", "the eye lies on the base plane"));
         }
-        let (r, sp, centre, distance, f) = (self.r, self.sp, self.centre, self.distance, self.f);
+        let (r, sp, centre, eye, f) = (self.r, self.sp, self.centre, self.eye_e, self.f);
         // the warp: sheared (a, b) on the base plane is voxel (a, b, k_base)
         let unperm = |ijk: DVec3| unpermute(perm, ijk);
         let to_eye = |v: DVec3| r * (v * sp);
@@ -269,9 +279,9 @@ impl EyeGeometry {
         let [w, h] = self.size;
         let (cu, cv) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
         // rows (u·w, v·w, w) over columns (a, b, 1)
-        let rw = DVec3::new(-ea.z, -eb.z, distance - e0.z);
-        let ru = cu * rw + f * DVec3::new(ea.x, eb.x, e0.x);
-        let rv = cv * rw - f * DVec3::new(ea.y, eb.y, e0.y);
+        let rw = DVec3::new(-ea.z, -eb.z, eye.z - e0.z);
+        let ru = cu * rw + f * DVec3::new(ea.x, eb.x, e0.x - eye.x);
+        let rv = cv * rw - f * DVec3::new(ea.y, eb.y, e0.y - eye.y);
         let forward = DMat3::from_cols(ru, rv, rw).transpose();
         let det = forward.determinant();
         if !(det.is_finite() && det != 0.0) {
@@ -396,6 +406,23 @@ impl PerspectiveView {
             Ok(v) => Ok(vec![v]),
             Err(_) => g.pyramids(near),
         }
+    }
+
+    /// The views of a perspective frame from an eye anywhere: at `eye`
+    /// (eye coordinates: world units from the volume centre along the
+    /// camera's axes, looking toward −z), `f` pixels per unit of
+    /// `(e.x − eye.x)/(eye.z − e.z)`. As [`PerspectiveView::frame`] when the
+    /// volume centre is in front of the eye; otherwise always the split.
+    /// Empty when no part of the volume is in front of the near plane on
+    /// screen: a volume entirely behind the eye gives an empty image.
+    pub fn frame_at(camera: &Camera, f: f64, eye: [f64; 3], dims: [usize; 3], spacing: [f32; 3], near: f64) -> Result<Vec<Self>> {
+        let g = EyeGeometry::at(camera, f, DVec3::from_array(eye), dims, spacing)?;
+        if eye[2] > 0.0
+            && let Ok(v) = g.one_pyramid()?
+        {
+            return Ok(vec![v]);
+        }
+        g.pyramids(near)
     }
 
     /// Lacroute's pyramid split of a perspective frame: the eye at the apex,
@@ -525,6 +552,92 @@ mod tests {
             last = err;
         }
         assert!(last < 1e-4);
+    }
+
+    /// The pyramids of the split, from eyes anywhere (inside the volume, near
+    /// it, beyond it): each pyramid's slices and warp follow the true camera
+    /// (projecting a point of any slice gives the pixel the warp gives its
+    /// base-plane point), its slices run away from the eye from the near
+    /// plane on (`σ ≤ 1` at every slice in front of the near plane), and the
+    /// pyramids are distinct, the image centre's first.
+    #[test]
+    fn perspective_pyramids_follow_the_camera() {
+        let mut seed = 17u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (dims, sp) = ([20, 26, 17], [1.0f32, 0.8, 1.5]);
+        let c = DVec3::new(9.5, 12.5, 8.0);
+        let s = DVec3::new(1.0, 0.8, 1.5);
+        let mut views = 0;
+        for _ in 0..200 {
+            let r = DMat3::from_euler(glam::EulerRot::XYZ, rnd() * 7.0, rnd() * 7.0, rnd() * 7.0);
+            let cam = Camera { rotation: r, zoom: Some(2.0), size: [96, 80] };
+            let eye = [rnd() * 40.0 - 20.0, rnd() * 40.0 - 20.0, rnd() * 40.0 - 20.0];
+            let f = 20.0 + rnd() * 100.0;
+            let vs = PerspectiveView::frame_at(&cam, f, eye, dims, sp, 0.5).unwrap();
+            let mut seen = vec![];
+            for p in &vs {
+                assert!(!seen.contains(&(p.axis, p.ascending)));
+                seen.push((p.axis, p.ascending));
+                views += 1;
+                for _ in 0..5 {
+                    let (a, b) = (rnd() * 30.0 - 5.0, rnd() * 30.0 - 5.0);
+                    let ahead = |k: f64| if p.ascending { k - p.eye[2] } else { p.eye[2] - k };
+                    let k = (rnd() * (p.n[2] - 1) as f64).round();
+                    if ahead(k) < 0.5 {
+                        continue;
+                    }
+                    if p.window.is_some() {
+                        assert!(p.scale(k) <= 1.0 + 1e-12 && p.scale(k) > 0.0);
+                    }
+                    let x = DVec3::from_array(p.sheared_to_voxel(a, b, k));
+                    let e = r * ((x - c) * s);
+                    let h = eye[2] - e.z;
+                    let Some(got) = p.warp.to_output(a, b) else {
+                        assert!(h <= 1e-9, "the warp says behind the eye, the camera {h}");
+                        continue;
+                    };
+                    if h < 1.0 {
+                        // (near the eye plane both blow up)
+                        continue;
+                    }
+                    let want = [47.5 + f * (e.x - eye[0]) / h, 39.5 - f * (e.y - eye[1]) / h];
+                    assert!((got[0] - want[0]).abs() < 1e-4 * (1.0 + want[0].abs()), "{got:?} vs {want:?}");
+                    assert!((got[1] - want[1]).abs() < 1e-4 * (1.0 + want[1].abs()), "{got:?} vs {want:?}");
+                }
+            }
+            if let Some(p) = vs.first().filter(|p| p.window.is_some()) {
+                let rays = EyeGeometry::at(&cam, f, DVec3::from_array(eye), dims, sp).unwrap().rays;
+                let own = rays.owner(47.5, 39.5);
+                // the first pyramid owns the centre, if any pyramid does
+                if vs.iter().any(|v| (v.axis, v.ascending) == own) {
+                    assert_eq!((p.axis, p.ascending), own);
+                }
+            }
+        }
+        assert!(views > 100, "{views}");
+    }
+
+    /// A volume entirely behind the eye has no view (an empty image, not an
+    /// error); with the eye inside it, the pyramids the screen sees.
+    #[test]
+    fn perspective_volume_behind_the_eye_has_no_view() {
+        let cam = Camera::new(DMat3::IDENTITY, [64, 48]);
+        let (dims, sp) = ([20, 20, 20], [1.0f32; 3]);
+        // the eye past the volume's far face (z = −9.5), looking away from it
+        for eye in [[0.0, 0.0, -15.0], [3.0, -2.0, -10.5], [0.0, 0.0, -9.7]] {
+            let v = PerspectiveView::frame_at(&cam, 40.0, eye, dims, sp, 0.5).unwrap();
+            assert!(v.is_empty(), "{eye:?}: {} views", v.len());
+        }
+        // the eye inside, a 90° view: the −z pyramid, and no other at the centre
+        let v = PerspectiveView::frame_at(&cam, 24.0, [0.0, 0.0, 1.0], dims, sp, 0.5).unwrap();
+        assert!(!v.is_empty() && (v[0].axis, v[0].ascending) == (2, false));
+        assert!(v.iter().all(|p| p.window.is_some()));
+        // and a wide view from inside sees the side pyramids too
+        let v = PerspectiveView::frame_at(&cam, 10.0, [0.0, 0.0, 1.0], dims, sp, 0.5).unwrap();
+        assert!(v.len() >= 3, "{}", v.len());
     }
 
     #[test]

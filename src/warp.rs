@@ -339,6 +339,21 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
         (lo, hi) = clip_positive(lo, hi, phi * wa - xa, phi * wb - xb);
         (lo, hi) = clip_positive(lo, hi, ya - qlo * wa, yb - qlo * wb);
         (lo, hi) = clip_positive(lo, hi, qhi * wa - ya, qhi * wb - yb);
+        if let Some(o) = owned {
+            // the pyramid's pixels of the row: s·d_axis ± d_c ≥ 0 for the other
+            // two axes c, each linear in u; a pixel of slack (the exact owner
+            // test below decides)
+            let (m, (axis, up)) = (o.rays.dirs, o.pyramid);
+            let s = if up { 1.0 } else { -1.0 };
+            let (da, db) = (s * m.x_axis[axis], s * (m.y_axis[axis] * vf + m.z_axis[axis]));
+            for c in (0..3).filter(|&c| c != axis) {
+                let (ca, cb) = (m.x_axis[c], m.y_axis[c] * vf + m.z_axis[c]);
+                for t in [1.0, -1.0] {
+                    let (ga, gb) = (da + t * ca, db + t * cb);
+                    (lo, hi) = clip_positive(lo, hi, ga, gb + ga.abs() + 1e-9 * (gb.abs() + ga.abs() * w as f64));
+                }
+            }
+        }
         let (u0, u1) = if lo <= hi && hi >= 0.0 { (lo.ceil().max(0.0) as usize, (hi.floor() as usize).min(w - 1) + 1) } else { (0, 0) };
         let (u0, u1) = if u0 < u1 { (u0, u1) } else { (0, 0) };
         if owned.is_none() {

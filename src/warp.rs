@@ -378,9 +378,11 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
             let inv_w = 1.0 / (wa * uf + wb);
             let p = ((xa * uf + xb) * inv_w + pad).clamp(pmin, pmax);
             let q = ((ya * uf + yb) * inv_w + pad).clamp(qmin, qmax);
-            let (x0, y0) = (p.floor(), q.floor());
-            let (fx, fy) = ((p - x0) as f32, (q - y0) as f32);
-            let i = y0 as usize * iw + x0 as usize;
+            // p, q ≥ 0 here: truncation is the floor (no libm call: the
+            // x86-64 baseline has no floor instruction)
+            let (xi, yi) = (p as usize, q as usize);
+            let (fx, fy) = ((p - xi as f64) as f32, (q - yi as f64) as f32);
+            let i = yi * iw + xi;
             let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
             let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
             let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);

@@ -583,3 +583,44 @@ fn perspective_split_terminates_rays_and_composites_the_last_slices() {
         assert!(head_on > 50, "{head_on} pixels meet a wall head-on");
     }
 }
+
+/// Flying in across the change from one pyramid to the split (the eye
+/// distance where a ray into the volume first passes 63.4°): the image
+/// changes between the last one-pyramid frame and the first split frame no
+/// more than the reference's does between the same two eyes.
+#[test]
+fn perspective_fly_in_across_the_split_has_no_jump() {
+    let vol = smooth_blobs([44, 40, 36]);
+    let tf = TransferFunction::ramp(40.0, 160.0, 0.5, [0.9, 0.7, 0.5]);
+    let refr = ReferenceRenderer::new(&vol);
+    let opts = ReferenceOptions { step: 0.1, ..Default::default() };
+    let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, -0.3, 0.4, 0.1), [80, 80]);
+    for mode in [Mode::Blend, Mode::Iso] {
+        let mut r = renderer(&vol, &tf, Method::Rle, mode, Projection::Parallel);
+        let mut last: Option<(f64, Image)> = None;
+        let mut crossed = false;
+        for i in 0..60 {
+            let d = 1.2 * 0.98f64.powi(i);
+            let proj = Projection::perspective(60.0, d).unwrap();
+            r.set_projection(proj).unwrap();
+            let img = render(&mut r, &cam);
+            // (the one-pyramid factorization refuses exactly what needs the split)
+            let (c, dist) = proj.resolve(&cam, vol.dims(), vol.spacing()).unwrap().unwrap();
+            if shearwarp::view::PerspectiveView::new(&c, dist, vol.dims(), vol.spacing()).is_err() {
+                let (d0, before) = last.take().expect("the first frame is one pyramid");
+                let scene = Scene::from_renderer(&r);
+                let p0 = Projection::perspective(60.0, d0).unwrap();
+                let ra = refr.render_projected(&scene, &cam, &p0, &opts).unwrap().image;
+                let rb = refr.render_projected(&scene, &cam, &proj, &opts).unwrap().image;
+                let (jump, ref_jump) = (rmse(&before, &img).unwrap(), rmse(&ra, &rb).unwrap());
+                let (ea, eb) = (rmse(&before, &ra).unwrap(), rmse(&img, &rb).unwrap());
+                eprintln!("{mode:?}: split from {d:.3} diagonals: jump {jump:.4}, reference {ref_jump:.4}; RMSE {ea:.4} → {eb:.4}");
+                assert!(jump <= 1.5 * ref_jump + 0.01, "{mode:?}: jump {jump} vs reference {ref_jump}");
+                crossed = true;
+                break;
+            }
+            last = Some((d, img));
+        }
+        assert!(crossed, "the fly-in never reached the split");
+    }
+}

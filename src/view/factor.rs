@@ -223,6 +223,36 @@ mod tests {
         Factorization::new(&Camera::new(r, [200, 100]), dims, sp).unwrap()
     }
 
+    /// A forced axis equal to the principal one is the plain factorization;
+    /// another axis keeps the camera's shading directions and warp, with the
+    /// shear clamped to 45° (finite even when the view is along the slices).
+    #[test]
+    fn with_axis_forces_the_slicing_axis() {
+        let cam = Camera::new(DMat3::from_euler(glam::EulerRot::XYZ, 0.3, -0.5, 0.2), [64, 48]);
+        let (dims, sp) = ([20, 30, 40], [1.0f32, 0.5, 3.0]);
+        let f = Factorization::new(&cam, dims, sp).unwrap();
+        assert_eq!(Factorization::with_axis(&cam, dims, sp, f.axis).unwrap(), f);
+        for axis in 0..3 {
+            let g = Factorization::with_axis(&cam, dims, sp, axis).unwrap();
+            assert_eq!((g.axis, g.perm), (axis, permutation(axis)));
+            assert!(g.shear.iter().all(|s| s.is_finite() && s.abs() <= 1.0));
+            // the same headlight in object space
+            let light = |f: &Factorization| {
+                let mut l = [0.0; 3];
+                for c in 0..3 {
+                    l[f.perm[c]] = f.grad_to_eye_z[c] / f.grad_scale[c];
+                }
+                l
+            };
+            let (a, b) = (light(&f), light(&g));
+            assert!((0..3).all(|c| (a[c] - b[c]).abs() < 1e-12), "{a:?} vs {b:?}");
+        }
+        // looking along x: the z factorization's shear would be infinite
+        let side = Camera::new(rotate_eye(DMat3::IDENTITY, 1, 90.0), [32, 32]);
+        let g = Factorization::with_axis(&side, dims, sp, 2).unwrap();
+        assert!(g.shear.iter().all(|s| s.is_finite()));
+    }
+
     #[test]
     fn identity_view_looks_down_z() {
         let f = fact(DMat3::IDENTITY, [10, 20, 30], [1.0; 3]);

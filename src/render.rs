@@ -310,7 +310,10 @@ pub struct Renderer {
     /// The plans of the last split perspective frame, one per pyramid (reused
     /// likewise), and whether the last frame was split.
     pyramid_plans: Vec<FramePlan>,
+    pyramid_count: usize,
     last_split: bool,
+    /// The perspective views of the last frame (a buffer reused).
+    views: Vec<PerspectiveView>,
     /// The producer of per-pixel ray limits, if any, and a counter bumped when it changes.
     limiter: Option<(std::sync::Arc<dyn Limiter>, u64)>,
     inter: Intermediate,
@@ -351,7 +354,9 @@ impl Renderer {
             masks: [None, None, None],
             plan: None,
             pyramid_plans: vec![],
+            pyramid_count: 0,
             last_split: false,
+            views: vec![],
             limiter: None,
             inter: Intermediate::default(),
             last_frame: None,
@@ -566,13 +571,13 @@ impl Renderer {
     /// The frame plan of the last frame (of a frame split into pyramids, the
     /// plan of the pyramid owning the image centre, if any).
     pub fn last_plan(&self) -> Option<&FramePlan> {
-        if self.last_split { self.pyramid_plans.first() } else { self.plan.as_ref() }
+        if self.last_split { self.pyramid_plans[..self.pyramid_count].first() } else { self.plan.as_ref() }
     }
 
     /// The frame plans of the last frame: one, or one per pyramid of a split
     /// perspective frame (the pyramid owning the image centre first).
     pub fn last_plans(&self) -> &[FramePlan] {
-        if self.last_split { &self.pyramid_plans } else { self.plan.as_slice() }
+        if self.last_split { &self.pyramid_plans[..self.pyramid_count] } else { self.plan.as_slice() }
     }
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
@@ -951,13 +956,19 @@ impl Renderer {
                         "perspective is not yet supported by the binary rotator (nor its brute force); use --method rle",
                     ));
                 }
-                let mut views = PerspectiveView::frame(&cam, distance, dims, spacing, NEAR_SLICES)?;
-                if views.len() != 1 || views[0].window.is_some() {
+                // (the views' buffer is kept across frames: no allocation per frame)
+                let mut views = std::mem::take(&mut self.views);
+                let made = PerspectiveView::frame_into(&cam, distance, dims, spacing, NEAR_SLICES, &mut views);
+                if made.is_ok() && (views.len() != 1 || views[0].window.is_some()) {
                     // the eye near or inside the volume: Lacroute's pyramid split
-                    let stats = self.render_pyramids(camera, &cam, distance, &views, out)?;
-                    return Ok(self.finish_frame(key, out, stats));
+                    let stats = self.render_pyramids(camera, &cam, distance, &views, out);
+                    self.views = views;
+                    return Ok(self.finish_frame(key, out, stats?));
                 }
-                Some((cam, views.pop().expect("one view")))
+                let one = views.pop();
+                self.views = views;
+                made?;
+                Some((cam, one.expect("one view")))
             }
         };
         let f = Factorization::new(persp.as_ref().map_or(camera, |p| &p.0), dims, spacing)?;
@@ -1030,6 +1041,7 @@ impl Renderer {
         clear_for_pyramids(out, camera.size[0], camera.size[1]);
         stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
         self.last_split = true;
+        self.pyramid_count = 0;
         let mut plans = std::mem::take(&mut self.pyramid_plans);
         let mut result = Ok(());
         for (i, pv) in views.iter().enumerate() {
@@ -1060,7 +1072,8 @@ impl Renderer {
                 break;
             }
         }
-        plans.truncate(views.len());
+        // (plans past this frame's pyramids are kept, with their arrays, for later frames)
+        self.pyramid_count = views.len().min(plans.len());
         self.pyramid_plans = plans;
         result.map(|_| stats)
     }

@@ -293,13 +293,14 @@ impl EyeGeometry {
         Ok(PerspectiveView { axis, perm, n, eye: e, k_front: k_base, kappa, ascending, warp: Warp { forward, inverse }, window: None })
     }
 
-    /// The pyramids of the split (see [`PerspectiveView::pyramids`]).
-    fn pyramids(&self, near: f64) -> Result<Vec<PerspectiveView>> {
+    /// The pyramids of the split (see [`PerspectiveView::pyramids`]),
+    /// appended to `out`.
+    fn pyramids_into(&self, near: f64, out: &mut Vec<PerspectiveView>) -> Result<()> {
         let [w, h] = self.size;
         // the output rectangle and a one-pixel ring, as a polygon
         let (u1, v1) = (w as f64, h as f64);
-        let screen = vec![[-1.0, -1.0], [u1, -1.0], [u1, v1], [-1.0, v1]];
-        let mut out = vec![];
+        let screen = Polygon::new(&[[-1.0, -1.0], [u1, -1.0], [u1, v1], [-1.0, v1]]);
+        let first = out.len();
         for axis in 0..3 {
             for ascending in [false, true] {
                 let perm = permutation(axis);
@@ -315,18 +316,18 @@ impl EyeGeometry {
                 let dirs = self.rays.dirs;
                 let row = |c: usize| DVec3::new(dirs.x_axis[c], dirs.y_axis[c], dirs.z_axis[c]);
                 let dk = row(axis) * s;
-                let mut poly = screen.clone();
+                let mut poly = screen;
                 for c in [perm[0], perm[1]] {
                     for t in [1.0, -1.0] {
-                        poly = clip_polygon(&poly, dk + row(c) * t);
+                        poly = poly.clip(dk + row(c) * t);
                     }
                 }
-                if poly.len() < 3 {
+                if poly.n < 3 {
                     continue;
                 }
                 let mut v = self.view(axis, ascending, k_base)?;
                 let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-                for p in &poly {
+                for p in poly.vertices() {
                     // in the pyramid, so in front of its base plane: w > 0
                     let Some(ab) = v.warp.to_sheared(p[0], p[1]) else { continue };
                     for a in 0..2 {
@@ -345,36 +346,60 @@ impl EyeGeometry {
         }
         // the pyramid of the image centre first
         let c = self.rays.owner((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
-        if let Some(i) = out.iter().position(|v| (v.axis, v.ascending) == c) {
-            let first = out.remove(i);
-            out.insert(0, first);
+        if let Some(i) = out[first..].iter().position(|v| (v.axis, v.ascending) == c) {
+            out[first..=first + i].rotate_right(1);
         }
-        Ok(out)
+        Ok(())
+    }
+}
+
+/// A convex polygon of at most 12 vertices (the screen rectangle clipped by
+/// four half-planes has at most 8), on the stack.
+#[derive(Clone, Copy)]
+struct Polygon {
+    v: [[f64; 2]; 12],
+    n: usize,
+}
+
+impl Polygon {
+    fn new(vs: &[[f64; 2]]) -> Self {
+        let mut p = Polygon { v: [[0.0; 2]; 12], n: vs.len() };
+        p.v[..vs.len()].copy_from_slice(vs);
+        p
+    }
+
+    fn vertices(&self) -> &[[f64; 2]] {
+        &self.v[..self.n]
+    }
+
+    /// Sutherland–Hodgman: the part where `c · (u, v, 1) ≥ 0`.
+    fn clip(&self, c: DVec3) -> Self {
+        let val = |p: &[f64; 2]| c.x * p[0] + c.y * p[1] + c.z;
+        let mut out = Polygon { v: [[0.0; 2]; 12], n: 0 };
+        let mut push = |p: [f64; 2]| {
+            if out.n < out.v.len() {
+                out.v[out.n] = p;
+                out.n += 1;
+            }
+        };
+        for i in 0..self.n {
+            let (p, q) = (&self.v[i], &self.v[(i + 1) % self.n]);
+            let (fp, fq) = (val(p), val(q));
+            if fp >= 0.0 {
+                push(*p);
+            }
+            if (fp >= 0.0) != (fq >= 0.0) {
+                let t = fp / (fp - fq);
+                push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
+            }
+        }
+        out
     }
 }
 
 /// Base-plane pixels a pyramid's window reaches past the preimage of its
 /// output pixels (the warp's bilinear taps need one).
 const WINDOW_MARGIN: f64 = 2.0;
-
-/// Sutherland–Hodgman: the part of convex polygon `poly` (output pixel
-/// coordinates) where `c · (u, v, 1) ≥ 0`.
-fn clip_polygon(poly: &[[f64; 2]], c: DVec3) -> Vec<[f64; 2]> {
-    let val = |p: &[f64; 2]| c.x * p[0] + c.y * p[1] + c.z;
-    let mut out = Vec::with_capacity(poly.len() + 1);
-    for i in 0..poly.len() {
-        let (p, q) = (&poly[i], &poly[(i + 1) % poly.len()]);
-        let (fp, fq) = (val(p), val(q));
-        if fp >= 0.0 {
-            out.push(*p);
-        }
-        if (fp >= 0.0) != (fq >= 0.0) {
-            let t = fp / (fp - fq);
-            out.push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
-        }
-    }
-    out
-}
 
 impl PerspectiveView {
     /// The voxel-space ray directions of the output pixels of `camera` seen
@@ -401,11 +426,21 @@ impl PerspectiveView {
     /// pyramid split ([`PerspectiveView::pyramids`]). Empty when nothing of
     /// the volume is in front of the near plane and on screen.
     pub fn frame(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3], near: f64) -> Result<Vec<Self>> {
+        let mut out = vec![];
+        Self::frame_into(camera, distance, dims, spacing, near, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`PerspectiveView::frame`] into `out` (cleared first; its allocation
+    /// reused, so a renderer's frames allocate nothing here).
+    pub fn frame_into(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3], near: f64, out: &mut Vec<Self>) -> Result<()> {
+        out.clear();
         let g = EyeGeometry::new(camera, distance, dims, spacing)?;
         match g.one_pyramid()? {
-            Ok(v) => Ok(vec![v]),
-            Err(_) => g.pyramids(near),
+            Ok(v) => out.push(v),
+            Err(_) => g.pyramids_into(near, out)?,
         }
+        Ok(())
     }
 
     /// The views of a perspective frame from an eye anywhere: at `eye`
@@ -422,7 +457,9 @@ impl PerspectiveView {
         {
             return Ok(vec![v]);
         }
-        g.pyramids(near)
+        let mut out = vec![];
+        g.pyramids_into(near, &mut out)?;
+        Ok(out)
     }
 
     /// Lacroute's pyramid split of a perspective frame: the eye at the apex,
@@ -437,7 +474,9 @@ impl PerspectiveView {
     /// the warp's bilinear taps). The pyramid owning the image centre comes
     /// first; the others follow in the order `−x, +x, −y, +y, −z, +z`.
     pub fn pyramids(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3], near: f64) -> Result<Vec<Self>> {
-        EyeGeometry::new(camera, distance, dims, spacing)?.pyramids(near)
+        let mut out = vec![];
+        EyeGeometry::new(camera, distance, dims, spacing)?.pyramids_into(near, &mut out)?;
+        Ok(out)
     }
 
     /// The scale `σ_k` of slice `k` (1 at the base plane, growing away from the eye).

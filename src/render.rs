@@ -996,16 +996,10 @@ impl Renderer {
             self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
         }
         self.last_split = false;
-        let result = self.composite_plan(&plan, &mut stats);
-        if result.is_ok() {
-            let t = Instant::now();
-            let inter = &self.inter;
-            self.pool.install(|| {
-                out.prepare(camera.size[0], camera.size[1]);
-                warp(inter, &plan, out);
-            });
-            stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
-        }
+        let result = self.composite_plan(&plan, &mut stats, |inter: &Intermediate| {
+            out.prepare(camera.size[0], camera.size[1]);
+            warp(inter, &plan, out);
+        });
         self.plan = Some(plan);
         result?;
         Ok(self.finish_frame(key, out, stats))
@@ -1060,12 +1054,8 @@ impl Renderer {
                     self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
                 }
                 let plan = &plans[i];
-                self.composite_plan(plan, &mut stats)?;
-                let t = Instant::now();
-                let (inter, owned) = (&self.inter, Owned { rays, pyramid: (pv.axis, pv.ascending) });
-                self.pool.install(|| warp_owned(inter, plan, out, &owned));
-                stats.warp_ms += t.elapsed().as_secs_f64() * 1e3;
-                Ok(())
+                let owned = Owned { rays, pyramid: (pv.axis, pv.ascending) };
+                self.composite_plan(plan, &mut stats, |inter: &Intermediate| warp_owned(inter, plan, out, &owned))
             })();
             if step.is_err() {
                 result = step;
@@ -1080,11 +1070,12 @@ impl Renderer {
 
     /// Composites one frame plan into the intermediate image by the
     /// renderer's method (its axis's structures must exist: see
-    /// [`Renderer::ensure_axis`]), adding the shear and render times and the
+    /// [`Renderer::ensure_axis`]), then runs `then_warp` on it (in the same
+    /// job on the pool), adding the shear, render and warp times and the
     /// rays to `stats`. The one per-plan step of every frame: a parallel or
     /// one-pyramid frame has one plan, a split perspective frame one per
     /// pyramid.
-    fn composite_plan(&mut self, plan: &FramePlan, stats: &mut FrameStats) -> Result<()> {
+    fn composite_plan(&mut self, plan: &FramePlan, stats: &mut FrameStats, then_warp: impl FnOnce(&Intermediate) + Send) -> Result<()> {
         let axis = plan.view.axis;
         let mode = self.settings.mode;
         if mode == Mode::Blend {
@@ -1162,6 +1153,10 @@ impl Renderer {
                 }
             };
             stats.rays += rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);
+            // the warp in the same job (one job sent into the pool per plan)
+            let t = Instant::now();
+            then_warp(inter);
+            stats.warp_ms += t.elapsed().as_secs_f64() * 1e3;
             Ok(())
         });
         result

@@ -32,7 +32,7 @@ use crate::error::{Error, Result};
 use crate::memory::Memory;
 use crate::view::plan::{FramePlan, Grid, Limiter};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
-use crate::warp::{Canvas, Texel, warp};
+use crate::warp::{Canvas, Owned, Texel, clear_for_pyramids, warp, warp_owned};
 
 /// Largest sheared mask, in bytes, a renderer builds for one axis. It is
 /// allocated zeroed (address space; only the occupied part is ever touched).
@@ -342,6 +342,13 @@ pub struct Renderer {
     masks: [Option<AxisMask>; 3],
     /// The plan of the last frame (its arrays reused by the next).
     plan: Option<FramePlan>,
+    /// The plans of the last split perspective frame, one per pyramid (reused
+    /// likewise), and whether the last frame was split.
+    pyramid_plans: Vec<FramePlan>,
+    pyramid_count: usize,
+    last_split: bool,
+    /// The perspective views of the last frame (a buffer reused).
+    views: Vec<PerspectiveView>,
     /// The producer of per-pixel ray limits, if any, and a counter bumped when it changes.
     limiter: Option<(std::sync::Arc<dyn Limiter>, u64)>,
     inter: Intermediate,
@@ -383,6 +390,10 @@ impl Renderer {
             codes: [None, None, None],
             masks: [None, None, None],
             plan: None,
+            pyramid_plans: vec![],
+            pyramid_count: 0,
+            last_split: false,
+            views: vec![],
             limiter: None,
             inter: Intermediate::default(),
             last_frame: None,
@@ -614,11 +625,18 @@ impl Renderer {
     }
     /// The factorization of the last frame.
     pub fn last_factorization(&self) -> Option<&Factorization> {
-        self.plan.as_ref().map(|p| &p.view)
+        self.last_plan().map(|p| &p.view)
     }
-    /// The frame plan of the last frame.
+    /// The frame plan of the last frame (of a frame split into pyramids, the
+    /// plan of the pyramid owning the image centre, if any).
     pub fn last_plan(&self) -> Option<&FramePlan> {
-        self.plan.as_ref()
+        if self.last_split { self.pyramid_plans[..self.pyramid_count].first() } else { self.plan.as_ref() }
+    }
+
+    /// The frame plans of the last frame: one, or one per pyramid of a split
+    /// perspective frame (the pyramid owning the image centre first).
+    pub fn last_plans(&self) -> &[FramePlan] {
+        if self.last_split { &self.pyramid_plans[..self.pyramid_count] } else { self.plan.as_slice() }
     }
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
@@ -984,11 +1002,11 @@ impl Renderer {
         };
         if let Some((k, stamp)) = self.last_frame {
             if k == key && out.stamp == stamp && out.width == camera.size[0] && out.height == camera.size[1] {
-                return Ok(FrameStats { skipped: true, axis: self.plan.as_ref().map_or(0, |p| p.view.axis), ..Default::default() });
+                return Ok(FrameStats { skipped: true, axis: self.last_plan().map_or(0, |p| p.view.axis), ..Default::default() });
             }
         }
         let (dims, spacing) = (self.volume.dims(), self.volume.spacing());
-        // a perspective frame: the camera scaled by its field of view, and its factorization
+        // a perspective frame: the camera scaled by its field of view, and its views
         let persp = match self.projection.resolve(camera, dims, spacing)? {
             None => None,
             Some((cam, distance)) => {
@@ -998,7 +1016,19 @@ impl Renderer {
                         "perspective is not yet supported by the binary rotator (nor its brute force); use --method rle",
                     ));
                 }
-                Some((cam, PerspectiveView::new(&cam, distance, dims, spacing)?))
+                // (the views' buffer is kept across frames: no allocation per frame)
+                let mut views = std::mem::take(&mut self.views);
+                let made = PerspectiveView::frame_into(&cam, distance, dims, spacing, NEAR_SLICES, &mut views);
+                if made.is_ok() && (views.len() != 1 || views[0].window.is_some()) {
+                    // the eye near or inside the volume: Lacroute's pyramid split
+                    let stats = self.render_pyramids(camera, &cam, distance, &views, out);
+                    self.views = views;
+                    return Ok(self.finish_frame(key, out, stats?));
+                }
+                let one = views.pop();
+                self.views = views;
+                made?;
+                Some((cam, one.expect("one view")))
             }
         };
         if self.quality != 1.0 && matches!(self.settings.method, Method::Binary | Method::Brute) {
@@ -1017,7 +1047,7 @@ impl Renderer {
         let mut stats = FrameStats { axis: f.axis, ..Default::default() };
         stats.build_ms = self.ensure_axis(f.axis)?;
         // the frame plan, from the projection's producer
-        let plan = self.plan.get_or_insert_with(|| FramePlan::parallel(&f, spacing));
+        let mut plan = self.plan.take().unwrap_or_else(|| FramePlan::parallel(&f, spacing));
         let limits = plan.take_limits();
         match &persp {
             None => plan.set_parallel(&f, spacing),
@@ -1036,6 +1066,92 @@ impl Renderer {
             // on the renderer's pool: a limiter may work in parallel
             self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
         }
+        self.last_split = false;
+        let result = self.composite_plan(&plan, &mut stats, |inter: &Intermediate| {
+            out.prepare(camera.size[0], camera.size[1]);
+            warp(inter, &plan, out);
+        });
+        self.plan = Some(plan);
+        result?;
+        Ok(self.finish_frame(key, out, stats))
+    }
+
+    /// Stamps `out` as this frame's image (see [`Renderer::render`]'s skip).
+    fn finish_frame<T: Texel>(&mut self, key: FrameKey, out: &mut Canvas<T>, stats: FrameStats) -> FrameStats {
+        let stamp = NEXT_STAMP.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        out.stamp = stamp;
+        self.last_frame = Some((key, stamp));
+        stats
+    }
+
+    /// A perspective frame split into Lacroute's pyramids (`views`, from
+    /// [`PerspectiveView::frame`]; `cam` is `camera` with the perspective
+    /// zoom, the eye `distance` world units from the volume centre). The
+    /// image is cleared, then each pyramid in turn gets its plan (its own
+    /// axis, slices and window), is composited by the one per-plan function
+    /// every frame uses ([`Renderer::composite_plan`]) and warped into its own
+    /// output pixels only ([`warp_owned`]). No pyramid: an empty image.
+    fn render_pyramids<T: Texel>(
+        &mut self,
+        camera: &Camera,
+        cam: &Camera,
+        distance: f64,
+        views: &[PerspectiveView],
+        out: &mut Canvas<T>,
+    ) -> Result<FrameStats> {
+        let (dims, spacing) = (self.volume.dims(), self.volume.spacing());
+        let rays = PerspectiveView::ray_directions(cam, distance, dims, spacing)?;
+        let mut stats = FrameStats { axis: views.first().map_or(2, |v| v.axis), ..Default::default() };
+        let t = Instant::now();
+        clear_for_pyramids(out, camera.size[0], camera.size[1]);
+        stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.last_split = true;
+        self.pyramid_count = 0;
+        let mut plans = std::mem::take(&mut self.pyramid_plans);
+        let mut result = Ok(());
+        for (i, pv) in views.iter().enumerate() {
+            let step = (|| -> Result<()> {
+                let mut f = Factorization::with_axis(cam, dims, spacing, pv.axis)?;
+                f.ascending = pv.ascending;
+                stats.build_ms += self.ensure_axis(pv.axis)?;
+                if plans.len() <= i {
+                    plans.push(FramePlan::parallel(&f, spacing));
+                }
+                let plan = &mut plans[i];
+                let limits = plan.take_limits();
+                plan.set_perspective(pv, &f, spacing, NEAR_SLICES);
+                plan.set_ray_opacity(self.settings.mode == Mode::Blend);
+                if self.quality != 1.0 {
+                    plan.set_pitch(1.0 / self.quality);
+                }
+                plan.set_box_footprint(self.settings.footprint == Footprint::Box);
+                if let Some((l, _)) = &self.limiter {
+                    self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
+                }
+                let plan = &plans[i];
+                let owned = Owned { rays, pyramid: (pv.axis, pv.ascending) };
+                self.composite_plan(plan, &mut stats, |inter: &Intermediate| warp_owned(inter, plan, out, &owned))
+            })();
+            if step.is_err() {
+                result = step;
+                break;
+            }
+        }
+        // (plans past this frame's pyramids are kept, with their arrays, for later frames)
+        self.pyramid_count = views.len().min(plans.len());
+        self.pyramid_plans = plans;
+        result.map(|_| stats)
+    }
+
+    /// Composites one frame plan into the intermediate image by the
+    /// renderer's method (its axis's structures must exist: see
+    /// [`Renderer::ensure_axis`]), then runs `then_warp` on it (in the same
+    /// job on the pool), adding the shear, render and warp times and the
+    /// rays to `stats`. The one per-plan step of every frame: a parallel or
+    /// one-pyramid frame has one plan, a split perspective frame one per
+    /// pyramid.
+    fn composite_plan(&mut self, plan: &FramePlan, stats: &mut FrameStats, then_warp: impl FnOnce(&Intermediate) + Send) -> Result<()> {
+        let axis = plan.view.axis;
         let mode = self.settings.mode;
         if mode == Mode::Blend {
             match &mut self.tissues {
@@ -1043,7 +1159,7 @@ impl Renderer {
                 None => self.classifier.set_sample_ratio(plan.opacity_ratio),
             }
         }
-        let stack = self.stacks[f.axis].as_ref().expect("ensure_axis builds the stack");
+        let stack = self.stacks[axis].as_ref().expect("ensure_axis builds the stack");
         let (cls, iso, matcher): (&Classifier, f32, &Matcher) = match (&self.tissues, mode) {
             (Some(ts), Mode::Iso) => (&ts.iso_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
             (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
@@ -1052,14 +1168,12 @@ impl Renderer {
         let settings = self.settings;
         let (inter, masks, rle) = (&mut self.inter, &mut self.masks, &mut self.rle);
         let (normals, shade) = (&self.normals, &mut self.shade);
-        let plan = &*plan;
-        // one job on the pool per frame: shear, render and warp all run inside it,
-        // by the one pipeline of this method
+        // one job on the pool per plan: shear and render run inside it
         let result: Result<()> = self.pool.install(|| {
             let t = Instant::now();
             let rect: Option<Rect> = match settings.method {
                 Method::Binary => {
-                    let m = masks[f.axis].as_mut().ok_or_else(|| missing("the sheared mask", f.axis))?;
+                    let m = masks[axis].as_mut().ok_or_else(|| missing("the sheared mask", axis))?;
                     let w: ShearWork = match &mut m.mask {
                         AnyMask::W32(m) => m.shear_to(&plan.shear),
                         AnyMask::W64(m) => m.shear_to(&plan.shear),
@@ -1070,25 +1184,25 @@ impl Renderer {
                         AnyMask::W32(m) => m.occupied_rays(plan.grid.size),
                         AnyMask::W64(m) => m.occupied_rays(plan.grid.size),
                     };
-                    stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
+                    stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
-                    let ctx = ray_context(stack, cls, plan, iso, settings, normals[f.axis].as_ref(), shade);
+                    let ctx = ray_context(stack, cls, plan, iso, settings, normals[axis].as_ref(), shade);
                     match &m.mask {
                         AnyMask::W32(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                         AnyMask::W64(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                     }
-                    stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
+                    stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
                     rect
                 }
                 Method::Brute => {
                     let rect = volume_rect(plan, stack.cells());
-                    stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
+                    stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
-                    let ctx = ray_context(stack, cls, plan, iso, settings, normals[f.axis].as_ref(), shade);
+                    let ctx = ray_context(stack, cls, plan, iso, settings, normals[axis].as_ref(), shade);
                     render_brute(&ctx, rect, inter);
-                    stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
+                    stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
                     rect
                 }
                 Method::Rle | Method::BruteRle => {
@@ -1097,36 +1211,30 @@ impl Renderer {
                     rle.prepare_view(plan, ratio, settings.shading);
                     let rect = match settings.method {
                         Method::Rle => {
-                            rle.axis(f.axis).ok_or_else(|| missing("the run-length encoding", f.axis))?;
+                            rle.axis(axis).ok_or_else(|| missing("the run-length encoding", axis))?;
                             rle.rect(plan)
                         }
                         _ => volume_rect(plan, stack.cells()),
                     };
-                    stats.shear_ms = t.elapsed().as_secs_f64() * 1e3;
+                    stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
                     match settings.method {
                         Method::Rle => rle.render(plan, settings.ert, rect, inter),
                         _ => rle.render_brute(stack, plan, settings.ert, rect, inter),
                     }
-                    stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
+                    stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
                     rect
                 }
             };
-            stats.rays = rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);
-
-            // warp
+            stats.rays += rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);
+            // the warp in the same job (one job sent into the pool per plan)
             let t = Instant::now();
-            out.prepare(camera.size[0], camera.size[1]);
-            warp(inter, plan, out);
-            stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
+            then_warp(inter);
+            stats.warp_ms += t.elapsed().as_secs_f64() * 1e3;
             Ok(())
         });
-        result?;
-        let stamp = NEXT_STAMP.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        out.stamp = stamp;
-        self.last_frame = Some((key, stamp));
-        Ok(stats)
+        result
     }
 }
 

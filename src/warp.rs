@@ -16,6 +16,7 @@ use rayon::prelude::*;
 
 use crate::composite::Intermediate;
 use crate::error::{Error, Result};
+use crate::view::perspective::RayDirections;
 use crate::view::plan::FramePlan;
 
 /// A rendered image of pixels `T` ([`Texel`]), row 0 at the top: [`Image`]
@@ -281,6 +282,39 @@ fn clip_positive(lo: f64, hi: f64, a: f64, b: f64) -> (f64, f64) {
 /// the ring so rounding at the span's ends cannot reach past it), and only
 /// what the last frame wrote outside it is cleared.
 pub fn warp_projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>) {
+    projective(inter, plan, out, None)
+}
+
+/// The output pixels of one pyramid of a split perspective frame
+/// ([`crate::view::PerspectiveView::pyramids`]): those whose ray's owner
+/// ([`crate::view::perspective::ray_owner`]) is `pyramid` (axis, toward +axis).
+#[derive(Clone, Copy, Debug)]
+pub struct Owned {
+    pub rays: RayDirections,
+    pub pyramid: (usize, bool),
+}
+
+/// Clears `out` (sized `width × height`) before the pyramids of a split
+/// frame are warped into it with [`warp_owned`] (which write only their
+/// own pixels).
+pub fn clear_for_pyramids<T: Texel>(out: &mut Canvas<T>, width: usize, height: usize) {
+    out.prepare(width, height);
+    out.data.fill(T::CLEAR);
+    // every row may be written: the next warp clears what it does not cover
+    out.spans.fill((0, width as u32));
+}
+
+/// The projective warp of one pyramid of a split frame: as
+/// [`warp_projective`], but only the output pixels `owned` holds are written
+/// (the others, another pyramid's, are left alone), and nothing is cleared:
+/// start the frame with [`clear_for_pyramids`]. Each pixel's owner is a
+/// function of the pixel alone, so the pyramids' pixels tile the image, with
+/// no seam and no pixel written twice.
+pub fn warp_owned<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>, owned: &Owned) {
+    projective(inter, plan, out, Some(owned))
+}
+
+fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>, owned: Option<&Owned>) {
     let m = plan.warp.inverse;
     let w = out.width;
     let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
@@ -288,8 +322,10 @@ pub fn warp_projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &m
     out.data.par_chunks_mut(w).zip(out.spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
         let (old0, old1) = (span.0 as usize, span.1 as usize);
         let Some(r) = inter.valid else {
-            row[old0..old1].fill(T::CLEAR);
-            *span = (0, 0);
+            if owned.is_none() {
+                row[old0..old1].fill(T::CLEAR);
+                *span = (0, 0);
+            }
             return;
         };
         let vf = v as f64;
@@ -305,13 +341,30 @@ pub fn warp_projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &m
         (lo, hi) = clip_positive(lo, hi, phi * wa - xa, phi * wb - xb);
         (lo, hi) = clip_positive(lo, hi, ya - qlo * wa, yb - qlo * wb);
         (lo, hi) = clip_positive(lo, hi, qhi * wa - ya, qhi * wb - yb);
+        if let Some(o) = owned {
+            // the pyramid's pixels of the row: s·d_axis ± d_c ≥ 0 for the other
+            // two axes c, each linear in u; a pixel of slack (the exact owner
+            // test below decides)
+            let (m, (axis, up)) = (o.rays.dirs, o.pyramid);
+            let s = if up { 1.0 } else { -1.0 };
+            let (da, db) = (s * m.x_axis[axis], s * (m.y_axis[axis] * vf + m.z_axis[axis]));
+            for c in (0..3).filter(|&c| c != axis) {
+                let (ca, cb) = (m.x_axis[c], m.y_axis[c] * vf + m.z_axis[c]);
+                for t in [1.0, -1.0] {
+                    let (ga, gb) = (da + t * ca, db + t * cb);
+                    (lo, hi) = clip_positive(lo, hi, ga, gb + ga.abs() + 1e-9 * (gb.abs() + ga.abs() * w as f64));
+                }
+            }
+        }
         let (u0, u1) = if lo <= hi && hi >= 0.0 { (lo.ceil().max(0.0) as usize, (hi.floor() as usize).min(w - 1) + 1) } else { (0, 0) };
         let (u0, u1) = if u0 < u1 { (u0, u1) } else { (0, 0) };
-        if old0 < old1 {
-            row[old0..old1.min(u0).max(old0)].fill(T::CLEAR);
-            row[u1.max(old0).min(old1)..old1].fill(T::CLEAR);
+        if owned.is_none() {
+            if old0 < old1 {
+                row[old0..old1.min(u0).max(old0)].fill(T::CLEAR);
+                row[u1.max(old0).min(old1)..old1].fill(T::CLEAR);
+            }
+            *span = (u0 as u32, u1 as u32);
         }
-        *span = (u0 as u32, u1 as u32);
         // inside the span every tap is in the valid rectangle or its ring
         // (clamped into the grid too: x0 and x0 + 1 are always pixels)
         let ih = inter.size[1];
@@ -319,12 +372,19 @@ pub fn warp_projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &m
         let (qmin, qmax) = ((r.q0 as f64 - 1.0).max(0.0), (r.q1 + 1).min(ih - 1) as f64 - 1e-9);
         for (u, px) in row.iter_mut().enumerate().take(u1).skip(u0) {
             let uf = u as f64;
+            if let Some(o) = owned
+                && o.rays.owner(uf, vf) != o.pyramid
+            {
+                continue;
+            }
             let inv_w = 1.0 / (wa * uf + wb);
             let p = ((xa * uf + xb) * inv_w + pad).clamp(pmin, pmax);
             let q = ((ya * uf + yb) * inv_w + pad).clamp(qmin, qmax);
-            let (x0, y0) = (p.floor(), q.floor());
-            let (fx, fy) = ((p - x0) as f32, (q - y0) as f32);
-            let i = y0 as usize * iw + x0 as usize;
+            // p, q ≥ 0 here: truncation is the floor (no libm call: the
+            // x86-64 baseline has no floor instruction)
+            let (xi, yi) = (p as usize, q as usize);
+            let (fx, fy) = ((p - xi as f64) as f32, (q - yi as f64) as f32);
+            let i = yi * iw + xi;
             let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
             let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
             let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);

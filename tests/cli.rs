@@ -266,6 +266,16 @@ fn perspective_renders_with_rle_and_bad_input_is_exit_2() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["projection"]["eye_distance"], 2.0);
+    // the eye inside the volume: the pyramid split
+    let o = sw()
+        .args(["render", "--phantom-dims", "40,40,36", "--size", "48", "--method", "rle", "--perspective", "60"])
+        .args(["--eye-distance", "0.1", "--json", "-o"])
+        .arg(dir.path().join("inside.png"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(j["coverage"].as_f64().unwrap() > 0.5, "{j}");
     for (args, msg) in [
         (vec!["--perspective", "40"], "--method rle"),
         (vec!["--perspective", "0", "--method", "rle"], "0 < FOV < 180"),
@@ -274,7 +284,7 @@ fn perspective_renders_with_rle_and_bad_input_is_exit_2() {
         (vec!["--perspective", "40", "--eye-distance", "0", "--method", "rle"], "--eye-distance"),
         (vec!["--perspective", "40", "--eye-distance", "inf", "--method", "rle"], "--eye-distance"),
         (vec!["--eye-distance", "2", "--method", "rle"], "--perspective"),
-        (vec!["--perspective", "40", "--eye-distance", "0.1", "--method", "rle"], "pyramid split"),
+        (vec!["--perspective", "40", "--eye-distance", "0.1"], "not yet supported by the binary rotator"),
     ] {
         sw().args(["render", "--phantom-dims", "24,24,20", "--size", "32", "-o"])
             .arg(dir.path().join("x.png"))

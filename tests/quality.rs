@@ -38,7 +38,7 @@ fn bits(img: &Image) -> Vec<u32> {
 }
 
 /// Accelerated RLE equals its brute force bit for bit at every quality, in
-/// both projections and modes, over random volumes and views, for any thread
+/// both projections (one pyramid and the split) and modes, over random volumes and views, for any thread
 /// count; and quality 1 is the default image.
 #[test]
 fn quality_rle_equals_brute_force_bit_for_bit_in_both_projections() {
@@ -50,8 +50,12 @@ fn quality_rle_equals_brute_force_bit_for_bit_in_both_projections() {
         let vol = blobs(dims, 300 + case as u64, sp);
         let tf = TransferFunction::ramp(40.0, 160.0, 0.5, [0.9, 0.7, 0.5]);
         let rot = DMat3::from_euler(EulerRot::XYZ, rnd() * 7.0, rnd() * 7.0, rnd() * 7.0);
-        let proj =
-            if case % 3 == 0 { Projection::Parallel } else { Projection::perspective(15.0 + rnd() * 40.0, 2.0 + rnd() * 2.0).unwrap() };
+        // parallel, one pyramid, and the split (the eye near or inside)
+        let proj = match case % 4 {
+            0 => Projection::Parallel,
+            3 => Projection::perspective(40.0 + rnd() * 50.0, 0.1 + rnd() * 0.5).unwrap(),
+            _ => Projection::perspective(15.0 + rnd() * 40.0, 2.0 + rnd() * 2.0).unwrap(),
+        };
         let q = [0.25, 0.5, 0.8, 1.5, 2.0][case % 5];
         let cam = Camera::new(rot, [56, 48]);
         let mode = if case % 2 == 0 { Mode::Blend } else { Mode::Iso };

@@ -50,9 +50,13 @@ fn steady_state_rle_frames_do_not_allocate() {
     .unwrap();
     for method in [Method::Rle, Method::BruteRle] {
         for mode in [Mode::Iso, Mode::Blend] {
-            for (threads, projection) in
-                [(1, Projection::Parallel), (2, Projection::Parallel), (2, Projection::perspective(40.0, 2.0).unwrap())]
-            {
+            for (threads, projection) in [
+                (1, Projection::Parallel),
+                (2, Projection::Parallel),
+                (2, Projection::perspective(40.0, 2.0).unwrap()),
+                // the eye inside: the pyramid split
+                (2, Projection::perspective(60.0, 0.1).unwrap()),
+            ] {
                 let tissues = tissues_for(&vol);
                 let s = Settings { method, mode, threads, ..Settings::default() };
                 let mut r = Renderer::with_tissues(vol.clone(), &tissues, s).unwrap();

@@ -80,11 +80,17 @@ pub struct ReferenceOptions {
     pub opacity_cutoff: f64,
     /// Worker threads (0 = rayon's global pool).
     pub threads: usize,
+    /// Perspective: the near clip, in voxels (≥ 0). A ray starts where it is
+    /// `near` voxels from the eye along its largest voxel-space component —
+    /// the fast paths' near plane ([`crate::render::NEAR_SLICES`] slices in
+    /// front of the eye along each pyramid's axis), so the same camera sees
+    /// the same part of the volume when the eye is inside it. 0: from the eye.
+    pub near: f64,
 }
 
 impl Default for ReferenceOptions {
     fn default() -> Self {
-        ReferenceOptions { step: DEFAULT_STEP, opacity_cutoff: DEFAULT_OPACITY_CUTOFF, threads: 0 }
+        ReferenceOptions { step: DEFAULT_STEP, opacity_cutoff: DEFAULT_OPACITY_CUTOFF, threads: 0, near: crate::render::NEAR_SLICES }
     }
 }
 
@@ -96,6 +102,9 @@ impl ReferenceOptions {
         }
         if !(self.opacity_cutoff > 0.0 && self.opacity_cutoff <= 1.0) {
             return Err(Error::value("reference opacity cutoff", format!("{} (must be in (0, 1])", self.opacity_cutoff)));
+        }
+        if !(self.near.is_finite() && self.near >= 0.0) {
+            return Err(Error::value("reference near clip", format!("{} (must be finite and ≥ 0)", self.near)));
         }
         Ok(())
     }
@@ -448,6 +457,7 @@ impl ReferenceRenderer {
             delta: opts.step * min_sp,
             ratio: opts.step,
             cutoff: opts.opacity_cutoff,
+            near: opts.near,
             light_m: light / sp,
             light_s: DVec3::ONE / sp,
             iso_rgb: [iso_c.r, iso_c.g, iso_c.b],
@@ -495,6 +505,8 @@ struct Tracer<'a> {
     /// Step in minimum spacings (the opacity-correction exponent).
     ratio: f64,
     cutoff: f64,
+    /// The near clip in voxels (perspective).
+    near: f64,
     light_m: DVec3,
     light_s: DVec3,
     iso_rgb: [f32; 3],
@@ -513,6 +525,11 @@ impl Tracer<'_> {
         let Some((t0, t1)) = self.rays.clip_ray(o, d) else {
             return ([0.0; 4], f64::NAN, 0);
         };
+        // a perspective ray starts at the near clip
+        let t0 = if self.rays.eye.is_some() { t0.max(self.near / d.abs().max_element()) } else { t0 };
+        if t0 > t1 {
+            return ([0.0; 4], f64::NAN, 0);
+        }
         let vol = self.vol;
         let hi = DVec3::new(vol.dims[0] as f64 - 1.0, vol.dims[1] as f64 - 1.0, vol.dims[2] as f64 - 1.0);
         let at = |i: u64| -> (f64, DVec3) {
@@ -738,7 +755,7 @@ mod tests {
         let r = ReferenceRenderer::new(&v);
         let cam = Camera { rotation: DMat3::IDENTITY, zoom: Some(1.0), size: [5, 5] };
         for step in [0.05, 0.01, 1.0] {
-            let opts = ReferenceOptions { step, opacity_cutoff: 1.0, threads: 1 };
+            let opts = ReferenceOptions { step, opacity_cutoff: 1.0, threads: 1, ..Default::default() };
             let out = r.render(&Scene::new(Mode::Blend, &cls, 0.0, Shading::default()), &cam, &opts).unwrap();
             // samples at 0, Δ, …, 7: 7/Δ + 1 of them, each α' = 1 − 0.9^Δ
             let n = (7.0 / step).floor() + 1.0;

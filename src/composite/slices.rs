@@ -493,6 +493,9 @@ impl RleFrame<'_> {
             let mut x = x0;
             loop {
                 // skip opaque pixels through the links
+                if x > x1 {
+                    break;
+                }
                 x = find(lrow, (x - p0) as usize) as i64 + p0;
                 if x > x1 {
                     break;

@@ -111,6 +111,19 @@ pub(crate) fn unpermute(perm: [usize; 3], ijk: DVec3) -> DVec3 {
 impl Factorization {
     /// Factorizes `camera` for a volume of `dims` voxels with `spacing`.
     pub fn new(camera: &Camera, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+        Self::build(camera, dims, spacing, None)
+    }
+
+    /// The factorization of `camera` along principal axis `axis`, whatever the
+    /// view direction: what a pyramid of a split perspective frame takes its
+    /// permutation and shading directions from. Its shear (the view
+    /// direction's, which may pass 45° or be infinite along this axis) is
+    /// clamped to `[−1, 1]`.
+    pub fn with_axis(camera: &Camera, dims: [usize; 3], spacing: [f32; 3], axis: usize) -> Result<Self> {
+        Self::build(camera, dims, spacing, Some(axis.min(2)))
+    }
+
+    fn build(camera: &Camera, dims: [usize; 3], spacing: [f32; 3], force_axis: Option<usize>) -> Result<Self> {
         let r = camera.rotation;
         let [w, h] = camera.size;
         if w == 0 || h == 0 || w > 1 << 15 || h > 1 << 15 {
@@ -125,10 +138,13 @@ impl Factorization {
         // viewing direction (into the scene) in world, then voxel space
         let dir_world = r.transpose() * DVec3::new(0.0, 0.0, -1.0);
         let dir_vox = dir_world / sp;
-        let axis = principal_axis(dir_vox);
+        let axis = force_axis.unwrap_or_else(|| principal_axis(dir_vox));
         let perm = permutation(axis);
         let d = DVec3::new(dir_vox[perm[0]], dir_vox[perm[1]], dir_vox[perm[2]]);
-        let shear = [d.x / d.z, d.y / d.z];
+        let shear = match force_axis {
+            None => [d.x / d.z, d.y / d.z],
+            Some(_) => [d.x, d.y].map(|x| if d.z == 0.0 { 0.0 } else { (x / d.z).clamp(-1.0, 1.0) }),
+        };
         let n = [dims[perm[0]], dims[perm[1]], dims[perm[2]]];
         let kc = (n[2] as f64 - 1.0) / 2.0;
         // voxel → image: u = cu + zoom·(R·S·(v − c)).x ; v = cv − zoom·(…).y
@@ -205,6 +221,36 @@ mod tests {
 
     fn fact(r: DMat3, dims: [usize; 3], sp: [f32; 3]) -> Factorization {
         Factorization::new(&Camera::new(r, [200, 100]), dims, sp).unwrap()
+    }
+
+    /// A forced axis equal to the principal one is the plain factorization;
+    /// another axis keeps the camera's shading directions and warp, with the
+    /// shear clamped to 45° (finite even when the view is along the slices).
+    #[test]
+    fn with_axis_forces_the_slicing_axis() {
+        let cam = Camera::new(DMat3::from_euler(glam::EulerRot::XYZ, 0.3, -0.5, 0.2), [64, 48]);
+        let (dims, sp) = ([20, 30, 40], [1.0f32, 0.5, 3.0]);
+        let f = Factorization::new(&cam, dims, sp).unwrap();
+        assert_eq!(Factorization::with_axis(&cam, dims, sp, f.axis).unwrap(), f);
+        for axis in 0..3 {
+            let g = Factorization::with_axis(&cam, dims, sp, axis).unwrap();
+            assert_eq!((g.axis, g.perm), (axis, permutation(axis)));
+            assert!(g.shear.iter().all(|s| s.is_finite() && s.abs() <= 1.0));
+            // the same headlight in object space
+            let light = |f: &Factorization| {
+                let mut l = [0.0; 3];
+                for c in 0..3 {
+                    l[f.perm[c]] = f.grad_to_eye_z[c] / f.grad_scale[c];
+                }
+                l
+            };
+            let (a, b) = (light(&f), light(&g));
+            assert!((0..3).all(|c| (a[c] - b[c]).abs() < 1e-12), "{a:?} vs {b:?}");
+        }
+        // looking along x: the z factorization's shear would be infinite
+        let side = Camera::new(rotate_eye(DMat3::IDENTITY, 1, 90.0), [32, 32]);
+        let g = Factorization::with_axis(&side, dims, sp, 2).unwrap();
+        assert!(g.shear.iter().all(|s| s.is_finite()));
     }
 
     #[test]

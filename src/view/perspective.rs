@@ -17,14 +17,22 @@
 //! `σ_k ≥ 1` (compositing only minifies) and translated. The warp from the base
 //! plane to the output is the 3×3 projective map [`PerspectiveView::warp`].
 //!
-//! One pyramid only: the rays into the volume may leave the principal axis by
+//! One pyramid: the rays into the volume may leave the principal axis by
 //! up to `atan(MAX_RAY_SLOPE)` (63.4°) per in-slice axis, not only 45°, so
 //! the 45° views and the main diagonal render from an eye 1.5 volume diagonals
 //! away or farther (their far-side rays pass 45°: at slope 2 a ray samples a
-//! slice every 3 voxels at worst, its opacity corrected for it). Views past
-//! that — the eye inside or very near the volume — need Lacroute's pyramid
-//! split (issue 21, a later phase): [`PerspectiveView::new`] says so with an
-//! error. [`crate::view::plan::FramePlan::set_perspective`] makes the plan.
+//! slice every 3 voxels at worst, its opacity corrected for it).
+//!
+//! Views past that — the eye inside or very near the volume, a wide field of
+//! view — get Lacroute's pyramid split ([`PerspectiveView::pyramids`],
+//! chosen by [`PerspectiveView::frame`]): the eye is the apex of six
+//! pyramids, one per signed axis of voxel space; each output pixel belongs to
+//! the pyramid of its ray's largest direction component ([`ray_owner`]), so
+//! every ray leaves its pyramid's axis by at most 45°. Each pyramid is a view
+//! of its own (its axis, its slices walked away from the eye, the farthest
+//! slice as base plane) with a window: the base-plane box of its pixels' rays.
+//! [`crate::view::plan::FramePlan::set_perspective`] makes each plan, and the
+//! renderer warps each pyramid into its own pixels only.
 
 use glam::{DMat3, DVec3};
 
@@ -109,7 +117,9 @@ pub struct PerspectiveView {
     pub n: [usize; 3],
     /// The eye in permuted voxel-index coordinates `(i, j, k)`.
     pub eye: [f64; 3],
-    /// The base plane: the slice nearest the eye.
+    /// The base plane (`σ = 1`): the slice nearest the eye for one pyramid
+    /// (compositing only minifies), the slice farthest from it for a pyramid
+    /// of the split (compositing only magnifies).
     pub k_front: usize,
     /// `κ = 1/(k_front − eye_k)`.
     pub kappa: f64,
@@ -117,36 +127,120 @@ pub struct PerspectiveView {
     pub ascending: bool,
     /// Base-plane sheared coordinates → output pixels.
     pub warp: Warp,
+    /// A pyramid of the split ([`PerspectiveView::pyramids`]): the box
+    /// `[lo, hi]` of base-plane points `(a, b)` whose rays the view must
+    /// composite (those of its output pixels, plus a margin). `None`: one
+    /// pyramid, every ray into the volume.
+    pub window: Option<[[f64; 2]; 2]>,
 }
 
-impl PerspectiveView {
-    /// Factorizes `camera` seen from `distance` world units in front of the
-    /// volume centre, for a volume of `dims` voxels with `spacing`.
-    pub fn new(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+/// The pyramid (principal axis, and `true` for rays going toward `+axis`)
+/// of a ray with voxel-space direction `d` (not zero): its largest component
+/// by magnitude, exact ties going to z, then y, then x (as
+/// [`crate::view::principal_axis`] prefers them). Every output pixel belongs
+/// to exactly one pyramid.
+#[inline(always)]
+pub fn ray_owner(d: DVec3) -> (usize, bool) {
+    let a = d.abs();
+    let axis = if a.z >= a.x && a.z >= a.y {
+        2
+    } else if a.y >= a.x {
+        1
+    } else {
+        0
+    };
+    (axis, d[axis] > 0.0)
+}
+
+/// The voxel-space ray directions of a perspective camera's output pixels:
+/// pixel `(u, v)`'s ray from the eye runs along `dirs · (u, v, 1)`, linear in
+/// the pixel (the warp of a pyramid of the split tests each pixel's owner
+/// with it, [`ray_owner`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayDirections {
+    pub dirs: DMat3,
+}
+
+impl RayDirections {
+    /// The direction of pixel `(u, v)`'s ray (voxel space, not normalized).
+    #[inline(always)]
+    pub fn at(&self, u: f64, v: f64) -> DVec3 {
+        self.dirs * DVec3::new(u, v, 1.0)
+    }
+
+    /// The pyramid of output pixel `(u, v)` ([`ray_owner`]).
+    #[inline(always)]
+    pub fn owner(&self, u: f64, v: f64) -> (usize, bool) {
+        ray_owner(self.at(u, v))
+    }
+}
+
+/// What every view of one perspective frame shares: the camera, the eye in
+/// voxel space and the output pixels' rays.
+struct EyeGeometry {
+    r: DMat3,
+    size: [usize; 2],
+    sp: DVec3,
+    centre: DVec3,
+    dims: [usize; 3],
+    /// The eye in eye coordinates (world units from the volume centre, the
+    /// camera's axes; `(0, 0, D)` for an eye `D` in front of the centre) and
+    /// the image scale `f` (pixels per unit of `(e.x − E.x)/(E.z − e.z)`).
+    eye_e: DVec3,
+    f: f64,
+    /// The eye in voxel-index coordinates.
+    eye_v: DVec3,
+    rays: RayDirections,
+}
+
+impl EyeGeometry {
+    fn new(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
         if !(distance.is_finite() && distance > 0.0) {
             return Err(Error::value("eye distance", format!("{distance} (must be finite and > 0)")));
         }
-        let [w, h] = camera.size;
+        let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
+        let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let zoom = camera_zoom(camera, nd, sp)?;
+        Self::at(camera, zoom * distance, DVec3::new(0.0, 0.0, distance), dims, spacing)
+    }
+
+    /// The eye at `eye_e` (eye coordinates), image scale `f`.
+    fn at(camera: &Camera, f: f64, eye_e: DVec3, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+        if !(f.is_finite() && f > 0.0 && eye_e.is_finite()) {
+            return Err(Error::value("perspective view", format!("image scale {f}, eye {eye_e} (must be finite, the scale > 0)")));
+        }
         let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
         let nd = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
         let centre = (nd - 1.0) / 2.0;
-        let zoom = camera_zoom(camera, nd, sp)?;
         let r = camera.rotation;
-        // the eye in voxel space, and the principal axis of the direction to the centre
-        let eye_v = (r.transpose() * DVec3::new(0.0, 0.0, distance)) / sp + centre;
-        let axis = principal_axis(centre - eye_v);
+        let eye_v = (r.transpose() * eye_e) / sp + centre;
+        // the eye-space direction through (u, v) is ((u − cu)/f, (cv − v)/f, −1)
+        let [w, h] = camera.size;
+        let (cu, cv) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+        let rt = r.transpose();
+        let to_vox = |e: DVec3| (rt * e) / sp;
+        let dirs = DMat3::from_cols(
+            to_vox(DVec3::new(1.0 / f, 0.0, 0.0)),
+            to_vox(DVec3::new(0.0, -1.0 / f, 0.0)),
+            to_vox(DVec3::new(-cu / f, cv / f, -1.0)),
+        );
+        Ok(EyeGeometry { r, size: camera.size, sp, centre, dims, eye_e, f, eye_v, rays: RayDirections { dirs } })
+    }
+
+    /// The one-pyramid view, or (inner `Err`) why the frame needs the split.
+    fn one_pyramid(&self) -> Result<std::result::Result<PerspectiveView, &'static str>> {
+        let axis = principal_axis(self.centre - self.eye_v);
         let perm = permutation(axis);
-        let e = [eye_v[perm[0]], eye_v[perm[1]], eye_v[perm[2]]];
-        let n = [dims[perm[0]], dims[perm[1]], dims[perm[2]]];
+        let e = [self.eye_v[perm[0]], self.eye_v[perm[1]], self.eye_v[perm[2]]];
+        let n = [self.dims[perm[0]], self.dims[perm[1]], self.dims[perm[2]]];
         let last = n[2].saturating_sub(1) as f64;
         let (k_front, ascending) = if e[2] < 0.0 {
             (0, true)
         } else if e[2] > last {
             (n[2] - 1, false)
         } else {
-            return Err(Error::value(
-                "perspective view",
-                "the eye is inside the volume's slab (between its first and last slice along the principal axis): that needs the pyramid split, not yet done; move the eye farther (--eye-distance)",
+            return Ok(Err(
+                "the eye is inside the volume's slab (between its first and last slice along the principal axis): that needs the pyramid split",
             ));
         };
         // one pyramid only if every ray into the box has an in-slice slope of at
@@ -159,22 +253,35 @@ impl PerspectiveView {
             let lim = dk * MAX_RAY_SLOPE * (1.0 + 1e-12);
             (x[0] - e[0]).abs() > lim || (x[1] - e[1]).abs() > lim
         }) {
-            return Err(Error::value(
-                "perspective view",
-                "rays deviate more than 63.4° from the principal axis (the eye too near the volume): it needs the pyramid split, not yet done; move the eye farther (--eye-distance)",
+            return Ok(Err(
+                "rays deviate more than 63.4° from the principal axis (the eye too near the volume): that needs the pyramid split",
             ));
         }
-        let kappa = 1.0 / (k_front as f64 - e[2]);
-        // the warp: sheared (a, b) on the base plane is voxel (a, b, k_front)
+        self.view(axis, ascending, k_front).map(Ok)
+    }
+
+    /// The view of principal axis `axis`, slices walked in ascending `k` or
+    /// not, with slice `k_base` as the base plane (`σ = 1`).
+    fn view(&self, axis: usize, ascending: bool, k_base: usize) -> Result<PerspectiveView> {
+        let perm = permutation(axis);
+        let e = [self.eye_v[perm[0]], self.eye_v[perm[1]], self.eye_v[perm[2]]];
+        let n = [self.dims[perm[0]], self.dims[perm[1]], self.dims[perm[2]]];
+        let kappa = 1.0 / (k_base as f64 - e[2]);
+        if !kappa.is_finite() {
+            return Err(Error::value("perspective view", "the eye lies on the base plane"));
+        }
+        let (r, sp, centre, eye, f) = (self.r, self.sp, self.centre, self.eye_e, self.f);
+        // the warp: sheared (a, b) on the base plane is voxel (a, b, k_base)
         let unperm = |ijk: DVec3| unpermute(perm, ijk);
         let to_eye = |v: DVec3| r * (v * sp);
-        let e0 = r * ((unperm(DVec3::new(0.0, 0.0, k_front as f64)) - centre) * sp);
+        let e0 = r * ((unperm(DVec3::new(0.0, 0.0, k_base as f64)) - centre) * sp);
         let (ea, eb) = (to_eye(unperm(DVec3::X)), to_eye(unperm(DVec3::Y)));
-        let (cu, cv, f) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0, zoom * distance);
+        let [w, h] = self.size;
+        let (cu, cv) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
         // rows (u·w, v·w, w) over columns (a, b, 1)
-        let rw = DVec3::new(-ea.z, -eb.z, distance - e0.z);
-        let ru = cu * rw + f * DVec3::new(ea.x, eb.x, e0.x);
-        let rv = cv * rw - f * DVec3::new(ea.y, eb.y, e0.y);
+        let rw = DVec3::new(-ea.z, -eb.z, eye.z - e0.z);
+        let ru = cu * rw + f * DVec3::new(ea.x, eb.x, e0.x - eye.x);
+        let rv = cv * rw - f * DVec3::new(ea.y, eb.y, e0.y - eye.y);
         let forward = DMat3::from_cols(ru, rv, rw).transpose();
         let det = forward.determinant();
         if !(det.is_finite() && det != 0.0) {
@@ -183,7 +290,193 @@ impl PerspectiveView {
         // F⁻¹ itself: (a, b, 1)/h with h > 0 in front of the eye (a negative
         // multiple, such as adj(F) when det F < 0, would flip that test)
         let inverse = forward.inverse();
-        Ok(PerspectiveView { axis, perm, n, eye: e, k_front, kappa, ascending, warp: Warp { forward, inverse } })
+        Ok(PerspectiveView { axis, perm, n, eye: e, k_front: k_base, kappa, ascending, warp: Warp { forward, inverse }, window: None })
+    }
+
+    /// The pyramids of the split (see [`PerspectiveView::pyramids`]),
+    /// appended to `out`.
+    fn pyramids_into(&self, near: f64, out: &mut Vec<PerspectiveView>) -> Result<()> {
+        let [w, h] = self.size;
+        // the output rectangle and a one-pixel ring, as a polygon
+        let (u1, v1) = (w as f64, h as f64);
+        let screen = Polygon::new(&[[-1.0, -1.0], [u1, -1.0], [u1, v1], [-1.0, v1]]);
+        let first = out.len();
+        for axis in 0..3 {
+            for ascending in [false, true] {
+                let perm = permutation(axis);
+                let nk = self.dims[axis];
+                let ek = self.eye_v[axis];
+                let s = if ascending { 1.0 } else { -1.0 };
+                // the base plane: the slice farthest from the eye, at least `near` in front of it
+                let k_base = if ascending { nk - 1 } else { 0 };
+                if s * (k_base as f64 - ek) < near {
+                    continue;
+                }
+                // the pixels of this pyramid: s·d_k ≥ |d_i|, |d_j| (each linear in (u, v))
+                let dirs = self.rays.dirs;
+                let row = |c: usize| DVec3::new(dirs.x_axis[c], dirs.y_axis[c], dirs.z_axis[c]);
+                let dk = row(axis) * s;
+                let mut poly = screen;
+                for c in [perm[0], perm[1]] {
+                    for t in [1.0, -1.0] {
+                        poly = poly.clip(dk + row(c) * t);
+                    }
+                }
+                if poly.n < 3 {
+                    continue;
+                }
+                let mut v = self.view(axis, ascending, k_base)?;
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for p in poly.vertices() {
+                    // in the pyramid, so in front of its base plane: w > 0
+                    let Some(ab) = v.warp.to_sheared(p[0], p[1]) else { continue };
+                    for a in 0..2 {
+                        lo[a] = lo[a].min(ab[a]);
+                        hi[a] = hi[a].max(ab[a]);
+                    }
+                }
+                if !(lo[0] <= hi[0] && lo[1] <= hi[1]) {
+                    continue;
+                }
+                // the warp's bilinear taps reach one intermediate pixel past the
+                // preimage of the pixels; two for safety
+                v.window = Some([lo.map(|x| x - WINDOW_MARGIN), hi.map(|x| x + WINDOW_MARGIN)]);
+                out.push(v);
+            }
+        }
+        // the pyramid of the image centre first
+        let c = self.rays.owner((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+        if let Some(i) = out[first..].iter().position(|v| (v.axis, v.ascending) == c) {
+            out[first..=first + i].rotate_right(1);
+        }
+        Ok(())
+    }
+}
+
+/// A convex polygon of at most 12 vertices (the screen rectangle clipped by
+/// four half-planes has at most 8), on the stack.
+#[derive(Clone, Copy)]
+struct Polygon {
+    v: [[f64; 2]; 12],
+    n: usize,
+}
+
+impl Polygon {
+    fn new(vs: &[[f64; 2]]) -> Self {
+        let mut p = Polygon { v: [[0.0; 2]; 12], n: vs.len() };
+        p.v[..vs.len()].copy_from_slice(vs);
+        p
+    }
+
+    fn vertices(&self) -> &[[f64; 2]] {
+        &self.v[..self.n]
+    }
+
+    /// Sutherland–Hodgman: the part where `c · (u, v, 1) ≥ 0`.
+    fn clip(&self, c: DVec3) -> Self {
+        let val = |p: &[f64; 2]| c.x * p[0] + c.y * p[1] + c.z;
+        let mut out = Polygon { v: [[0.0; 2]; 12], n: 0 };
+        let mut push = |p: [f64; 2]| {
+            if out.n < out.v.len() {
+                out.v[out.n] = p;
+                out.n += 1;
+            }
+        };
+        for i in 0..self.n {
+            let (p, q) = (&self.v[i], &self.v[(i + 1) % self.n]);
+            let (fp, fq) = (val(p), val(q));
+            if fp >= 0.0 {
+                push(*p);
+            }
+            if (fp >= 0.0) != (fq >= 0.0) {
+                let t = fp / (fp - fq);
+                push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
+            }
+        }
+        out
+    }
+}
+
+/// Base-plane pixels a pyramid's window reaches past the preimage of its
+/// output pixels (the warp's bilinear taps need one).
+const WINDOW_MARGIN: f64 = 2.0;
+
+impl PerspectiveView {
+    /// The voxel-space ray directions of the output pixels of `camera` seen
+    /// from `distance` world units in front of the volume centre.
+    pub fn ray_directions(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<RayDirections> {
+        Ok(EyeGeometry::new(camera, distance, dims, spacing)?.rays)
+    }
+
+    /// Factorizes `camera` seen from `distance` world units in front of the
+    /// volume centre, for a volume of `dims` voxels with `spacing`: one
+    /// pyramid, or an error when the view needs the pyramid split
+    /// ([`PerspectiveView::frame`] makes the split instead).
+    pub fn new(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3]) -> Result<Self> {
+        let g = EyeGeometry::new(camera, distance, dims, spacing)?;
+        match g.one_pyramid()? {
+            Ok(v) => Ok(v),
+            Err(why) => Err(Error::value("perspective view", why)),
+        }
+    }
+
+    /// The views of one perspective frame: the one pyramid of
+    /// [`PerspectiveView::new`] when every ray into the volume stays within
+    /// `atan(MAX_RAY_SLOPE)` of the principal axis; otherwise Lacroute's
+    /// pyramid split ([`PerspectiveView::pyramids`]). Empty when nothing of
+    /// the volume is in front of the near plane and on screen.
+    pub fn frame(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3], near: f64) -> Result<Vec<Self>> {
+        let mut out = vec![];
+        Self::frame_into(camera, distance, dims, spacing, near, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`PerspectiveView::frame`] into `out` (cleared first; its allocation
+    /// reused, so a renderer's frames allocate nothing here).
+    pub fn frame_into(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3], near: f64, out: &mut Vec<Self>) -> Result<()> {
+        out.clear();
+        let g = EyeGeometry::new(camera, distance, dims, spacing)?;
+        match g.one_pyramid()? {
+            Ok(v) => out.push(v),
+            Err(_) => g.pyramids_into(near, out)?,
+        }
+        Ok(())
+    }
+
+    /// The views of a perspective frame from an eye anywhere: at `eye`
+    /// (eye coordinates: world units from the volume centre along the
+    /// camera's axes, looking toward −z), `f` pixels per unit of
+    /// `(e.x − eye.x)/(eye.z − e.z)`. As [`PerspectiveView::frame`] when the
+    /// volume centre is in front of the eye; otherwise always the split.
+    /// Empty when no part of the volume is in front of the near plane on
+    /// screen: a volume entirely behind the eye gives an empty image.
+    pub fn frame_at(camera: &Camera, f: f64, eye: [f64; 3], dims: [usize; 3], spacing: [f32; 3], near: f64) -> Result<Vec<Self>> {
+        let g = EyeGeometry::at(camera, f, DVec3::from_array(eye), dims, spacing)?;
+        if eye[2] > 0.0
+            && let Ok(v) = g.one_pyramid()?
+        {
+            return Ok(vec![v]);
+        }
+        let mut out = vec![];
+        g.pyramids_into(near, &mut out)?;
+        Ok(out)
+    }
+
+    /// Lacroute's pyramid split of a perspective frame: the eye at the apex,
+    /// one pyramid per signed axis `±x, ±y, ±z` of voxel space (the rays whose
+    /// direction's largest component is along that axis, with that sign:
+    /// [`ray_owner`]), each factorized along its own axis with the slice
+    /// farthest from the eye as the base plane (`σ_k ≤ 1`: the slices nearer
+    /// the eye are magnified, bilinearly) and slices walked away from the eye.
+    /// Only the pyramids with a slice at least `near` in front of the eye and
+    /// some output pixel are kept; each one's [`PerspectiveView::window`] is
+    /// the base-plane box of the rays of its output pixels (plus a margin for
+    /// the warp's bilinear taps). The pyramid owning the image centre comes
+    /// first; the others follow in the order `−x, +x, −y, +y, −z, +z`.
+    pub fn pyramids(camera: &Camera, distance: f64, dims: [usize; 3], spacing: [f32; 3], near: f64) -> Result<Vec<Self>> {
+        let mut out = vec![];
+        EyeGeometry::new(camera, distance, dims, spacing)?.pyramids_into(near, &mut out)?;
+        Ok(out)
     }
 
     /// The scale `σ_k` of slice `k` (1 at the base plane, growing away from the eye).
@@ -298,6 +591,92 @@ mod tests {
             last = err;
         }
         assert!(last < 1e-4);
+    }
+
+    /// The pyramids of the split, from eyes anywhere (inside the volume, near
+    /// it, beyond it): each pyramid's slices and warp follow the true camera
+    /// (projecting a point of any slice gives the pixel the warp gives its
+    /// base-plane point), its slices run away from the eye from the near
+    /// plane on (`σ ≤ 1` at every slice in front of the near plane), and the
+    /// pyramids are distinct, the image centre's first.
+    #[test]
+    fn perspective_pyramids_follow_the_camera() {
+        let mut seed = 17u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (dims, sp) = ([20, 26, 17], [1.0f32, 0.8, 1.5]);
+        let c = DVec3::new(9.5, 12.5, 8.0);
+        let s = DVec3::new(1.0, 0.8, 1.5);
+        let mut views = 0;
+        for _ in 0..200 {
+            let r = DMat3::from_euler(glam::EulerRot::XYZ, rnd() * 7.0, rnd() * 7.0, rnd() * 7.0);
+            let cam = Camera { rotation: r, zoom: Some(2.0), size: [96, 80] };
+            let eye = [rnd() * 40.0 - 20.0, rnd() * 40.0 - 20.0, rnd() * 40.0 - 20.0];
+            let f = 20.0 + rnd() * 100.0;
+            let vs = PerspectiveView::frame_at(&cam, f, eye, dims, sp, 0.5).unwrap();
+            let mut seen = vec![];
+            for p in &vs {
+                assert!(!seen.contains(&(p.axis, p.ascending)));
+                seen.push((p.axis, p.ascending));
+                views += 1;
+                for _ in 0..5 {
+                    let (a, b) = (rnd() * 30.0 - 5.0, rnd() * 30.0 - 5.0);
+                    let ahead = |k: f64| if p.ascending { k - p.eye[2] } else { p.eye[2] - k };
+                    let k = (rnd() * (p.n[2] - 1) as f64).round();
+                    if ahead(k) < 0.5 {
+                        continue;
+                    }
+                    if p.window.is_some() {
+                        assert!(p.scale(k) <= 1.0 + 1e-12 && p.scale(k) > 0.0);
+                    }
+                    let x = DVec3::from_array(p.sheared_to_voxel(a, b, k));
+                    let e = r * ((x - c) * s);
+                    let h = eye[2] - e.z;
+                    let Some(got) = p.warp.to_output(a, b) else {
+                        assert!(h <= 1e-9, "the warp says behind the eye, the camera {h}");
+                        continue;
+                    };
+                    if h < 1.0 {
+                        // (near the eye plane both blow up)
+                        continue;
+                    }
+                    let want = [47.5 + f * (e.x - eye[0]) / h, 39.5 - f * (e.y - eye[1]) / h];
+                    assert!((got[0] - want[0]).abs() < 1e-4 * (1.0 + want[0].abs()), "{got:?} vs {want:?}");
+                    assert!((got[1] - want[1]).abs() < 1e-4 * (1.0 + want[1].abs()), "{got:?} vs {want:?}");
+                }
+            }
+            if let Some(p) = vs.first().filter(|p| p.window.is_some()) {
+                let rays = EyeGeometry::at(&cam, f, DVec3::from_array(eye), dims, sp).unwrap().rays;
+                let own = rays.owner(47.5, 39.5);
+                // the first pyramid owns the centre, if any pyramid does
+                if vs.iter().any(|v| (v.axis, v.ascending) == own) {
+                    assert_eq!((p.axis, p.ascending), own);
+                }
+            }
+        }
+        assert!(views > 100, "{views}");
+    }
+
+    /// A volume entirely behind the eye has no view (an empty image, not an
+    /// error); with the eye inside it, the pyramids the screen sees.
+    #[test]
+    fn perspective_volume_behind_the_eye_has_no_view() {
+        let cam = Camera::new(DMat3::IDENTITY, [64, 48]);
+        let (dims, sp) = ([20, 20, 20], [1.0f32; 3]);
+        // the eye past the volume's far face (z = −9.5), looking away from it
+        for eye in [[0.0, 0.0, -15.0], [3.0, -2.0, -10.5], [0.0, 0.0, -9.7]] {
+            let v = PerspectiveView::frame_at(&cam, 40.0, eye, dims, sp, 0.5).unwrap();
+            assert!(v.is_empty(), "{eye:?}: {} views", v.len());
+        }
+        // the eye inside, a 90° view: the −z pyramid, and no other at the centre
+        let v = PerspectiveView::frame_at(&cam, 24.0, [0.0, 0.0, 1.0], dims, sp, 0.5).unwrap();
+        assert!(!v.is_empty() && (v[0].axis, v[0].ascending) == (2, false));
+        assert!(v.iter().all(|p| p.window.is_some()));
+        // and a wide view from inside sees the side pyramids too
+        let v = PerspectiveView::frame_at(&cam, 10.0, [0.0, 0.0, 1.0], dims, sp, 0.5).unwrap();
+        assert!(v.len() >= 3, "{}", v.len());
     }
 
     #[test]

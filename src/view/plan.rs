@@ -367,6 +367,8 @@ impl FramePlan {
     ///   ring the warp's bilinear taps may read), so no slice is ever cut off.
     ///   One `pad` serves both axes: the axis with the smaller low margin keeps
     ///   some unused pixels (never composited: the occupied rectangle skips them).
+    ///   A pyramid of the split ([`PerspectiveView::window`]) keeps only the
+    ///   part of that box inside its window, and puts the window at the origin.
     /// - **Rays.** The intermediate pixels' rays are those of the parallel view's
     ///   pixels in the limit: pixel `(p, q)` is the base-plane point
     ///   `(p − pad, q − pad) + shift`, with `shift` chosen so the ray of sheared
@@ -387,10 +389,15 @@ impl FramePlan {
         // the binary rotator does not read perspective plans (the renderer refuses it)
         self.shear.set_view(f);
         let nk = pv.n[2];
-        // the shift that puts sheared (0, 0)'s sample in the centre slice on a voxel column
+        // the shift that puts sheared (0, 0)'s sample in the centre slice on a
+        // voxel column; for a pyramid of the split, the one that puts its window
+        // at the grid's origin
         let kc = (nk as f64 - 1.0) / 2.0;
         let (sc, tc) = (pv.scale(kc), pv.trans(kc));
-        let shift = tc.map(|t| (t.round() - t) / sc);
+        let shift = match pv.window {
+            None => tc.map(|t| (t.round() - t) / sc),
+            Some([lo, _]) => lo.map(f64::floor),
+        };
         self.scaled.clear();
         self.scaled.extend((0..nk).map(|k| {
             let (s, t) = (pv.scale(k as f64), pv.trans(k as f64));
@@ -422,7 +429,14 @@ impl FramePlan {
                 hi[a] = hi[a].max((cells[a] as f64 - m.trans[a]) / m.scale);
             }
         }
-        let (pad, size) = if ks.is_empty() || cells[0] == 0 || cells[1] == 0 {
+        // a pyramid of the split: only its window's rays
+        if let Some([wlo, whi]) = pv.window {
+            for a in 0..2 {
+                lo[a] = lo[a].max(wlo[a] - shift[a]);
+                hi[a] = hi[a].min(whi[a] - shift[a]);
+            }
+        }
+        let (pad, size) = if ks.is_empty() || cells[0] == 0 || cells[1] == 0 || !(lo[0] <= hi[0] && lo[1] <= hi[1]) {
             (1, [2, 2])
         } else {
             // pixel p samples a = p − pad: the first pixel at or after lo is

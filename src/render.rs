@@ -19,7 +19,7 @@ use crate::classify::presets::Tissue;
 use crate::classify::shading::Shading;
 use crate::classify::{Classifier, TransferFunction};
 use crate::composite::Mode;
-use crate::composite::raycast::{RayContext, render_binary, render_brute, volume_rect};
+use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary, render_brute, volume_rect};
 use crate::composite::{Intermediate, Rect};
 use crate::data::normals::CellSource;
 use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
@@ -30,7 +30,7 @@ use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, PackedCodes, ShearWor
 use crate::encode::rle::{ClassKey, RleCache};
 use crate::error::{Error, Result};
 use crate::memory::Memory;
-use crate::view::plan::{FramePlan, Grid, Limiter};
+use crate::view::plan::{FramePlan, Grid, Limiter, MapKind};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::{Canvas, Texel, warp};
 
@@ -931,15 +931,7 @@ impl Renderer {
         // a perspective frame: the camera scaled by its field of view, and its factorization
         let persp = match self.projection.resolve(camera, dims, spacing)? {
             None => None,
-            Some((cam, distance)) => {
-                if matches!(self.settings.method, Method::Binary | Method::Brute) {
-                    return Err(Error::value(
-                        "method",
-                        "perspective is not yet supported by the binary rotator (nor its brute force); use --method rle",
-                    ));
-                }
-                Some((cam, PerspectiveView::new(&cam, distance, dims, spacing)?))
-            }
+            Some((cam, distance)) => Some((cam, PerspectiveView::new(&cam, distance, dims, spacing)?)),
         };
         let f = Factorization::new(persp.as_ref().map_or(camera, |p| &p.0), dims, spacing)?;
         if let Some((_, pv)) = &persp {
@@ -994,8 +986,13 @@ impl Renderer {
                         AnyMask::W64(m) => m.shear_to(&plan.shear),
                     };
                     (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);
+                    let scaled = plan.kind == MapKind::ScaleTranslate;
                     let rect = match &m.mask {
                         _ if !settings.occupied_rect => volume_rect(plan, stack.cells()),
+                        // the mask's occupied columns are the translated rays'; a
+                        // scaled plan's rays meet the occupied cells elsewhere
+                        AnyMask::W32(m) if scaled => occupied_scaled_rays(plan, m, stack.cells()),
+                        AnyMask::W64(m) if scaled => occupied_scaled_rays(plan, m, stack.cells()),
                         AnyMask::W32(m) => m.occupied_rays(plan.grid.size),
                         AnyMask::W64(m) => m.occupied_rays(plan.grid.size),
                     };

@@ -75,7 +75,7 @@ Examples:
   shearwarp info --phantom head                        # size, range, histogram, thresholds
   shearwarp render scan.nrrd --tissue bone -o bone.png  # NRRD, NIfTI, DICOM directory, .den, raw
   shearwarp info brain.nii.gz                          # dims, spacing, histogram, thresholds
-  shearwarp render --method rle --perspective 40 --eye-distance 1.5 -o persp.png   # perspective
+  shearwarp render --perspective 40 --eye-distance 1.5 -o persp.png   # perspective
   shearwarp view                                       # interactive window: drag to rotate, keys 1-4 tissues
   shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
 
@@ -541,8 +541,7 @@ impl RenderArgs {
     }
 
     /// The projection: `--perspective FOV` (with `--eye-distance D`, default
-    /// 2 diagonals), else parallel. Bad numbers, and a path that cannot render
-    /// perspective, are usage errors.
+    /// 2 diagonals), else parallel. Bad numbers are usage errors.
     pub fn projection(&self) -> Result<Projection> {
         let Some(fov) = self.perspective else { return Ok(Projection::Parallel) };
         if !(fov > 0.0 && fov < 180.0) {
@@ -551,9 +550,6 @@ impl RenderArgs {
         let d = self.eye_distance.unwrap_or(DEFAULT_EYE_DISTANCE);
         if !(d.is_finite() && d > 0.0) {
             usage!("--eye-distance must be a finite number of volume diagonals > 0, got {d}");
-        }
-        if matches!(self.method, Method::Binary | Method::Brute) {
-            usage!("perspective is not yet supported by the binary rotator (nor --method brute); use --method rle (or brute-rle)");
         }
         Ok(Projection::perspective(fov, d)?)
     }

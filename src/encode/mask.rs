@@ -308,6 +308,14 @@ impl<W: Word> BinaryMask<W> {
     pub fn cell(&self, si: usize, sj: usize, k: usize) -> bool {
         self.code(si, sj, k) != 0
     }
+    /// The cells `[ci0, ci1, cj0, cj1]` of slice `k` that may have a non-zero
+    /// code (a super cell's span, so possibly reaching past the volume's
+    /// cells), or `None` when the slice has none.
+    pub fn slice_cells(&self, k: usize) -> Option<[i64; 4]> {
+        let s = self.s as i64;
+        self.bbox[k]
+            .map(|[i0, i1, j0, j1]| [s * i0 as i64 - (s - 1), s * i1 as i64 + s - 1, s * j0 as i64 - (s - 1), s * j1 as i64 + s - 1])
+    }
     /// Current super offsets `F[k]` of each slice along i and j.
     pub fn floors(&self) -> [Vec<i32>; 2] {
         [0, 1].map(|a| self.off[a].iter().map(|o| self.pad as i32 - o).collect())

@@ -238,7 +238,7 @@ impl<F: Fn(&FramePlan, &mut RayLimits) + Send + Sync> Limiter for F {
 /// for it). The one floor of every scaled map ([`FramePlan::cell_of`],
 /// [`FramePlan::pixels_of_cells`]).
 #[inline(always)]
-fn floor_i64(s: f64) -> i64 {
+pub(crate) fn floor_i64(s: f64) -> i64 {
     let c = s as i64;
     if (c as f64) > s { c - 1 } else { c }
 }

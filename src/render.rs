@@ -985,6 +985,13 @@ impl Renderer {
                         AnyMask::W32(m) => m.shear_to(&plan.shear),
                         AnyMask::W64(m) => m.shear_to(&plan.shear),
                     };
+                    if plan.kind == MapKind::ScaleTranslate {
+                        // what the diverging rays' walks skip blocks by
+                        match &mut m.mask {
+                            AnyMask::W32(m) => m.update_occupancy(matcher),
+                            AnyMask::W64(m) => m.update_occupancy(matcher),
+                        }
+                    }
                     (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);
                     let scaled = plan.kind == MapKind::ScaleTranslate;
                     let rect = match &m.mask {

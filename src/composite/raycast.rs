@@ -31,7 +31,7 @@ use crate::data::normals::{ByteCells, NormalStack, PackedCells, ShadeTable, appl
 use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
-use crate::encode::walk::ColumnWalk;
+use crate::encode::walk::{BlockOccupancy, ColumnWalk};
 use crate::view::plan::{FramePlan, MapKind, SliceMap, floor_i64};
 
 /// Everything a ray needs, borrowed for one frame.
@@ -444,7 +444,9 @@ impl Ray for ScaledRay {
     }
 }
 
-/// Rays of `rect` of the intermediate image through the sheared mask: each ray
+/// Rays of `rect` of the intermediate image through the sheared mask (for a
+/// scaled plan, with its block occupancy up to date for `m`:
+/// [`BinaryMask::update_occupancy`]): each ray
 /// reads its (super) column and visits only the slices whose code `m` matches,
 /// in parallel over rows; marks `rect` valid. A row steps from super column to
 /// super column with a counter (no division per ray) and answers a ray whose
@@ -490,7 +492,7 @@ fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
         MapKind::ScaleTranslate => render_rows(rect, out, |q, p0, crow, drow| {
-            let mut src = Diverging { ctx, mask, search, m, q };
+            let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q };
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
     }
@@ -581,6 +583,7 @@ impl<'a, W: Word> RaySource for Columns<'a, W> {
 struct Diverging<'a, W: Word> {
     ctx: &'a RayContext<'a>,
     mask: &'a BinaryMask<W>,
+    occ: &'a BlockOccupancy,
     search: Search,
     m: &'a Matcher,
     q: usize,
@@ -594,7 +597,8 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
         let ray = self.ctx.scaled_ray(p, self.q);
         let plan = self.ctx.plan;
         let [lo, hi] = plan.ray_range(p, self.q);
-        let mut it = ColumnWalk::new(self.mask, &plan.shear, &plan.scaled, ray.at, lo, hi, self.ctx.ascending, self.search, self.m);
+        let mut it =
+            ColumnWalk::new(self.mask, self.occ, &plan.shear, &plan.scaled, ray.at, lo, hi, self.ctx.ascending, self.search, self.m);
         let walk = it.peek().map(|k0| (it, k0));
         (ray, walk)
     }

@@ -76,6 +76,9 @@ pub struct BlockOccupancy {
     len: usize,
     /// The slices with a non-zero code `[k0, k1]` (`k0 > k1`: none).
     slices: [usize; 2],
+    /// The box of cells with a non-zero code over all slices, as sample
+    /// positions: `[i0, i1, j0, j1]`, the samples of cells `i0 ..< i1` along i.
+    cells: [f64; 4],
     sums: Vec<u32>,
 }
 
@@ -91,6 +94,13 @@ impl BlockOccupancy {
             (Some(a), Some(b)) => [a, b],
             _ => [1, 0],
         };
+        let mut cells = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+        for k in 0..nk {
+            if let Some([i0, i1, j0, j1]) = mask.slice_cells(k) {
+                cells = [cells[0].min(i0 as f64), cells[1].max(i1 as f64 + 1.0), cells[2].min(j0 as f64), cells[3].max(j1 as f64 + 1.0)];
+            }
+        }
+        self.cells = cells;
         let Some(r) = self.rect else { return };
         let (w, h) = (r.p1 - r.p0 + 1, r.q1 - r.q0 + 1);
         self.stride = w + 1;
@@ -212,8 +222,37 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
     ) -> Self {
         let log_nb = m.width().trailing_zeros();
         let slots = (W::BITS >> log_nb) as usize;
-        // only the slices with a non-zero code
-        let (lo, hi) = (lo.max(occ.slices[0]), hi.min(occ.slices[1]));
+        // only the slices with a non-zero code, where the ray is inside the box
+        // of cells with one
+        let (mut lo, mut hi) = (lo.max(occ.slices[0]), hi.min(occ.slices[1]));
+        if lo <= hi {
+            for ax in 0..2 {
+                let x = |k: usize| scaled[k].scale * at[ax] + scaled[k].trans[ax];
+                let (xl, xh) = (x(lo), x(hi));
+                let (c0, c1) = (occ.cells[2 * ax], occ.cells[2 * ax + 1]);
+                // x is affine in k: the slices where x ∈ [c0, c1), widened by one
+                // slice each side for rounding
+                if hi == lo || xh == xl {
+                    if xl < c0 - MARGIN || xl > c1 + MARGIN {
+                        hi = 0;
+                        lo = 1;
+                        break;
+                    }
+                    continue;
+                }
+                let g = (xh - xl) / (hi - lo) as f64;
+                let (ta, tb) = ((c0 - xl) / g, (c1 - xl) / g);
+                let (t0, t1) = (ta.min(tb), ta.max(tb));
+                let span = (hi - lo) as f64;
+                if t1 < -1.0 || t0 > span + 1.0 {
+                    hi = 0;
+                    lo = 1;
+                    break;
+                }
+                let (d0, d1) = ((t0.max(0.0).floor() as usize).saturating_sub(1), ((t1.min(span)).ceil() as usize) + 1);
+                (lo, hi) = (lo + d0, hi.min(lo + d1));
+            }
+        }
         let drift = |ax: usize, k: usize| {
             let s = &scaled[k];
             s.scale * at[ax] + s.trans[ax] - shear.trans[ax][k]

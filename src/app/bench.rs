@@ -103,10 +103,11 @@ pub struct BenchCmd {
     /// Also print one Markdown row per variant and view.
     #[arg(long)]
     pub per_view: bool,
-    /// Also benchmark the paths that render perspective (rle, brute-rle) under
-    /// a perspective projection with this vertical field of view in degrees,
-    /// beside the parallel rows ("rle-persp", "brute-rle-persp"; errors against
-    /// the perspective reference; no iso depth error yet).
+    /// Also benchmark every path (binary, brute, rle, brute-rle) under a
+    /// perspective projection with this vertical field of view in degrees,
+    /// beside the parallel rows ("binary-persp", "brute-persp", "rle-persp",
+    /// "brute-rle-persp"; errors and iso depth errors against the perspective
+    /// reference).
     #[arg(long, value_name = "FOV_DEGREES", allow_negative_numbers = true)]
     pub perspective: Option<f64>,
     /// With --perspective: the eye's distance from the volume's centre in
@@ -160,10 +161,11 @@ pub fn registry(base: Settings) -> Vec<Variant> {
     v
 }
 
-/// The variants that render `projection` (a perspective one): the RLE path
-/// and its brute force, named `rle-persp` and `brute-rle-persp`.
+/// The variants that render `projection` (a perspective one): the binary
+/// rotator (cell 1, the base's word and search), the RLE path and their brute
+/// forces, named `binary-persp`, `brute-persp`, `rle-persp` and `brute-rle-persp`.
 pub fn perspective_variants(base: Settings, projection: Projection) -> Vec<Variant> {
-    [(Method::Rle, "rle-persp"), (Method::BruteRle, "brute-rle-persp")]
+    [(Method::Binary, "binary-persp"), (Method::Brute, "brute-persp"), (Method::Rle, "rle-persp"), (Method::BruteRle, "brute-rle-persp")]
         .map(|(method, name)| Variant { name: name.into(), settings: Settings { method, cell: 1, ..base }, projection })
         .to_vec()
 }
@@ -503,8 +505,6 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                 truth_ms,
             });
             let truth = match (mode, analytic) {
-                // (the fast paths' iso depth is not yet computed in perspective)
-                _ if proj.is_perspective() => None,
                 (Mode::Iso, Some(a)) => Some((a, "analytic")),
                 (Mode::Iso, None) => Some((image.depth.clone(), "reference")),
                 _ => None,
@@ -909,7 +909,12 @@ mod tests {
         let pv = perspective_variants(Settings::default(), p);
         assert_eq!(
             pv.iter().map(|x| (x.name.as_str(), x.settings.method, x.projection)).collect::<Vec<_>>(),
-            [("rle-persp", Method::Rle, p), ("brute-rle-persp", Method::BruteRle, p)]
+            [
+                ("binary-persp", Method::Binary, p),
+                ("brute-persp", Method::Brute, p),
+                ("rle-persp", Method::Rle, p),
+                ("brute-rle-persp", Method::BruteRle, p)
+            ]
         );
     }
 

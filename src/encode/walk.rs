@@ -226,7 +226,7 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
         // of cells with one
         let (mut lo, mut hi) = (lo.max(occ.slices[0]), hi.min(occ.slices[1]));
         if lo <= hi {
-            for ax in 0..2 {
+            for ax in [0, 1] {
                 let x = |k: usize| scaled[k].scale * at[ax] + scaled[k].trans[ax];
                 let (xl, xh) = (x(lo), x(hi));
                 let (c0, c1) = (occ.cells[2 * ax], occ.cells[2 * ax + 1]);

@@ -988,8 +988,8 @@ impl Renderer {
                     if plan.kind == MapKind::ScaleTranslate {
                         // what the diverging rays' walks skip blocks by
                         match &mut m.mask {
-                            AnyMask::W32(m) => m.update_occupancy(matcher),
-                            AnyMask::W64(m) => m.update_occupancy(matcher),
+                            AnyMask::W32(m) => m.update_occupancy(matcher, &plan.shear),
+                            AnyMask::W64(m) => m.update_occupancy(matcher, &plan.shear),
                         }
                     }
                     (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);

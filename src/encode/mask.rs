@@ -644,12 +644,12 @@ impl<W: Word> BinaryMask<W> {
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
     }
 
-    /// Rebuilds the block occupancy of the mask in its current shear for
+    /// Rebuilds the block occupancy of the mask, sheared to `state`, for
     /// matcher `m` (what the walks of a scaled plan's rays read: see
     /// [`crate::encode::walk`]), reusing its tables.
-    pub fn update_occupancy(&mut self, m: &crate::encode::depth::Matcher) {
+    pub fn update_occupancy(&mut self, m: &crate::encode::depth::Matcher, state: &ShearState) {
         let mut occ = std::mem::take(&mut self.occupancy);
-        occ.build(self, m);
+        occ.build(self, m, state);
         self.occupancy = occ;
     }
 

@@ -16,15 +16,17 @@
 //! `c = floor(x_k)`, the only cell whose four corners its bilinear
 //! interpolation reads. The mask keeps slice `k`'s cells at integer offset
 //! `f = floor(trans[k])`, so with cell size 1 the cell sits in column
-//! `c − f + PAD`, and `c − f = floor(u_k + trans[k]) − floor(trans[k])` is
-//! `floor(u_k)` or `floor(u_k) + 1`. With super cells of size `s` the slice sits
+//! `c − f + PAD`, and `h = c − f = floor(u_k + trans[k]) − floor(trans[k])`
+//! is `floor(u_k + frac(trans[k]))`: `floor(u_k)` or `floor(u_k) + 1`, and
+//! exactly one of them where the slices' fractions allow (the walk bounds it
+//! with the range of the fractions over each block of slices). With super cells of size `s` the slice sits
 //! at super offset `F = ceil(f / s)`, `s·F = f + φ` with `0 ≤ φ < s`, and super
 //! column `P` holds super cell `SI = P − PAD + F`, which covers cells
 //! `[s·SI − (s − 1), s·SI + (s − 1)]`; `P − PAD = floor(g / s)` with
-//! `g = c − f − φ` satisfies that, and `g` lies in
-//! `[floor(u_k) − (s − 1), floor(u_k) + 1]`. So over a segment with
-//! `floor(u_k) ∈ [m0, m1]` the columns `PAD + [⌊(m0 − s + 1)/s⌋, ⌊(m1 + 1)/s⌋]`
-//! (two per axis, four in all, in the usual case) hold every sample's cell, and
+//! `g = h − φ` satisfies that, and `g` lies in `[h − (s − 1), h]`. So over a
+//! segment with `h ∈ [h0, h1]` the columns
+//! `PAD + [⌊(h0 − s + 1)/s⌋, ⌊h1/s⌋]` (at cell size 1 one or two per axis)
+//! hold every sample's cell, and
 //! the walk's candidates are a superset of the slices whose sample can be
 //! visible: every candidate is confirmed by a real sample, as with super cells,
 //! and the image is the brute force's, bit for bit. The bounds of `u` come from
@@ -76,6 +78,10 @@ pub struct BlockOccupancy {
     len: usize,
     /// The slices with a non-zero code `[k0, k1]` (`k0 > k1`: none).
     slices: [usize; 2],
+    /// Per block, the range of the fractional parts of its slices' shear
+    /// translations, `[min_i, max_i, min_j, max_j]`: a sample's cell sits
+    /// `floor(u + frac(trans))` columns from the ray's base (see [`ColumnWalk`]).
+    frac: Vec<[f64; 4]>,
     /// The box of cells with a non-zero code over all slices, as sample
     /// positions: `[i0, i1, j0, j1]`, the samples of cells `i0 ..< i1` along i.
     cells: [f64; 4],
@@ -85,9 +91,24 @@ pub struct BlockOccupancy {
 impl BlockOccupancy {
     /// Rebuilds the tables for `mask` in its current shear and matcher `m`,
     /// reusing the allocation.
-    pub fn build<W: Word>(&mut self, mask: &BinaryMask<W>, m: &Matcher) {
+    pub fn build<W: Word>(&mut self, mask: &BinaryMask<W>, m: &Matcher, shear: &ShearState) {
         self.rect = mask.occupied_rect();
         let nk = mask.slices();
+        let slots = (W::BITS / m.width()) as usize;
+        self.len = slots.div_ceil(BLOCKS_PER_WORD);
+        self.frac.clear();
+        self.frac.extend((0..nk.div_ceil(self.len)).map(|b| {
+            let mut f = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+            for k in b * self.len..((b + 1) * self.len).min(nk) {
+                for ax in [0, 1] {
+                    let t = shear.trans[ax][k];
+                    let x = t - t.floor();
+                    f[2 * ax] = f[2 * ax].min(x);
+                    f[2 * ax + 1] = f[2 * ax + 1].max(x);
+                }
+            }
+            f
+        }));
         let first = (0..nk).find(|&k| mask.slice_cells(k).is_some());
         let last = (0..nk).rev().find(|&k| mask.slice_cells(k).is_some());
         self.slices = match (first, last) {
@@ -106,8 +127,6 @@ impl BlockOccupancy {
         self.stride = w + 1;
         let nw = mask.words_per_row();
         let nb = m.width();
-        let slots = (W::BITS / nb) as usize;
-        self.len = slots.div_ceil(BLOCKS_PER_WORD);
         let per_word = slots / self.len;
         let nbk = nw * per_word;
         self.blocks = nbk;
@@ -307,12 +326,15 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
     #[inline(always)]
     fn columns(&self, ax: usize, ka: usize, kb: usize) -> Option<(usize, usize)> {
         let (a, b) = (self.drift(ax, ka), self.drift(ax, kb));
-        let m0 = floor_i64(a.min(b) - MARGIN);
-        let m1 = floor_i64(a.max(b) + MARGIN);
+        // the cell's offset from the slice's, floor(x) − floor(t) = floor(u + frac(t)),
+        // over the slices' fractions in the block (ka and kb share one)
+        let f = &self.occ.frac[ka / self.occ.len];
+        let h0 = floor_i64(a.min(b) + f[2 * ax] - MARGIN);
+        let h1 = floor_i64(a.max(b) + f[2 * ax + 1] + MARGIN);
         let s = self.mask.cell_size() as i64;
         let pad = self.mask.pad() as i64;
         // (no division at cell size 1, the usual case)
-        let (c0, c1) = if s == 1 { (m0 + pad, m1 + 1 + pad) } else { ((m0 - s + 1).div_euclid(s) + pad, (m1 + 1).div_euclid(s) + pad) };
+        let (c0, c1) = if s == 1 { (h0 + pad, h1 + pad) } else { ((h0 - s + 1).div_euclid(s) + pad, h1.div_euclid(s) + pad) };
         let (c0, c1) = (c0.max(0), c1.min(self.mask.grid()[ax] as i64 - 1));
         (c0 <= c1).then_some((c0 as usize, c1 as usize))
     }
@@ -331,7 +353,9 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
             }
             let (ka, kb) = (self.lo.max(b * len), self.hi.min(b * len + len - 1));
             let (Some((p0, p1)), Some((q0, q1))) = (self.columns(0, ka, kb), self.columns(1, ka, kb)) else { continue };
-            if !self.occ.any(b, p0, p1, q0, q1) {
+            // (a rectangle of at most 2 × 2 columns is what a segment reads
+            // anyway: the table would only repeat its test)
+            if (p1 - p0 + 1) * (q1 - q0 + 1) > 4 && !self.occ.any(b, p0, p1, q0, q1) {
                 continue;
             }
             // a block lies within one word (its length divides the word's slots)
@@ -449,8 +473,9 @@ mod tests {
         let mut rnd = crate::testing::xorshift(77);
         fn check<W: Word>(codes: &CellCodes, s: usize, m: &Matcher, rnd: &mut impl FnMut() -> u64) {
             let mut mask = BinaryMask::<W>::from_codes(codes, s);
-            mask.shear_to(&ShearState::from_ends(codes.nk, [[-9.3, 8.7], [5.2, -6.1]]));
-            mask.update_occupancy(m);
+            let st = ShearState::from_ends(codes.nk, [[-9.3, 8.7], [5.2, -6.1]]);
+            mask.shear_to(&st);
+            mask.update_occupancy(m, &st);
             let occ = mask.occupancy();
             let [gw, gh] = mask.grid();
             let slots = (W::BITS / m.width()) as usize;

@@ -353,9 +353,10 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
             }
             let (ka, kb) = (self.lo.max(b * len), self.hi.min(b * len + len - 1));
             let (Some((p0, p1)), Some((q0, q1))) = (self.columns(0, ka, kb), self.columns(1, ka, kb)) else { continue };
-            // (a rectangle of at most 2 × 2 columns is what a segment reads
-            // anyway: the table would only repeat its test)
-            if (p1 - p0 + 1) * (q1 - q0 + 1) > 4 && !self.occ.any(b, p0, p1, q0, q1) {
+            // (asked even for a rectangle a segment would read: the table's four
+            // loads are cheaper than the mask's rows; interleaved A/B, head
+            // 256³ at 512², FOV 30°: render 16–18 ms against 24–26 ms)
+            if !self.occ.any(b, p0, p1, q0, q1) {
                 continue;
             }
             // a block lies within one word (its length divides the word's slots)

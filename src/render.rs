@@ -19,7 +19,7 @@ use crate::classify::presets::Tissue;
 use crate::classify::shading::Shading;
 use crate::classify::{Classifier, TransferFunction};
 use crate::composite::Mode;
-use crate::composite::raycast::{RayContext, render_binary, render_brute, volume_rect};
+use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary, render_brute, volume_rect};
 use crate::composite::{Intermediate, Rect};
 use crate::data::normals::CellSource;
 use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
@@ -30,7 +30,7 @@ use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, PackedCodes, ShearWor
 use crate::encode::rle::{ClassKey, RleCache};
 use crate::error::{Error, Result};
 use crate::memory::Memory;
-use crate::view::plan::{FramePlan, Grid, Limiter};
+use crate::view::plan::{FramePlan, Grid, Limiter, MapKind};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::{Canvas, Owned, Texel, clear_for_pyramids, warp, warp_owned};
 
@@ -1010,12 +1010,6 @@ impl Renderer {
         let persp = match self.projection.resolve(camera, dims, spacing)? {
             None => None,
             Some((cam, distance)) => {
-                if matches!(self.settings.method, Method::Binary | Method::Brute) {
-                    return Err(Error::value(
-                        "method",
-                        "perspective is not yet supported by the binary rotator (nor its brute force); use --method rle",
-                    ));
-                }
                 // (the views' buffer is kept across frames: no allocation per frame)
                 let mut views = std::mem::take(&mut self.views);
                 let made = PerspectiveView::frame_into(&cam, distance, dims, spacing, NEAR_SLICES, &mut views);
@@ -1031,12 +1025,6 @@ impl Renderer {
                 Some((cam, one.expect("one view")))
             }
         };
-        if self.quality != 1.0 && matches!(self.settings.method, Method::Binary | Method::Brute) {
-            return Err(Error::value(
-                "quality",
-                "an intermediate image size other than one pixel per voxel is not yet supported by the binary rotator (nor its brute force); use --method rle",
-            ));
-        }
         let f = Factorization::new(persp.as_ref().map_or(camera, |p| &p.0), dims, spacing)?;
         if let Some((_, pv)) = &persp {
             // the eye lies on the view axis: same principal axis, same slice order
@@ -1178,9 +1166,21 @@ impl Renderer {
                         AnyMask::W32(m) => m.shear_to(&plan.shear),
                         AnyMask::W64(m) => m.shear_to(&plan.shear),
                     };
+                    if plan.kind == MapKind::ScaleTranslate {
+                        // what the diverging rays' walks skip blocks by
+                        match &mut m.mask {
+                            AnyMask::W32(m) => m.update_occupancy(matcher, &plan.shear),
+                            AnyMask::W64(m) => m.update_occupancy(matcher, &plan.shear),
+                        }
+                    }
                     (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);
+                    let scaled = plan.kind == MapKind::ScaleTranslate;
                     let rect = match &m.mask {
                         _ if !settings.occupied_rect => volume_rect(plan, stack.cells()),
+                        // the mask's occupied columns are the translated rays'; a
+                        // scaled plan's rays meet the occupied cells elsewhere
+                        AnyMask::W32(m) if scaled => occupied_scaled_rays(plan, m, stack.cells()),
+                        AnyMask::W64(m) if scaled => occupied_scaled_rays(plan, m, stack.cells()),
                         AnyMask::W32(m) => m.occupied_rays(plan.grid.size),
                         AnyMask::W64(m) => m.occupied_rays(plan.grid.size),
                     };

@@ -231,60 +231,47 @@ fn shearwarp_cpu_caps_the_level_and_reports_it() {
 }
 
 #[test]
-fn perspective_renders_with_rle_and_bad_input_is_exit_2() {
+fn perspective_renders_with_rle_and_binary_and_bad_input_is_exit_2() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("persp.png");
-    let o = sw()
-        .args([
-            "render",
-            "--phantom-dims",
-            "40,40,36",
-            "--size",
-            "64",
-            "--method",
-            "rle",
-            "--perspective",
-            "40",
-            "--eye-distance",
-            "1.5",
-            "--json",
-            "-o",
-        ])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(j["projection"]["fov_deg"], 40.0);
-    assert!(j["coverage"].as_f64().unwrap() > 0.05, "{j}");
-    // rotate too, through the 45° principal-axis switch
-    let o = sw()
-        .args(["rotate", "--phantom-dims", "40,40,36", "--size", "48", "--method", "rle", "--mode", "blend", "--perspective", "30"])
-        .args(["--degrees", "90", "--step-deg", "15", "--json"])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(j["projection"]["eye_distance"], 2.0);
-    // the eye inside the volume: the pyramid split
-    let o = sw()
-        .args(["render", "--phantom-dims", "40,40,36", "--size", "48", "--method", "rle", "--perspective", "60"])
-        .args(["--eye-distance", "0.1", "--json", "-o"])
-        .arg(dir.path().join("inside.png"))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert!(j["coverage"].as_f64().unwrap() > 0.5, "{j}");
+    for method in ["rle", "binary", "brute"] {
+        let o = sw()
+            .args(["render", "--phantom-dims", "40,40,36", "--size", "64", "--method", method])
+            .args(["--perspective", "40", "--eye-distance", "1.5", "--json", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{method}: {}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(j["projection"]["fov_deg"], 40.0);
+        assert!(j["coverage"].as_f64().unwrap() > 0.05, "{method}: {j}");
+        // rotate too, through the 45° principal-axis switch
+        let o = sw()
+            .args(["rotate", "--phantom-dims", "40,40,36", "--size", "48", "--method", method, "--mode", "blend", "--perspective", "30"])
+            .args(["--degrees", "90", "--step-deg", "15", "--json"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{method}: {}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(j["projection"]["eye_distance"], 2.0);
+        // the eye inside the volume: the pyramid split
+        let o = sw()
+            .args(["render", "--phantom-dims", "40,40,36", "--size", "48", "--method", method, "--perspective", "60"])
+            .args(["--eye-distance", "0.1", "--json", "-o"])
+            .arg(dir.path().join("inside.png"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{method}: {}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert!(j["coverage"].as_f64().unwrap() > 0.5, "{method}: {j}");
+    }
     for (args, msg) in [
-        (vec!["--perspective", "40"], "--method rle"),
         (vec!["--perspective", "0", "--method", "rle"], "0 < FOV < 180"),
         (vec!["--perspective", "180", "--method", "rle"], "0 < FOV < 180"),
         (vec!["--perspective", "NaN", "--method", "rle"], "0 < FOV < 180"),
         (vec!["--perspective", "40", "--eye-distance", "0", "--method", "rle"], "--eye-distance"),
         (vec!["--perspective", "40", "--eye-distance", "inf", "--method", "rle"], "--eye-distance"),
         (vec!["--eye-distance", "2", "--method", "rle"], "--perspective"),
-        (vec!["--perspective", "40", "--eye-distance", "0.1"], "not yet supported by the binary rotator"),
     ] {
         sw().args(["render", "--phantom-dims", "24,24,20", "--size", "32", "-o"])
             .arg(dir.path().join("x.png"))

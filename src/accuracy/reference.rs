@@ -57,7 +57,7 @@ use crate::composite::Mode;
 use crate::data::volume::Volume;
 use crate::error::{Error, Result};
 use crate::render::Renderer;
-use crate::view::{Camera, Factorization, Projection};
+use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::Image;
 
 /// Default reference step along a ray, in units of the smallest voxel spacing.
@@ -623,17 +623,22 @@ impl Tracer<'_> {
 /// neighbouring hits, weighted over those neighbours that hit (NaN when they
 /// carry less than half the weight, the same 0.5 coverage rule as the
 /// silhouette metric). The hit point is where the pixel's own ray meets that
-/// fractional slice ([`Factorization::sheared_to_voxel`]).
+/// fractional slice ([`Factorization::sheared_to_voxel`]; under perspective,
+/// [`PerspectiveView::sheared_to_voxel`]).
 pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>> {
     let plan = renderer.last_plan().ok_or_else(|| Error::value("fast path depth", "the renderer has not rendered a frame yet"))?;
-    if renderer.projection().is_perspective() {
-        return Err(Error::value("fast path depth", "not yet computed under a perspective projection"));
-    }
+    let (dims, spacing, proj) = (renderer.dims(), renderer.spacing(), renderer.projection());
+    // a perspective frame's camera (scaled by its field of view) and view
+    let (cam, pv) = match proj.resolve(camera, dims, spacing)? {
+        None => (*camera, None),
+        Some((cam, distance)) => (cam, Some(PerspectiveView::new(&cam, distance, dims, spacing)?)),
+    };
     let f = &plan.view;
-    if *f != Factorization::new(camera, renderer.dims(), renderer.spacing())? {
+    if *f != Factorization::new(&cam, dims, spacing)? || pv.is_some() != plan.perspective.is_some() {
         return Err(Error::value("fast path depth", "the last frame was rendered with a different camera"));
     }
-    let rays = Rays::new(camera, renderer.dims(), renderer.spacing())?;
+    let shift = plan.perspective.map_or([0.0; 2], |r| r.shift);
+    let rays = Rays::with_projection(camera, &proj, dims, spacing)?;
     let inter = renderer.intermediate();
     if inter.size != plan.grid.size {
         return Err(Error::value("fast path depth", "the intermediate image does not match the last frame's geometry"));
@@ -660,7 +665,11 @@ pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>>
                 }
             }
             if wsum >= 0.5 {
-                let voxel = f.sheared_to_voxel(a, b, ksum / wsum);
+                let voxel = match &pv {
+                    None => f.sheared_to_voxel(a, b, ksum / wsum),
+                    // the plan's sheared point is the view's, shifted
+                    Some(pv) => pv.sheared_to_voxel(a + shift[0], b + shift[1], ksum / wsum),
+                };
                 *o = rays.depth_of(DVec3::from_array(voxel));
             }
         }

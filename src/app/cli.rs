@@ -75,7 +75,7 @@ Examples:
   shearwarp info --phantom head                        # size, range, histogram, thresholds
   shearwarp render scan.nrrd --tissue bone -o bone.png  # NRRD, NIfTI, DICOM directory, .den, raw
   shearwarp info brain.nii.gz                          # dims, spacing, histogram, thresholds
-  shearwarp render --method rle --perspective 40 --eye-distance 1.5 -o persp.png   # perspective
+  shearwarp render --perspective 40 --eye-distance 1.5 -o persp.png   # perspective
   shearwarp view                                       # interactive window: drag to rotate, keys 1-4 tissues
   shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
 
@@ -229,7 +229,7 @@ pub struct RenderArgs {
     pub clip_plane: Vec<ClipPlane>,
     /// Intermediate image resolution Q in pixels per voxel (0.25–2; Schulze's
     /// adaptive image size): below 1 a coarser, faster frame, above 1 finer
-    /// sampling of each slice. Both projections; --method rle or brute-rle.
+    /// sampling of each slice. Both projections, every method.
     #[arg(long, value_name = "Q", allow_negative_numbers = true)]
     pub quality: Option<f64>,
     /// RLE paths: how a slice whose intermediate pixels are wider than a voxel
@@ -566,11 +566,6 @@ impl RenderArgs {
         if !(q.is_finite() && (lo..=hi).contains(&q)) {
             usage!("--quality must be {lo}..={hi} intermediate pixels per voxel, got {q}");
         }
-        if q != 1.0 && matches!(self.method, Method::Binary | Method::Brute) {
-            usage!(
-                "--quality other than 1 is not yet supported by the binary rotator (nor --method brute); use --method rle (or brute-rle)"
-            );
-        }
         Ok(Some(q))
     }
 
@@ -587,8 +582,7 @@ impl RenderArgs {
     }
 
     /// The projection: `--perspective FOV` (with `--eye-distance D`, default
-    /// 2 diagonals), else parallel. Bad numbers, and a path that cannot render
-    /// perspective, are usage errors.
+    /// 2 diagonals), else parallel. Bad numbers are usage errors.
     pub fn projection(&self) -> Result<Projection> {
         let Some(fov) = self.perspective else { return Ok(Projection::Parallel) };
         if !(fov > 0.0 && fov < 180.0) {
@@ -597,9 +591,6 @@ impl RenderArgs {
         let d = self.eye_distance.unwrap_or(DEFAULT_EYE_DISTANCE);
         if !(d.is_finite() && d > 0.0) {
             usage!("--eye-distance must be a finite number of volume diagonals > 0, got {d}");
-        }
-        if matches!(self.method, Method::Binary | Method::Brute) {
-            usage!("perspective is not yet supported by the binary rotator (nor --method brute); use --method rle (or brute-rle)");
         }
         Ok(Projection::perspective(fov, d)?)
     }

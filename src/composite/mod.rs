@@ -83,9 +83,20 @@ pub fn correct_opacity(s: [f32; 4], e: f32) -> [f32; 4] {
     if e == 1.0 || !(a > 0.0 && a < 1.0) {
         return s;
     }
-    let a2 = 1.0 - exp2_approx(e * log2_approx(1.0 - a));
+    let a2 = correct_alpha(a, e);
     let f = a2 / a;
     [s[0] * f, s[1] * f, s[2] * f, a2]
+}
+
+/// The opacity `α` of one sample spacing corrected to `e` spacings,
+/// `1 − (1 − α)^e` (the raycast paths' straight-alpha samples; `e = 1` and
+/// `α` of 0 or 1 return `α` bit for bit).
+#[inline(always)]
+pub fn correct_alpha(a: f32, e: f32) -> f32 {
+    if e == 1.0 || !(a > 0.0 && a < 1.0) {
+        return a;
+    }
+    1.0 - exp2_approx(e * log2_approx(1.0 - a))
 }
 
 /// `log2 x` for a normal `x > 0`, to about 1e-7 relative: the exponent from

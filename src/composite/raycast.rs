@@ -26,12 +26,13 @@ use rayon::prelude::*;
 use crate::classify::Classifier;
 use crate::classify::shading::{Shading, headlight_ndl};
 use crate::composite::Rect;
-use crate::composite::{Intermediate, Mode, composite, terminated};
+use crate::composite::{Intermediate, Mode, composite, correct_alpha, terminated};
 use crate::data::normals::{ByteCells, NormalStack, PackedCells, ShadeTable, apply_shade};
 use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
-use crate::view::plan::{FramePlan, MapKind, SliceMap};
+use crate::encode::walk::{BlockOccupancy, ColumnWalk};
+use crate::view::plan::{FramePlan, MapKind, SliceMap, floor_i64};
 
 /// Everything a ray needs, borrowed for one frame.
 pub struct RayContext<'a> {
@@ -39,7 +40,8 @@ pub struct RayContext<'a> {
     pub classifier: &'a Classifier,
     /// The frame's plan.
     pub plan: &'a FramePlan,
-    /// The frame's per-slice maps (translations: [`MapKind::Translate`]).
+    /// The frame's per-slice maps (their translations' split; a
+    /// [`MapKind::ScaleTranslate`] plan's rays read [`FramePlan::scaled`]).
     pub maps: &'a [SliceMap],
     pub shading: Shading,
     pub mode: Mode,
@@ -173,7 +175,6 @@ impl<'a> RayContext<'a> {
         shading: Shading,
         ert: f32,
     ) -> Self {
-        assert_eq!(plan.kind, MapKind::Translate, "the ray traversal samples translated slices");
         assert_eq!(plan.maps.len(), stack.n[2], "a plan for another stack");
         let c = stack.cells();
         let iso_c = classifier.classify(iso);
@@ -237,17 +238,11 @@ impl<'a> RayContext<'a> {
         }
     }
 
-    /// The cell and weights of ray `(p, q)` at slice `k`, or `None` outside the volume.
+    /// The ray of intermediate pixel `(p, q)` under a scaled plan
+    /// ([`MapKind::ScaleTranslate`]): its sheared point and opacity exponent.
     #[inline(always)]
-    fn locate(&self, p: i32, q: i32, k: usize) -> Option<(usize, usize, f32, f32)> {
-        let s = self.maps[k];
-        let ci = p - self.pad + s.floor[0];
-        let cj = q - self.pad + s.floor[1];
-        if (ci as u32) < self.cells[0] && (cj as u32) < self.cells[1] {
-            Some((ci as usize, cj as usize, s.weight[0], s.weight[1]))
-        } else {
-            None
-        }
+    pub fn scaled_ray(&self, p: usize, q: usize) -> ScaledRay {
+        ScaledRay { at: self.plan.intermediate_to_sheared(p as f64, q as f64), e: self.plan.opacity_exponent(p, q) }
     }
 
     /// Hints the cache to fetch what ray `(p, q)` reads from its first
@@ -260,8 +255,8 @@ impl<'a> RayContext<'a> {
     /// 256-voxel volumes (interleaved A/B).
     /// With gradient shading: the neighbourhood a hit's gradients read.
     #[inline(always)]
-    pub fn prefetch<V: Cells>(&self, v: &V, p: i32, q: i32, k: usize, last: &mut usize) {
-        if let Some((ci, cj, _, _)) = self.locate(p, q, k) {
+    pub fn prefetch<V: Cells, R: Ray>(&self, v: &V, ray: R, k: usize, last: &mut usize) {
+        if let Some((ci, cj, _, _)) = ray.locate(self, k) {
             let b = self.stack.index(ci, cj, k);
             if b >> 4 != *last {
                 *last = b >> 4;
@@ -281,25 +276,25 @@ impl<'a> RayContext<'a> {
         }
     }
 
-    /// Traces ray `(p, q)` over the candidate slices `ks` (front to back), all
+    /// Traces `ray` over the candidate slices `ks` (front to back), all
     /// within the ray's slice range `[lo, hi]` (index order), which also bounds
     /// an iso hit's refinement.
     #[inline(always)]
-    pub fn trace<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
+    pub fn trace<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
         match self.mode {
-            Mode::Blend => self.trace_blend(v, p, q, ks),
-            Mode::Iso => self.trace_iso(v, p, q, ks, lo, hi),
+            Mode::Blend => self.trace_blend(v, ray, ks),
+            Mode::Iso => self.trace_iso(v, ray, ks, lo, hi),
         }
     }
 
     #[inline(always)]
-    fn trace_blend<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>) -> RayResult {
+    fn trace_blend<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>) -> RayResult {
         let mut acc = [0f32; 4];
         for k in ks {
             if terminated(acc[3], self.ert) {
                 break;
             }
-            let Some((ci, cj, wi, wj)) = self.locate(p, q, k) else {
+            let Some((ci, cj, wi, wj)) = ray.locate(self, k) else {
                 continue;
             };
             let d = self.sample(v, ci, cj, k, wi, wj);
@@ -307,6 +302,7 @@ impl<'a> RayContext<'a> {
             if alpha <= 0.0 {
                 continue;
             }
+            let alpha = ray.opacity(alpha);
             let c = self.classifier.classify(d);
             composite(&mut acc, self.shade_sample(v, [c.r, c.g, c.b], ci, cj, k, wi, wj), alpha);
         }
@@ -314,14 +310,14 @@ impl<'a> RayContext<'a> {
     }
 
     #[inline(always)]
-    fn trace_iso<V: Cells>(&self, v: &V, p: i32, q: i32, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
+    fn trace_iso<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
         for k in ks {
-            let Some((ci, cj, wi, wj)) = self.locate(p, q, k) else {
+            let Some((ci, cj, wi, wj)) = ray.locate(self, k) else {
                 continue;
             };
             let d = self.sample(v, ci, cj, k, wi, wj);
             if d >= self.iso {
-                return self.iso_hit(v, p, q, k, ci, cj, wi, wj, d, lo, hi);
+                return self.iso_hit(v, ray, k, ci, cj, wi, wj, d, lo, hi);
             }
         }
         MISS
@@ -337,11 +333,10 @@ impl<'a> RayContext<'a> {
     /// shades it.
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
-    fn iso_hit<V: Cells>(
+    fn iso_hit<V: Cells, R: Ray>(
         &self,
         v: &V,
-        p: i32,
-        q: i32,
+        ray: R,
         k: usize,
         ci: usize,
         cj: usize,
@@ -354,7 +349,7 @@ impl<'a> RayContext<'a> {
         // the sample before the hit, when it is below the iso value: the surface
         // crosses between the two slices at fraction t
         let before = self.prev_slice(k, lo, hi).and_then(|kp| {
-            let (pi, pj, pwi, pwj) = self.locate(p, q, kp)?;
+            let (pi, pj, pwi, pwj) = ray.locate(self, kp)?;
             let dp = self.sample(v, pi, pj, kp, pwi, pwj);
             (dp < self.iso).then(|| (kp, ((self.iso - dp) / (d - dp)).clamp(0.0, 1.0), (pi, pj, pwi, pwj)))
         });
@@ -382,7 +377,76 @@ impl<'a> RayContext<'a> {
     }
 }
 
-/// Rays of `rect` of the intermediate image through the sheared mask: each ray
+/// Where a ray samples: the cell and in-cell weights of its sample in slice `k`
+/// (`None` outside the volume), read from the plan's sample map, and the
+/// correction of a sample's opacity to the ray's own spacing. One trace loop
+/// serves every kind of map: [`GridRay`] for translated slices
+/// ([`MapKind::Translate`]), [`ScaledRay`] for scaled ones
+/// ([`MapKind::ScaleTranslate`]: perspective, or another pixel pitch).
+pub trait Ray: Copy {
+    fn locate(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)>;
+    /// The opacity `alpha` (corrected to the plan's uniform spacing) corrected
+    /// to this ray's spacing.
+    fn opacity(&self, alpha: f32) -> f32;
+}
+
+/// The ray of intermediate pixel `(p, q)` of a translated plan: its sample in
+/// slice `k` is in cell `(p, q) − pad + floor(trans[k])`, at the slice's weights.
+#[derive(Clone, Copy, Debug)]
+pub struct GridRay {
+    pub p: i32,
+    pub q: i32,
+}
+
+impl Ray for GridRay {
+    #[inline(always)]
+    fn locate(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)> {
+        let s = ctx.maps[k];
+        let ci = self.p - ctx.pad + s.floor[0];
+        let cj = self.q - ctx.pad + s.floor[1];
+        if (ci as u32) < ctx.cells[0] && (cj as u32) < ctx.cells[1] {
+            Some((ci as usize, cj as usize, s.weight[0], s.weight[1]))
+        } else {
+            None
+        }
+    }
+    #[inline(always)]
+    fn opacity(&self, alpha: f32) -> f32 {
+        alpha
+    }
+}
+
+/// The ray through sheared point `at` of a scaled plan: its sample in slice `k`
+/// is at `σ_k · at + τ_k` ([`FramePlan::scaled`], the same numbers as
+/// [`FramePlan::cell_of`]); `e` is its opacity exponent
+/// ([`FramePlan::opacity_exponent`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ScaledRay {
+    pub at: [f64; 2],
+    pub e: f32,
+}
+
+impl Ray for ScaledRay {
+    #[inline(always)]
+    fn locate(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)> {
+        let m = &ctx.plan.scaled[k];
+        let (x, y) = (m.scale * self.at[0] + m.trans[0], m.scale * self.at[1] + m.trans[1]);
+        let (ci, cj) = (floor_i64(x), floor_i64(y));
+        if (ci as u64) < ctx.cells[0] as u64 && (cj as u64) < ctx.cells[1] as u64 {
+            Some((ci as usize, cj as usize, (x - ci as f64) as f32, (y - cj as f64) as f32))
+        } else {
+            None
+        }
+    }
+    #[inline(always)]
+    fn opacity(&self, alpha: f32) -> f32 {
+        correct_alpha(alpha, self.e)
+    }
+}
+
+/// Rays of `rect` of the intermediate image through the sheared mask (for a
+/// scaled plan, with its block occupancy up to date for `m`:
+/// [`BinaryMask::update_occupancy`]): each ray
 /// reads its (super) column and visits only the slices whose code `m` matches,
 /// in parallel over rows; marks `rect` valid. A row steps from super column to
 /// super column with a counter (no division per ray) and answers a ray whose
@@ -422,21 +486,122 @@ fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
-    let hw = search == Search::Bitscan && mask.cpu_level().has_avx2();
-    render_rows(rect, out, |q, p0, crow, drow| {
-        #[cfg(target_arch = "x86_64")]
-        if hw {
-            // SAFETY: `hw` is true only when the mask's CPU level has AVX2; a
-            // mask's level is always capped to at most `kernels::detected()`,
-            // which is `Avx2` only when `is_x86_feature_detected!` found lzcnt and
-            // bmi1 on this CPU at run time, which is all `binary_row_lzcnt`
-            // requires; its body is the safe `binary_row`.
-            unsafe { binary_row_lzcnt::<W, V, LIMITED>(ctx, v, mask, search, m, prefetch, q, p0, crow, drow) };
-            return;
+    match ctx.plan.kind {
+        MapKind::Translate => render_rows(rect, out, |q, p0, crow, drow| {
+            let mut src = Columns::new(ctx, mask, search, m, q, p0);
+            binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
+        }),
+        MapKind::ScaleTranslate => render_rows(rect, out, |q, p0, crow, drow| {
+            let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q };
+            binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
+        }),
+    }
+}
+
+/// One row of [`render_binary`], by the copy compiled for the CPU level.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn binary_row_dispatch<W: Word, V: Cells, const LIMITED: bool, S: RaySource>(
+    ctx: &RayContext,
+    v: &V,
+    mask: &BinaryMask<W>,
+    search: Search,
+    src: &mut S,
+    prefetch: bool,
+    q: usize,
+    p0: usize,
+    crow: &mut [[f32; 4]],
+    drow: &mut [f32],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if search == Search::Bitscan && mask.cpu_level().has_avx2() {
+        // SAFETY: the mask's CPU level has AVX2 here; a mask's level is always
+        // capped to at most `kernels::detected()`, which is `Avx2` only when
+        // `is_x86_feature_detected!` found lzcnt and bmi1 on this CPU at run
+        // time, which is all `binary_row_lzcnt` requires; its body is the safe
+        // `binary_row`.
+        unsafe { binary_row_lzcnt::<V, LIMITED, S>(ctx, v, src, prefetch, q, p0, crow, drow) };
+        return;
+    }
+    let _ = (mask, search);
+    binary_row::<V, LIMITED, S>(ctx, v, src, prefetch, q, p0, crow, drow);
+}
+
+/// Where a row of [`render_binary`] gets its rays, each with the walk over its
+/// candidate slices: the one place the two kinds of sample map differ.
+trait RaySource {
+    type Ray: Ray;
+    type Walk: Iterator<Item = usize>;
+    /// The ray of pixel `p` of the row (called for `p0, p0 + 1, …` in order)
+    /// and, unless it has no candidate, its walk and its first candidate (which
+    /// the walk will return first).
+    fn ray(&mut self, p: usize) -> (Self::Ray, Option<(Self::Walk, usize)>);
+}
+
+/// The rays of a translated plan: each reads one (super) column of the mask,
+/// stepping from column to column with a counter (no division per ray).
+struct Columns<'a, W: Word> {
+    ctx: &'a RayContext<'a>,
+    mask: &'a BinaryMask<W>,
+    search: Search,
+    m: &'a Matcher,
+    q: usize,
+    s: usize,
+    sp: usize,
+    left: usize,
+    sq: usize,
+}
+
+impl<'a, W: Word> Columns<'a, W> {
+    #[inline(always)]
+    fn new(ctx: &'a RayContext<'a>, mask: &'a BinaryMask<W>, search: Search, m: &'a Matcher, q: usize, p0: usize) -> Self {
+        let (sp, left) = mask.column_run(p0);
+        let sq = mask.ray_column(p0, q).1;
+        Columns { ctx, mask, search, m, q, s: mask.cell_size(), sp, left, sq }
+    }
+}
+
+impl<'a, W: Word> RaySource for Columns<'a, W> {
+    type Ray = GridRay;
+    type Walk = SetBits<'a, W>;
+    #[inline(always)]
+    fn ray(&mut self, p: usize) -> (GridRay, Option<(SetBits<'a, W>, usize)>) {
+        let mut it = SetBits::with_matcher(self.mask.row(self.sp, self.sq), self.ctx.ascending, self.search, self.m);
+        let walk = it.peek().map(|k0| (it, k0));
+        self.left -= 1;
+        if self.left == 0 {
+            self.sp += 1;
+            self.left = self.s;
         }
-        let _ = hw;
-        binary_row::<W, V, LIMITED>(ctx, v, mask, search, m, prefetch, q, p0, crow, drow);
-    });
+        (GridRay { p: p as i32, q: self.q as i32 }, walk)
+    }
+}
+
+/// The rays of a scaled plan: each walks across the mask's columns as it
+/// diverges from the direction the mask is sheared to ([`ColumnWalk`]), over
+/// its own slice range.
+struct Diverging<'a, W: Word> {
+    ctx: &'a RayContext<'a>,
+    mask: &'a BinaryMask<W>,
+    occ: &'a BlockOccupancy,
+    search: Search,
+    m: &'a Matcher,
+    q: usize,
+}
+
+impl<'a, W: Word> RaySource for Diverging<'a, W> {
+    type Ray = ScaledRay;
+    type Walk = ColumnWalk<'a, W>;
+    #[inline(always)]
+    fn ray(&mut self, p: usize) -> (ScaledRay, Option<(ColumnWalk<'a, W>, usize)>) {
+        let ray = self.ctx.scaled_ray(p, self.q);
+        let plan = self.ctx.plan;
+        let [lo, hi] = plan.ray_range(p, self.q);
+        let mut it =
+            ColumnWalk::new(self.mask, self.occ, &plan.shear, &plan.scaled, ray.at, lo, hi, self.ctx.ascending, self.search, self.m);
+        let walk = it.peek().map(|k0| (it, k0));
+        (ray, walk)
+    }
 }
 
 /// Rays per prefetch group of [`render_binary`]: enough misses in flight to
@@ -469,65 +634,64 @@ impl<I: Iterator<Item = usize>> Iterator for Clip<I> {
     }
 }
 
-/// Traces ray `(p, q)` over candidates `ks`: the whole stack, or (`LIMITED`)
-/// clipped to the plan's range for the ray.
+/// Traces `ray` (of pixel `(p, q)`) over candidates `ks`: the whole stack, or
+/// (`LIMITED`) clipped to the plan's range for the ray.
 #[inline(always)]
-fn trace_ray<V: Cells, const LIMITED: bool>(ctx: &RayContext, v: &V, p: usize, q: usize, ks: impl Iterator<Item = usize>) -> RayResult {
+fn trace_ray<V: Cells, R: Ray, const LIMITED: bool>(
+    ctx: &RayContext,
+    v: &V,
+    ray: R,
+    p: usize,
+    q: usize,
+    ks: impl Iterator<Item = usize>,
+) -> RayResult {
     if LIMITED {
         let [lo, hi] = ctx.plan.ray_range(p, q);
         if lo > hi {
             return MISS;
         }
-        ctx.trace(v, p as i32, q as i32, Clip { it: ks, lo, hi, ascending: ctx.ascending }, lo, hi)
+        ctx.trace(v, ray, Clip { it: ks, lo, hi, ascending: ctx.ascending }, lo, hi)
     } else {
-        ctx.trace(v, p as i32, q as i32, ks, 0, ctx.stack.n[2] - 1)
+        ctx.trace(v, ray, ks, 0, ctx.stack.n[2] - 1)
     }
 }
 
-/// One row of [`render_binary`] (inlined into both compiled copies).
+/// One row of [`render_binary`] (inlined into both compiled copies): in groups
+/// of [`PREFETCH_GROUP`] rays, first every ray's first candidate (prefetched),
+/// then the walks.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn binary_row<W: Word, V: Cells, const LIMITED: bool>(
+fn binary_row<V: Cells, const LIMITED: bool, S: RaySource>(
     ctx: &RayContext,
     v: &V,
-    mask: &BinaryMask<W>,
-    search: Search,
-    m: &Matcher,
+    src: &mut S,
     prefetch: bool,
     q: usize,
     p0: usize,
     crow: &mut [[f32; 4]],
     drow: &mut [f32],
 ) {
-    let s = mask.cell_size();
-    let (mut sp, mut left) = mask.column_run(p0);
-    let sq = mask.ray_column(p0, q).1;
     // each ray's walk, positioned at its first candidate between the phases
-    let mut walks: [Option<SetBits<W>>; PREFETCH_GROUP] = std::array::from_fn(|_| None);
+    let mut walks: [Option<(S::Ray, S::Walk)>; PREFETCH_GROUP] = std::array::from_fn(|_| None);
     let mut last_line = usize::MAX;
     for (g, (cg, dg)) in crow.chunks_mut(PREFETCH_GROUP).zip(drow.chunks_mut(PREFETCH_GROUP)).enumerate() {
         let pg = p0 + g * PREFETCH_GROUP;
         // phase 1: the first candidate slice of every ray of the group (none for
         // an empty column), prefetched
         for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
-            let mut it = SetBits::with_matcher(mask.row(sp, sq), ctx.ascending, search, m);
-            *walk = it.peek().map(|k0| {
+            let (ray, w) = src.ray(pg + dp);
+            *walk = w.map(|(it, k0)| {
                 if prefetch {
-                    ctx.prefetch(v, (pg + dp) as i32, q as i32, k0, &mut last_line);
+                    ctx.prefetch(v, ray, k0, &mut last_line);
                 }
-                it
+                (ray, it)
             });
-            left -= 1;
-            if left == 0 {
-                sp += 1;
-                left = s;
-            }
         }
         // phase 2: the walks, from the first candidate on
         for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter_mut()).enumerate() {
             let res = match walk.take() {
                 None => MISS,
-                Some(walk) => trace_ray::<V, LIMITED>(ctx, v, pg + dp, q, walk),
+                Some((ray, walk)) => trace_ray::<V, _, LIMITED>(ctx, v, ray, pg + dp, q, walk),
             };
             *c = res.rgba;
             *d = res.depth;
@@ -542,37 +706,46 @@ fn binary_row<W: Word, V: Cells, const LIMITED: bool>(
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "lzcnt,bmi1")]
-unsafe fn binary_row_lzcnt<W: Word, V: Cells, const LIMITED: bool>(
+unsafe fn binary_row_lzcnt<V: Cells, const LIMITED: bool, S: RaySource>(
     ctx: &RayContext,
     v: &V,
-    mask: &BinaryMask<W>,
-    search: Search,
-    m: &Matcher,
+    src: &mut S,
     prefetch: bool,
     q: usize,
     p0: usize,
     crow: &mut [[f32; 4]],
     drow: &mut [f32],
 ) {
-    binary_row::<W, V, LIMITED>(ctx, v, mask, search, m, prefetch, q, p0, crow, drow)
+    binary_row::<V, LIMITED, S>(ctx, v, src, prefetch, q, p0, crow, drow)
 }
 
 /// The brute-force reference: every slice of every ray of `rect` (within the
-/// plan's slice range and ray limits), no mask.
+/// plan's slice range and ray limits), no mask, with the same rays as
+/// [`render_binary`] (the plan's sample maps, either kind).
 pub fn render_brute(ctx: &RayContext, rect: Option<Rect>, out: &mut Intermediate) {
-    with_cells!(ctx, |v| brute_rows(ctx, &v, rect, out))
+    with_cells!(ctx, |v| match ctx.plan.kind {
+        MapKind::Translate => brute_rows(ctx, &v, rect, out, |p, q| GridRay { p: p as i32, q: q as i32 }),
+        MapKind::ScaleTranslate => brute_rows(ctx, &v, rect, out, |p, q| ctx.scaled_ray(p, q)),
+    })
 }
 
-/// [`render_brute`] for one cell layout.
-fn brute_rows<V: Cells>(ctx: &RayContext, v: &V, rect: Option<Rect>, out: &mut Intermediate) {
+/// [`render_brute`] for one cell layout and kind of ray.
+fn brute_rows<V: Cells, R: Ray>(
+    ctx: &RayContext,
+    v: &V,
+    rect: Option<Rect>,
+    out: &mut Intermediate,
+    ray: impl Fn(usize, usize) -> R + Sync,
+) {
     render_rows(rect, out, |q, p0, crow, drow| {
         for (dp, (c, d)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
             let p = p0 + dp;
             let [lo, hi] = ctx.plan.ray_range(p, q);
+            let r = ray(p, q);
             let res = match (lo <= hi, ctx.ascending) {
                 (false, _) => MISS,
-                (true, true) => ctx.trace(v, p as i32, q as i32, lo..=hi, lo, hi),
-                (true, false) => ctx.trace(v, p as i32, q as i32, (lo..=hi).rev(), lo, hi),
+                (true, true) => ctx.trace(v, r, lo..=hi, lo, hi),
+                (true, false) => ctx.trace(v, r, (lo..=hi).rev(), lo, hi),
             };
             *c = res.rgba;
             *d = res.depth;
@@ -612,4 +785,125 @@ pub fn volume_rect(plan: &FramePlan, cells: [usize; 2]) -> Option<Rect> {
     let (p0, p1) = span(0);
     let (q0, q1) = span(1);
     Some(Rect { p0, p1, q0, q1 })
+}
+
+/// The rays of a scaled plan ([`MapKind::ScaleTranslate`]) that can meet an
+/// occupied cell of `mask` (of a volume of `cells` cells per slice): the
+/// pixels whose samples fall in some composited slice's box of non-zero codes
+/// ([`BinaryMask::slice_cells`]). The scaled counterpart of
+/// [`BinaryMask::occupied_rays`]; every other ray's walk would find nothing.
+pub fn occupied_scaled_rays<W: Word>(plan: &FramePlan, mask: &BinaryMask<W>, cells: [usize; 2]) -> Option<Rect> {
+    let grid = plan.grid.size;
+    if cells[0] == 0 || cells[1] == 0 || grid[0] == 0 || grid[1] == 0 {
+        return None;
+    }
+    let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
+    'slices: for k in plan.front_to_back() {
+        let Some([i0, i1, j0, j1]) = mask.slice_cells(k) else { continue };
+        let c = [[i0.max(0), i1.min(cells[0] as i64 - 1)], [j0.max(0), j1.min(cells[1] as i64 - 1)]];
+        let mut x = [[0i64; 2]; 2];
+        for a in 0..2 {
+            x[a] = plan.pixels_of_cells(k, a, c[a][0], c[a][1]);
+            if c[a][0] > c[a][1] || x[a][0] > x[a][1] {
+                continue 'slices;
+            }
+        }
+        for a in 0..2 {
+            lo[a] = lo[a].min(x[a][0]);
+            hi[a] = hi[a].max(x[a][1]);
+        }
+    }
+    let (p0, q0) = (lo[0].max(0), lo[1].max(0));
+    let (p1, q1) = (hi[0].min(grid[0] as i64 - 1), hi[1].min(grid[1] as i64 - 1));
+    if p0 > p1 || q0 > q1 {
+        return None;
+    }
+    Some(Rect { p0: p0 as usize, p1: p1 as usize, q0: q0 as usize, q1: q1 as usize })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classify::TransferFunction;
+    use crate::data::volume::Volume;
+    use crate::encode::depth::binary_matcher;
+    use crate::encode::mask::CellCodes;
+    use crate::view::plan::ScaledMap;
+    use crate::view::{Camera, Factorization};
+    use glam::DMat3;
+
+    /// A parallel plan turned into a scaled one at another pixel pitch (the
+    /// adaptive intermediate image size): `pitch` voxels per pixel, slice `k`
+    /// sampled at `sigma · (a, b) + trans[k]`.
+    fn rescaled(mut plan: FramePlan, pitch: f64, sigma: f64) -> FramePlan {
+        let g = plan.grid;
+        let f = 1.0 / (pitch * sigma);
+        plan.grid.pitch = pitch;
+        plan.grid.pad = (g.pad as f64 * f).ceil() as usize;
+        plan.grid.size = g.size.map(|x| (x as f64 * f).ceil() as usize + 2);
+        plan.kind = MapKind::ScaleTranslate;
+        plan.scaled =
+            (0..plan.slices()).map(|k| ScaledMap { scale: sigma, trans: [plan.shear.trans[0][k], plan.shear.trans[1][k]] }).collect();
+        plan
+    }
+
+    /// The binary walk reads any scaled plan: a parallel view at 2 pixels per
+    /// voxel, at 0.75, and with a uniform slice scale, renders the brute
+    /// force's image bit for bit (blend and iso, cell sizes 1 and 2, u32 and u64).
+    #[test]
+    fn uniform_scale_parallel_plan_binary_equals_brute_force() {
+        let dims = [19, 17, 41];
+        let vol = Volume::from_fn(dims, [1.0; 3], |x, y, z| {
+            let d = ((x as f32 - 9.0).powi(2) + (y as f32 - 8.0).powi(2) + (z as f32 - 20.0).powi(2)).sqrt();
+            (200.0 * (1.0 - d / 9.0)).max(0.0) + if (x * 7 + y * 3 + z * 5) % 23 == 0 { 90.0 } else { 0.0 }
+        })
+        .unwrap();
+        let tf = TransferFunction::ramp(40.0, 160.0, 0.5, [0.9, 0.7, 0.5]);
+        let (lo, hi) = vol.value_range();
+        let cls = Classifier::new(&tf, lo, hi);
+        let mut checked = 0;
+        for (i, r) in [DMat3::from_euler(glam::EulerRot::XYZ, 0.3, -0.4, 0.2), DMat3::from_euler(glam::EulerRot::XYZ, 1.9, 0.5, -0.3)]
+            .into_iter()
+            .enumerate()
+        {
+            let f = Factorization::new(&Camera::new(r, [64, 64]), dims, [1.0; 3]).unwrap();
+            let stack = SliceStack::new(&vol, f.axis);
+            let base = FramePlan::parallel(&f, [1.0; 3]);
+            for (pitch, sigma) in [(0.5, 1.0), (1.0 / 0.75, 1.0), (1.0, 0.8)] {
+                let plan = rescaled(base.clone(), pitch, sigma);
+                for mode in [Mode::Blend, Mode::Iso] {
+                    let iso = 100.0;
+                    let ctx = RayContext::new(&stack, &cls, &plan, mode, iso, Shading::default(), 0.95);
+                    let visible = |_: f32, h: f32| if mode == Mode::Iso { h >= iso } else { h > 39.0 };
+                    let codes = CellCodes::binary(&stack, visible);
+                    let rect = volume_rect(&plan, stack.cells());
+                    let mut want = Intermediate::default();
+                    want.prepare(plan.grid.size);
+                    render_brute(&ctx, rect, &mut want);
+                    for s in [1, 2] {
+                        let mut got = Intermediate::default();
+                        got.prepare(plan.grid.size);
+                        if (i + s) % 2 == 0 {
+                            let mut mask = BinaryMask::<u64>::from_codes(&codes, s);
+                            mask.shear_to(&plan.shear);
+                            mask.update_occupancy(binary_matcher(), &plan.shear);
+                            render_binary(&ctx, &mask, Search::Bitscan, binary_matcher(), true, rect, &mut got);
+                        } else {
+                            let mut mask = BinaryMask::<u32>::from_codes(&codes, s);
+                            mask.shear_to(&plan.shear);
+                            mask.update_occupancy(binary_matcher(), &plan.shear);
+                            render_binary(&ctx, &mask, Search::Bitscan, binary_matcher(), true, rect, &mut got);
+                        }
+                        let bits = |x: &Intermediate| {
+                            x.rgba.iter().flatten().map(|v| v.to_bits()).chain(x.depth.iter().map(|v| v.to_bits())).collect::<Vec<u32>>()
+                        };
+                        assert_eq!(bits(&got), bits(&want), "view {i} pitch {pitch} sigma {sigma} {mode:?} cell {s}");
+                        assert!(want.rgba.iter().any(|p| p[3] > 0.0));
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(checked, 24);
+    }
 }

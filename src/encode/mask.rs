@@ -120,6 +120,9 @@ pub struct BinaryMask<W: Word> {
     /// Scratch of a fused step along j: old row q − 2, and a row of zeros.
     row_buf2: Vec<W>,
     zero_row: Vec<W>,
+    /// The block occupancy of the last scaled frame ([`BinaryMask::update_occupancy`]),
+    /// its tables reused across frames.
+    occupancy: crate::encode::walk::BlockOccupancy,
 }
 
 /// Runs `$fixed` with the constant `$n` bound to the column length `$nw` when it
@@ -203,6 +206,7 @@ impl<W: Word> BinaryMask<W> {
             moves: std::array::from_fn(|_| vec![W::ZERO; nw]),
             row_buf2: vec![W::ZERO; grid[0] * nw],
             zero_row: vec![W::ZERO; grid[0] * nw],
+            occupancy: Default::default(),
         };
         m.scatter();
         m
@@ -307,6 +311,14 @@ impl<W: Word> BinaryMask<W> {
     /// True when the unsheared super cell has a non-zero code.
     pub fn cell(&self, si: usize, sj: usize, k: usize) -> bool {
         self.code(si, sj, k) != 0
+    }
+    /// The cells `[ci0, ci1, cj0, cj1]` of slice `k` that may have a non-zero
+    /// code (a super cell's span, so possibly reaching past the volume's
+    /// cells), or `None` when the slice has none.
+    pub fn slice_cells(&self, k: usize) -> Option<[i64; 4]> {
+        let s = self.s as i64;
+        self.bbox[k]
+            .map(|[i0, i1, j0, j1]| [s * i0 as i64 - (s - 1), s * i1 as i64 + s - 1, s * j0 as i64 - (s - 1), s * j1 as i64 + s - 1])
     }
     /// Current super offsets `F[k]` of each slice along i and j.
     pub fn floors(&self) -> [Vec<i32>; 2] {
@@ -630,6 +642,20 @@ impl<W: Word> BinaryMask<W> {
                 unreachable!("fused steps only for columns of 1 to 4 words"), [1 2 3 4]);
         }
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
+    }
+
+    /// Rebuilds the block occupancy of the mask, sheared to `state`, for
+    /// matcher `m` (what the walks of a scaled plan's rays read: see
+    /// [`crate::encode::walk`]), reusing its tables.
+    pub fn update_occupancy(&mut self, m: &crate::encode::depth::Matcher, state: &ShearState) {
+        let mut occ = std::mem::take(&mut self.occupancy);
+        occ.build(self, m, state);
+        self.occupancy = occ;
+    }
+
+    /// The block occupancy last built by [`BinaryMask::update_occupancy`].
+    pub fn occupancy(&self) -> &crate::encode::walk::BlockOccupancy {
+        &self.occupancy
     }
 
     /// One paper-style rotation step of `state` (see [`ShearState::rotated`]):

@@ -17,3 +17,4 @@ pub mod mask;
 pub mod rle;
 pub mod shear;
 pub mod shift;
+pub mod walk;

@@ -70,8 +70,7 @@ pub struct ViewCmd {
     /// Adaptive intermediate image size: while the view is dragged, the
     /// preview's resolution (0.25–1 pixels per voxel) follows this frame rate
     /// (Schulze et al.: q · sqrt(target / measured), with hysteresis); the frame
-    /// on release renders at --quality (at least 1). 1..=1000. Takes effect on
-    /// the paths that resample their intermediate image (--method rle).
+    /// on release renders at --quality (at least 1). 1..=1000.
     #[arg(long, value_name = "FPS")]
     pub target_fps: Option<f64>,
 }

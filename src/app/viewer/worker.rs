@@ -20,7 +20,7 @@ use super::state::{Class, Kind, Plane, Spec};
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
-use shearwarp::render::{Footprint, FrameStats, Method, Renderer, Settings};
+use shearwarp::render::{Footprint, FrameStats, Renderer, Settings};
 use shearwarp::view::Projection;
 use shearwarp::view::clip::{ClipPlane, ClipPlanes};
 use shearwarp::warp::{Canvas, Image8, Texel};
@@ -238,14 +238,10 @@ impl Renderers {
         Ok(st)
     }
 
-    /// The intermediate image size a frame asking for `q` renders at: `q` on
-    /// the paths that resample their intermediate image, 1 on the binary
-    /// rotator and its brute force (which do not yet).
+    /// The intermediate image size a frame asking for `q` renders at (every
+    /// path resamples its intermediate image).
     pub fn quality_for(&self, q: f64) -> f64 {
-        match self.tissues.settings().method {
-            Method::Binary | Method::Brute => 1.0,
-            _ => q,
-        }
+        q
     }
 
     /// Builds the mask of one stale principal axis of the current renderer, if

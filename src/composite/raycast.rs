@@ -536,6 +536,9 @@ trait RaySource {
     /// and, unless it has no candidate, its walk and its first candidate (which
     /// the walk will return first).
     fn ray(&mut self, p: usize) -> (Self::Ray, Option<(Self::Walk, usize)>);
+    /// The ray of pixel `p` again (cheap: kept out of the walks between a
+    /// group's two phases, which would only move it around).
+    fn ray_of(&self, p: usize) -> Self::Ray;
 }
 
 /// The rays of a translated plan: each reads one (super) column of the mask,
@@ -567,13 +570,20 @@ impl<'a, W: Word> RaySource for Columns<'a, W> {
     #[inline(always)]
     fn ray(&mut self, p: usize) -> (GridRay, Option<(SetBits<'a, W>, usize)>) {
         let mut it = SetBits::with_matcher(self.mask.row(self.sp, self.sq), self.ctx.ascending, self.search, self.m);
-        let walk = it.peek().map(|k0| (it, k0));
+        let walk = match it.peek() {
+            Some(k0) => Some((it, k0)),
+            None => None,
+        };
         self.left -= 1;
         if self.left == 0 {
             self.sp += 1;
             self.left = self.s;
         }
         (GridRay { p: p as i32, q: self.q as i32 }, walk)
+    }
+    #[inline(always)]
+    fn ray_of(&self, p: usize) -> GridRay {
+        GridRay { p: p as i32, q: self.q as i32 }
     }
 }
 
@@ -599,8 +609,15 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
         let [lo, hi] = plan.ray_range(p, self.q);
         let mut it =
             ColumnWalk::new(self.mask, self.occ, &plan.shear, &plan.scaled, ray.at, lo, hi, self.ctx.ascending, self.search, self.m);
-        let walk = it.peek().map(|k0| (it, k0));
+        let walk = match it.peek() {
+            Some(k0) => Some((it, k0)),
+            None => None,
+        };
         (ray, walk)
+    }
+    #[inline(always)]
+    fn ray_of(&self, p: usize) -> ScaledRay {
+        self.ctx.scaled_ray(p, self.q)
     }
 }
 
@@ -672,26 +689,31 @@ fn binary_row<V: Cells, const LIMITED: bool, S: RaySource>(
     drow: &mut [f32],
 ) {
     // each ray's walk, positioned at its first candidate between the phases
-    let mut walks: [Option<(S::Ray, S::Walk)>; PREFETCH_GROUP] = std::array::from_fn(|_| None);
+    let mut walks: [Option<S::Walk>; PREFETCH_GROUP] = std::array::from_fn(|_| None);
     let mut last_line = usize::MAX;
     for (g, (cg, dg)) in crow.chunks_mut(PREFETCH_GROUP).zip(drow.chunks_mut(PREFETCH_GROUP)).enumerate() {
         let pg = p0 + g * PREFETCH_GROUP;
         // phase 1: the first candidate slice of every ray of the group (none for
         // an empty column), prefetched
         for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
+            // (a match, not a closure: the walk's bit scans must stay inside
+            // this function, compiled for the CPU level of its caller)
             let (ray, w) = src.ray(pg + dp);
-            *walk = w.map(|(it, k0)| {
-                if prefetch {
-                    ctx.prefetch(v, ray, k0, &mut last_line);
+            *walk = match w {
+                Some((it, k0)) => {
+                    if prefetch {
+                        ctx.prefetch(v, ray, k0, &mut last_line);
+                    }
+                    Some(it)
                 }
-                (ray, it)
-            });
+                None => None,
+            };
         }
         // phase 2: the walks, from the first candidate on
         for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter_mut()).enumerate() {
             let res = match walk.take() {
                 None => MISS,
-                Some((ray, walk)) => trace_ray::<V, _, LIMITED>(ctx, v, ray, pg + dp, q, walk),
+                Some(walk) => trace_ray::<V, _, LIMITED>(ctx, v, src.ray_of(pg + dp), pg + dp, q, walk),
             };
             *c = res.rgba;
             *d = res.depth;

@@ -30,7 +30,7 @@ use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, PackedCodes, ShearWor
 use crate::encode::rle::{ClassKey, RleCache};
 use crate::error::{Error, Result};
 use crate::memory::Memory;
-use crate::view::plan::{FramePlan, Grid, Limiter, MapKind};
+use crate::view::plan::{FramePlan, Grid, Limiter, MapKind, RayLimits};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::{Canvas, Owned, Texel, clear_for_pyramids, warp, warp_owned};
 
@@ -1039,21 +1039,9 @@ impl Renderer {
         let limits = plan.take_limits();
         match &persp {
             None => plan.set_parallel(&f, spacing),
-            Some((_, pv)) => {
-                plan.set_perspective(pv, &f, spacing, NEAR_SLICES);
-                // iso opacities are 0 or 1: never corrected
-                plan.set_ray_opacity(self.settings.mode == Mode::Blend);
-            }
+            Some((_, pv)) => plan.set_perspective(pv, &f, spacing, NEAR_SLICES),
         }
-        if self.quality != 1.0 {
-            // the adaptive image size: the same rays, resampled at another pitch
-            plan.set_pitch(1.0 / self.quality);
-        }
-        plan.set_box_footprint(self.settings.footprint == Footprint::Box);
-        if let Some((l, _)) = &self.limiter {
-            // on the renderer's pool: a limiter may work in parallel
-            self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
-        }
+        self.finish_plan(&mut plan, limits);
         self.last_split = false;
         let result = self.composite_plan(&plan, &mut stats, |inter: &Intermediate| {
             out.prepare(camera.size[0], camera.size[1]);
@@ -1062,6 +1050,24 @@ impl Renderer {
         self.plan = Some(plan);
         result?;
         Ok(self.finish_frame(key, out, stats))
+    }
+
+    /// What every plan takes after its projection's producer made it (one
+    /// place for the plain frame and each pyramid of a split one): each ray's
+    /// opacity correction in blend mode (iso opacities are 0 or 1: never
+    /// corrected), the adaptive image size (the same rays resampled at
+    /// another pitch), the footprint of minified slices, and the limiter's ray
+    /// limits (on the renderer's pool: a limiter may work in parallel), into
+    /// `limits`, the buffer the plan held before.
+    fn finish_plan(&self, plan: &mut FramePlan, limits: Option<RayLimits>) {
+        plan.set_ray_opacity(self.settings.mode == Mode::Blend);
+        if self.quality != 1.0 {
+            plan.set_pitch(1.0 / self.quality);
+        }
+        plan.set_box_footprint(self.settings.footprint == Footprint::Box);
+        if let Some((l, _)) = &self.limiter {
+            self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
+        }
     }
 
     /// Stamps `out` as this frame's image (see [`Renderer::render`]'s skip).
@@ -1108,14 +1114,7 @@ impl Renderer {
                 let plan = &mut plans[i];
                 let limits = plan.take_limits();
                 plan.set_perspective(pv, &f, spacing, NEAR_SLICES);
-                plan.set_ray_opacity(self.settings.mode == Mode::Blend);
-                if self.quality != 1.0 {
-                    plan.set_pitch(1.0 / self.quality);
-                }
-                plan.set_box_footprint(self.settings.footprint == Footprint::Box);
-                if let Some((l, _)) = &self.limiter {
-                    self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
-                }
+                self.finish_plan(plan, limits);
                 let plan = &plans[i];
                 let owned = Owned { rays, pyramid: (pv.axis, pv.ascending) };
                 self.composite_plan(plan, &mut stats, |inter: &Intermediate| warp_owned(inter, plan, out, &owned))

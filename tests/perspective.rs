@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::blobs;
+use common::{bits, blobs, render, renderer};
 use glam::{DMat3, EulerRot};
 use shearwarp::accuracy::metrics::{max_abs_error, rmse};
 use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
@@ -18,23 +18,6 @@ use shearwarp::data::volume::Volume;
 use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::{Camera, Projection, rotate_eye};
 use shearwarp::warp::Image;
-
-fn renderer(vol: &Volume, tf: &TransferFunction, method: Method, mode: Mode, projection: Projection) -> Renderer {
-    let s = Settings { method, mode, threads: 2, ..Settings::default() };
-    let mut r = Renderer::new(vol.clone(), tf, s).unwrap();
-    r.set_projection(projection).unwrap();
-    r
-}
-
-fn render(r: &mut Renderer, cam: &Camera) -> Image {
-    let mut img = Image::new(cam.size[0], cam.size[1]);
-    r.render(cam, &mut img).unwrap();
-    img
-}
-
-fn bits(img: &Image) -> Vec<u32> {
-    img.data.iter().flatten().map(|x| x.to_bits()).collect()
-}
 
 /// The accelerated RLE path equals its brute force bit for bit under
 /// perspective, over random volumes, rotations, fields of view and eye

@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::blobs;
+use common::{bits, blobs};
 use glam::{DMat3, EulerRot};
 use shearwarp::accuracy::metrics::{max_abs_error, rmse};
 use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
@@ -20,10 +20,6 @@ use shearwarp::data::volume::Volume;
 use shearwarp::render::{Method, Renderer, Settings, WordSize};
 use shearwarp::view::{Camera, Projection, rotate_eye};
 use shearwarp::warp::Image;
-
-fn bits(img: &Image) -> Vec<u32> {
-    img.data.iter().flatten().map(|x| x.to_bits()).collect()
-}
 
 fn try_render(r: &mut Renderer, cam: &Camera) -> Option<Image> {
     let mut img = Image::new(cam.size[0], cam.size[1]);

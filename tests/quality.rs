@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::blobs;
+use common::{bits, blobs, render};
 use glam::{DMat3, EulerRot};
 use shearwarp::accuracy::metrics::rmse;
 use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
@@ -17,24 +17,12 @@ use shearwarp::data::phantom::{self, SPHERE_ISO};
 use shearwarp::data::volume::Volume;
 use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::{Camera, Projection, rotate_eye};
-use shearwarp::warp::Image;
 
+/// [`common::renderer`] at `q` intermediate pixels per voxel.
 fn renderer(vol: &Volume, tf: &TransferFunction, method: Method, mode: Mode, projection: Projection, q: f64) -> Renderer {
-    let s = Settings { method, mode, threads: 2, ..Settings::default() };
-    let mut r = Renderer::new(vol.clone(), tf, s).unwrap();
-    r.set_projection(projection).unwrap();
+    let mut r = common::renderer(vol, tf, method, mode, projection);
     r.set_quality(q).unwrap();
     r
-}
-
-fn render(r: &mut Renderer, cam: &Camera) -> Image {
-    let mut img = Image::new(cam.size[0], cam.size[1]);
-    r.render(cam, &mut img).unwrap();
-    img
-}
-
-fn bits(img: &Image) -> Vec<u32> {
-    img.data.iter().flatten().map(|x| x.to_bits()).collect()
 }
 
 /// Accelerated RLE equals its brute force bit for bit at every quality, in

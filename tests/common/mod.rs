@@ -2,7 +2,33 @@
 //! some of them.
 #![allow(dead_code)]
 
+use shearwarp::classify::TransferFunction;
+use shearwarp::composite::Mode;
 use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::render::{Method, Renderer, Settings};
+use shearwarp::view::{Camera, Projection};
+use shearwarp::warp::Image;
+
+/// A renderer of `vol` with one transfer function, `method` and `mode` on two
+/// threads, in `projection`.
+pub fn renderer(vol: &Volume, tf: &TransferFunction, method: Method, mode: Mode, projection: Projection) -> Renderer {
+    let s = Settings { method, mode, threads: 2, ..Settings::default() };
+    let mut r = Renderer::new(vol.clone(), tf, s).unwrap();
+    r.set_projection(projection).unwrap();
+    r
+}
+
+/// One frame of `cam` into a new image.
+pub fn render(r: &mut Renderer, cam: &Camera) -> Image {
+    let mut img = Image::new(cam.size[0], cam.size[1]);
+    r.render(cam, &mut img).unwrap();
+    img
+}
+
+/// The image's bits (for bit-for-bit comparisons).
+pub fn bits(img: &Image) -> Vec<u32> {
+    img.data.iter().flatten().map(|x| x.to_bits()).collect()
+}
 
 /// Four blobs plus sparse noise, with voxel `spacing`: a small volume with
 /// soft and hard edges for the accuracy tests.

@@ -107,7 +107,11 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
         cell: settings.cell,
         drag_speed: cmd.drag_speed,
         projection,
-        adaptive: Adaptive::new(cmd.target_fps, cmd.render.quality()?.unwrap_or(1.0)),
+        adaptive: {
+            let mut a = Adaptive::new(cmd.target_fps, cmd.render.quality()?.unwrap_or(1.0));
+            a.fixed_in_parallel = matches!(settings.method, shearwarp::render::Method::Binary | shearwarp::render::Method::Brute);
+            a
+        },
         diagonal_mm: (0..3).map(|a| ((d[a].max(1) - 1) as f64 * spacing[a] as f64).powi(2)).sum::<f64>().sqrt(),
     });
     let mut app = App {
@@ -318,7 +322,7 @@ impl App {
         if matches!(self.state.drag, Some(Drag::Rotate { .. })) {
             self.meter.record(Instant::now(), f.spec.camera.rotation);
             // the adaptive image size follows the previews' cost while dragging
-            if f.kind == Kind::Preview && !f.stats.skipped && self.state.adaptive.measured(f.quality, f.total_ms) {
+            if f.kind == Kind::Preview && !f.stats.skipped && self.state.adapts() && self.state.adaptive.measured(f.quality, f.total_ms) {
                 self.log(format!("quality {} px/voxel while moving", self.state.adaptive.moving));
             }
         }

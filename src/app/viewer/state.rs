@@ -102,6 +102,10 @@ pub struct Adaptive {
     pub moving: f64,
     /// The quality of a still view (≥ 1).
     pub still: f64,
+    /// No adaptation in the parallel projection: the preview's path there
+    /// (the binary rotator's translated rays) is fastest at one pixel per
+    /// voxel — at another pitch its rays take the slower diverging walk.
+    pub fixed_in_parallel: bool,
     /// Frame times (ms) measured at `moving` since it last changed (the last
     /// [`Adaptive::WINDOW`]).
     times: [f64; Adaptive::WINDOW],
@@ -122,7 +126,14 @@ impl Adaptive {
     pub fn new(target_fps: Option<f64>, quality: f64) -> Self {
         let still = quality.clamp(1.0, MAX_QUALITY);
         let moving = if target_fps.is_some() { 1.0 } else { quality.clamp(MIN_QUALITY, MAX_QUALITY) };
-        Adaptive { target_ms: target_fps.map(|f| 1000.0 / f), moving, still, times: [0.0; Self::WINDOW], count: 0 }
+        Adaptive {
+            target_ms: target_fps.map(|f| 1000.0 / f),
+            moving,
+            still,
+            fixed_in_parallel: false,
+            times: [0.0; Self::WINDOW],
+            count: 0,
+        }
     }
 
     /// Takes the frame time `ms` of a preview rendered at quality `q` while
@@ -337,7 +348,7 @@ impl State {
 
     /// The frame the current state asks for.
     pub fn spec(&self) -> Spec {
-        let quality = if self.drag.is_some() { self.adaptive.moving } else { self.adaptive.still };
+        let quality = if self.drag.is_some() && self.adapts() { self.adaptive.moving } else { self.adaptive.still };
         Spec {
             seq: self.seq,
             camera: self.camera(),
@@ -347,6 +358,12 @@ impl State {
             quality,
             clip: self.clip,
         }
+    }
+
+    /// Whether the preview's quality follows the frame rate now (not in the
+    /// parallel projection when [`Adaptive::fixed_in_parallel`]).
+    pub fn adapts(&self) -> bool {
+        !(self.adaptive.fixed_in_parallel && !self.projection.is_perspective())
     }
 
     /// The current camera.
@@ -692,12 +709,12 @@ impl State {
                 l.push(format!("{f:.2} ms/frame = shear {:.2} + render {:.2} + warp {:.2}", s.shear_ms, s.render_ms, s.warp_ms));
                 l.push(format!("{fps:.0} fps max; drag: {:.0} fps shown, {:.0} deg/s", hud.fps, hud.degps));
                 if let Some(t) = self.adaptive.target_ms {
-                    l.push(format!(
-                        "target {:.0} fps: {} px/voxel moving, {} still",
-                        1000.0 / t,
-                        self.adaptive.moving,
-                        self.adaptive.still
-                    ));
+                    l.push(match self.adapts() {
+                        true => {
+                            format!("target {:.0} fps: {} px/voxel moving, {} still", 1000.0 / t, self.adaptive.moving, self.adaptive.still)
+                        }
+                        false => format!("target {:.0} fps: 1 px/voxel in parallel (fastest there)", 1000.0 / t),
+                    });
                 }
                 let axis = if *switched { " (axis switch)" } else { "" };
                 l.push(format!("axis {}{axis}, {}", AXES[s.axis.min(2)], shear_summary(s)));
@@ -857,6 +874,16 @@ mod tests {
         assert!(s.seq > seq, "the release renders again");
         assert_eq!(s.spec().quality, 1.0);
         assert!(matches!(s.requests()[..], [Request::Preview(Spec { quality: 1.0, .. }), ..]));
+        // the binary rotator's parallel preview stays at one pixel per voxel
+        // (its translated rays are fastest there); in perspective it adapts
+        s.adaptive.fixed_in_parallel = true;
+        s.handle(Input::Press { x: 200.0, y: 200.0 });
+        s.handle(Input::Move { x: 220.0, y: 200.0 });
+        assert!(!s.adapts());
+        assert_eq!(s.spec().quality, 1.0);
+        s.handle(Input::Key(Key::ToggleProjection));
+        assert!(s.adapts());
+        assert_eq!(s.spec().quality, 0.5);
     }
 
     /// C places a plane through the centre facing the viewer (the near half

@@ -6,7 +6,9 @@
 //!   rectangle ([`mask`]), kept sheared per view by one-bit, fused two-bit or
 //!   direct shears ([`shear`]: translation arrays and shift vectors; [`shift`]:
 //!   the shift kernels, plain and AVX2), and searched along depth for candidate
-//!   slices ([`depth`]: byte LUTs and bit scans over 1/2/4-bit codes);
+//!   slices ([`depth`]: byte LUTs and bit scans over 1/2/4-bit codes), and
+//!   walked by rays that diverge from the direction it is sheared to
+//!   (perspective, another pixel pitch: [`walk`]);
 //! - Lacroute's run-length encoding of the pre-classified volume per principal
 //!   axis ([`rle`]: classification per voxel, runs, per-view tables; its slice
 //!   traversal is [`crate::composite::slices`]).

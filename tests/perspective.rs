@@ -7,7 +7,7 @@ mod common;
 
 use common::{bits, blobs, render, renderer};
 use glam::{DMat3, EulerRot};
-use shearwarp::accuracy::metrics::{max_abs_error, rmse};
+use shearwarp::accuracy::metrics::rmse;
 use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
 use shearwarp::classify::TransferFunction;
 use shearwarp::classify::presets;
@@ -63,18 +63,7 @@ fn perspective_rle_equals_brute_force_bit_for_bit() {
 /// perspective image converges to the parallel one.
 #[test]
 fn perspective_converges_to_parallel_as_the_eye_recedes() {
-    // empty faces: a parallel view along an axis has rays exactly on the faces
-    // (closed box), which any perspective ray of them leaves on one side
-    let b = blobs([24, 20, 28], 7, [1.0, 0.7, 1.6]);
-    let edge = |x: usize, n: usize| x == 0 || x + 1 == n;
-    let vol = Volume::from_fn(
-        [24, 20, 28],
-        [1.0, 0.7, 1.6],
-        |x, y, z| {
-            if edge(x, 24) || edge(y, 20) || edge(z, 28) { 0.0 } else { b.get(x, y, z) }
-        },
-    )
-    .unwrap();
+    let vol = common::closed_blobs();
     let tf = TransferFunction::ramp(40.0, 160.0, 0.5, [0.9, 0.7, 0.5]);
     let size = 64;
     // view along z (no shear) and oblique: in the limit the perspective plan's
@@ -83,22 +72,8 @@ fn perspective_converges_to_parallel_as_the_eye_recedes() {
         let cam = Camera::new(rot, [size, size]);
         for mode in [Mode::Blend, Mode::Iso] {
             let par = render(&mut renderer(&vol, &tf, Method::Rle, mode, Projection::Parallel), &cam);
-            let mut last = f64::INFINITY;
-            let mut errs = vec![];
-            let mut p1e4 = par.clone();
-            for d in [10.0, 100.0, 1e4] {
-                // the parallel fit's zoom: f / (d · diagonal) = size / diagonal
-                let fov = 2.0 * (1.0f64 / (2.0 * d)).atan().to_degrees();
-                let p = render(&mut renderer(&vol, &tf, Method::Rle, mode, Projection::perspective(fov, d).unwrap()), &cam);
-                let e = rmse(&p, &par).unwrap();
-                errs.push(e);
-                p1e4 = p;
-                assert!(e <= last + 1e-6, "{mode:?}: RMSE {errs:?} did not shrink as the eye receded");
-                last = e;
-            }
-            let m = max_abs_error(&p1e4, &par).unwrap();
-            eprintln!("{mode:?}: RMSE to parallel {errs:?}, max {m}");
-            assert!(last < 1e-3 && m < 0.02, "{mode:?} {rot:?}: RMSE to parallel {errs:?}, max {m}");
+            let at = |proj| render(&mut renderer(&vol, &tf, Method::Rle, mode, proj), &cam);
+            common::assert_recedes_to_parallel(&par, &[10.0, 100.0, 1e4], at, &format!("{mode:?} {rot:?}"));
         }
     }
 }
@@ -112,8 +87,7 @@ fn perspective_rle_matches_the_reference() {
     let tf = presets::generic(SPHERE_ISO, 200.0).tf;
     let refr = ReferenceRenderer::new(&vol);
     let opts = ReferenceOptions { step: 0.1, ..Default::default() };
-    let diag = rotate_eye(rotate_eye(DMat3::IDENTITY, 1, 45.0), 0, 35.264_389_682_754_654);
-    let views = [("0°", DMat3::IDENTITY), ("45°", rotate_eye(DMat3::IDENTITY, 1, 45.0)), ("diagonal", diag)];
+    let views = common::three_views();
     let mut report = vec![];
     for mode in [Mode::Blend, Mode::Iso] {
         for (name, rot) in views {

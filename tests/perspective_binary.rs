@@ -10,7 +10,7 @@ mod common;
 
 use common::{bits, blobs};
 use glam::{DMat3, EulerRot};
-use shearwarp::accuracy::metrics::{max_abs_error, rmse};
+use shearwarp::accuracy::metrics::rmse;
 use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
 use shearwarp::classify::TransferFunction;
 use shearwarp::classify::presets;
@@ -92,8 +92,7 @@ fn perspective_binary_matches_the_reference() {
     let tf = presets::generic(SPHERE_ISO, 200.0).tf;
     let refr = ReferenceRenderer::new(&vol);
     let opts = ReferenceOptions { step: 0.1, ..Default::default() };
-    let diag = rotate_eye(rotate_eye(DMat3::IDENTITY, 1, 45.0), 0, 35.264_389_682_754_654);
-    let views = [("0°", DMat3::IDENTITY), ("45°", rotate_eye(DMat3::IDENTITY, 1, 45.0)), ("diagonal", diag)];
+    let views = common::three_views();
     let mut report = vec![];
     for mode in [Mode::Blend, Mode::Iso] {
         for (name, rot) in views {
@@ -121,39 +120,17 @@ fn perspective_binary_matches_the_reference() {
 /// the binary path).
 #[test]
 fn perspective_binary_converges_to_parallel_as_the_eye_recedes() {
-    let b = blobs([24, 20, 28], 7, [1.0, 0.7, 1.6]);
-    let edge = |x: usize, n: usize| x == 0 || x + 1 == n;
-    let vol = Volume::from_fn(
-        [24, 20, 28],
-        [1.0, 0.7, 1.6],
-        |x, y, z| {
-            if edge(x, 24) || edge(y, 20) || edge(z, 28) { 0.0 } else { b.get(x, y, z) }
-        },
-    )
-    .unwrap();
+    let vol = common::closed_blobs();
     let size = 64;
     for rot in [rotate_eye(DMat3::IDENTITY, 2, 30.0), DMat3::from_euler(EulerRot::XYZ, 0.3, -0.5, 0.2)] {
         let cam = Camera::new(rot, [size, size]);
         for mode in [Mode::Blend, Mode::Iso] {
             let s = Settings { mode, threads: 2, method: Method::Binary, ..Settings::default() };
             let par = try_render(&mut renderer(&vol, false, s, Projection::Parallel), &cam).unwrap();
-            let mut last = f64::INFINITY;
-            let mut errs = vec![];
-            let mut far = par.clone();
+            let at = |proj| try_render(&mut renderer(&vol, false, s, proj), &cam).unwrap();
             // iso thresholds samples: a sample that moves by 1e-3 voxel
             // (the eye at 1e4 diagonals) can still flip a hit, so go farther
-            for d in [10.0, 100.0, 1e4, 1e6] {
-                let fov = 2.0 * (1.0f64 / (2.0 * d)).atan().to_degrees();
-                let p = try_render(&mut renderer(&vol, false, s, Projection::perspective(fov, d).unwrap()), &cam).unwrap();
-                let e = rmse(&p, &par).unwrap();
-                errs.push(e);
-                far = p;
-                assert!(e <= last + 1e-6, "{mode:?}: RMSE {errs:?} did not shrink as the eye receded");
-                last = e;
-            }
-            let m = max_abs_error(&far, &par).unwrap();
-            eprintln!("{mode:?}: RMSE to parallel {errs:?}, max {m}");
-            assert!(last < 1e-3 && m < 0.02, "{mode:?} {rot:?}: RMSE to parallel {errs:?}, max {m}");
+            common::assert_recedes_to_parallel(&par, &[10.0, 100.0, 1e4, 1e6], at, &format!("{mode:?} {rot:?}"));
         }
     }
 }

@@ -82,8 +82,7 @@ fn quality_images_track_the_reference_in_both_projections() {
     let tf = presets::generic(SPHERE_ISO, 200.0).tf;
     let refr = ReferenceRenderer::new(&vol);
     let opts = ReferenceOptions { step: 0.1, ..Default::default() };
-    let diag = rotate_eye(rotate_eye(DMat3::IDENTITY, 1, 45.0), 0, 35.264_389_682_754_654);
-    let views = [("0°", DMat3::IDENTITY), ("45°", rotate_eye(DMat3::IDENTITY, 1, 45.0)), ("diagonal", diag)];
+    let views = common::three_views();
     let mut report = vec![];
     for (name, rot) in views {
         let cam = Camera::new(rot, [128, 128]);

@@ -81,3 +81,45 @@ pub fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
         (seed >> 11) as f64 / (1u64 << 53) as f64
     }
 }
+
+/// The three views the accuracy tests compare at: 0°, 45° about y, and along
+/// the main diagonal (the hardest view).
+pub fn three_views() -> [(&'static str, glam::DMat3); 3] {
+    use shearwarp::view::rotate_eye;
+    let id = glam::DMat3::IDENTITY;
+    let diag = rotate_eye(rotate_eye(id, 1, 45.0), 0, 35.264_389_682_754_654);
+    [("0°", id), ("45°", rotate_eye(id, 1, 45.0)), ("diagonal", diag)]
+}
+
+/// [`blobs`] 24×20×28 (spacing 1, 0.7, 1.6) with empty faces: a parallel
+/// view along an axis has rays exactly on the faces (closed box), which any
+/// perspective ray of them leaves on one side.
+pub fn closed_blobs() -> Volume {
+    let b = blobs([24, 20, 28], 7, [1.0, 0.7, 1.6]);
+    let edge = |x: usize, n: usize| x == 0 || x + 1 == n;
+    Volume::from_fn([24, 20, 28], [1.0, 0.7, 1.6], |x, y, z| if edge(x, 24) || edge(y, 20) || edge(z, 28) { 0.0 } else { b.get(x, y, z) })
+        .unwrap()
+}
+
+/// As the eye recedes through `distances` (diagonals; the field of view
+/// shrunk to keep the parallel fit's image scale), the image `at(projection)`
+/// converges to `par`: its RMSE never grows, and ends below 1e-3 with a
+/// largest difference below 0.02. Returns the RMSEs.
+pub fn assert_recedes_to_parallel(par: &Image, distances: &[f64], mut at: impl FnMut(Projection) -> Image, what: &str) -> Vec<f64> {
+    use shearwarp::accuracy::metrics::{max_abs_error, rmse};
+    let mut errs = vec![];
+    let mut far = par.clone();
+    for &d in distances {
+        // the parallel fit's zoom: f / (d · diagonal) = size / diagonal
+        let fov = 2.0 * (1.0f64 / (2.0 * d)).atan().to_degrees();
+        let p = at(Projection::perspective(fov, d).unwrap());
+        let e = rmse(&p, par).unwrap();
+        assert!(errs.last().is_none_or(|&l: &f64| e <= l + 1e-6), "{what}: RMSE {errs:?} then {e}: did not shrink as the eye receded");
+        errs.push(e);
+        far = p;
+    }
+    let m = max_abs_error(&far, par).unwrap();
+    eprintln!("{what}: RMSE to parallel {errs:?}, max {m}");
+    assert!(errs.last().is_some_and(|&l| l < 1e-3) && m < 0.02, "{what}: RMSE to parallel {errs:?}, max {m}");
+    errs
+}

@@ -322,7 +322,11 @@ impl App {
         if matches!(self.state.drag, Some(Drag::Rotate { .. })) {
             self.meter.record(Instant::now(), f.spec.camera.rotation);
             // the adaptive image size follows the previews' cost while dragging
-            if f.kind == Kind::Preview && !f.stats.skipped && self.state.adapts() && self.state.adaptive.measured(f.quality, f.total_ms) {
+            if f.kind == Kind::Preview
+                && !f.stats.skipped
+                && self.state.adapts()
+                && self.state.adaptive.measured(f.spec.quality, f.total_ms)
+            {
                 self.log(format!("quality {} px/voxel while moving", self.state.adaptive.moving));
             }
         }

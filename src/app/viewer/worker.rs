@@ -44,9 +44,6 @@ pub struct Frame {
     /// idle ([`Reply::Prefetched`] follows when they are built).
     pub prefetch: bool,
     pub spec: Spec,
-    /// The intermediate pixels per voxel it was rendered at (its spec's, or 1
-    /// on a path that does not resample: [`Renderers::quality_for`]).
-    pub quality: f64,
 }
 
 /// What a worker reports.
@@ -223,7 +220,7 @@ impl Renderers {
             self.interactive = spec.clip;
             self.build_limiter();
         }
-        let q = self.quality_for(spec.quality);
+        let q = spec.quality;
         let r = self.select(spec.class, spec.cell)?;
         if r.quality() != q {
             r.set_quality(q)?;
@@ -236,12 +233,6 @@ impl Renderers {
         let st = r.render(&spec.camera, img)?;
         self.stale[st.axis] = false;
         Ok(st)
-    }
-
-    /// The intermediate image size a frame asking for `q` renders at (every
-    /// path resamples its intermediate image).
-    pub fn quality_for(&self, q: f64) -> f64 {
-        q
     }
 
     /// Builds the mask of one stale principal axis of the current renderer, if
@@ -331,15 +322,13 @@ impl Worker {
                         };
                         reply(Reply::Busy { kind, seq: spec.seq, what });
                     }
-                    let quality = renderers.quality_for(spec.quality);
                     match renderers.render(&spec, &mut img) {
                         Ok(stats) => {
                             img.to_0rgb(&mut pixels);
                             let total_ms = t.elapsed().as_secs_f64() * 1e3;
                             let (width, height) = (img.width, img.height);
                             let prefetch = renderers.stale.contains(&true);
-                            let f =
-                                Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, started: t, prefetch, spec, quality };
+                            let f = Frame { seq: spec.seq, kind, width, height, pixels, stats, total_ms, started: t, prefetch, spec };
                             reply(Reply::Frame(Box::new(f)));
                         }
                         Err(e) => reply(Reply::Failed { kind, seq: spec.seq, error: e.to_string() }),

@@ -12,7 +12,7 @@ fn bench(only: &str) -> Command {
 }
 
 fn tiny() -> Command {
-    bench("c1-u64-bitscan,c2-u32-lut,brute")
+    bench("binary-c1-u64-bitscan,binary-c1-u64-bitscan-noert,c2-u32-lut,brute")
 }
 
 #[test]
@@ -21,7 +21,7 @@ fn a_tiny_matrix_writes_every_output() {
     let (csv, svg, png) = (dir.path().join("b.csv"), dir.path().join("b.svg"), dir.path().join("b.png"));
     let out = tiny().arg("--csv").arg(&csv).arg("--plot").arg(&svg).arg("--plot").arg(&png).arg("--json").assert().success();
     let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
-    // 8 views × (3 iso variants + 4 blend variants: "c1-u64-bitscan" also picks its no-ERT twin)
+    // 8 views × (3 iso variants + 4 blend variants: the no-ERT twin is blend's alone)
     assert_eq!(json["records"].as_array().unwrap().len(), 8 * 7);
     assert_eq!(json["summary"].as_array().unwrap().len(), 7);
     assert_eq!(json["views"].as_array().unwrap().len(), 8);
@@ -124,4 +124,62 @@ fn perspective_lists_are_measured_or_listed_as_skipped() {
     // bad lists are usage errors
     bench("rle").args(["--perspective", "40,200"]).assert().code(2);
     bench("rle").args(["--perspective", "40", "--eye-distance", "3,-1"]).assert().code(2);
+}
+
+/// `bench --peers`: a peer that cannot run here is listed as skipped at every
+/// view with the reason (the run still succeeds); where VTK is installed its
+/// frames are measured against the same reference as shearwarp's rows (same
+/// views, same model: a matched frame is close); bad uses are usage errors.
+#[test]
+fn peers_are_measured_beside_the_variants_or_listed_as_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let den = dir.path().join("sphere.den");
+    Command::cargo_bin("shearwarp")
+        .unwrap()
+        .args(["export", "--phantom", "sphere", "--phantom-dims", "24,24,24", "-o"])
+        .arg(&den)
+        .assert()
+        .success();
+    let peers = |harness: Option<&str>| {
+        let mut c = Command::cargo_bin("shearwarp").unwrap();
+        c.args(["bench", "--size", "48", "--random-views", "1", "--reps", "1", "--rounds", "1", "--ref-step", "0.2", "--quiet"]);
+        c.args(["--modes", "blend", "--only", "rle", "--peers", "vtk", "--json", "--den"])
+            .arg(&den)
+            .arg("--peer-dir")
+            .arg(dir.path().join("frames"));
+        if let Some(h) = harness {
+            c.env("SHEARWARP_VTK_HARNESS", h);
+        }
+        c
+    };
+    let out = peers(Some("/nonexistent/harness.py")).assert().success();
+    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    let views = json["views"].as_array().unwrap().len();
+    let skipped: Vec<&serde_json::Value> = json["skipped"].as_array().unwrap().iter().filter(|s| s["variant"] == "vtk").collect();
+    assert_eq!(skipped.len(), views);
+    assert!(skipped.iter().all(|s| s["reason"].as_str().unwrap().contains("vtk harness")), "{skipped:?}");
+    assert!(json["records"].as_array().unwrap().iter().any(|r| r["variant"] == "rle"));
+
+    let vtk = std::process::Command::new("python3").args(["-c", "import vtk"]).output().is_ok_and(|o| o.status.success());
+    if vtk {
+        let out = peers(None).assert().success();
+        let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+        let rs: Vec<&serde_json::Value> = json["records"].as_array().unwrap().iter().filter(|r| r["variant"] == "vtk").collect();
+        assert_eq!(rs.len(), views, "{}", json["skipped"]);
+        for r in rs {
+            // the same views and model: a matched frame, not a shifted or mirrored one
+            assert!(r["error"]["rmse"].as_f64().unwrap() < 0.08 && r["error"]["ssim"].as_f64().unwrap() > 0.8, "{r}");
+            assert!(r["frame_ms"].as_f64().unwrap() > 0.0);
+        }
+    } else {
+        eprintln!("python3 with vtk not installed: the measured half of this test did not run");
+    }
+
+    // peers need blend mode and a .den volume
+    let mut c = Command::cargo_bin("shearwarp").unwrap();
+    c.args(["bench", "--phantom", "sphere", "--phantom-dims", "20,20,20", "--peers", "vtk", "--quiet"]);
+    c.assert().code(2).stderr(predicate::str::contains(".den"));
+    let mut c = Command::cargo_bin("shearwarp").unwrap();
+    c.args(["bench", "--modes", "iso", "--peers", "vtk", "--quiet", "--den"]).arg(&den);
+    c.assert().code(2).stderr(predicate::str::contains("blend"));
 }

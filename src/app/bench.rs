@@ -33,6 +33,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use crate::app::cli::{Usage, VolumeArgs};
+use crate::app::peers::{self, MODEL_SHADING, Peer, PeerCamera, PeerView};
 use shearwarp::accuracy::metrics::{DepthError, ImageError, compare, depth_error};
 use shearwarp::accuracy::reference::{ReferenceImage, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
 use shearwarp::accuracy::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_depth};
@@ -42,7 +43,7 @@ use shearwarp::data::phantom::{ML_ISO, Phantom, SPHERE_ISO};
 use shearwarp::data::volume::Volume;
 use shearwarp::encode::depth::Search;
 use shearwarp::render::{FrameStats, Method, Renderer, Settings, WordSize};
-use shearwarp::view::{Camera, NamedView, Projection, View, standard_views};
+use shearwarp::view::{Camera, Factorization, NamedView, Projection, View, standard_views};
 use shearwarp::warp::Image;
 
 /// `shearwarp bench`.
@@ -122,6 +123,19 @@ pub struct BenchCmd {
     /// --perspective).
     #[arg(long)]
     pub perspective_matrix: bool,
+    /// Peer renderers measured beside shearwarp's variants (comma-separated):
+    /// each renders the benchmark's own views (parallel and every
+    /// perspective) through its harness, and its frames are measured against
+    /// the same reference. Blend mode only, on a `.den` volume (`shearwarp
+    /// export` writes one); the blend rows then all use the peers' model:
+    /// VolPack's opaque ramp at the --iso threshold (default: the tissue's)
+    /// with its 0.05 cut, white, ambient 0.1 / diffuse 0.6 / specular 0.3^20.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub peers: Vec<Peer>,
+    /// Directory for the peers' frames and view lists (default: a fresh
+    /// directory under the system's temporary directory).
+    #[arg(long, requires = "peers")]
+    pub peer_dir: Option<PathBuf>,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -134,7 +148,15 @@ pub struct Variant {
     pub settings: Settings,
     /// Parallel, or the perspective of `--perspective`.
     pub projection: Projection,
+    /// Intermediate image pixels per voxel ([`Renderer::set_quality`]): 1,
+    /// or 2 for the `-q2` variants (finer slices where the output magnifies).
+    pub quality: f64,
 }
+
+/// The intermediate resolution of the `-q2` variants: Schulze's adaptive
+/// size at its finest, two pixels per voxel (what a zoomed-in view needs
+/// for the output's sampling rate; issue 22's matched sampling generalizes it).
+pub const FINE_QUALITY: f64 = 2.0;
 
 /// Every variant benchmarked for the mode and shared settings of `base`:
 /// the binary fast rotator with cell sizes 1–4, u32 and u64 words, LUT and
@@ -150,6 +172,7 @@ pub fn registry(base: Settings) -> Vec<Variant> {
                     name: format!("binary-c{cell}-{}-{}", word.name(), search.name()),
                     settings: Settings { method: Method::Binary, cell, word, search, ..base },
                     projection: Projection::Parallel,
+                    quality: 1.0,
                 });
             }
         }
@@ -160,28 +183,38 @@ pub fn registry(base: Settings) -> Vec<Variant> {
             name: "binary-c1-u64-bitscan-noert".into(),
             settings: Settings { method: Method::Binary, ert: 1.0, ..base },
             projection: Projection::Parallel,
+            quality: 1.0,
         });
     }
     let par = Projection::Parallel;
-    v.push(Variant { name: "brute".into(), settings: Settings { method: Method::Brute, cell: 1, ..base }, projection: par });
-    v.push(Variant { name: "rle".into(), settings: Settings { method: Method::Rle, cell: 1, ..base }, projection: par });
-    v.push(Variant { name: "brute-rle".into(), settings: Settings { method: Method::BruteRle, cell: 1, ..base }, projection: par });
+    let binary = Settings { method: Method::Binary, cell: 1, word: WordSize::U64, search: Search::Bitscan, ..base };
+    let rle = Settings { method: Method::Rle, cell: 1, ..base };
+    let variant = |name: &str, settings: Settings, quality: f64| Variant { name: name.into(), settings, projection: par, quality };
+    v.push(variant("binary-c1-u64-bitscan-q2", binary, FINE_QUALITY));
+    v.push(variant("brute", Settings { method: Method::Brute, cell: 1, ..base }, 1.0));
+    v.push(variant("rle", rle, 1.0));
+    v.push(variant("rle-q2", rle, FINE_QUALITY));
+    v.push(variant("brute-rle", Settings { method: Method::BruteRle, cell: 1, ..base }, 1.0));
     v
 }
 
 /// The variants that render `projection` (a perspective one): the RLE path
 /// and its brute force, the binary rotator (cell 1, u64 words, bit scan) and
 /// its brute force, named `rle-persp`, `brute-rle-persp`, `binary-persp` and
-/// `brute-persp`, each followed by `suffix`.
+/// `brute-persp`, and the two fast paths at [`FINE_QUALITY`]
+/// (`binary-persp-q2`, `rle-persp-q2`), each followed by `suffix`.
 pub fn perspective_variants(base: Settings, projection: Projection, suffix: &str) -> Vec<Variant> {
     let binary = Settings { method: Method::Binary, cell: 1, word: WordSize::U64, search: Search::Bitscan, ..base };
+    let rle = Settings { method: Method::Rle, cell: 1, ..base };
     [
-        (binary, "binary-persp"),
-        (Settings { method: Method::Brute, cell: 1, ..base }, "brute-persp"),
-        (Settings { method: Method::Rle, cell: 1, ..base }, "rle-persp"),
-        (Settings { method: Method::BruteRle, cell: 1, ..base }, "brute-rle-persp"),
+        (binary, "binary-persp", 1.0),
+        (binary, "binary-persp-q2", FINE_QUALITY),
+        (Settings { method: Method::Brute, cell: 1, ..base }, "brute-persp", 1.0),
+        (rle, "rle-persp", 1.0),
+        (rle, "rle-persp-q2", FINE_QUALITY),
+        (Settings { method: Method::BruteRle, cell: 1, ..base }, "brute-rle-persp", 1.0),
     ]
-    .map(|(settings, name)| Variant { name: format!("{name}{suffix}"), settings, projection })
+    .map(|(settings, name, quality)| Variant { name: format!("{name}{suffix}"), settings, projection, quality })
     .to_vec()
 }
 
@@ -296,6 +329,18 @@ impl BenchCmd {
             }
         }
         self.projections()?;
+        if !self.peers.is_empty() {
+            if !self.modes.contains(&Mode::Blend) {
+                return Err(usage("--peers measures blend mode (the peers composite); add blend to --modes".into()));
+            }
+            if self.den_path().is_none() {
+                return Err(usage(
+                    "--peers needs the volume as a VolPack .den file (--den FILE or FILE.den), the one format every peer reads; \
+                     `shearwarp export` writes one"
+                        .into(),
+                ));
+            }
+        }
         ReferenceOptions { step: self.ref_step, ..Default::default() }.check().map_err(|e| usage(format!("--ref-step: {e}")))?;
         for p in &self.plot {
             plot_format(p)?;
@@ -333,6 +378,14 @@ impl BenchCmd {
         Ok(uniq)
     }
 
+    /// The `.den` file of the volume, if it is one (what the peers read).
+    fn den_path(&self) -> Option<&Path> {
+        let v = &self.volume;
+        v.den.as_deref().or(v.file.as_deref().filter(|f| {
+            matches!(v.format, Some(shearwarp::data::io::Format::Den)) || f.extension().is_some_and(|e| e.eq_ignore_ascii_case("den"))
+        }))
+    }
+
     /// The phantom the volume was built from (None for files).
     fn phantom(&self) -> Option<Phantom> {
         if self.volume.file.is_some() || self.volume.raw.is_some() || self.volume.den.is_some() {
@@ -345,9 +398,22 @@ impl BenchCmd {
         })
     }
 
-    /// A renderer for `mode` with the benchmark's classification.
-    fn renderer(&self, vol: Volume, mode: Mode) -> Result<Renderer> {
-        let base = Settings { mode, ert: self.ert, threads: self.threads, ..Settings::default() };
+    /// The settings every variant of `mode` starts from: the peers' material
+    /// in blend mode when peers are measured.
+    fn base_settings(&self, mode: Mode) -> Settings {
+        let shading = if self.peer_model(mode) { MODEL_SHADING } else { Settings::default().shading };
+        Settings { mode, ert: self.ert, threads: self.threads, shading, ..Settings::default() }
+    }
+
+    /// True when `mode`'s rows use the peers' model (blend mode with --peers).
+    fn peer_model(&self, mode: Mode) -> bool {
+        mode == Mode::Blend && !self.peers.is_empty()
+    }
+
+    /// A renderer for `mode` with the benchmark's classification, and the
+    /// peers' threshold when `mode` uses their model.
+    fn renderer(&self, vol: Volume, mode: Mode) -> Result<(Renderer, Option<f32>)> {
+        let base = self.base_settings(mode);
         let tissues = presets::tissues_for(&vol);
         let hi = vol.value_range().1;
         let mut r = Renderer::with_tissues(vol, &tissues, base)?;
@@ -369,7 +435,13 @@ impl BenchCmd {
                 Mode::Iso => r.set_iso(iso)?,
             }
         }
-        Ok(r)
+        let mut threshold = None;
+        if self.peer_model(mode) {
+            let t = iso.unwrap_or(r.iso());
+            r.set_transfer_function(&peers::model_tf(t)?);
+            threshold = Some(t);
+        }
+        Ok((r, threshold))
     }
 }
 
@@ -486,16 +558,11 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
     let per_mode: Vec<(Mode, Vec<Variant>)> = modes
         .iter()
         .map(|&mode| {
-            let base = Settings { mode, ert: cmd.ert, threads: cmd.threads, ..Settings::default() };
+            let base = cmd.base_settings(mode);
             let mut all = registry(base);
             let projections = cmd.projections().unwrap_or_default();
             for p in &projections {
-                let suffix = match (p, projections.len()) {
-                    (_, 1) => String::new(),
-                    (Projection::Perspective { fov_deg, eye_distance }, _) => format!("-f{fov_deg}-d{eye_distance}"),
-                    _ => String::new(),
-                };
-                all.extend(perspective_variants(base, *p, &suffix));
+                all.extend(perspective_variants(base, *p, &projection_suffix(p, projections.len())));
             }
             let exact = |o: &str| all.iter().any(|v| v.name == o);
             let picked = |v: &Variant| cmd.only.iter().any(|o| if exact(o) { v.name == *o } else { v.name.contains(o.as_str()) });
@@ -533,15 +600,19 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
         let mode = *mode;
         // the last mode may take the volume itself
         let v = if per_mode.last().map(|l| l.0) == Some(mode) { vol.take().context("volume")? } else { vol.clone().context("volume")? };
-        let mut r = cmd.renderer(v, mode)?;
+        let (mut r, peer_threshold) = cmd.renderer(v, mode)?;
         report.classification.push((mode.name().into(), r.classification_name().into(), r.iso()));
         let scene = Scene::from_renderer(&r);
         let iso = r.iso();
         // references (and truth) per projection and view
         let mut projections: Vec<Projection> = vec![];
-        for v in variants.iter() {
-            if !projections.contains(&v.projection) {
-                projections.push(v.projection);
+        let peer_projections = match peer_threshold {
+            Some(_) => std::iter::once(Projection::Parallel).chain(cmd.projections()?).collect(),
+            None => vec![],
+        };
+        for p in variants.iter().map(|v| v.projection).chain(peer_projections.iter().copied()) {
+            if !projections.contains(&p) {
+                projections.push(p);
             }
         }
         let mut refs: Vec<std::result::Result<RefFrame, String>> = Vec::with_capacity(views.len() * projections.len());
@@ -595,6 +666,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
             for (vi, variant) in variants.iter().enumerate() {
                 r.set_settings(variant.settings)?;
                 r.set_projection(variant.projection)?;
+                r.set_quality(variant.quality)?;
                 r.prepare_all_axes();
                 let pi = projections.iter().position(|p| *p == variant.projection).context("projection")?;
                 for (wi, (view, rf)) in views.iter().zip(&refs[pi * nv..(pi + 1) * nv]).enumerate() {
@@ -672,10 +744,73 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                 });
             }
         }
+        // the peers, at the same views and projections, against the same references
+        if let Some(threshold) = peer_threshold {
+            let den = cmd.den_path().context("--peers needs a .den volume")?;
+            let dir = cmd.peer_dir.clone().unwrap_or_else(|| std::env::temp_dir().join(format!("shearwarp-peers-{}", std::process::id())));
+            for &peer in &cmd.peers {
+                for proj in &peer_projections {
+                    let pi = projections.iter().position(|p| p == proj).context("projection")?;
+                    let name = match proj {
+                        Projection::Parallel => peer.name().to_string(),
+                        _ => format!("{}-persp{}", peer.name(), projection_suffix(proj, peer_projections.len() - 1)),
+                    };
+                    pb.set_message(format!("{} {name}", mode.name()));
+                    let shown: Vec<(&View, &RefFrame)> =
+                        views.iter().zip(&refs[pi * nv..(pi + 1) * nv]).filter_map(|(v, rf)| rf.as_ref().ok().map(|rf| (v, rf))).collect();
+                    let cam0 = camera(&views[0]);
+                    let pcam = match proj.resolve(&cam0, dims, spacing)? {
+                        None => PeerCamera { size: cmd.size, zoom: Factorization::new(&cam0, dims, spacing)?.zoom, perspective: None },
+                        Some((c, distance)) => {
+                            let Projection::Perspective { fov_deg, .. } = *proj else { unreachable!("resolved a parallel projection") };
+                            PeerCamera { size: cmd.size, zoom: c.zoom.context("resolved zoom")?, perspective: Some((fov_deg, distance)) }
+                        }
+                    };
+                    let pviews: Vec<PeerView> =
+                        shown.iter().map(|(v, _)| PeerView { name: peers::file_safe(&v.name), rotation: v.rotation }).collect();
+                    let reps = cmd.reps * cmd.rounds;
+                    match peers::run(peer, den, &pviews, pcam, threshold, cmd.threads, cmd.warmup, reps, &dir.join(&name)) {
+                        Ok(run) => {
+                            for ((view, rf), (ms, img)) in shown.iter().zip(run.frames) {
+                                report.records.push(Record {
+                                    mode: mode.name(),
+                                    variant: name.clone(),
+                                    view: view.name.clone(),
+                                    axis: 0,
+                                    frame_ms: ms,
+                                    shear_ms: f64::NAN,
+                                    render_ms: f64::NAN,
+                                    warp_ms: f64::NAN,
+                                    cold_shear_ms: f64::NAN,
+                                    error: compare(&img, &rf.image.image)?,
+                                    depth_truth: None,
+                                    depth: None,
+                                });
+                            }
+                        }
+                        Err(e) => {
+                            for view in &views {
+                                let reason = format!("{e:#}");
+                                report.skipped.push(Skipped { mode: mode.name(), variant: name.clone(), view: view.name.clone(), reason });
+                            }
+                        }
+                    }
+                }
+            }
+        }
     }
     pb.finish_and_clear();
     report.summary = summarize(&report.records);
     Ok(report)
+}
+
+/// The suffix of a perspective variant's name when `n` projections are
+/// measured: `-f<FOV>-d<D>`, none for a single one (or a parallel view).
+fn projection_suffix(p: &Projection, n: usize) -> String {
+    match (p, n) {
+        (Projection::Perspective { fov_deg, eye_distance }, 2..) => format!("-f{fov_deg}-d{eye_distance}"),
+        _ => String::new(),
+    }
 }
 
 /// One real frame into the other of two images (see [`measure`]), returning its stats.
@@ -797,10 +932,10 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
             };
             let _ = writeln!(
                 s,
-                "| {} | {:.3} | {:.3} | {:.5} | {} | {:.4} | {:.5} | {:.5} |{dc} {} |",
+                "| {} | {:.3} | {} | {:.5} | {} | {:.4} | {:.5} | {:.5} |{dc} {} |",
                 x.variant,
                 x.frame_ms,
-                x.cold_shear_ms,
+                fmt_opt(Some(x.cold_shear_ms), 3),
                 x.rmse_mean,
                 fmt_psnr(x.psnr_worst),
                 x.max_abs,
@@ -815,13 +950,25 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
             .iter()
             .filter(|x| x.mode == mode)
             .filter_map(|x| {
-                let (base, _) = x.variant.split_once("-persp")?;
-                let par = rep.summary.iter().find(|p| p.mode == mode && p.variant == base_parallel(base))?;
+                let (base, rest) = x.variant.split_once("-persp")?;
+                let fine = if rest.starts_with("-q2") { "-q2" } else { "" };
+                let par = rep.summary.iter().find(|p| p.mode == mode && p.variant == base_parallel(base) + fine)?;
                 Some(format!("{} {:.2}", x.variant, x.frame_ms / par.frame_ms))
             })
             .collect();
         if !ratios.is_empty() {
             let _ = writeln!(s, "\nPerspective / parallel frame time (same path, same run): {}.", ratios.join(", "));
+        }
+        let peer_rows: Vec<&str> =
+            rep.summary.iter().filter(|x| x.mode == mode && x.cold_shear_ms.is_nan()).map(|x| x.variant.as_str()).collect();
+        if !peer_rows.is_empty() {
+            let _ = writeln!(
+                s,
+                "\nPeers ({}): the harness's own frame time (median of its timed renders per view, then over the views), \
+                 their frames measured against the same reference; every row of this mode uses the peers' model \
+                 (opaque ramp at the iso value with the 0.05 cut, white, ambient 0.1, diffuse 0.6, specular 0.3^20).",
+                peer_rows.join(", ")
+            );
         }
         // skipped views, one line per variant and reason
         let mut skipped: Vec<(&str, &str, Vec<&str>)> = vec![];
@@ -859,12 +1006,12 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
             for r in rep.records.iter().filter(|r| r.mode == mode) {
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {} | {:.3} | {:.3} | {:.5} | {} | {:.5} | {:.5} | {} | {} |",
+                    "| {} | {} | {} | {:.3} | {} | {:.5} | {} | {:.5} | {:.5} | {} | {} |",
                     r.variant,
                     r.view,
                     ["x", "y", "z"][r.axis.min(2)],
                     r.frame_ms,
-                    r.cold_shear_ms,
+                    fmt_opt(Some(r.cold_shear_ms), 3),
                     r.error.rmse,
                     fmt_psnr(r.error.psnr),
                     r.error.ssim,
@@ -1045,24 +1192,30 @@ mod tests {
     #[test]
     fn registry_covers_the_matrix() {
         let v = registry(Settings::default());
-        assert_eq!(v.len(), 4 * 2 * 2 + 3);
+        assert_eq!(v.len(), 4 * 2 * 2 + 5);
         let b = registry(Settings { mode: Mode::Blend, ..Settings::default() });
-        assert_eq!(b.len(), 4 * 2 * 2 + 4);
+        assert_eq!(b.len(), 4 * 2 * 2 + 6);
         assert!(b.iter().any(|x| x.settings.ert == 1.0 && x.name.ends_with("noert")));
         let names: std::collections::BTreeSet<&str> = v.iter().map(|x| x.name.as_str()).collect();
         assert_eq!(names.len(), v.len(), "names are unique");
         assert!(names.contains("binary-c1-u64-bitscan") && names.contains("binary-c4-u32-lut") && names.contains("brute"));
         assert!(names.contains("rle") && names.contains("brute-rle"));
         assert!(v.iter().all(|x| x.projection == Projection::Parallel));
+        // the fine variants: the fast paths at two intermediate pixels per voxel, the rest at one
+        let fine: Vec<&str> = v.iter().filter(|x| x.quality == FINE_QUALITY).map(|x| x.name.as_str()).collect();
+        assert_eq!(fine, ["binary-c1-u64-bitscan-q2", "rle-q2"]);
+        assert!(v.iter().all(|x| x.quality == FINE_QUALITY || x.quality == 1.0));
         let p = Projection::perspective(40.0, 2.0).unwrap();
         let pv = perspective_variants(Settings::default(), p, "-f40-d2");
         assert_eq!(
-            pv.iter().map(|x| (x.name.as_str(), x.settings.method, x.projection)).collect::<Vec<_>>(),
+            pv.iter().map(|x| (x.name.as_str(), x.settings.method, x.projection, x.quality)).collect::<Vec<_>>(),
             [
-                ("binary-persp-f40-d2", Method::Binary, p),
-                ("brute-persp-f40-d2", Method::Brute, p),
-                ("rle-persp-f40-d2", Method::Rle, p),
-                ("brute-rle-persp-f40-d2", Method::BruteRle, p)
+                ("binary-persp-f40-d2", Method::Binary, p, 1.0),
+                ("binary-persp-q2-f40-d2", Method::Binary, p, FINE_QUALITY),
+                ("brute-persp-f40-d2", Method::Brute, p, 1.0),
+                ("rle-persp-f40-d2", Method::Rle, p, 1.0),
+                ("rle-persp-q2-f40-d2", Method::Rle, p, FINE_QUALITY),
+                ("brute-rle-persp-f40-d2", Method::BruteRle, p, 1.0)
             ]
         );
         // the matrix: 3 fields of view × 3 distances and the eye inside

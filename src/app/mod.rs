@@ -5,10 +5,13 @@
 //!   `export` commands, reports and image/animation output;
 //! - [`bench`]: `shearwarp bench`, the speed-against-error matrix of every
 //!   variant against the reference renderer, with tables and plots;
+//! - [`peers`]: `shearwarp bench --peers`, VTK run at the benchmark's views
+//!   with the shared peer model, its frames read back for the metrics;
 //! - [`viewer`] (feature `viewer`): `shearwarp view`, the interactive window.
 
 pub mod bench;
 pub mod cli;
+pub mod peers;
 pub mod viewer;
 
 use std::sync::OnceLock;

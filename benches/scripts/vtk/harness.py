@@ -174,6 +174,20 @@ def parse_args(argv):
                          "in volume diagonals (default 2; shearwarp's --eye-distance)")
     ap.add_argument("--times", action="store_true",
                     help="also print every frame time in the JSON")
+    ap.add_argument("--views", metavar="FILE",
+                    help="shearwarp's matched views (`shearwarp bench --peers`): a JSON list of "
+                         "{\"name\": N, \"matrix\": [9 numbers, row-major]}, each the volume's "
+                         "rotation about its voxel-centre (dims-1)/2, rendered --warmup + --reps "
+                         "times and saved as DIR/<name>.png with --frames-out DIR; needs --zoom. "
+                         "Replaces the rotation sequence (--frames, --step-deg, --fit)")
+    ap.add_argument("--reps", type=int, default=3, metavar="R",
+                    help="with --views: timed renders per view (default 3)")
+    ap.add_argument("--zoom", type=float, metavar="Z",
+                    help="with --views: image pixels per voxel (shearwarp's resolved zoom); "
+                         "pixel (c, r) samples ((c - (N-1)/2)/Z, ((N-1)/2 - r)/Z) as shearwarp's do")
+    ap.add_argument("--eye-voxels", type=float, metavar="D",
+                    help="with --views and --perspective: the eye's distance from the volume's "
+                         "centre in voxels (shearwarp's resolved distance; replaces --eye-distance)")
     a = ap.parse_args(argv)
 
     if not 1 <= a.size <= 16384:
@@ -194,6 +208,33 @@ def parse_args(argv):
         a.save_set = {int(s) for s in a.save_frames.split(",") if s.strip() != ""}
     except ValueError:
         ap.error(f"bad --save-frames {a.save_frames!r}")
+    a.view_list = None
+    if a.views is not None:
+        if a.zoom is None or not (math.isfinite(a.zoom) and a.zoom > 0.0):
+            ap.error("--views needs --zoom Z (finite, > 0)")
+        if a.reps < 1:
+            ap.error("--reps must be >= 1")
+        if a.eye_voxels is not None and not (math.isfinite(a.eye_voxels) and a.eye_voxels > 0.0):
+            ap.error("--eye-voxels must be finite and > 0")
+        if a.perspective is not None and a.eye_voxels is None:
+            ap.error("--views with --perspective needs --eye-voxels D")
+        try:
+            with open(a.views) as f:
+                vl = json.load(f)
+        except (OSError, ValueError) as e:
+            ap.error(f"cannot read --views {a.views}: {e}")
+        if not isinstance(vl, list) or not vl:
+            ap.error(f"--views {a.views}: expected a non-empty JSON list")
+        a.view_list = []
+        for i, v in enumerate(vl):
+            m = v.get("matrix") if isinstance(v, dict) else None
+            nm = v.get("name") if isinstance(v, dict) else None
+            if not isinstance(nm, str) or not re.fullmatch(r"[A-Za-z0-9_.+-]+", nm) or \
+                    not isinstance(m, list) or len(m) != 9 or \
+                    not all(isinstance(x, (int, float)) and math.isfinite(x) for x in m):
+                ap.error(f"--views {a.views}: entry {i} needs a file-safe \"name\" and a "
+                         f"\"matrix\" of 9 finite numbers")
+            a.view_list.append((nm, [float(x) for x in m]))
     return a
 
 
@@ -339,7 +380,10 @@ def main(argv):
     img = vtkImageData()
     img.SetDimensions(nx, ny, nz)
     img.SetSpacing(1.0, 1.0, 1.0)
-    img.SetOrigin(-nx / 2.0, -ny / 2.0, -nz / 2.0)
+    if a.view_list is None:
+        img.SetOrigin(-nx / 2.0, -ny / 2.0, -nz / 2.0)
+    else:  # shearwarp rotates about the voxel-centre box's centre
+        img.SetOrigin(-(nx - 1) / 2.0, -(ny - 1) / 2.0, -(nz - 1) / 2.0)
     arr = np.frombuffer(voxels, dtype=np.uint8)
     varr = numpy_to_vtk(arr, deep=1, array_type=VTK_UNSIGNED_CHAR)
     varr.SetName("density")
@@ -420,7 +464,27 @@ def main(argv):
     h = 0.5 / px_per_voxel
     dist = diag + 10.0
     cam = ren.GetActiveCamera()
-    if a.perspective is None:
+    if a.view_list is not None:
+        # shearwarp's camera: pixel centres (c - (N-1)/2)/Z are VTK's own
+        # (c + 0.5 - N/2)/s with s = Z, so no half-pixel shift
+        px_per_voxel = a.zoom
+        scale = a.size / (2.0 * a.zoom)
+        if a.perspective is None:
+            cam.ParallelProjectionOn()
+            cam.SetFocalPoint(0.0, 0.0, 0.0)
+            cam.SetPosition(0.0, 0.0, -dist)
+            cam.SetViewUp(0.0, -1.0, 0.0)
+            cam.SetParallelScale(scale)
+            cam.SetClippingRange(dist - 0.5 * diag - 2.0, dist + 0.5 * diag + 2.0)
+        else:
+            eye = a.eye_voxels
+            cam.ParallelProjectionOff()
+            cam.SetFocalPoint(0.0, 0.0, 0.0)
+            cam.SetPosition(0.0, 0.0, -eye)
+            cam.SetViewUp(0.0, -1.0, 0.0)
+            cam.SetViewAngle(a.perspective)
+            cam.SetClippingRange(max(0.5, eye - 0.5 * diag - 2.0), eye + 0.5 * diag + 2.0)
+    elif a.perspective is None:
         cam.ParallelProjectionOn()
         cam.SetFocalPoint(-h, -h, 0.0)
         cam.SetPosition(-h, -h, -dist)
@@ -447,6 +511,14 @@ def main(argv):
     if renwin.GetClassName() != win_class:
         log(f"warning: asked VTK for {win_class}, got {renwin.GetClassName()}")
 
+    def set_matrix(r):
+        m = vtkMatrix4x4()
+        m.DeepCopy((r[0], r[1], r[2], 0.0,
+                    r[3], r[4], r[5], 0.0,
+                    r[6], r[7], r[8], 0.0,
+                    0.0, 0.0, 0.0, 1.0))
+        vol.SetUserMatrix(m)
+
     def set_view(f):
         t = math.radians(f * a.step_deg)
         c, s = math.cos(t), math.sin(t)
@@ -468,7 +540,7 @@ def main(argv):
         except OSError as e:
             die(f"cannot create {a.frames_out}: {e.strerror or e}")
 
-    def save_png(f):
+    def save_png(f, file_name=None):
         w2i.Modified()
         w2i.Update()
         out = w2i.GetOutput()
@@ -482,7 +554,7 @@ def main(argv):
             ext.SetInputConnection(w2i.GetOutputPort())
             ext.SetComponents(0)
             src = ext
-        path = os.path.join(a.frames_out, f"vtk_{name}_{a.tf}_{a.size}_f{f:03d}.png")
+        path = os.path.join(a.frames_out, file_name or f"vtk_{name}_{a.tf}_{a.size}_f{f:03d}.png")
         wr = vtkPNGWriter()
         wr.SetFileName(path)
         wr.SetInputConnection(src.GetOutputPort())
@@ -495,7 +567,38 @@ def main(argv):
     setup_ms = None
     render_ms, mapper_ms, finish_ms, cast_ms = [], [], [], []
     nimg = 0
-    for i in range(-a.warmup, a.frames):
+    per_view = []
+
+    def timed_render():
+        cast["t0"] = cast["ms"] = None
+        t0 = time.perf_counter()
+        renwin.Render()
+        t1 = time.perf_counter()
+        renwin.WaitForCompletion()  # glFinish, outside frame_ms
+        return (t1 - t0) * 1e3, (time.perf_counter() - t1) * 1e3
+
+    # shearwarp's matched views: warm-up renders of each view, then --reps timed ones
+    for vname, mat in a.view_list or []:
+        set_matrix(mat)
+        for w in range(a.warmup):
+            ms, _ = timed_render()
+            if setup_ms is None:
+                setup_ms = ms
+        times = []
+        for _ in range(a.reps):
+            ms, fin = timed_render()
+            times.append(ms)
+            render_ms.append(ms)
+            finish_ms.append(fin)
+            mapper_ms.append(mapper.GetTimeToDraw() * 1e3)
+            if cast["ms"] is not None:
+                cast_ms.append(cast["ms"])
+        if a.frames_out:
+            save_png(0, f"{vname}.png")
+            nimg += 1
+        per_view.append({"name": vname, "frame_ms_median": round(median(times), 4),
+                         "frame_ms_min": round(min(times), 4), "reps": a.reps})
+    for i in range(-a.warmup, a.frames if a.view_list is None else 0):
         f = max(i, 0)
         set_view(f)
         cast["t0"] = cast["ms"] = None
@@ -590,6 +693,13 @@ def main(argv):
         "timed": "renWin.Render()",
         "images_written": nimg,
     }
+    if a.view_list is not None:
+        out["frames"] = len(render_ms)
+        out["views"] = per_view
+        out["view"]["projection"] = "orthographic" if a.perspective is None else \
+            {"perspective": a.perspective, "eye_voxels": a.eye_voxels}
+        out["view"]["rotation"] = "volume user matrix per --views entry, about (dims-1)/2"
+        out["view"]["px_per_voxel"] = a.zoom
     if a.times:
         out["frame_ms"] = [round(x, 4) for x in render_ms]
     sys.stdout.write(json.dumps(out, separators=(",", ":")) + "\n")

@@ -127,9 +127,11 @@ fn perspective_lists_are_measured_or_listed_as_skipped() {
 }
 
 /// `bench --peers`: a peer that cannot run here is listed as skipped at every
-/// view with the reason (the run still succeeds); where VTK is installed its
-/// frames are measured against the same reference as shearwarp's rows (same
-/// views, same model: a matched frame is close); bad uses are usage errors.
+/// view with the reason (the run still succeeds); where VTK or VolPack is
+/// installed its frames are measured against the same reference as
+/// shearwarp's rows (same views, same model: a matched frame is close, a
+/// shifted or mirrored one would not be); VolPack's perspective is listed as
+/// skipped; bad uses are usage errors.
 #[test]
 fn peers_are_measured_beside_the_variants_or_listed_as_skipped() {
     let dir = tempfile::tempdir().unwrap();
@@ -140,39 +142,48 @@ fn peers_are_measured_beside_the_variants_or_listed_as_skipped() {
         .arg(&den)
         .assert()
         .success();
-    let peers = |harness: Option<&str>| {
+    let peers = |list: &str, fake: bool| {
         let mut c = Command::cargo_bin("shearwarp").unwrap();
         c.args(["bench", "--size", "48", "--random-views", "1", "--reps", "1", "--rounds", "1", "--ref-step", "0.2", "--quiet"]);
-        c.args(["--modes", "blend", "--only", "rle", "--peers", "vtk", "--json", "--den"])
-            .arg(&den)
-            .arg("--peer-dir")
-            .arg(dir.path().join("frames"));
-        if let Some(h) = harness {
-            c.env("SHEARWARP_VTK_HARNESS", h);
+        // (the ball's surface, inside the volume: at a lower threshold the box's faces cut it, where
+        // the peers shade with a zero normal and the reference with the one-sided gradient)
+        c.args(["--modes", "blend", "--only", "rle", "--peers", list, "--iso", "127", "--json", "--den"]).arg(&den);
+        c.arg("--peer-dir").arg(dir.path().join("frames"));
+        if fake {
+            c.env("SHEARWARP_VTK_HARNESS", "/nonexistent/harness.py").env("SHEARWARP_VOLPACK_HARNESS", "/nonexistent/harness");
         }
         c
     };
-    let out = peers(Some("/nonexistent/harness.py")).assert().success();
+    let out = peers("vtk,volpack", true).assert().success();
     let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
     let views = json["views"].as_array().unwrap().len();
-    let skipped: Vec<&serde_json::Value> = json["skipped"].as_array().unwrap().iter().filter(|s| s["variant"] == "vtk").collect();
-    assert_eq!(skipped.len(), views);
-    assert!(skipped.iter().all(|s| s["reason"].as_str().unwrap().contains("vtk harness")), "{skipped:?}");
+    for (peer, why) in [("vtk", "vtk harness"), ("volpack", "volpack harness")] {
+        let skipped: Vec<&serde_json::Value> = json["skipped"].as_array().unwrap().iter().filter(|s| s["variant"] == peer).collect();
+        assert_eq!(skipped.len(), views);
+        assert!(skipped.iter().all(|s| s["reason"].as_str().unwrap().contains(why)), "{skipped:?}");
+    }
     assert!(json["records"].as_array().unwrap().iter().any(|r| r["variant"] == "rle"));
 
     let vtk = std::process::Command::new("python3").args(["-c", "import vtk"]).output().is_ok_and(|o| o.status.success());
-    if vtk {
-        let out = peers(None).assert().success();
+    let volpack = std::path::Path::new("/usr/include/volpack.h").exists();
+    for (peer, here) in [("vtk", vtk), ("volpack", volpack)] {
+        if !here {
+            eprintln!("{peer} is not installed: the measured half of this test did not run for it");
+            continue;
+        }
+        let out = peers(peer, false).args(["--perspective", "40"]).assert().success();
         let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
-        let rs: Vec<&serde_json::Value> = json["records"].as_array().unwrap().iter().filter(|r| r["variant"] == "vtk").collect();
+        let rs: Vec<&serde_json::Value> = json["records"].as_array().unwrap().iter().filter(|r| r["variant"] == peer).collect();
         assert_eq!(rs.len(), views, "{}", json["skipped"]);
         for r in rs {
             // the same views and model: a matched frame, not a shifted or mirrored one
             assert!(r["error"]["rmse"].as_f64().unwrap() < 0.08 && r["error"]["ssim"].as_f64().unwrap() > 0.8, "{r}");
             assert!(r["frame_ms"].as_f64().unwrap() > 0.0);
         }
-    } else {
-        eprintln!("python3 with vtk not installed: the measured half of this test did not run");
+        let persp = format!("{peer}-persp");
+        let measured = json["records"].as_array().unwrap().iter().filter(|r| r["variant"] == persp.as_str()).count();
+        let skipped = json["skipped"].as_array().unwrap().iter().filter(|r| r["variant"] == persp.as_str()).count();
+        assert_eq!((measured, skipped), if peer == "vtk" { (views, 0) } else { (0, views) }, "{persp}");
     }
 
     // peers need blend mode and a .den volume

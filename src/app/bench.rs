@@ -769,7 +769,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                     let pviews: Vec<PeerView> =
                         shown.iter().map(|(v, _)| PeerView { name: peers::file_safe(&v.name), rotation: v.rotation }).collect();
                     let reps = cmd.reps * cmd.rounds;
-                    match peers::run(peer, den, &pviews, pcam, threshold, cmd.threads, cmd.warmup, reps, &dir.join(&name)) {
+                    match peers::run(peer, den, &pviews, pcam, threshold, cmd.ert, cmd.threads, cmd.warmup, reps, &dir.join(&name)) {
                         Ok(run) => {
                             for ((view, rf), (ms, img)) in shown.iter().zip(run.frames) {
                                 report.records.push(Record {

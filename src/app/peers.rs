@@ -27,6 +27,9 @@ pub enum Peer {
     /// VTK's `vtkFixedPointVolumeRayCastMapper` (CPU ray casting, trilinear,
     /// post-classified), through `benches/scripts/vtk/harness.py`.
     Vtk,
+    /// VolPack (Lacroute's RLE shear-warp, pre-classified, 8-bit image,
+    /// single-threaded), through `benches/scripts/volpack/harness.c`.
+    Volpack,
 }
 
 impl Peer {
@@ -34,6 +37,7 @@ impl Peer {
     pub fn name(self) -> &'static str {
         match self {
             Peer::Vtk => "vtk",
+            Peer::Volpack => "volpack",
         }
     }
 }
@@ -68,16 +72,56 @@ pub fn user_matrix(r: DMat3) -> [f64; 9] {
     [c[0][0], c[1][0], c[2][0], c[0][1], c[1][1], c[2][1], c[0][2], c[1][2], c[2][2]]
 }
 
-/// A peer's frame read back: an 8-bit grey or RGB PNG over a black
-/// background, as an [`Image`] whose alpha marks the covered pixels (any
-/// channel above 0, the peers write no alpha), so the silhouette metric
-/// compares coverage as it does for shearwarp's frames.
+/// A peer's frame read back: an 8-bit grey or RGB PNG, or a binary 8-bit PGM
+/// (VolPack's), over a black background, as an [`Image`] whose alpha marks
+/// the covered pixels (any channel above 0: the peers write no alpha), so the
+/// silhouette metric compares coverage as it does for shearwarp's frames.
 pub fn read_frame(path: &Path, size: usize) -> Result<Image> {
-    let img = image::open(path).with_context(|| format!("{}: cannot read the peer's frame", path.display()))?.to_rgb8();
-    if img.width() as usize != size || img.height() as usize != size {
-        bail!("{}: the peer wrote {}×{} pixels, the benchmark renders {size}×{size}", path.display(), img.width(), img.height());
+    let (w, h, px) = if path.extension().is_some_and(|e| e == "pgm") {
+        let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read the peer's frame", path.display()))?;
+        let (w, h, grey) = parse_pgm(&bytes).with_context(|| format!("{}: not a binary 8-bit PGM", path.display()))?;
+        (w, h, grey.iter().map(|&g| [g, g, g]).collect::<Vec<_>>())
+    } else {
+        let img = image::open(path).with_context(|| format!("{}: cannot read the peer's frame", path.display()))?.to_rgb8();
+        (img.width() as usize, img.height() as usize, img.pixels().map(|p| p.0).collect())
+    };
+    if w != size || h != size {
+        bail!("{}: the peer wrote {w}×{h} pixels, the benchmark renders {size}×{size}", path.display());
     }
-    Ok(frame_from_rgb8(size, size, img.pixels().map(|p| p.0)))
+    Ok(frame_from_rgb8(size, size, px.into_iter()))
+}
+
+/// A binary PGM (`P5`, maxval ≤ 255, `#` comments): width, height, pixels.
+fn parse_pgm(b: &[u8]) -> Result<(usize, usize, &[u8])> {
+    let mut pos = 0usize;
+    let mut field = || -> Result<&[u8]> {
+        loop {
+            while pos < b.len() && b[pos].is_ascii_whitespace() {
+                pos += 1;
+            }
+            if pos < b.len() && b[pos] == b'#' {
+                while pos < b.len() && b[pos] != b'\n' {
+                    pos += 1;
+                }
+                continue;
+            }
+            break;
+        }
+        let start = pos;
+        while pos < b.len() && !b[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        anyhow::ensure!(pos > start, "truncated header");
+        Ok(&b[start..pos])
+    };
+    anyhow::ensure!(field()? == b"P5", "not P5");
+    let mut num = || -> Result<usize> { Ok(std::str::from_utf8(field()?)?.parse::<usize>()?) };
+    let (w, h, max) = (num()?, num()?, num()?);
+    anyhow::ensure!(max > 0 && max <= 255, "maxval {max} (8-bit only)");
+    let n = w.checked_mul(h).context("size overflows")?;
+    let data = b.get(pos + 1..).context("truncated")?;
+    anyhow::ensure!(data.len() >= n, "truncated pixels ({} of {n})", data.len());
+    Ok((w, h, &data[..n]))
 }
 
 /// An [`Image`] from 8-bit RGB pixels over black (alpha 1 where any channel is
@@ -121,10 +165,43 @@ fn vtk_harness() -> PathBuf {
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/scripts/vtk/harness.py"))
 }
 
+/// The VolPack harness: `$SHEARWARP_VOLPACK_HARNESS`, else this source tree's
+/// `benches/scripts/volpack/harness.c` built into `target/volpack/harness`
+/// with `cc` when missing or older than its source (as
+/// `benches/scripts/volpack/setup.sh` does; that script also installs
+/// `libvolpack1-dev`).
+fn volpack_harness() -> Result<PathBuf> {
+    if let Some(p) = std::env::var_os("SHEARWARP_VOLPACK_HARNESS") {
+        return Ok(PathBuf::from(p));
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let (src, bin) = (root.join("benches/scripts/volpack/harness.c"), root.join("target/volpack/harness"));
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    if modified(&bin).is_none() || modified(&bin) < modified(&src) {
+        std::fs::create_dir_all(bin.parent().context("harness directory")?)?;
+        let out = Command::new("cc")
+            .args(["-O2", "-o"])
+            .arg(&bin)
+            .arg(&src)
+            .args(["-lvolpack", "-lm"])
+            .output()
+            .context("cannot run cc to build the VolPack harness")?;
+        if !out.status.success() {
+            bail!(
+                "cannot build the VolPack harness (is libvolpack1-dev installed? benches/scripts/volpack/setup.sh installs it): {}",
+                String::from_utf8_lossy(&out.stderr).lines().next().unwrap_or("")
+            );
+        }
+    }
+    Ok(bin)
+}
+
 /// Runs `peer` on the `.den` volume `den` over `views` (`warmup` untimed and
-/// `reps` timed renders each) with `threads` threads (0: the peer's default)
-/// and the model at `threshold`; frames go to `dir`. An error says why the
-/// peer cannot run here (not installed, no display, a failed render).
+/// `reps` timed renders each) with `threads` threads (0: the peer's default;
+/// VolPack is single-threaded), the model at `threshold` and early ray
+/// termination at `ert` (VTK's is fixed at 0.9922); frames go to `dir`. An
+/// error says why the peer cannot run here (not installed, no display, a
+/// perspective VolPack cannot do, a failed render).
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     peer: Peer,
@@ -132,6 +209,7 @@ pub fn run(
     views: &[PeerView],
     cam: PeerCamera,
     threshold: f32,
+    ert: f32,
     threads: usize,
     warmup: usize,
     reps: usize,
@@ -140,18 +218,40 @@ pub fn run(
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let list: Vec<serde_json::Value> =
         views.iter().map(|v| serde_json::json!({ "name": v.name, "matrix": user_matrix(v.rotation) })).collect();
-    let vfile = dir.join("views.json");
-    std::fs::write(&vfile, serde_json::to_string(&list)?).with_context(|| format!("{}: cannot write", vfile.display()))?;
-    let mut c = match peer {
+    // the view list: JSON for VTK, one line per view for the C harness
+    let (vfile, text) = match peer {
+        Peer::Vtk => (dir.join("views.json"), serde_json::to_string(&list)?),
+        Peer::Volpack => {
+            let lines: Vec<String> = views
+                .iter()
+                .map(|v| {
+                    let m = user_matrix(v.rotation).map(|x| format!("{x:.17e}"));
+                    format!("{} {}", v.name, m.join(" "))
+                })
+                .collect();
+            (dir.join("views.txt"), lines.join("\n") + "\n")
+        }
+    };
+    std::fs::write(&vfile, text).with_context(|| format!("{}: cannot write", vfile.display()))?;
+    let (mut c, ext) = match peer {
         Peer::Vtk => {
             let mut c = Command::new("python3");
             c.arg(vtk_harness());
-            c
+            c.args(["--threads", &threads.to_string()]);
+            (c, "png")
+        }
+        Peer::Volpack => {
+            if cam.perspective.is_some() {
+                bail!("VolPack renders parallel projections only (its perspective factorization is disabled)");
+            }
+            let mut c = Command::new(volpack_harness()?);
+            c.args(["--max-ray-opacity", &ert.to_string()]);
+            (c, "pgm")
         }
     };
     c.arg("--den").arg(den).arg("--views").arg(&vfile).arg("--frames-out").arg(dir);
     c.args(["--tf", "opaque", "--threshold", &threshold.to_string(), "--min-opacity", &MODEL_MIN_OPACITY.to_string()]);
-    c.args(["--size", &cam.size.to_string(), "--zoom", &cam.zoom.to_string(), "--threads", &threads.to_string()]);
+    c.args(["--size", &cam.size.to_string(), "--zoom", &cam.zoom.to_string()]);
     c.args(["--warmup", &warmup.max(1).to_string(), "--reps", &reps.max(1).to_string()]);
     if let Some((fov, eye)) = cam.perspective {
         c.args(["--perspective", &fov.to_string(), "--eye-voxels", &eye.to_string()]);
@@ -178,7 +278,7 @@ pub fn run(
             .find(|p| p["name"] == v.name.as_str())
             .and_then(|p| p["frame_ms_median"].as_f64())
             .with_context(|| format!("the {} harness reported no time for view {}", peer.name(), v.name))?;
-        frames.push((ms, read_frame(&dir.join(format!("{}.png", v.name)), cam.size)?));
+        frames.push((ms, read_frame(&dir.join(format!("{}.{ext}", v.name)), cam.size)?));
     }
     Ok(PeerRun { frames })
 }
@@ -290,6 +390,19 @@ mod tests {
         let eb = compare(&blurred, &reference).unwrap();
         assert!((eb.rmse - want).abs() < 0.5 / 255.0 + 1e-9, "blur: RMSE {} vs {want}", eb.rmse);
         assert!(eb.rmse > 4.0 * e8.rmse && eb.ssim < e8.ssim, "blur reads as worse: {eb:?} vs {e8:?}");
+    }
+
+    #[test]
+    fn pgm_frames_parse_and_bad_ones_are_errors() {
+        let mut ok = b"P5\n# VolPack\n3 2\n255\n".to_vec();
+        ok.extend([0, 10, 20, 30, 40, 255]);
+        let (w, h, px) = parse_pgm(&ok).unwrap();
+        assert_eq!((w, h, px), (3, 2, &[0u8, 10, 20, 30, 40, 255][..]));
+        assert!(parse_pgm(&ok[..ok.len() - 1]).is_err(), "truncated pixels");
+        assert!(parse_pgm(b"P6\n1 1\n255\n\0\0\0").is_err(), "colour PPM");
+        assert!(parse_pgm(b"P5\n1 1\n65535\n\0\0").is_err(), "16-bit");
+        assert!(parse_pgm(b"P5\n1").is_err(), "truncated header");
+        assert!(parse_pgm(b"P5\n99999999999 99999999999\n255\n").is_err(), "absurd size");
     }
 
     #[test]

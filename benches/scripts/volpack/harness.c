@@ -15,6 +15,7 @@
  */
 
 #define _POSIX_C_SOURCE 200809L
+#include <ctype.h>
 #include <errno.h>
 #include <math.h>
 #include <stdint.h>
@@ -363,7 +364,54 @@ static void usage(FILE *f)
 "  --save-frames LIST    comma-separated frame indices (default 0,45)\n"
 "  --write-den FILE      write the (generated/upsampled) input volume as .den\n"
 "                        (with --frames 0: write it and exit, no VolPack work)\n"
-"  --times               also print every frame time in the JSON\n");
+"  --times               also print every frame time in the JSON\n"
+"shearwarp's matched views (`shearwarp bench --peers volpack`):\n"
+"  --views FILE          one view per line: NAME m00 m01 m02 m10 m11 m12 m20 m21 m22,\n"
+"                        the volume's rotation (row-major) about its voxel-centre\n"
+"                        (dims-1)/2; each rendered --warmup + --reps times and\n"
+"                        saved as DIR/NAME.pgm with --frames-out DIR (replaces\n"
+"                        --frames, --step-deg, --fit, --save-frames); needs --zoom\n"
+"  --zoom Z              image pixels per voxel; pixel (c, r) samples\n"
+"                        ((c - (N-1)/2)/Z, (r - (N-1)/2)/Z), as shearwarp's do\n"
+"  --reps R              timed renders per view (default 3)\n");
+}
+
+#define MAX_VIEWS 4096
+
+/* shearwarp's matched views: names and row-major rotations */
+typedef struct {
+    char name[128];
+    double m[9];
+} MatchedView;
+
+static int load_views(const char *path, MatchedView *v)
+{
+    FILE *f = fopen(path, "r");
+    char line[1024];
+    int n = 0, ln = 0;
+    if (!f) die("cannot read --views %s", path);
+    while (fgets(line, sizeof line, f)) {
+        MatchedView *w = &v[n];
+        int k, got;
+        ln++;
+        if (strspn(line, " \t\r\n") == strlen(line)) continue;
+        if (n == MAX_VIEWS) die("--views: more than 4096 views%s", "");
+        got = sscanf(line, "%127s %lf %lf %lf %lf %lf %lf %lf %lf %lf", w->name, &w->m[0], &w->m[1],
+                     &w->m[2], &w->m[3], &w->m[4], &w->m[5], &w->m[6], &w->m[7], &w->m[8]);
+        if (got != 10) {
+            fprintf(stderr, "harness: --views %s line %d: ", path, ln);
+            die("expected NAME and 9 numbers%s", "");
+        }
+        for (k = 0; k < 9; k++)
+            if (!isfinite(w->m[k])) die("--views: a matrix entry is not finite%s", "");
+        for (k = 0; w->name[k]; k++)
+            if (!isalnum((unsigned char)w->name[k]) && !strchr("._+-", w->name[k]))
+                die("--views: view names may hold letters, digits and ._+- only%s", "");
+        n++;
+    }
+    fclose(f);
+    if (n == 0) die("--views %s holds no view", path);
+    return n;
 }
 
 static int parse_int(const char *s, const char *opt)
@@ -397,6 +445,10 @@ int main(int argc, char **argv)
     int size = 512, frames = 360, warmup = 1, print_times = 0;
     double threshold = 24.0, ramp_top = 0.3, ramp_end = 255.0;
     double min_opacity = 0.05, max_ray_opacity = 0.95, step_deg = 1.0;
+    const char *views_path = NULL;
+    double zoom = 0.0;
+    int reps = 3, nviews = 0;
+    static MatchedView views[MAX_VIEWS];
 
     int dims[3];
     unsigned char *scalars;
@@ -434,6 +486,9 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--save-frames")) save_list = NEXT();
         else if (!strcmp(a, "--write-den")) write_den_path = NEXT();
         else if (!strcmp(a, "--times")) print_times = 1;
+        else if (!strcmp(a, "--views")) views_path = NEXT();
+        else if (!strcmp(a, "--zoom")) zoom = parse_double(NEXT(), a);
+        else if (!strcmp(a, "--reps")) reps = parse_int(NEXT(), a);
         else {
             usage(stderr);
             die("unknown option %s", a);
@@ -453,6 +508,12 @@ int main(int argc, char **argv)
     if (up < 1 || up > 8) die("bad --upsample%s", "");
     if (!strcmp(tf, "ramp") && !(ramp_end > threshold))
         die("--ramp-end must exceed --threshold%s", "");
+    if (views_path) {
+        if (!(zoom > 0.0 && isfinite(zoom))) die("--views needs --zoom Z (finite, > 0)%s", "");
+        if (reps < 1 || reps > 100000) die("bad --reps%s", "");
+        nviews = load_views(views_path, views);
+        frames = nviews * reps; /* the timing arrays hold every timed render */
+    }
 
     /* ---- load / generate the volume ---- */
     if (den_path) {
@@ -583,6 +644,8 @@ int main(int argc, char **argv)
        centred, so the largest dimension spans [-0.5, 0.5].  A window of
        half-width h maps [-h, h] onto the N image pixels. */
     double half = !strcmp(fit, "diag") ? 0.5 * diag / maxdim : 0.5;
+    if (views_path) /* Z pixels per voxel: the window spans N/Z voxels */
+        half = size / (2.0 * zoom * maxdim);
     double px_per_voxel = size / (2.0 * half * maxdim);
     vpcheck(vpc, vpCurrentMatrix(vpc, VP_PROJECT), "vpCurrentMatrix(PROJECT)");
     vpcheck(vpc, vpIdentityMatrix(vpc), "vpIdentityMatrix(PROJECT)");
@@ -619,7 +682,46 @@ int main(int argc, char **argv)
     }
 
     int nimg = 0;
-    for (i = -warmup; i < frames; i++) {
+    /* shearwarp's matched views. VolPack maps voxel p to column
+       N/2 + s*x', row N/2 + s*y' with (x', y') of M (p - dims/2) and s = Z
+       here; shearwarp puts it at (N-1)/2 + Z*x' with x' of M (p - (dims-1)/2).
+       The model matrix [M | t] (object units: voxels / maxdim) with
+       t = (Z*(M h) - 1/2) / (Z*maxdim), h = (1/2, 1/2, 1/2), on x and y makes
+       the two agree (z only orders the slices). */
+    for (int vi = 0; vi < nviews; vi++) {
+        const double *m = views[vi].m;
+        double S = zoom * maxdim;
+        vpMatrix4 mm;
+        int r, k;
+        for (r = 0; r < 4; r++)
+            for (k = 0; k < 4; k++) mm[r][k] = (r == k && r == 3) ? 1.0 : 0.0;
+        for (r = 0; r < 3; r++) {
+            for (k = 0; k < 3; k++) mm[r][k] = m[3 * r + k];
+            if (r < 2)
+                mm[r][3] = (zoom * 0.5 * (m[3 * r] + m[3 * r + 1] + m[3 * r + 2]) - 0.5) / S;
+        }
+        vpcheck(vpc, vpIdentityMatrix(vpc), "vpIdentityMatrix(MODEL)");
+        vpcheck(vpc, vpSetMatrix(vpc, mm), "vpSetMatrix(MODEL)");
+        double *times = &render_ms[vi * reps];
+        for (i = -warmup; i < reps; i++) {
+            double s0 = now_ms();
+            vpcheck(vpc, vpShadeTable(vpc), "vpShadeTable");
+            double s1 = now_ms();
+            vpcheck(vpc, vpRenderClassifiedVolume(vpc), "vpRenderClassifiedVolume");
+            double s2 = now_ms();
+            if (i < 0)
+                continue;
+            shade_ms[vi * reps + i] = s1 - s0;
+            times[i] = s2 - s1;
+        }
+        if (frames_out) {
+            char path[4096];
+            snprintf(path, sizeof path, "%s/%s.pgm", frames_out, views[vi].name);
+            write_pgm(path, image, size, size);
+            nimg++;
+        }
+    }
+    for (i = -warmup; i < (views_path ? 0 : frames); i++) {
         int f = i < 0 ? 0 : i;
         /* view of frame f: model = R_y(f * step) (VolPack's vpRotate matrix),
            set from scratch each frame so no rounding accumulates. */
@@ -684,6 +786,19 @@ int main(int argc, char **argv)
            "\"depth_cue\":false},", MAT_AMBIENT, MAT_DIFFUSE, MAT_SPECULAR,
            MAT_SHININESS);
     printf("\"threads\":1,\"images_written\":%d", nimg);
+    if (views_path) {
+        printf(",\"zoom\":%.9g,\"views\":[", zoom);
+        for (int vi = 0; vi < nviews; vi++) {
+            double *t = malloc(sizeof(double) * reps);
+            if (!t) die("out of memory%s", "");
+            memcpy(t, &render_ms[vi * reps], sizeof(double) * reps);
+            qsort(t, reps, sizeof(double), cmp_double);
+            printf("%s{\"name\":\"%s\",\"frame_ms_median\":%.4f,\"frame_ms_min\":%.4f,\"reps\":%d}",
+                   vi ? "," : "", views[vi].name, median_sorted(t, reps), t[0], reps);
+            free(t);
+        }
+        printf("]");
+    }
     if (print_times) {
         printf(",\"frame_ms\":[");
         for (i = 0; i < frames; i++)

@@ -38,6 +38,7 @@ use shearwarp::accuracy::metrics::{DepthError, ImageError, compare, depth_error}
 use shearwarp::accuracy::reference::{ReferenceImage, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
 use shearwarp::accuracy::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_depth};
 use shearwarp::classify::presets;
+use shearwarp::classify::shading::Shading;
 use shearwarp::composite::Mode;
 use shearwarp::data::phantom::{ML_ISO, Phantom, SPHERE_ISO};
 use shearwarp::data::volume::Volume;
@@ -98,6 +99,9 @@ pub struct BenchCmd {
     /// Print JSON (records and summary) instead of the Markdown tables.
     #[arg(long)]
     pub json: bool,
+    /// Also write the JSON report to this file (the Markdown still goes to stdout).
+    #[arg(long, value_name = "FILE")]
+    pub json_out: Option<PathBuf>,
     /// Write a plot of frame time against RMSE (.svg or .png; repeat for both).
     #[arg(long)]
     pub plot: Vec<PathBuf>,
@@ -489,6 +493,27 @@ pub struct Report {
     pub summary: Vec<Summary>,
     /// Variants and views that could not be rendered, and why.
     pub skipped: Vec<Skipped>,
+    /// With `--peers`: the error floor of the shared model, per parallel view
+    /// ([`MODEL_FLOOR_DELTA`]).
+    pub model_floor: Vec<ModelFloor>,
+    /// With `--peers`: per peer row, the shearwarp row that matches or beats
+    /// it on both time and error, or by how much none does ([`dominance`]).
+    pub dominance: Vec<String>,
+}
+
+/// How far the peers' material constants are moved to show the model's error
+/// floor: the reference re-rendered with ambient, diffuse and specular each
+/// this much higher reads as this error against the reference itself, a
+/// scale for what an unmatched detail of a peer's shading costs.
+pub const MODEL_FLOOR_DELTA: f32 = 0.01;
+
+/// The reference with the material moved by [`MODEL_FLOOR_DELTA`] against the
+/// reference, at one view.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ModelFloor {
+    pub view: String,
+    pub rmse: f64,
+    pub ssim: f64,
 }
 
 /// A variant that cannot render a view (a perspective the path does not do yet).
@@ -523,6 +548,9 @@ pub fn run(cmd: &BenchCmd) -> Result<()> {
     }
     for p in &cmd.plot {
         write_plot(p, &report)?;
+    }
+    if let Some(p) = &cmd.json_out {
+        std::fs::write(p, serde_json::to_string_pretty(&report)?).with_context(|| format!("{}: cannot write", p.display()))?;
     }
     if cmd.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -594,6 +622,8 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
         records: vec![],
         summary: vec![],
         skipped: vec![],
+        model_floor: vec![],
+        dominance: vec![],
     };
     let mut vol = Some(vol);
     for (mode, variants) in &per_mode {
@@ -631,6 +661,16 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                 Err(e) => return Err(e.into()),
             };
             let ms = t.elapsed().as_secs_f64() * 1e3;
+            if peer_threshold.is_some() && !proj.is_perspective() {
+                let d = MODEL_FLOOR_DELTA;
+                let sh = scene.shading;
+                let moved = Scene {
+                    shading: Shading { ambient: sh.ambient + d, diffuse: sh.diffuse + d, specular: sh.specular + d, ..sh },
+                    ..scene.clone()
+                };
+                let e = compare(&refr.render_projected(&moved, &cam, proj, &ropts)?.image, &image.image)?;
+                report.model_floor.push(ModelFloor { view: view.name.clone(), rmse: e.rmse, ssim: e.ssim });
+            }
             let t = Instant::now();
             let analytic = match (mode, phantom) {
                 _ if proj.is_perspective() => None,
@@ -801,7 +841,49 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
     }
     pb.finish_and_clear();
     report.summary = summarize(&report.records);
+    report.dominance = ["iso", "blend"].iter().flat_map(|m| dominance(&report.summary, m)).collect();
     Ok(report)
+}
+
+/// Whether a shearwarp row matches each peer row of `mode`: for every peer
+/// (a row without a shear time), the shearwarp rows at most as slow *and* at
+/// most as wrong (the fastest of them), or, when there is none, by how much
+/// the best shearwarp row at most as slow misses its error and the best at
+/// most as wrong misses its time. Rows are compared within one projection
+/// (parallel rows with parallel, each perspective with its own).
+pub fn dominance(summary: &[Summary], mode: &str) -> Vec<String> {
+    let projection = |v: &str| v.split_once("-persp").map(|(_, r)| r.trim_start_matches("-q2").to_string());
+    let rows: Vec<&Summary> = summary.iter().filter(|x| x.mode == mode).collect();
+    let mut out = vec![];
+    for p in rows.iter().filter(|x| x.cold_shear_ms.is_nan()) {
+        let ours: Vec<&&Summary> =
+            rows.iter().filter(|x| !x.cold_shear_ms.is_nan() && projection(&x.variant) == projection(&p.variant)).collect();
+        let head = format!("{} ({:.3} ms, RMSE {:.5})", p.variant, p.frame_ms, p.rmse_mean);
+        let both =
+            ours.iter().filter(|x| x.frame_ms <= p.frame_ms && x.rmse_mean <= p.rmse_mean).min_by(|a, b| a.frame_ms.total_cmp(&b.frame_ms));
+        if let Some(b) = both {
+            out.push(format!("{head}: matched or beaten by {} ({:.3} ms, RMSE {:.5})", b.variant, b.frame_ms, b.rmse_mean));
+            continue;
+        }
+        let faster = ours.iter().filter(|x| x.frame_ms <= p.frame_ms).min_by(|a, b| a.rmse_mean.total_cmp(&b.rmse_mean));
+        let better = ours.iter().filter(|x| x.rmse_mean <= p.rmse_mean).min_by(|a, b| a.frame_ms.total_cmp(&b.frame_ms));
+        let mut why = vec![];
+        if let Some(f) = faster {
+            why.push(format!(
+                "the most accurate shearwarp row as fast, {}, has {:+.0} % RMSE",
+                f.variant,
+                100.0 * (f.rmse_mean / p.rmse_mean - 1.0)
+            ));
+        }
+        if let Some(b) = better {
+            why.push(format!("the fastest as accurate, {}, takes {:+.0} % time", b.variant, 100.0 * (b.frame_ms / p.frame_ms - 1.0)));
+        }
+        if why.is_empty() {
+            why.push("no shearwarp row of its projection".into());
+        }
+        out.push(format!("{head}: NOT MATCHED, no shearwarp row is as fast and as accurate: {}", why.join("; ")));
+    }
+    out
 }
 
 /// The suffix of a perspective variant's name when `n` projections are
@@ -969,6 +1051,19 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
                  (opaque ramp at the iso value with the 0.05 cut, white, ambient 0.1, diffuse 0.6, specular 0.3^20).",
                 peer_rows.join(", ")
             );
+            if !rep.model_floor.is_empty() {
+                let n = rep.model_floor.len() as f64;
+                let _ = writeln!(
+                    s,
+                    "Model floor: the reference with ambient, diffuse and specular each {MODEL_FLOOR_DELTA} higher reads \
+                     RMSE {:.5}, SSIM {:.5} (mean over the parallel views) against the reference.",
+                    rep.model_floor.iter().map(|f| f.rmse).sum::<f64>() / n,
+                    rep.model_floor.iter().map(|f| f.ssim).sum::<f64>() / n
+                );
+            }
+            for line in dominance(&rep.summary, mode) {
+                let _ = writeln!(s, "- {line}");
+            }
         }
         // skipped views, one line per variant and reason
         let mut skipped: Vec<(&str, &str, Vec<&str>)> = vec![];
@@ -1179,8 +1274,27 @@ where
                 + Circle::new((0, 0), 9, color.stroke_width(2))
                 + Text::new(p.0.variant.clone(), (label_dx(p.1, &p.0.variant), -16), ("sans-serif", 13).into_font().color(&BLACK))
         }))?;
+        // the peers (rows without a shear time): a black square, always named
+        let peers: Vec<&&(&Summary, f64, f64)> = mine.iter().filter(|p| p.0.cold_shear_ms.is_nan()).collect();
+        if !peers.is_empty() {
+            chart
+                .draw_series(peers.iter().map(|p| {
+                    EmptyElement::at((p.1, p.2))
+                        + Rectangle::new([(-6, -6), (6, 6)], BLACK.filled())
+                        + Text::new(p.0.variant.clone(), (label_dx(p.1, &p.0.variant), 8), ("sans-serif", 13).into_font().color(&BLACK))
+                }))?
+                .label("peers (VolPack, VTK)")
+                .legend(|(x, y)| Rectangle::new([(x - 5, y - 5), (x + 5, y + 5)], BLACK.filled()));
+        }
     }
-    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).label_font(("sans-serif", 14)).draw()?;
+    // the lower left (fast and exact) is the corner no method reaches
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .draw()?;
     root.present()?;
     Ok(())
 }
@@ -1244,5 +1358,41 @@ mod tests {
         let s = summarize(&[rec("fast", 1.0, 0.1), rec("slow-good", 5.0, 0.01), rec("dominated", 6.0, 0.05), rec("tie", 1.0, 0.1)]);
         let front: Vec<&str> = s.iter().filter(|x| x.pareto).map(|x| x.variant.as_str()).collect();
         assert_eq!(front, ["fast", "slow-good", "tie"]);
+    }
+
+    /// A peer row (no shear time) is matched by the fastest shearwarp row of
+    /// its projection at most as slow and as wrong, or reported as not
+    /// matched with both margins; perspective rows meet only their own kind.
+    #[test]
+    fn peers_are_matched_or_reported() {
+        let rec = |variant: &str, t: f64, e: f64, peer: bool| Record {
+            mode: "blend",
+            variant: variant.into(),
+            view: "0°".into(),
+            axis: 0,
+            frame_ms: t,
+            shear_ms: 0.0,
+            render_ms: t,
+            warp_ms: 0.0,
+            cold_shear_ms: if peer { f64::NAN } else { 0.0 },
+            error: ImageError { rmse: e, psnr: shearwarp::accuracy::metrics::psnr(e), max_abs: e, ssim: 1.0, silhouette: 0.0 },
+            depth_truth: None,
+            depth: None,
+        };
+        let s = summarize(&[
+            rec("rle", 1.0, 0.04, false),
+            rec("binary", 2.0, 0.03, false),
+            rec("rle-persp", 2.0, 0.03, false),
+            rec("volpack", 1.5, 0.05, true),
+            rec("vtk", 50.0, 0.02, true),
+            rec("vtk-persp", 1.0, 0.05, true),
+        ]);
+        let d = dominance(&s, "blend");
+        assert_eq!(d.len(), 3);
+        assert!(d[0].starts_with("volpack") && d[0].contains("matched or beaten by rle (1.000 ms"), "{}", d[0]);
+        assert!(d[1].starts_with("vtk ") && d[1].contains("NOT MATCHED") && d[1].contains("binary, has +50 % RMSE"), "{}", d[1]);
+        // the perspective peer meets only rle-persp, which is slower
+        assert!(d[2].starts_with("vtk-persp") && d[2].contains("NOT MATCHED") && d[2].contains("rle-persp, takes +100 % time"), "{}", d[2]);
+        assert!(dominance(&s, "iso").is_empty());
     }
 }

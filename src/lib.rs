@@ -13,6 +13,9 @@
 //! → view ([`view`]: camera, factorization, frame plan)
 //! → composite ([`composite`]: ray and slice traversals into the intermediate image)
 //! → warp ([`warp`]: the intermediate image to the final one).
+//! [`geometry`] holds surfaces placed in the volume (meshes, primitives) and
+//! their rasterizer at the output resolution, for geometry and clip regions
+//! that enter the frame plan as per-pixel ray limits.
 //! [`render`] runs that pipeline per frame; [`kernels`] holds the one CPU
 //! level every SIMD kernel is chosen by; [`memory`] what each structure holds
 //! and the fallible allocation of the large ones. [`accuracy`] (reference renderer,
@@ -29,6 +32,7 @@ pub mod composite;
 pub mod data;
 pub mod encode;
 pub mod error;
+pub mod geometry;
 pub mod kernels;
 pub mod memory;
 pub mod render;

@@ -1,0 +1,22 @@
+//! Geometry in the volume (issue 23; Bruckner's InverseWarp hybrid).
+//!
+//! Owns the surfaces placed in a volume and their picture at the output
+//! resolution:
+//! - [`mesh`]: triangle meshes in voxel-index coordinates (with a transform)
+//!   and the analytic primitives for quick use and for tests: sphere, box,
+//!   cylinder ("needle") and plane;
+//! - [`raster`]: the CPU rasterizer that draws meshes into a colour and depth
+//!   buffer at the output resolution, in the renderer's own image coordinates
+//!   and for both projections (near-plane clipping, the top-left fill rule,
+//!   back-face modes, Lambert/Blinn-Phong under the headlight).
+//!
+//! The depth buffer is in the reference renderer's depth units (world units
+//! along the view from the plane through the volume centre), so a pixel's
+//! geometry and volume depths compare directly. Turning that depth into the
+//! frame plan's per-pixel ray limits (the inverse warp) is the next stage.
+
+pub mod mesh;
+pub mod raster;
+
+pub use mesh::Mesh;
+pub use raster::{Cull, GeometryImage, Material, Projector, rasterize};

@@ -211,8 +211,9 @@ pub struct RenderArgs {
     /// Perspective projection with this vertical field of view, in degrees
     /// (0 < FOV < 180), from an eye on the view axis --eye-distance volume
     /// diagonals from the volume's centre (the field of view sets the scale:
-    /// no --zoom). Renders with --method rle or brute-rle; the eye inside or
-    /// very near the volume (rays more than 63.4° off the principal axis) is
+    /// no --zoom). Every method renders it (the binary rotator walks each
+    /// ray across the mask's columns as it diverges); the eye inside or very
+    /// near the volume (rays more than 63.4° off the principal axis) is
     /// rendered by Lacroute's pyramid split, e.g. --eye-distance 0.1.
     #[arg(long, value_name = "FOV_DEGREES", allow_negative_numbers = true, conflicts_with = "zoom")]
     pub perspective: Option<f64>,

@@ -414,6 +414,18 @@ static int load_views(const char *path, MatchedView *v)
     return n;
 }
 
+/* One frame of the current view: the shade table (timed apart, excluded from
+   frame_ms) and vpRenderClassifiedVolume (compositing and warp). */
+static void render_frame(vpContext *vpc, double *shade_ms, double *render_ms)
+{
+    double s0 = now_ms();
+    vpcheck(vpc, vpShadeTable(vpc), "vpShadeTable");
+    double s1 = now_ms();
+    vpcheck(vpc, vpRenderClassifiedVolume(vpc), "vpRenderClassifiedVolume");
+    *shade_ms = s1 - s0;
+    *render_ms = now_ms() - s1;
+}
+
 static int parse_int(const char *s, const char *opt)
 {
     char *end;
@@ -702,17 +714,13 @@ int main(int argc, char **argv)
         }
         vpcheck(vpc, vpIdentityMatrix(vpc), "vpIdentityMatrix(MODEL)");
         vpcheck(vpc, vpSetMatrix(vpc, mm), "vpSetMatrix(MODEL)");
-        double *times = &render_ms[vi * reps];
         for (i = -warmup; i < reps; i++) {
-            double s0 = now_ms();
-            vpcheck(vpc, vpShadeTable(vpc), "vpShadeTable");
-            double s1 = now_ms();
-            vpcheck(vpc, vpRenderClassifiedVolume(vpc), "vpRenderClassifiedVolume");
-            double s2 = now_ms();
+            double sh, re;
+            render_frame(vpc, &sh, &re);
             if (i < 0)
                 continue;
-            shade_ms[vi * reps + i] = s1 - s0;
-            times[i] = s2 - s1;
+            shade_ms[vi * reps + i] = sh;
+            render_ms[vi * reps + i] = re;
         }
         if (frames_out) {
             char path[4096];
@@ -727,15 +735,12 @@ int main(int argc, char **argv)
            set from scratch each frame so no rounding accumulates. */
         vpcheck(vpc, vpIdentityMatrix(vpc), "vpIdentityMatrix(MODEL)");
         vpcheck(vpc, vpRotate(vpc, VP_Y_AXIS, f * step_deg), "vpRotate");
-        double s0 = now_ms();
-        vpcheck(vpc, vpShadeTable(vpc), "vpShadeTable");
-        double s1 = now_ms();
-        vpcheck(vpc, vpRenderClassifiedVolume(vpc), "vpRenderClassifiedVolume");
-        double s2 = now_ms();
+        double sh, re;
+        render_frame(vpc, &sh, &re);
         if (i < 0)
             continue;
-        shade_ms[i] = s1 - s0;
-        render_ms[i] = s2 - s1;
+        shade_ms[i] = sh;
+        render_ms[i] = re;
         if (frames_out && save[i]) {
             char path[4096];
             snprintf(path, sizeof path, "%s/volpack_%s_%s_%d_f%03d.pgm", frames_out,

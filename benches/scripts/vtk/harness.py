@@ -462,29 +462,20 @@ def main(argv):
     # VTK casts through pixel centres ((c + 0.5 - N/2)/s); VolPack puts
     # (col, row) at (c - N/2)/s.  Shift the camera by half a pixel to match.
     h = 0.5 / px_per_voxel
-    dist = diag + 10.0
-    cam = ren.GetActiveCamera()
+    # shearwarp's perspective: the eye on the view axis eye_distance
+    # diagonals from the centre, the vertical field of view over the image
+    # height; near plane 0.5 voxel in front of the eye (or the volume)
+    eye = a.eye_distance * diag
     if a.view_list is not None:
-        # shearwarp's camera: pixel centres (c - (N-1)/2)/Z are VTK's own
-        # (c + 0.5 - N/2)/s with s = Z, so no half-pixel shift
+        # shearwarp's own camera: pixel centres (c - (N-1)/2)/Z are VTK's
+        # (c + 0.5 - N/2)/s with s = Z, so no half-pixel shift; its eye distance
         px_per_voxel = a.zoom
         scale = a.size / (2.0 * a.zoom)
-        if a.perspective is None:
-            cam.ParallelProjectionOn()
-            cam.SetFocalPoint(0.0, 0.0, 0.0)
-            cam.SetPosition(0.0, 0.0, -dist)
-            cam.SetViewUp(0.0, -1.0, 0.0)
-            cam.SetParallelScale(scale)
-            cam.SetClippingRange(dist - 0.5 * diag - 2.0, dist + 0.5 * diag + 2.0)
-        else:
-            eye = a.eye_voxels
-            cam.ParallelProjectionOff()
-            cam.SetFocalPoint(0.0, 0.0, 0.0)
-            cam.SetPosition(0.0, 0.0, -eye)
-            cam.SetViewUp(0.0, -1.0, 0.0)
-            cam.SetViewAngle(a.perspective)
-            cam.SetClippingRange(max(0.5, eye - 0.5 * diag - 2.0), eye + 0.5 * diag + 2.0)
-    elif a.perspective is None:
+        h = 0.0
+        eye = a.eye_voxels
+    dist = diag + 10.0
+    cam = ren.GetActiveCamera()
+    if a.perspective is None:
         cam.ParallelProjectionOn()
         cam.SetFocalPoint(-h, -h, 0.0)
         cam.SetPosition(-h, -h, -dist)
@@ -492,10 +483,6 @@ def main(argv):
         cam.SetParallelScale(scale)
         cam.SetClippingRange(dist - 0.5 * diag - 2.0, dist + 0.5 * diag + 2.0)
     else:
-        # shearwarp's perspective: the eye on the view axis eye_distance
-        # diagonals from the centre, the vertical field of view over the image
-        # height; near plane 0.5 voxel in front of the eye (or the volume)
-        eye = a.eye_distance * diag
         cam.ParallelProjectionOff()
         cam.SetFocalPoint(0.0, 0.0, 0.0)
         cam.SetPosition(0.0, 0.0, -eye)

@@ -8,15 +8,20 @@
 //! - [`raster`]: the CPU rasterizer that draws meshes into a colour and depth
 //!   buffer at the output resolution, in the renderer's own image coordinates
 //!   and for both projections (near-plane clipping, the top-left fill rule,
-//!   back-face modes, Lambert/Blinn-Phong under the headlight).
+//!   back-face modes, Lambert/Blinn-Phong under the headlight);
+//! - [`inverse_warp`]: that depth buffer as the frame plan's per-pixel ray
+//!   limits ([`GeometryLimits`], a [`crate::view::plan::Limiter`]: every
+//!   path stops at the geometry), and the final image of the volume over the
+//!   geometry's colour.
 //!
 //! The depth buffer is in the reference renderer's depth units (world units
 //! along the view from the plane through the volume centre), so a pixel's
-//! geometry and volume depths compare directly. Turning that depth into the
-//! frame plan's per-pixel ray limits (the inverse warp) is the next stage.
+//! geometry and volume depths compare directly.
 
+pub mod inverse_warp;
 pub mod mesh;
 pub mod raster;
 
+pub use inverse_warp::{GeometryLimits, composite_over_geometry};
 pub use mesh::Mesh;
 pub use raster::{Cull, GeometryImage, Material, Projector, rasterize};

@@ -492,7 +492,7 @@ fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
         MapKind::ScaleTranslate => render_rows(rect, out, |q, p0, crow, drow| {
-            let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q };
+            let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q, start: None };
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
     }
@@ -536,6 +536,13 @@ trait RaySource {
     /// and, unless it has no candidate, its walk and its first candidate (which
     /// the walk will return first).
     fn ray(&mut self, p: usize) -> (Self::Ray, Option<(Self::Walk, usize)>);
+    /// Called before the rays of pixels `p0 .. p0 + n` (a group of
+    /// [`binary_row`]) are asked for: where a source finds what a group of rays
+    /// shares.
+    #[inline(always)]
+    fn group(&mut self, p0: usize, n: usize) {
+        let _ = (p0, n);
+    }
     /// The ray of pixel `p` again (cheap: kept out of the walks between a
     /// group's two phases, which would only move it around).
     fn ray_of(&self, p: usize) -> Self::Ray;
@@ -589,7 +596,8 @@ impl<'a, W: Word> RaySource for Columns<'a, W> {
 
 /// The rays of a scaled plan: each walks across the mask's columns as it
 /// diverges from the direction the mask is sheared to ([`ColumnWalk`]), over
-/// its own slice range.
+/// its own slice range, from the first block in which its group may have a
+/// candidate ([`BlockOccupancy::first_block`]).
 struct Diverging<'a, W: Word> {
     ctx: &'a RayContext<'a>,
     mask: &'a BinaryMask<W>,
@@ -597,6 +605,9 @@ struct Diverging<'a, W: Word> {
     search: Search,
     m: &'a Matcher,
     q: usize,
+    /// The group's first block with a possible candidate (`None`: no ray of
+    /// the group has one).
+    start: Option<usize>,
 }
 
 impl<'a, W: Word> RaySource for Diverging<'a, W> {
@@ -605,8 +616,16 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
     #[inline(always)]
     fn ray(&mut self, p: usize) -> (ScaledRay, Option<(ColumnWalk<'a, W>, usize)>) {
         let ray = self.ctx.scaled_ray(p, self.q);
+        let Some(b) = self.start else { return (ray, None) };
         let plan = self.ctx.plan;
-        let [lo, hi] = plan.ray_range(p, self.q);
+        let [mut lo, mut hi] = plan.ray_range(p, self.q);
+        // (the blocks before the group's first hold no candidate of this ray)
+        let len = self.occ.block_len();
+        if self.ctx.ascending {
+            lo = lo.max(b * len);
+        } else {
+            hi = hi.min(b * len + len - 1);
+        }
         let mut it =
             ColumnWalk::new(self.mask, self.occ, &plan.shear, &plan.scaled, ray.at, lo, hi, self.ctx.ascending, self.search, self.m);
         let walk = match it.peek() {
@@ -618,6 +637,16 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
     #[inline(always)]
     fn ray_of(&self, p: usize) -> ScaledRay {
         self.ctx.scaled_ray(p, self.q)
+    }
+    #[inline(always)]
+    fn group(&mut self, p0: usize, n: usize) {
+        let plan = self.ctx.plan;
+        let (a0, a1) =
+            (plan.intermediate_to_sheared(p0 as f64, self.q as f64), plan.intermediate_to_sheared((p0 + n - 1) as f64, self.q as f64));
+        let at = [[a0[0].min(a1[0]), a0[0].max(a1[0])], [a0[1].min(a1[1]), a0[1].max(a1[1])]];
+        // the plan's slices hold every ray's own range
+        let [lo, hi] = plan.k_range;
+        self.start = self.occ.first_block(self.mask, &plan.shear, &plan.scaled, at, lo, hi, self.ctx.ascending);
     }
 }
 
@@ -693,6 +722,7 @@ fn binary_row<V: Cells, const LIMITED: bool, S: RaySource>(
     let mut last_line = usize::MAX;
     for (g, (cg, dg)) in crow.chunks_mut(PREFETCH_GROUP).zip(drow.chunks_mut(PREFETCH_GROUP)).enumerate() {
         let pg = p0 + g * PREFETCH_GROUP;
+        src.group(pg, cg.len());
         // phase 1: the first candidate slice of every ray of the group (none for
         // an empty column), prefetched
         for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {

@@ -168,6 +168,55 @@ impl BlockOccupancy {
         self.len
     }
 
+    /// The first block, in walking order, over slices `[lo, hi]` (index
+    /// order) in which a ray of a group may meet a matching column: every ray
+    /// through a sheared point of `[at[0][0], at[0][1]] × [at[1][0], at[1][1]]`
+    /// (min, max per axis) under the slices' `scaled` maps, against `mask` in
+    /// `shear` (the mask and shear this table was built for). `None`: no ray
+    /// of the group has a candidate. The group's drift over a block spans the
+    /// extremes of its corner rays at the block's end slices (affine in the
+    /// point and in `k`), so its rectangle holds every member's columns and a
+    /// block it skips has no candidate for any of them: a group of rays pays
+    /// for the empty blocks in front of its surface once instead of once per
+    /// ray.
+    #[allow(clippy::too_many_arguments)]
+    pub fn first_block<W: Word>(
+        &self,
+        mask: &BinaryMask<W>,
+        shear: &ShearState,
+        scaled: &[ScaledMap],
+        at: [[f64; 2]; 2],
+        lo: usize,
+        hi: usize,
+        ascending: bool,
+    ) -> Option<usize> {
+        let (lo, hi) = (lo.max(self.slices[0]), hi.min(self.slices[1]));
+        if lo > hi || self.rect.is_none() {
+            return None;
+        }
+        let len = self.len.max(1);
+        let (bl, bh) = (lo / len, hi / len);
+        let drift = |ax: usize, k: usize| {
+            let (s, t) = (&scaled[k], shear.trans[ax][k]);
+            let (x0, x1) = (s.scale * at[ax][0] + s.trans[ax] - t, s.scale * at[ax][1] + s.trans[ax] - t);
+            (x0.min(x1), x0.max(x1))
+        };
+        for i in 0..=bh - bl {
+            let b = if ascending { bl + i } else { bh - i };
+            let (ka, kb) = (lo.max(b * len), hi.min(b * len + len - 1));
+            let cols = |ax: usize| {
+                let ((a0, a1), (b0, b1)) = (drift(ax, ka), drift(ax, kb));
+                columns(mask, &self.frac[b], ax, a0.min(b0), a1.max(b1))
+            };
+            if let (Some((p0, p1)), Some((q0, q1))) = (cols(0), cols(1))
+                && self.any(b, p0, p1, q0, q1)
+            {
+                return Some(b);
+            }
+        }
+        None
+    }
+
     /// True when some column of `[p0, p1] × [q0, q1]` (super columns) has a
     /// match in block `w`.
     #[inline(always)]
@@ -182,6 +231,24 @@ impl BlockOccupancy {
         let (s, n) = (self.stride, self.blocks);
         t[(y1 * s + x1) * n] + t[(y0 * s + x0) * n] != t[(y0 * s + x1) * n] + t[(y1 * s + x0) * n]
     }
+}
+
+/// The mask columns `[c0, c1]` along axis `ax` that hold the cells of samples
+/// whose drift lies in `[u0, u1]`, in slices of one block (whose fractions of
+/// the shear translations are `frac`: [`BlockOccupancy`]), clipped to the grid
+/// (`None`: off the grid). See the module docs.
+#[inline(always)]
+fn columns<W: Word>(mask: &BinaryMask<W>, frac: &[f64; 4], ax: usize, u0: f64, u1: f64) -> Option<(usize, usize)> {
+    // the cell's offset from the slice's, floor(x) − floor(t) = floor(u + frac(t)),
+    // over the slices' fractions in the block
+    let h0 = floor_i64(u0 + frac[2 * ax] - MARGIN);
+    let h1 = floor_i64(u1 + frac[2 * ax + 1] + MARGIN);
+    let s = mask.cell_size() as i64;
+    let pad = mask.pad() as i64;
+    // (no division at cell size 1, the usual case)
+    let (c0, c1) = if s == 1 { (h0 + pad, h1 + pad) } else { ((h0 - s + 1).div_euclid(s) + pad, h1.div_euclid(s) + pad) };
+    let (c0, c1) = (c0.max(0), c1.min(mask.grid()[ax] as i64 - 1));
+    (c0 <= c1).then_some((c0 as usize, c1 as usize))
 }
 
 /// The slices of one ray of a scaled plan whose mask codes match, front to back
@@ -326,17 +393,8 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
     #[inline(always)]
     fn columns(&self, ax: usize, ka: usize, kb: usize) -> Option<(usize, usize)> {
         let (a, b) = (self.drift(ax, ka), self.drift(ax, kb));
-        // the cell's offset from the slice's, floor(x) − floor(t) = floor(u + frac(t)),
-        // over the slices' fractions in the block (ka and kb share one)
-        let f = &self.occ.frac[ka / self.occ.len];
-        let h0 = floor_i64(a.min(b) + f[2 * ax] - MARGIN);
-        let h1 = floor_i64(a.max(b) + f[2 * ax + 1] + MARGIN);
-        let s = self.mask.cell_size() as i64;
-        let pad = self.mask.pad() as i64;
-        // (no division at cell size 1, the usual case)
-        let (c0, c1) = if s == 1 { (h0 + pad, h1 + pad) } else { ((h0 - s + 1).div_euclid(s) + pad, h1.div_euclid(s) + pad) };
-        let (c0, c1) = (c0.max(0), c1.min(self.mask.grid()[ax] as i64 - 1));
-        (c0 <= c1).then_some((c0 as usize, c1 as usize))
+        // (ka and kb share a block)
+        columns(self.mask, &self.occ.frac[ka / self.occ.len], ax, a.min(b), a.max(b))
     }
 
     /// Starts the next block with a possible match; false when none is left.

@@ -534,8 +534,9 @@ trait RaySource {
     type Walk: Iterator<Item = usize>;
     /// The ray of pixel `p` of the row (called for `p0, p0 + 1, …` in order)
     /// and, unless it has no candidate, its walk and its first candidate (which
-    /// the walk will return first).
-    fn ray(&mut self, p: usize) -> (Self::Ray, Option<(Self::Walk, usize)>);
+    /// the walk will return first); `v` is the frame's cells (what a source may
+    /// sample before walking).
+    fn ray<V: Cells>(&mut self, v: &V, p: usize) -> (Self::Ray, Option<(Self::Walk, usize)>);
     /// Called before the rays of pixels `p0 .. p0 + n` (a group of
     /// [`binary_row`]) are asked for: where a source finds what a group of rays
     /// shares.
@@ -575,7 +576,7 @@ impl<'a, W: Word> RaySource for Columns<'a, W> {
     type Ray = GridRay;
     type Walk = SetBits<'a, W>;
     #[inline(always)]
-    fn ray(&mut self, p: usize) -> (GridRay, Option<(SetBits<'a, W>, usize)>) {
+    fn ray<V: Cells>(&mut self, _: &V, p: usize) -> (GridRay, Option<(SetBits<'a, W>, usize)>) {
         let mut it = SetBits::with_matcher(self.mask.row(self.sp, self.sq), self.ctx.ascending, self.search, self.m);
         let walk = match it.peek() {
             Some(k0) => Some((it, k0)),
@@ -614,14 +615,28 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
     type Ray = ScaledRay;
     type Walk = ColumnWalk<'a, W>;
     #[inline(always)]
-    fn ray(&mut self, p: usize) -> (ScaledRay, Option<(ColumnWalk<'a, W>, usize)>) {
-        let ray = self.ctx.scaled_ray(p, self.q);
+    fn ray<V: Cells>(&mut self, v: &V, p: usize) -> (ScaledRay, Option<(ColumnWalk<'a, W>, usize)>) {
+        let ctx = self.ctx;
+        let ray = ctx.scaled_ray(p, self.q);
         let Some(b) = self.start else { return (ray, None) };
-        let plan = self.ctx.plan;
+        let plan = ctx.plan;
         let [mut lo, mut hi] = plan.ray_range(p, self.q);
-        // (the blocks before the group's first hold no candidate of this ray)
         let len = self.occ.block_len();
-        if self.ctx.ascending {
+        // the eye in tissue: when the group may have a candidate in the ray's
+        // first block and the ray's first sample is an iso hit, that sample is
+        // the ray's result, as the walk (which holds it: the mask is
+        // conservative) and brute force (its first sample) would find it
+        let first = if ctx.ascending { lo } else { hi };
+        if ctx.mode == Mode::Iso
+            && lo <= hi
+            && first / len == b
+            && let Some((ci, cj, wi, wj)) = ray.locate(ctx, first)
+            && ctx.sample(v, ci, cj, first, wi, wj) >= ctx.iso
+        {
+            return (ray, Some((ColumnWalk::only(self.mask, self.occ, self.m, self.search, first), first)));
+        }
+        // (the blocks before the group's first hold no candidate of this ray)
+        if ctx.ascending {
             lo = lo.max(b * len);
         } else {
             hi = hi.min(b * len + len - 1);
@@ -728,7 +743,7 @@ fn binary_row<V: Cells, const LIMITED: bool, S: RaySource>(
         for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
             // (a match, not a closure: the walk's bit scans must stay inside
             // this function, compiled for the CPU level of its caller)
-            let (ray, w) = src.ray(pg + dp);
+            let (ray, w) = src.ray(v, pg + dp);
             *walk = match w {
                 Some((it, k0)) => {
                     if prefetch {

@@ -381,6 +381,34 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
         }
     }
 
+    /// The walk that returns slice `k` alone (a ray whose first sample is
+    /// already its result).
+    pub fn only(mask: &'a BinaryMask<W>, occ: &'a BlockOccupancy, m: &'a Matcher, search: Search, k: usize) -> Self {
+        ColumnWalk {
+            mask,
+            occ,
+            m,
+            search,
+            ascending: true,
+            u0: [0.0; 2],
+            g: [0.0; 2],
+            step: [f64::INFINITY; 2],
+            k0: k as f64,
+            lo: k,
+            hi: k,
+            block: 0,
+            block_end: 0,
+            done: true,
+            word: 0,
+            next: 0,
+            last: 0,
+            in_block: false,
+            cur: W::ZERO,
+            pending: Some(k),
+            log_nb: m.width().trailing_zeros(),
+        }
+    }
+
     /// The drift along axis `ax` at slice `k`.
     #[inline(always)]
     fn drift(&self, ax: usize, k: usize) -> f64 {

@@ -31,7 +31,7 @@ use crate::data::normals::{ByteCells, NormalStack, PackedCells, ShadeTable, appl
 use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
-use crate::encode::walk::{BlockOccupancy, ColumnWalk};
+use crate::encode::walk::{BlockOccupancy, ColumnWalk, Drift};
 use crate::view::plan::{FramePlan, MapKind, SliceMap, floor_i64};
 
 /// Everything a ray needs, borrowed for one frame.
@@ -492,7 +492,9 @@ fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
         MapKind::ScaleTranslate => render_rows(rect, out, |q, p0, crow, drow| {
-            let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q, start: None };
+            let [lo, hi] = ctx.plan.k_range;
+            let drift = Drift::new(&ctx.plan.shear, &ctx.plan.scaled, lo.min(hi), hi);
+            let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q, drift, blocks: None };
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
     }
@@ -606,9 +608,11 @@ struct Diverging<'a, W: Word> {
     search: Search,
     m: &'a Matcher,
     q: usize,
-    /// The group's first block with a possible candidate (`None`: no ray of
-    /// the group has one).
-    start: Option<usize>,
+    /// The plan's drift across the mask.
+    drift: Drift,
+    /// The group's first and last blocks with a possible candidate, in
+    /// walking order (`None`: no ray of the group has one).
+    blocks: Option<(usize, usize)>,
 }
 
 impl<'a, W: Word> RaySource for Diverging<'a, W> {
@@ -618,7 +622,7 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
     fn ray<V: Cells>(&mut self, v: &V, p: usize) -> (ScaledRay, Option<(ColumnWalk<'a, W>, usize)>) {
         let ctx = self.ctx;
         let ray = ctx.scaled_ray(p, self.q);
-        let Some(b) = self.start else { return (ray, None) };
+        let Some((b, e)) = self.blocks else { return (ray, None) };
         let plan = ctx.plan;
         let [mut lo, mut hi] = plan.ray_range(p, self.q);
         let len = self.occ.block_len();
@@ -635,14 +639,10 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
         {
             return (ray, Some((ColumnWalk::only(self.mask, self.occ, self.m, self.search, first), first)));
         }
-        // (the blocks before the group's first hold no candidate of this ray)
-        if ctx.ascending {
-            lo = lo.max(b * len);
-        } else {
-            hi = hi.min(b * len + len - 1);
-        }
-        let mut it =
-            ColumnWalk::new(self.mask, self.occ, &plan.shear, &plan.scaled, ray.at, lo, hi, self.ctx.ascending, self.search, self.m);
+        // (the blocks outside the group's hold no candidate of this ray)
+        let (first, last) = if ctx.ascending { (b, e) } else { (e, b) };
+        (lo, hi) = (lo.max(first * len), hi.min(last * len + len - 1));
+        let mut it = ColumnWalk::new(self.mask, self.occ, &self.drift, ray.at, lo, hi, ctx.ascending, self.search, self.m);
         let walk = match it.peek() {
             Some(k0) => Some((it, k0)),
             None => None,
@@ -661,7 +661,14 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
         let at = [[a0[0].min(a1[0]), a0[0].max(a1[0])], [a0[1].min(a1[1]), a0[1].max(a1[1])]];
         // the plan's slices hold every ray's own range
         let [lo, hi] = plan.k_range;
-        self.start = self.occ.first_block(self.mask, &plan.shear, &plan.scaled, at, lo, hi, self.ctx.ascending);
+        let first = |lo, hi, ascending| self.occ.first_block(self.mask, &plan.shear, &plan.scaled, at, lo, hi, ascending);
+        let asc = self.ctx.ascending;
+        self.blocks = first(lo, hi, asc).map(|b| {
+            // the last, from the back up to the first
+            let len = self.occ.block_len();
+            let (lo, hi) = if asc { (lo.max(b * len), hi) } else { (lo, hi.min(b * len + len - 1)) };
+            (b, first(lo, hi, !asc).unwrap_or(b))
+        });
     }
 }
 

@@ -74,17 +74,15 @@ pub struct BlockOccupancy {
     /// `sums[(y · stride + x) · blocks + b]`, so the blocks a ray tests one
     /// after the other at nearby columns share cache lines.
     blocks: usize,
-    /// Slices per block.
+    /// Slices per block (a power of two) and its log2.
     len: usize,
+    log_len: u32,
     /// The slices with a non-zero code `[k0, k1]` (`k0 > k1`: none).
     slices: [usize; 2],
     /// Per block, the range of the fractional parts of its slices' shear
     /// translations, `[min_i, max_i, min_j, max_j]`: a sample's cell sits
     /// `floor(u + frac(trans))` columns from the ray's base (see [`ColumnWalk`]).
     frac: Vec<[f64; 4]>,
-    /// The box of cells with a non-zero code over all slices, as sample
-    /// positions: `[i0, i1, j0, j1]`, the samples of cells `i0 ..< i1` along i.
-    cells: [f64; 4],
     sums: Vec<u32>,
 }
 
@@ -96,6 +94,8 @@ impl BlockOccupancy {
         let nk = mask.slices();
         let slots = (W::BITS / m.width()) as usize;
         self.len = slots.div_ceil(BLOCKS_PER_WORD);
+        assert!(self.len.is_power_of_two(), "slots per word are a power of two");
+        self.log_len = self.len.trailing_zeros();
         self.frac.clear();
         self.frac.extend((0..nk.div_ceil(self.len)).map(|b| {
             let mut f = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
@@ -115,13 +115,6 @@ impl BlockOccupancy {
             (Some(a), Some(b)) => [a, b],
             _ => [1, 0],
         };
-        let mut cells = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
-        for k in 0..nk {
-            if let Some([i0, i1, j0, j1]) = mask.slice_cells(k) {
-                cells = [cells[0].min(i0 as f64), cells[1].max(i1 as f64 + 1.0), cells[2].min(j0 as f64), cells[3].max(j1 as f64 + 1.0)];
-            }
-        }
-        self.cells = cells;
         let Some(r) = self.rect else { return };
         let (w, h) = (r.p1 - r.p0 + 1, r.q1 - r.q0 + 1);
         self.stride = w + 1;
@@ -251,6 +244,46 @@ fn columns<W: Word>(mask: &BinaryMask<W>, frac: &[f64; 4], ax: usize, u0: f64, u
     (c0 <= c1).then_some((c0 as usize, c1 as usize))
 }
 
+/// A scaled plan's drift across a mask sheared to the plan's shear, for every
+/// ray at once: the drift of the ray through sheared point `a` at slice `k`,
+/// `u = σ_k · a + τ_k − trans[k]`, is affine in `k` and, at any one slice, in
+/// `a`, so it is `u0(a) + g(a) · (k − k0)` with `u0` and `g` affine in `a`
+/// (per axis). Made once per row from the plan's end slices: a ray's walk
+/// starts from two multiply-adds per axis instead of maps read at its own
+/// end slices and a division.
+#[derive(Clone, Copy, Debug)]
+pub struct Drift {
+    /// The reference slice.
+    k0: f64,
+    /// Per axis: `u0 = c[0] · a + c[1]`, `g = c[2] · a + c[3]`.
+    c: [[f64; 4]; 2],
+}
+
+impl Drift {
+    /// The drift of the rays of `scaled` maps across a mask sheared to `shear`,
+    /// from the slices `lo` and `hi` (any two, the farther apart the better).
+    pub fn new(shear: &ShearState, scaled: &[ScaledMap], lo: usize, hi: usize) -> Self {
+        let c = [0, 1].map(|ax| {
+            let (s0, t0) = (scaled[lo].scale, scaled[lo].trans[ax] - shear.trans[ax][lo]);
+            if hi <= lo {
+                return [s0, t0, 0.0, 0.0];
+            }
+            let (s1, t1) = (scaled[hi].scale, scaled[hi].trans[ax] - shear.trans[ax][hi]);
+            let n = (hi - lo) as f64;
+            [s0, t0, (s1 - s0) / n, (t1 - t0) / n]
+        });
+        Drift { k0: lo as f64, c }
+    }
+
+    /// The drift of the ray through `at` at the reference slice, and its
+    /// change per slice (per axis).
+    #[inline(always)]
+    fn of(&self, at: [f64; 2]) -> ([f64; 2], [f64; 2]) {
+        let c = &self.c;
+        ([c[0][0] * at[0] + c[0][1], c[1][0] * at[1] + c[1][1]], [c[0][2] * at[0] + c[0][3], c[1][2] * at[1] + c[1][3]])
+    }
+}
+
 /// The slices of one ray of a scaled plan whose mask codes match, front to back
 /// (a superset of the slices whose sample may be visible; see the module docs).
 pub struct ColumnWalk<'a, W: Word> {
@@ -290,15 +323,14 @@ pub struct ColumnWalk<'a, W: Word> {
 
 impl<'a, W: Word> ColumnWalk<'a, W> {
     /// The walk of the ray through sheared point `at` over slices `[lo, hi]`
-    /// (index order; none when `lo > hi`) of a mask sheared to `shear`, under
-    /// the slices' `scaled` maps, skipping blocks by `occ` (built for this
-    /// mask, shear and matcher).
+    /// (index order; none when `lo > hi`) of a mask whose drift is `drift`,
+    /// skipping blocks by `occ` (built for this mask, shear and matcher).
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     pub fn new(
         mask: &'a BinaryMask<W>,
         occ: &'a BlockOccupancy,
-        shear: &ShearState,
-        scaled: &[ScaledMap],
+        drift: &Drift,
         at: [f64; 2],
         lo: usize,
         hi: usize,
@@ -307,54 +339,10 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
         m: &'a Matcher,
     ) -> Self {
         let log_nb = m.width().trailing_zeros();
-        let slots = (W::BITS >> log_nb) as usize;
-        // only the slices with a non-zero code, where the ray is inside the box
-        // of cells with one
-        let (mut lo, mut hi) = (lo.max(occ.slices[0]), hi.min(occ.slices[1]));
-        if lo <= hi {
-            for ax in [0, 1] {
-                let x = |k: usize| scaled[k].scale * at[ax] + scaled[k].trans[ax];
-                let (xl, xh) = (x(lo), x(hi));
-                let (c0, c1) = (occ.cells[2 * ax], occ.cells[2 * ax + 1]);
-                // x is affine in k: the slices where x ∈ [c0, c1), widened by one
-                // slice each side for rounding
-                if hi == lo || xh == xl {
-                    if xl < c0 - MARGIN || xl > c1 + MARGIN {
-                        hi = 0;
-                        lo = 1;
-                        break;
-                    }
-                    continue;
-                }
-                let g = (xh - xl) / (hi - lo) as f64;
-                let (ta, tb) = ((c0 - xl) / g, (c1 - xl) / g);
-                let (t0, t1) = (ta.min(tb), ta.max(tb));
-                let span = (hi - lo) as f64;
-                if t1 < -1.0 || t0 > span + 1.0 {
-                    hi = 0;
-                    lo = 1;
-                    break;
-                }
-                let (d0, d1) = ((t0.max(0.0).floor() as usize).saturating_sub(1), ((t1.min(span)).ceil() as usize) + 1);
-                (lo, hi) = (lo + d0, hi.min(lo + d1));
-            }
-        }
-        let drift = |ax: usize, k: usize| {
-            let s = &scaled[k];
-            s.scale * at[ax] + s.trans[ax] - shear.trans[ax][k]
-        };
-        let (mut u0, mut g) = ([0.0; 2], [0.0; 2]);
-        if lo <= hi {
-            for ax in 0..2 {
-                u0[ax] = drift(ax, lo);
-                if hi > lo {
-                    g[ax] = (drift(ax, hi) - u0[ax]) / (hi - lo) as f64;
-                }
-            }
-        }
-        let _ = slots;
-        let len = occ.block_len().max(1);
-        let (bl, bh) = (lo / len, hi / len);
+        // only the slices with a non-zero code
+        let (lo, hi) = (lo.max(occ.slices[0]), hi.min(occ.slices[1]));
+        let (u0, g) = drift.of(at);
+        let (bl, bh) = (lo >> occ.log_len, hi >> occ.log_len);
         let (block, block_end) = if ascending { (bl, bh) } else { (bh, bl) };
         ColumnWalk {
             mask,
@@ -365,7 +353,7 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
             u0,
             g,
             step: g.map(|x| 1.0 / x.abs()),
-            k0: lo as f64,
+            k0: drift.k0,
             lo,
             hi,
             block,
@@ -422,14 +410,13 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
     fn columns(&self, ax: usize, ka: usize, kb: usize) -> Option<(usize, usize)> {
         let (a, b) = (self.drift(ax, ka), self.drift(ax, kb));
         // (ka and kb share a block)
-        columns(self.mask, &self.occ.frac[ka / self.occ.len], ax, a.min(b), a.max(b))
+        columns(self.mask, &self.occ.frac[ka >> self.occ.log_len], ax, a.min(b), a.max(b))
     }
 
     /// Starts the next block with a possible match; false when none is left.
     #[inline]
     fn start_block(&mut self) -> bool {
-        let slots = (W::BITS >> self.log_nb) as usize;
-        let len = self.occ.block_len().max(1);
+        let len = self.occ.len;
         while !self.done {
             let b = self.block;
             if b == self.block_end {
@@ -445,8 +432,9 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
             if !self.occ.any(b, p0, p1, q0, q1) {
                 continue;
             }
-            // a block lies within one word (its length divides the word's slots)
-            self.word = ka / slots;
+            // a block lies within one word (its length divides the word's slots;
+            // shifts: a division per block was a visible cost)
+            self.word = (ka << self.log_nb) / W::BITS as usize;
             (self.next, self.last) = if self.ascending { (ka, kb) } else { (kb, ka) };
             self.in_block = true;
             return true;

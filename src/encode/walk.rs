@@ -43,6 +43,13 @@
 //! there (four loads); if none does, the block is skipped at once. The
 //! rectangle is a superset of every segment's columns, so nothing is lost. A
 //! ray's slices are also cut to those with any non-zero code.
+//!
+//! **Groups.** Neighbouring rays cross the same empty blocks in front of (and
+//! behind) the surface: [`BlockOccupancy::first_block`] asks the table once
+//! per group of rays for the rectangle of the union of their drifts over each
+//! block, and each ray walks only between its group's first and last blocks
+//! with a possible candidate. A ray's drift comes from a [`Drift`] made once
+//! per row (affine in the ray's sheared point).
 
 use rayon::prelude::*;
 

@@ -31,7 +31,7 @@ use crate::data::normals::{ByteCells, NormalStack, PackedCells, ShadeTable, appl
 use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
-use crate::encode::walk::{BlockOccupancy, ColumnWalk};
+use crate::encode::walk::{BlockOccupancy, ColumnWalk, Drift};
 use crate::view::plan::{FramePlan, MapKind, SliceMap, floor_i64};
 
 /// Everything a ray needs, borrowed for one frame.
@@ -492,7 +492,9 @@ fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
         MapKind::ScaleTranslate => render_rows(rect, out, |q, p0, crow, drow| {
-            let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q };
+            let [lo, hi] = ctx.plan.k_range;
+            let drift = Drift::new(&ctx.plan.shear, &ctx.plan.scaled, lo.min(hi), hi);
+            let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q, drift, blocks: None };
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
     }
@@ -534,8 +536,16 @@ trait RaySource {
     type Walk: Iterator<Item = usize>;
     /// The ray of pixel `p` of the row (called for `p0, p0 + 1, …` in order)
     /// and, unless it has no candidate, its walk and its first candidate (which
-    /// the walk will return first).
-    fn ray(&mut self, p: usize) -> (Self::Ray, Option<(Self::Walk, usize)>);
+    /// the walk will return first); `v` is the frame's cells (what a source may
+    /// sample before walking).
+    fn ray<V: Cells>(&mut self, v: &V, p: usize) -> (Self::Ray, Option<(Self::Walk, usize)>);
+    /// Called before the rays of pixels `p0 .. p0 + n` (a group of
+    /// [`binary_row`]) are asked for: where a source finds what a group of rays
+    /// shares.
+    #[inline(always)]
+    fn group(&mut self, p0: usize, n: usize) {
+        let _ = (p0, n);
+    }
     /// The ray of pixel `p` again (cheap: kept out of the walks between a
     /// group's two phases, which would only move it around).
     fn ray_of(&self, p: usize) -> Self::Ray;
@@ -568,7 +578,7 @@ impl<'a, W: Word> RaySource for Columns<'a, W> {
     type Ray = GridRay;
     type Walk = SetBits<'a, W>;
     #[inline(always)]
-    fn ray(&mut self, p: usize) -> (GridRay, Option<(SetBits<'a, W>, usize)>) {
+    fn ray<V: Cells>(&mut self, _: &V, p: usize) -> (GridRay, Option<(SetBits<'a, W>, usize)>) {
         let mut it = SetBits::with_matcher(self.mask.row(self.sp, self.sq), self.ctx.ascending, self.search, self.m);
         let walk = match it.peek() {
             Some(k0) => Some((it, k0)),
@@ -589,7 +599,8 @@ impl<'a, W: Word> RaySource for Columns<'a, W> {
 
 /// The rays of a scaled plan: each walks across the mask's columns as it
 /// diverges from the direction the mask is sheared to ([`ColumnWalk`]), over
-/// its own slice range.
+/// its own slice range, from the first block in which its group may have a
+/// candidate ([`BlockOccupancy::first_block`]).
 struct Diverging<'a, W: Word> {
     ctx: &'a RayContext<'a>,
     mask: &'a BinaryMask<W>,
@@ -597,18 +608,41 @@ struct Diverging<'a, W: Word> {
     search: Search,
     m: &'a Matcher,
     q: usize,
+    /// The plan's drift across the mask.
+    drift: Drift,
+    /// The group's first and last blocks with a possible candidate, in
+    /// walking order (`None`: no ray of the group has one).
+    blocks: Option<(usize, usize)>,
 }
 
 impl<'a, W: Word> RaySource for Diverging<'a, W> {
     type Ray = ScaledRay;
     type Walk = ColumnWalk<'a, W>;
     #[inline(always)]
-    fn ray(&mut self, p: usize) -> (ScaledRay, Option<(ColumnWalk<'a, W>, usize)>) {
-        let ray = self.ctx.scaled_ray(p, self.q);
-        let plan = self.ctx.plan;
-        let [lo, hi] = plan.ray_range(p, self.q);
-        let mut it =
-            ColumnWalk::new(self.mask, self.occ, &plan.shear, &plan.scaled, ray.at, lo, hi, self.ctx.ascending, self.search, self.m);
+    fn ray<V: Cells>(&mut self, v: &V, p: usize) -> (ScaledRay, Option<(ColumnWalk<'a, W>, usize)>) {
+        let ctx = self.ctx;
+        let ray = ctx.scaled_ray(p, self.q);
+        let Some((b, e)) = self.blocks else { return (ray, None) };
+        let plan = ctx.plan;
+        let [mut lo, mut hi] = plan.ray_range(p, self.q);
+        let len = self.occ.block_len();
+        // the eye in tissue: when the group may have a candidate in the ray's
+        // first block and the ray's first sample is an iso hit, that sample is
+        // the ray's result, as the walk (which holds it: the mask is
+        // conservative) and brute force (its first sample) would find it
+        let first = if ctx.ascending { lo } else { hi };
+        if ctx.mode == Mode::Iso
+            && lo <= hi
+            && first / len == b
+            && let Some((ci, cj, wi, wj)) = ray.locate(ctx, first)
+            && ctx.sample(v, ci, cj, first, wi, wj) >= ctx.iso
+        {
+            return (ray, Some((ColumnWalk::only(self.mask, self.occ, self.m, self.search, first), first)));
+        }
+        // (the blocks outside the group's hold no candidate of this ray)
+        let (first, last) = if ctx.ascending { (b, e) } else { (e, b) };
+        (lo, hi) = (lo.max(first * len), hi.min(last * len + len - 1));
+        let mut it = ColumnWalk::new(self.mask, self.occ, &self.drift, ray.at, lo, hi, ctx.ascending, self.search, self.m);
         let walk = match it.peek() {
             Some(k0) => Some((it, k0)),
             None => None,
@@ -618,6 +652,23 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
     #[inline(always)]
     fn ray_of(&self, p: usize) -> ScaledRay {
         self.ctx.scaled_ray(p, self.q)
+    }
+    #[inline(always)]
+    fn group(&mut self, p0: usize, n: usize) {
+        let plan = self.ctx.plan;
+        let (a0, a1) =
+            (plan.intermediate_to_sheared(p0 as f64, self.q as f64), plan.intermediate_to_sheared((p0 + n - 1) as f64, self.q as f64));
+        let at = [[a0[0].min(a1[0]), a0[0].max(a1[0])], [a0[1].min(a1[1]), a0[1].max(a1[1])]];
+        // the plan's slices hold every ray's own range
+        let [lo, hi] = plan.k_range;
+        let first = |lo, hi, ascending| self.occ.first_block(self.mask, &plan.shear, &plan.scaled, at, lo, hi, ascending);
+        let asc = self.ctx.ascending;
+        self.blocks = first(lo, hi, asc).map(|b| {
+            // the last, from the back up to the first
+            let len = self.occ.block_len();
+            let (lo, hi) = if asc { (lo.max(b * len), hi) } else { (lo, hi.min(b * len + len - 1)) };
+            (b, first(lo, hi, !asc).unwrap_or(b))
+        });
     }
 }
 
@@ -693,12 +744,13 @@ fn binary_row<V: Cells, const LIMITED: bool, S: RaySource>(
     let mut last_line = usize::MAX;
     for (g, (cg, dg)) in crow.chunks_mut(PREFETCH_GROUP).zip(drow.chunks_mut(PREFETCH_GROUP)).enumerate() {
         let pg = p0 + g * PREFETCH_GROUP;
+        src.group(pg, cg.len());
         // phase 1: the first candidate slice of every ray of the group (none for
         // an empty column), prefetched
         for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
             // (a match, not a closure: the walk's bit scans must stay inside
             // this function, compiled for the CPU level of its caller)
-            let (ray, w) = src.ray(pg + dp);
+            let (ray, w) = src.ray(v, pg + dp);
             *walk = match w {
                 Some((it, k0)) => {
                     if prefetch {

@@ -43,6 +43,13 @@
 //! there (four loads); if none does, the block is skipped at once. The
 //! rectangle is a superset of every segment's columns, so nothing is lost. A
 //! ray's slices are also cut to those with any non-zero code.
+//!
+//! **Groups.** Neighbouring rays cross the same empty blocks in front of (and
+//! behind) the surface: [`BlockOccupancy::first_block`] asks the table once
+//! per group of rays for the rectangle of the union of their drifts over each
+//! block, and each ray walks only between its group's first and last blocks
+//! with a possible candidate. A ray's drift comes from a [`Drift`] made once
+//! per row (affine in the ray's sheared point).
 
 use rayon::prelude::*;
 
@@ -74,17 +81,15 @@ pub struct BlockOccupancy {
     /// `sums[(y · stride + x) · blocks + b]`, so the blocks a ray tests one
     /// after the other at nearby columns share cache lines.
     blocks: usize,
-    /// Slices per block.
+    /// Slices per block (a power of two) and its log2.
     len: usize,
+    log_len: u32,
     /// The slices with a non-zero code `[k0, k1]` (`k0 > k1`: none).
     slices: [usize; 2],
     /// Per block, the range of the fractional parts of its slices' shear
     /// translations, `[min_i, max_i, min_j, max_j]`: a sample's cell sits
     /// `floor(u + frac(trans))` columns from the ray's base (see [`ColumnWalk`]).
     frac: Vec<[f64; 4]>,
-    /// The box of cells with a non-zero code over all slices, as sample
-    /// positions: `[i0, i1, j0, j1]`, the samples of cells `i0 ..< i1` along i.
-    cells: [f64; 4],
     sums: Vec<u32>,
 }
 
@@ -96,6 +101,8 @@ impl BlockOccupancy {
         let nk = mask.slices();
         let slots = (W::BITS / m.width()) as usize;
         self.len = slots.div_ceil(BLOCKS_PER_WORD);
+        assert!(self.len.is_power_of_two(), "slots per word are a power of two");
+        self.log_len = self.len.trailing_zeros();
         self.frac.clear();
         self.frac.extend((0..nk.div_ceil(self.len)).map(|b| {
             let mut f = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
@@ -115,13 +122,6 @@ impl BlockOccupancy {
             (Some(a), Some(b)) => [a, b],
             _ => [1, 0],
         };
-        let mut cells = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
-        for k in 0..nk {
-            if let Some([i0, i1, j0, j1]) = mask.slice_cells(k) {
-                cells = [cells[0].min(i0 as f64), cells[1].max(i1 as f64 + 1.0), cells[2].min(j0 as f64), cells[3].max(j1 as f64 + 1.0)];
-            }
-        }
-        self.cells = cells;
         let Some(r) = self.rect else { return };
         let (w, h) = (r.p1 - r.p0 + 1, r.q1 - r.q0 + 1);
         self.stride = w + 1;
@@ -168,6 +168,55 @@ impl BlockOccupancy {
         self.len
     }
 
+    /// The first block, in walking order, over slices `[lo, hi]` (index
+    /// order) in which a ray of a group may meet a matching column: every ray
+    /// through a sheared point of `[at[0][0], at[0][1]] × [at[1][0], at[1][1]]`
+    /// (min, max per axis) under the slices' `scaled` maps, against `mask` in
+    /// `shear` (the mask and shear this table was built for). `None`: no ray
+    /// of the group has a candidate. The group's drift over a block spans the
+    /// extremes of its corner rays at the block's end slices (affine in the
+    /// point and in `k`), so its rectangle holds every member's columns and a
+    /// block it skips has no candidate for any of them: a group of rays pays
+    /// for the empty blocks in front of its surface once instead of once per
+    /// ray.
+    #[allow(clippy::too_many_arguments)]
+    pub fn first_block<W: Word>(
+        &self,
+        mask: &BinaryMask<W>,
+        shear: &ShearState,
+        scaled: &[ScaledMap],
+        at: [[f64; 2]; 2],
+        lo: usize,
+        hi: usize,
+        ascending: bool,
+    ) -> Option<usize> {
+        let (lo, hi) = (lo.max(self.slices[0]), hi.min(self.slices[1]));
+        if lo > hi || self.rect.is_none() {
+            return None;
+        }
+        let len = self.len.max(1);
+        let (bl, bh) = (lo / len, hi / len);
+        let drift = |ax: usize, k: usize| {
+            let (s, t) = (&scaled[k], shear.trans[ax][k]);
+            let (x0, x1) = (s.scale * at[ax][0] + s.trans[ax] - t, s.scale * at[ax][1] + s.trans[ax] - t);
+            (x0.min(x1), x0.max(x1))
+        };
+        for i in 0..=bh - bl {
+            let b = if ascending { bl + i } else { bh - i };
+            let (ka, kb) = (lo.max(b * len), hi.min(b * len + len - 1));
+            let cols = |ax: usize| {
+                let ((a0, a1), (b0, b1)) = (drift(ax, ka), drift(ax, kb));
+                columns(mask, &self.frac[b], ax, a0.min(b0), a1.max(b1))
+            };
+            if let (Some((p0, p1)), Some((q0, q1))) = (cols(0), cols(1))
+                && self.any(b, p0, p1, q0, q1)
+            {
+                return Some(b);
+            }
+        }
+        None
+    }
+
     /// True when some column of `[p0, p1] × [q0, q1]` (super columns) has a
     /// match in block `w`.
     #[inline(always)]
@@ -181,6 +230,64 @@ impl BlockOccupancy {
         let (x0, x1, y0, y1) = (a0 - r.p0, a1 - r.p0 + 1, b0 - r.q0, b1 - r.q0 + 1);
         let (s, n) = (self.stride, self.blocks);
         t[(y1 * s + x1) * n] + t[(y0 * s + x0) * n] != t[(y0 * s + x1) * n] + t[(y1 * s + x0) * n]
+    }
+}
+
+/// The mask columns `[c0, c1]` along axis `ax` that hold the cells of samples
+/// whose drift lies in `[u0, u1]`, in slices of one block (whose fractions of
+/// the shear translations are `frac`: [`BlockOccupancy`]), clipped to the grid
+/// (`None`: off the grid). See the module docs.
+#[inline(always)]
+fn columns<W: Word>(mask: &BinaryMask<W>, frac: &[f64; 4], ax: usize, u0: f64, u1: f64) -> Option<(usize, usize)> {
+    // the cell's offset from the slice's, floor(x) − floor(t) = floor(u + frac(t)),
+    // over the slices' fractions in the block
+    let h0 = floor_i64(u0 + frac[2 * ax] - MARGIN);
+    let h1 = floor_i64(u1 + frac[2 * ax + 1] + MARGIN);
+    let s = mask.cell_size() as i64;
+    let pad = mask.pad() as i64;
+    // (no division at cell size 1, the usual case)
+    let (c0, c1) = if s == 1 { (h0 + pad, h1 + pad) } else { ((h0 - s + 1).div_euclid(s) + pad, h1.div_euclid(s) + pad) };
+    let (c0, c1) = (c0.max(0), c1.min(mask.grid()[ax] as i64 - 1));
+    (c0 <= c1).then_some((c0 as usize, c1 as usize))
+}
+
+/// A scaled plan's drift across a mask sheared to the plan's shear, for every
+/// ray at once: the drift of the ray through sheared point `a` at slice `k`,
+/// `u = σ_k · a + τ_k − trans[k]`, is affine in `k` and, at any one slice, in
+/// `a`, so it is `u0(a) + g(a) · (k − k0)` with `u0` and `g` affine in `a`
+/// (per axis). Made once per row from the plan's end slices: a ray's walk
+/// starts from two multiply-adds per axis instead of maps read at its own
+/// end slices and a division.
+#[derive(Clone, Copy, Debug)]
+pub struct Drift {
+    /// The reference slice.
+    k0: f64,
+    /// Per axis: `u0 = c[0] · a + c[1]`, `g = c[2] · a + c[3]`.
+    c: [[f64; 4]; 2],
+}
+
+impl Drift {
+    /// The drift of the rays of `scaled` maps across a mask sheared to `shear`,
+    /// from the slices `lo` and `hi` (any two, the farther apart the better).
+    pub fn new(shear: &ShearState, scaled: &[ScaledMap], lo: usize, hi: usize) -> Self {
+        let c = [0, 1].map(|ax| {
+            let (s0, t0) = (scaled[lo].scale, scaled[lo].trans[ax] - shear.trans[ax][lo]);
+            if hi <= lo {
+                return [s0, t0, 0.0, 0.0];
+            }
+            let (s1, t1) = (scaled[hi].scale, scaled[hi].trans[ax] - shear.trans[ax][hi]);
+            let n = (hi - lo) as f64;
+            [s0, t0, (s1 - s0) / n, (t1 - t0) / n]
+        });
+        Drift { k0: lo as f64, c }
+    }
+
+    /// The drift of the ray through `at` at the reference slice, and its
+    /// change per slice (per axis).
+    #[inline(always)]
+    fn of(&self, at: [f64; 2]) -> ([f64; 2], [f64; 2]) {
+        let c = &self.c;
+        ([c[0][0] * at[0] + c[0][1], c[1][0] * at[1] + c[1][1]], [c[0][2] * at[0] + c[0][3], c[1][2] * at[1] + c[1][3]])
     }
 }
 
@@ -223,15 +330,14 @@ pub struct ColumnWalk<'a, W: Word> {
 
 impl<'a, W: Word> ColumnWalk<'a, W> {
     /// The walk of the ray through sheared point `at` over slices `[lo, hi]`
-    /// (index order; none when `lo > hi`) of a mask sheared to `shear`, under
-    /// the slices' `scaled` maps, skipping blocks by `occ` (built for this
-    /// mask, shear and matcher).
+    /// (index order; none when `lo > hi`) of a mask whose drift is `drift`,
+    /// skipping blocks by `occ` (built for this mask, shear and matcher).
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     pub fn new(
         mask: &'a BinaryMask<W>,
         occ: &'a BlockOccupancy,
-        shear: &ShearState,
-        scaled: &[ScaledMap],
+        drift: &Drift,
         at: [f64; 2],
         lo: usize,
         hi: usize,
@@ -240,54 +346,10 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
         m: &'a Matcher,
     ) -> Self {
         let log_nb = m.width().trailing_zeros();
-        let slots = (W::BITS >> log_nb) as usize;
-        // only the slices with a non-zero code, where the ray is inside the box
-        // of cells with one
-        let (mut lo, mut hi) = (lo.max(occ.slices[0]), hi.min(occ.slices[1]));
-        if lo <= hi {
-            for ax in [0, 1] {
-                let x = |k: usize| scaled[k].scale * at[ax] + scaled[k].trans[ax];
-                let (xl, xh) = (x(lo), x(hi));
-                let (c0, c1) = (occ.cells[2 * ax], occ.cells[2 * ax + 1]);
-                // x is affine in k: the slices where x ∈ [c0, c1), widened by one
-                // slice each side for rounding
-                if hi == lo || xh == xl {
-                    if xl < c0 - MARGIN || xl > c1 + MARGIN {
-                        hi = 0;
-                        lo = 1;
-                        break;
-                    }
-                    continue;
-                }
-                let g = (xh - xl) / (hi - lo) as f64;
-                let (ta, tb) = ((c0 - xl) / g, (c1 - xl) / g);
-                let (t0, t1) = (ta.min(tb), ta.max(tb));
-                let span = (hi - lo) as f64;
-                if t1 < -1.0 || t0 > span + 1.0 {
-                    hi = 0;
-                    lo = 1;
-                    break;
-                }
-                let (d0, d1) = ((t0.max(0.0).floor() as usize).saturating_sub(1), ((t1.min(span)).ceil() as usize) + 1);
-                (lo, hi) = (lo + d0, hi.min(lo + d1));
-            }
-        }
-        let drift = |ax: usize, k: usize| {
-            let s = &scaled[k];
-            s.scale * at[ax] + s.trans[ax] - shear.trans[ax][k]
-        };
-        let (mut u0, mut g) = ([0.0; 2], [0.0; 2]);
-        if lo <= hi {
-            for ax in 0..2 {
-                u0[ax] = drift(ax, lo);
-                if hi > lo {
-                    g[ax] = (drift(ax, hi) - u0[ax]) / (hi - lo) as f64;
-                }
-            }
-        }
-        let _ = slots;
-        let len = occ.block_len().max(1);
-        let (bl, bh) = (lo / len, hi / len);
+        // only the slices with a non-zero code
+        let (lo, hi) = (lo.max(occ.slices[0]), hi.min(occ.slices[1]));
+        let (u0, g) = drift.of(at);
+        let (bl, bh) = (lo >> occ.log_len, hi >> occ.log_len);
         let (block, block_end) = if ascending { (bl, bh) } else { (bh, bl) };
         ColumnWalk {
             mask,
@@ -298,7 +360,7 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
             u0,
             g,
             step: g.map(|x| 1.0 / x.abs()),
-            k0: lo as f64,
+            k0: drift.k0,
             lo,
             hi,
             block,
@@ -314,6 +376,34 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
         }
     }
 
+    /// The walk that returns slice `k` alone (a ray whose first sample is
+    /// already its result).
+    pub fn only(mask: &'a BinaryMask<W>, occ: &'a BlockOccupancy, m: &'a Matcher, search: Search, k: usize) -> Self {
+        ColumnWalk {
+            mask,
+            occ,
+            m,
+            search,
+            ascending: true,
+            u0: [0.0; 2],
+            g: [0.0; 2],
+            step: [f64::INFINITY; 2],
+            k0: k as f64,
+            lo: k,
+            hi: k,
+            block: 0,
+            block_end: 0,
+            done: true,
+            word: 0,
+            next: 0,
+            last: 0,
+            in_block: false,
+            cur: W::ZERO,
+            pending: Some(k),
+            log_nb: m.width().trailing_zeros(),
+        }
+    }
+
     /// The drift along axis `ax` at slice `k`.
     #[inline(always)]
     fn drift(&self, ax: usize, k: usize) -> f64 {
@@ -326,24 +416,14 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
     #[inline(always)]
     fn columns(&self, ax: usize, ka: usize, kb: usize) -> Option<(usize, usize)> {
         let (a, b) = (self.drift(ax, ka), self.drift(ax, kb));
-        // the cell's offset from the slice's, floor(x) − floor(t) = floor(u + frac(t)),
-        // over the slices' fractions in the block (ka and kb share one)
-        let f = &self.occ.frac[ka / self.occ.len];
-        let h0 = floor_i64(a.min(b) + f[2 * ax] - MARGIN);
-        let h1 = floor_i64(a.max(b) + f[2 * ax + 1] + MARGIN);
-        let s = self.mask.cell_size() as i64;
-        let pad = self.mask.pad() as i64;
-        // (no division at cell size 1, the usual case)
-        let (c0, c1) = if s == 1 { (h0 + pad, h1 + pad) } else { ((h0 - s + 1).div_euclid(s) + pad, h1.div_euclid(s) + pad) };
-        let (c0, c1) = (c0.max(0), c1.min(self.mask.grid()[ax] as i64 - 1));
-        (c0 <= c1).then_some((c0 as usize, c1 as usize))
+        // (ka and kb share a block)
+        columns(self.mask, &self.occ.frac[ka >> self.occ.log_len], ax, a.min(b), a.max(b))
     }
 
     /// Starts the next block with a possible match; false when none is left.
     #[inline]
     fn start_block(&mut self) -> bool {
-        let slots = (W::BITS >> self.log_nb) as usize;
-        let len = self.occ.block_len().max(1);
+        let len = self.occ.len;
         while !self.done {
             let b = self.block;
             if b == self.block_end {
@@ -359,8 +439,9 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
             if !self.occ.any(b, p0, p1, q0, q1) {
                 continue;
             }
-            // a block lies within one word (its length divides the word's slots)
-            self.word = ka / slots;
+            // a block lies within one word (its length divides the word's slots;
+            // shifts: a division per block was a visible cost)
+            self.word = (ka << self.log_nb) / W::BITS as usize;
             (self.next, self.last) = if self.ascending { (ka, kb) } else { (kb, ka) };
             self.in_block = true;
             return true;

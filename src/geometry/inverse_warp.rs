@@ -277,10 +277,10 @@ mod tests {
                     // where the two surfaces are within two voxels the limit is slice-quantized
                     // (see the module documentation): not yet within half a voxel there
                     let needle_depth = tn.map(|t| rays.depth_of(o + t * d));
-                    if let (Some(a), Some(b)) = (sphere_depth, needle_depth) {
-                        if (a - b).abs() < 2.0 {
-                            continue;
-                        }
+                    if let (Some(a), Some(b)) = (sphere_depth, needle_depth)
+                        && (a - b).abs() < 2.0
+                    {
+                        continue;
                     }
                     let truth = [ts, tn].into_iter().flatten().map(|t| rays.depth_of(o + t * d)).fold(f64::INFINITY, f64::min);
                     let seen = if vdepth[i].is_nan() { geo.depth[i] } else { vdepth[i].min(geo.depth[i]) };

@@ -190,7 +190,8 @@ pub fn rasterize(mesh: &Mesh, material: &Material, cull: Cull, proj: &Projector,
         let tri = t.map(|i| eye[i as usize]);
         // the flat normal in eye space (a world-space cross product: the eye frame is a rotation of it)
         let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
-        if !(n.length() > 0.0) {
+        // (a degenerate triangle, or one with a NaN corner, has no normal and covers nothing)
+        if n.length().is_nan() || n.length() == 0.0 {
             continue;
         }
         clip_near(proj, tri, &mut poly);

@@ -15,7 +15,7 @@
 use rayon::prelude::*;
 
 use crate::composite::Rect;
-use crate::composite::{Intermediate, composite_premultiplied, correct_opacity, terminated};
+use crate::composite::{Intermediate, composite_premultiplied, terminated};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::data::slices::SliceStack;
 use crate::encode::rle::runs::{Cursor, INF};
@@ -444,7 +444,7 @@ impl RleFrame<'_> {
     /// consecutive pixels are at least one apart (the slice is minified, never
     /// magnified), so the run cursors still only move forward. Each sample is
     /// the bilinear blend of its cell's four voxels, its opacity corrected to
-    /// its ray's own spacing ([`FramePlan::opacity_exponent`]).
+    /// its ray's own spacing ([`FramePlan::correct_opacity`]).
     ///
     /// A slice whose pixels are wider than a voxel (a minified one,
     /// [`FramePlan::footprint`] > 1) is box-filtered instead
@@ -461,6 +461,7 @@ impl RleFrame<'_> {
         }
         let nrows = px.len() / gw;
         let p0 = r.p0 as i64;
+        let map = plan.axis_map(k, 0);
         for row in 0..nrows {
             let q = q_first + row;
             let (cj, wj) = plan.cell_of(k, 1, q);
@@ -500,7 +501,7 @@ impl RleFrame<'_> {
                 if x > x1 {
                     break;
                 }
-                let (ci, wi) = plan.cell_of(k, 0, x as usize);
+                let (ci, wi) = map.cell(x);
                 let c = ci as u32;
                 if c == cell.0 {
                     // a magnified slice (pitch < 1): this pixel samples the last one's cell
@@ -642,9 +643,8 @@ impl RleFrame<'_> {
     }
 
     /// Composites pixel `(x, q)`'s sample of slice `k` (its cell's four
-    /// classified voxels `c00, c10, c01, c11` at weights `wi, wj`) if its ray
-    /// limits keep slice `k`, with the ray's own opacity correction; marks the
-    /// pixel in the links when it terminates.
+    /// classified voxels `c00, c10, c01, c11` at weights `wi, wj`) as
+    /// [`RleFrame::composite_sample`] does.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn scaled_sample(
@@ -659,18 +659,8 @@ impl RleFrame<'_> {
         lrow: &mut [u32],
         p0: i64,
     ) {
-        let plan = self.plan;
-        let inside = match &plan.limits {
-            None => true,
-            Some(l) => {
-                let [k0, k1] = l.get(x as usize, q);
-                k0 as usize <= k && k <= k1 as usize
-            }
-        };
-        if inside {
-            let smp = blend(c[0], c[1], c[2], c[3], &cell_weights(wi, wj));
-            self.composite_sample(k, x, q, smp, prow, lrow, p0);
-        }
+        let smp = blend(c[0], c[1], c[2], c[3], &cell_weights(wi, wj));
+        self.composite_sample(k, x, q, smp, prow, lrow, p0);
     }
 
     /// Composites `smp`, pixel `(x, q)`'s sample of slice `k`, if its ray
@@ -690,7 +680,7 @@ impl RleFrame<'_> {
         if inside {
             let xr = (x - p0) as usize;
             let acc = &mut prow[xr];
-            composite_premultiplied(acc, correct_opacity(smp, plan.opacity_exponent(x as usize, q)));
+            composite_premultiplied(acc, plan.correct_opacity(x as usize, q, smp));
             if terminated(acc[3], self.ert) {
                 lrow[xr] = 1;
             }
@@ -760,7 +750,7 @@ pub fn render_brute_preclassified(
                     let b = ci as usize + ni * cj as usize;
                     blend(buf[b], buf[b + 1], buf[b + ni], buf[b + ni + 1], &cell_weights(wi, wj))
                 };
-                composite_premultiplied(acc, correct_opacity(smp, plan.opacity_exponent(p, q)));
+                composite_premultiplied(acc, plan.correct_opacity(p, q, smp));
             }
         });
     }

@@ -446,6 +446,10 @@ impl RleFrame<'_> {
     /// the bilinear blend of its cell's four voxels, its opacity corrected to
     /// its ray's own spacing ([`FramePlan::correct_opacity`]).
     ///
+    /// The pixels whose two columns lie inside both scanlines' current runs
+    /// (most of them) read their voxels straight from the runs; the others
+    /// move the cursors and skip transparent columns.
+    ///
     /// A slice whose pixels are wider than a voxel (a minified one,
     /// [`FramePlan::footprint`] > 1) is box-filtered instead
     /// ([`RleFrame::box_slice`]); this bilinear one serves the rest (the base
@@ -486,10 +490,10 @@ impl RleFrame<'_> {
             let (mut cb, mut ct) = (rle.cursor(s), rle.cursor(s + 1));
             // the first column the cursors may still be asked for
             let mut next = 0u32;
-            // the last pixel's right column (its index and two voxels): the next
-            // pixel's left column when the two cells are adjacent
-            let mut right = (INF, [0f32; 4], [0f32; 4]);
-            // the last cell sampled and its four voxels (c00, c10, c01, c11)
+            // the columns `[lo_run, hi_run)` both cursors' current runs hold
+            let (mut lo_run, mut hi_run) = (INF, 0u32);
+            // the last cell sampled and its four voxels (c00, c10, c01, c11): its
+            // right column is the next pixel's left one when the cells are adjacent
             let mut cell = (INF, [[0f32; 4]; 4]);
             let mut x = x0;
             loop {
@@ -505,36 +509,43 @@ impl RleFrame<'_> {
                 let c = ci as u32;
                 if c == cell.0 {
                     // a magnified slice (pitch < 1): this pixel samples the last one's cell
-                    let [c00, c10, c01, c11] = cell.1;
-                    self.scaled_sample(k, x, q, wi, wj, [c00, c10, c01, c11], prow, lrow, p0);
+                    self.scaled_sample(k, x, q, wi, wj, cell.1, prow, lrow, p0);
                     x += 1;
                     continue;
                 }
-                if c < next {
-                    // (rounding made two pixels share a cell: start the walk again)
-                    (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
-                }
-                cb.seek(c);
-                ct.seek(c);
-                // skip transparent voxels: the pixel reads columns c and c + 1
-                let nx = cb.first_from(c).min(ct.first_from(c));
-                if nx > c + 1 {
-                    if nx == INF || nx as i64 - 1 > hi {
-                        break;
+                let adjacent = cell.0 != INF && cell.0 + 1 == c;
+                let [c00, c10, c01, c11] = if lo_run <= c && c + 1 < hi_run {
+                    // the fast path: both columns inside both scanlines' current runs
+                    let (vb, vt) = (&cb.vox[cb.base.wrapping_add(c) as usize..][..2], &ct.vox[ct.base.wrapping_add(c) as usize..][..2]);
+                    let (c00, c01) = if adjacent { (cell.1[1], cell.1[3]) } else { (self.tables.voxel(vb[0]), self.tables.voxel(vt[0])) };
+                    [c00, self.tables.voxel(vb[1]), c01, self.tables.voxel(vt[1])]
+                } else {
+                    if c < next {
+                        // (rounding made two pixels share a cell: start the walk again)
+                        (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
                     }
-                    next = c;
-                    let [xn, _] = plan.pixels_of_cells(k, 0, nx as i64 - 1, nx as i64 - 1);
-                    x = xn.max(x + 1);
-                    continue;
-                }
-                let (c00, c01) = if right.0 == c { (right.1, right.2) } else { (self.tables.get(cb.at(c)), self.tables.get(ct.at(c))) };
-                cb.step(c + 1);
-                ct.step(c + 1);
-                let (c10, c11) = (self.tables.get(cb.at(c + 1)), self.tables.get(ct.at(c + 1)));
-                right = (c + 1, c10, c11);
+                    cb.seek(c);
+                    ct.seek(c);
+                    // skip transparent voxels: the pixel reads columns c and c + 1
+                    let nx = cb.first_from(c).min(ct.first_from(c));
+                    if nx > c + 1 {
+                        if nx == INF || nx as i64 - 1 > hi {
+                            break;
+                        }
+                        next = c;
+                        let [xn, _] = plan.pixels_of_cells(k, 0, nx as i64 - 1, nx as i64 - 1);
+                        x = xn.max(x + 1);
+                        continue;
+                    }
+                    let (c00, c01) = if adjacent { (cell.1[1], cell.1[3]) } else { (self.tables.get(cb.at(c)), self.tables.get(ct.at(c))) };
+                    cb.step(c + 1);
+                    ct.step(c + 1);
+                    (lo_run, hi_run) = (cb.s.max(ct.s), cb.e.min(ct.e));
+                    [c00, self.tables.get(cb.at(c + 1)), c01, self.tables.get(ct.at(c + 1))]
+                };
                 cell = (c, [c00, c10, c01, c11]);
                 next = c + 1;
-                self.scaled_sample(k, x, q, wi, wj, [c00, c10, c01, c11], prow, lrow, p0);
+                self.scaled_sample(k, x, q, wi, wj, cell.1, prow, lrow, p0);
                 x += 1;
             }
         }

@@ -669,7 +669,7 @@ impl FramePlan {
                 // (monotone: σ > 0), over pixel indices that may be negative
                 let map = self.axis_map(k, axis);
                 let cell = |x: i64| map.cell(x).0;
-                let inv = |c: i64| ((c as f64 - m.trans[axis]) / m.scale / self.grid.pitch + pad).floor() as i64;
+                let inv = |c: i64| floor_i64((c as f64 - m.trans[axis]) / m.scale / self.grid.pitch + pad);
                 let mut x0 = inv(c0);
                 while cell(x0) >= c0 {
                     x0 -= 1;

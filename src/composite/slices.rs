@@ -15,7 +15,7 @@
 use rayon::prelude::*;
 
 use crate::composite::Rect;
-use crate::composite::{Intermediate, composite_premultiplied, correct_opacity, terminated};
+use crate::composite::{Intermediate, composite_premultiplied, terminated};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::data::slices::SliceStack;
 use crate::encode::rle::runs::{Cursor, INF};
@@ -444,7 +444,11 @@ impl RleFrame<'_> {
     /// consecutive pixels are at least one apart (the slice is minified, never
     /// magnified), so the run cursors still only move forward. Each sample is
     /// the bilinear blend of its cell's four voxels, its opacity corrected to
-    /// its ray's own spacing ([`FramePlan::opacity_exponent`]).
+    /// its ray's own spacing ([`FramePlan::correct_opacity`]).
+    ///
+    /// The pixels whose two columns lie inside both scanlines' current runs
+    /// (most of them) read their voxels straight from the runs; the others
+    /// move the cursors and skip transparent columns.
     ///
     /// A slice whose pixels are wider than a voxel (a minified one,
     /// [`FramePlan::footprint`] > 1) is box-filtered instead
@@ -461,6 +465,7 @@ impl RleFrame<'_> {
         }
         let nrows = px.len() / gw;
         let p0 = r.p0 as i64;
+        let map = plan.axis_map(k, 0);
         for row in 0..nrows {
             let q = q_first + row;
             let (cj, wj) = plan.cell_of(k, 1, q);
@@ -485,10 +490,10 @@ impl RleFrame<'_> {
             let (mut cb, mut ct) = (rle.cursor(s), rle.cursor(s + 1));
             // the first column the cursors may still be asked for
             let mut next = 0u32;
-            // the last pixel's right column (its index and two voxels): the next
-            // pixel's left column when the two cells are adjacent
-            let mut right = (INF, [0f32; 4], [0f32; 4]);
-            // the last cell sampled and its four voxels (c00, c10, c01, c11)
+            // the columns `[lo_run, hi_run)` both cursors' current runs hold
+            let (mut lo_run, mut hi_run) = (INF, 0u32);
+            // the last cell sampled and its four voxels (c00, c10, c01, c11): its
+            // right column is the next pixel's left one when the cells are adjacent
             let mut cell = (INF, [[0f32; 4]; 4]);
             let mut x = x0;
             loop {
@@ -500,40 +505,47 @@ impl RleFrame<'_> {
                 if x > x1 {
                     break;
                 }
-                let (ci, wi) = plan.cell_of(k, 0, x as usize);
+                let (ci, wi) = map.cell(x);
                 let c = ci as u32;
                 if c == cell.0 {
                     // a magnified slice (pitch < 1): this pixel samples the last one's cell
-                    let [c00, c10, c01, c11] = cell.1;
-                    self.scaled_sample(k, x, q, wi, wj, [c00, c10, c01, c11], prow, lrow, p0);
+                    self.scaled_sample(k, x, q, wi, wj, cell.1, prow, lrow, p0);
                     x += 1;
                     continue;
                 }
-                if c < next {
-                    // (rounding made two pixels share a cell: start the walk again)
-                    (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
-                }
-                cb.seek(c);
-                ct.seek(c);
-                // skip transparent voxels: the pixel reads columns c and c + 1
-                let nx = cb.first_from(c).min(ct.first_from(c));
-                if nx > c + 1 {
-                    if nx == INF || nx as i64 - 1 > hi {
-                        break;
+                let adjacent = cell.0 != INF && cell.0 + 1 == c;
+                let [c00, c10, c01, c11] = if lo_run <= c && c + 1 < hi_run {
+                    // the fast path: both columns inside both scanlines' current runs
+                    let (vb, vt) = (&cb.vox[cb.base.wrapping_add(c) as usize..][..2], &ct.vox[ct.base.wrapping_add(c) as usize..][..2]);
+                    let (c00, c01) = if adjacent { (cell.1[1], cell.1[3]) } else { (self.tables.voxel(vb[0]), self.tables.voxel(vt[0])) };
+                    [c00, self.tables.voxel(vb[1]), c01, self.tables.voxel(vt[1])]
+                } else {
+                    if c < next {
+                        // (rounding made two pixels share a cell: start the walk again)
+                        (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
                     }
-                    next = c;
-                    let [xn, _] = plan.pixels_of_cells(k, 0, nx as i64 - 1, nx as i64 - 1);
-                    x = xn.max(x + 1);
-                    continue;
-                }
-                let (c00, c01) = if right.0 == c { (right.1, right.2) } else { (self.tables.get(cb.at(c)), self.tables.get(ct.at(c))) };
-                cb.step(c + 1);
-                ct.step(c + 1);
-                let (c10, c11) = (self.tables.get(cb.at(c + 1)), self.tables.get(ct.at(c + 1)));
-                right = (c + 1, c10, c11);
+                    cb.seek(c);
+                    ct.seek(c);
+                    // skip transparent voxels: the pixel reads columns c and c + 1
+                    let nx = cb.first_from(c).min(ct.first_from(c));
+                    if nx > c + 1 {
+                        if nx == INF || nx as i64 - 1 > hi {
+                            break;
+                        }
+                        next = c;
+                        let [xn, _] = plan.pixels_of_cells(k, 0, nx as i64 - 1, nx as i64 - 1);
+                        x = xn.max(x + 1);
+                        continue;
+                    }
+                    let (c00, c01) = if adjacent { (cell.1[1], cell.1[3]) } else { (self.tables.get(cb.at(c)), self.tables.get(ct.at(c))) };
+                    cb.step(c + 1);
+                    ct.step(c + 1);
+                    (lo_run, hi_run) = (cb.s.max(ct.s), cb.e.min(ct.e));
+                    [c00, self.tables.get(cb.at(c + 1)), c01, self.tables.get(ct.at(c + 1))]
+                };
                 cell = (c, [c00, c10, c01, c11]);
                 next = c + 1;
-                self.scaled_sample(k, x, q, wi, wj, [c00, c10, c01, c11], prow, lrow, p0);
+                self.scaled_sample(k, x, q, wi, wj, cell.1, prow, lrow, p0);
                 x += 1;
             }
         }
@@ -642,9 +654,8 @@ impl RleFrame<'_> {
     }
 
     /// Composites pixel `(x, q)`'s sample of slice `k` (its cell's four
-    /// classified voxels `c00, c10, c01, c11` at weights `wi, wj`) if its ray
-    /// limits keep slice `k`, with the ray's own opacity correction; marks the
-    /// pixel in the links when it terminates.
+    /// classified voxels `c00, c10, c01, c11` at weights `wi, wj`) as
+    /// [`RleFrame::composite_sample`] does.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn scaled_sample(
@@ -659,18 +670,8 @@ impl RleFrame<'_> {
         lrow: &mut [u32],
         p0: i64,
     ) {
-        let plan = self.plan;
-        let inside = match &plan.limits {
-            None => true,
-            Some(l) => {
-                let [k0, k1] = l.get(x as usize, q);
-                k0 as usize <= k && k <= k1 as usize
-            }
-        };
-        if inside {
-            let smp = blend(c[0], c[1], c[2], c[3], &cell_weights(wi, wj));
-            self.composite_sample(k, x, q, smp, prow, lrow, p0);
-        }
+        let smp = blend(c[0], c[1], c[2], c[3], &cell_weights(wi, wj));
+        self.composite_sample(k, x, q, smp, prow, lrow, p0);
     }
 
     /// Composites `smp`, pixel `(x, q)`'s sample of slice `k`, if its ray
@@ -690,7 +691,7 @@ impl RleFrame<'_> {
         if inside {
             let xr = (x - p0) as usize;
             let acc = &mut prow[xr];
-            composite_premultiplied(acc, correct_opacity(smp, plan.opacity_exponent(x as usize, q)));
+            composite_premultiplied(acc, plan.correct_opacity(x as usize, q, smp));
             if terminated(acc[3], self.ert) {
                 lrow[xr] = 1;
             }
@@ -760,7 +761,7 @@ pub fn render_brute_preclassified(
                     let b = ci as usize + ni * cj as usize;
                     blend(buf[b], buf[b + 1], buf[b + ni], buf[b + ni + 1], &cell_weights(wi, wj))
                 };
-                composite_premultiplied(acc, correct_opacity(smp, plan.opacity_exponent(p, q)));
+                composite_premultiplied(acc, plan.correct_opacity(p, q, smp));
             }
         });
     }

@@ -26,6 +26,7 @@
 
 use glam::{DMat3, DVec3};
 
+use crate::composite::OpacityTable;
 use crate::encode::shear::ShearState;
 use crate::view::Factorization;
 use crate::view::perspective::PerspectiveView;
@@ -250,6 +251,27 @@ pub(crate) fn floor_i64(s: f64) -> i64 {
     if (c as f64) > s { c - 1 } else { c }
 }
 
+/// One slice's scaled map along one in-slice axis, over the grid
+/// ([`FramePlan::axis_map`]): pixel `x` samples at
+/// `scale · ((x − pad) · pitch) + trans`.
+#[derive(Clone, Copy, Debug)]
+pub struct AxisMap {
+    scale: f64,
+    trans: f64,
+    pad: f64,
+    pitch: f64,
+}
+
+impl AxisMap {
+    /// The cell and in-cell weight of pixel `x` (which may lie off the grid).
+    #[inline(always)]
+    pub fn cell(&self, x: i64) -> (i64, f32) {
+        let s = self.scale * ((x as f64 - self.pad) * self.pitch) + self.trans;
+        let c = floor_i64(s);
+        (c, (s - c as f64) as f32)
+    }
+}
+
 /// The geometry of one frame, read by every traversal and the warp.
 #[derive(Clone, Debug)]
 pub struct FramePlan {
@@ -286,6 +308,9 @@ pub struct FramePlan {
     /// uniform ratio (parallel plans, and perspective plans in iso mode: see
     /// [`FramePlan::set_ray_opacity`]).
     exponents: Vec<f32>,
+    /// The correction [`FramePlan::correct_opacity`] applies with those
+    /// exponents, covering the largest (kept across frames, grown as needed).
+    opacity_table: OpacityTable,
     /// Whether a minified slice's pixels are box-filtered ([`FramePlan::footprint`]).
     box_footprint: bool,
 }
@@ -306,6 +331,7 @@ impl FramePlan {
             scaled: vec![],
             perspective: None,
             exponents: vec![],
+            opacity_table: OpacityTable::default(),
             box_footprint: true,
         };
         p.set_parallel(f, spacing);
@@ -513,21 +539,35 @@ impl FramePlan {
         let Some(rays) = self.perspective.filter(|_| on) else { return };
         let [w, h] = self.grid.size;
         let base = self.opacity_ratio as f64;
+        let mut e_max = 1f32;
         for q in 0..h {
             for p in 0..w {
                 let [a, b] = self.intermediate_to_sheared(p as f64, q as f64);
-                self.exponents.push((rays.ratio(a, b) / base).max(1.0) as f32);
+                let e = (rays.ratio(a, b) / base).max(1.0) as f32;
+                e_max = e_max.max(e);
+                self.exponents.push(e);
             }
         }
+        self.opacity_table.cover(e_max);
     }
 
     /// The exponent `e ≥ 1` that takes an opacity corrected to
     /// [`FramePlan::opacity_ratio`] to intermediate pixel `(p, q)`'s own ray:
-    /// `α'' = 1 − (1 − α')^e` ([`crate::composite::correct_opacity`]); 1 for
-    /// every pixel of a parallel plan.
+    /// `α'' = 1 − (1 − α')^e` ([`FramePlan::correct_opacity`]; the raycast paths
+    /// [`crate::composite::correct_alpha`]); 1 for every pixel of a parallel plan.
     #[inline(always)]
     pub fn opacity_exponent(&self, p: usize, q: usize) -> f32 {
         if self.exponents.is_empty() { 1.0 } else { self.exponents[q * self.grid.size[0] + p] }
+    }
+
+    /// Premultiplied sample `s` of intermediate pixel `(p, q)`, its opacity
+    /// corrected to [`FramePlan::opacity_ratio`], corrected on to the pixel's
+    /// own ray ([`FramePlan::opacity_exponent`], by the plan's
+    /// [`OpacityTable`]): `s` itself, bit for bit, in a parallel plan. The
+    /// pre-classified slices and their brute force correct every sample here.
+    #[inline(always)]
+    pub fn correct_opacity(&self, p: usize, q: usize, s: [f32; 4]) -> [f32; 4] {
+        if self.exponents.is_empty() { s } else { self.opacity_table.correct(s, self.exponents[q * self.grid.size[0] + p]) }
     }
 
     /// The real sample spacing of intermediate pixel `(p, q)`'s ray over the
@@ -552,13 +592,18 @@ impl FramePlan {
                 let m = &self.maps[k];
                 (x as i64 - self.grid.pad as i64 + m.floor[axis] as i64, m.weight[axis])
             }
-            MapKind::ScaleTranslate => {
-                let m = &self.scaled[k];
-                let s = m.scale * ((x as f64 - self.grid.pad as f64) * self.grid.pitch) + m.trans[axis];
-                let c = floor_i64(s);
-                (c, (s - c as f64) as f32)
-            }
+            MapKind::ScaleTranslate => self.axis_map(k, axis).cell(x as i64),
         }
+    }
+
+    /// Slice `k`'s scaled map along in-slice axis `axis` with the grid's
+    /// numbers, for a traversal that samples many pixels of one slice
+    /// ([`MapKind::ScaleTranslate`] only): [`AxisMap::cell`] is
+    /// [`FramePlan::cell_of`], bit for bit.
+    #[inline(always)]
+    pub fn axis_map(&self, k: usize, axis: usize) -> AxisMap {
+        let m = &self.scaled[k];
+        AxisMap { scale: m.scale, trans: m.trans[axis], pad: self.grid.pad as f64, pitch: self.grid.pitch }
     }
 
     /// The exact in-slice sample position (voxel units, before the floor)
@@ -622,8 +667,9 @@ impl FramePlan {
                 let pad = self.grid.pad as f64;
                 // the estimate from the inverse map, then exact by the map itself
                 // (monotone: σ > 0), over pixel indices that may be negative
-                let cell = |x: i64| floor_i64(m.scale * ((x as f64 - pad) * self.grid.pitch) + m.trans[axis]);
-                let inv = |c: i64| ((c as f64 - m.trans[axis]) / m.scale / self.grid.pitch + pad).floor() as i64;
+                let map = self.axis_map(k, axis);
+                let cell = |x: i64| map.cell(x).0;
+                let inv = |c: i64| floor_i64((c as f64 - m.trans[axis]) / m.scale / self.grid.pitch + pad);
                 let mut x0 = inv(c0);
                 while cell(x0) >= c0 {
                     x0 -= 1;

@@ -83,9 +83,7 @@ fn perspective_converges_to_parallel_as_the_eye_recedes() {
 /// the main diagonal, beside the parallel error of the same views.
 #[test]
 fn perspective_rle_matches_the_reference() {
-    let vol = phantom::sphere([40, 40, 40]).unwrap();
-    let tf = presets::generic(SPHERE_ISO, 200.0).tf;
-    let refr = ReferenceRenderer::new(&vol);
+    let (vol, tf, refr) = common::sphere_scene();
     let opts = ReferenceOptions { step: 0.1, ..Default::default() };
     let views = common::three_views();
     let mut report = vec![];

@@ -11,11 +11,10 @@ mod common;
 use common::{bits, blobs};
 use glam::{DMat3, EulerRot};
 use shearwarp::accuracy::metrics::rmse;
-use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
+use shearwarp::accuracy::reference::{ReferenceOptions, Scene};
 use shearwarp::classify::TransferFunction;
 use shearwarp::classify::presets;
 use shearwarp::composite::Mode;
-use shearwarp::data::phantom::{self, SPHERE_ISO};
 use shearwarp::data::volume::Volume;
 use shearwarp::render::{Method, Renderer, Settings, WordSize};
 use shearwarp::view::{Camera, Projection, rotate_eye};
@@ -88,9 +87,7 @@ fn perspective_binary_equals_brute_force_bit_for_bit() {
 /// reference (the same views).
 #[test]
 fn perspective_binary_matches_the_reference() {
-    let vol = phantom::sphere([40, 40, 40]).unwrap();
-    let tf = presets::generic(SPHERE_ISO, 200.0).tf;
-    let refr = ReferenceRenderer::new(&vol);
+    let (vol, tf, refr) = common::sphere_scene();
     let opts = ReferenceOptions { step: 0.1, ..Default::default() };
     let views = common::three_views();
     let mut report = vec![];
@@ -142,9 +139,7 @@ fn perspective_binary_converges_to_parallel_as_the_eye_recedes() {
 fn perspective_binary_iso_depth_matches_the_reference() {
     use shearwarp::accuracy::metrics::depth_error;
     use shearwarp::accuracy::reference::fast_path_depth;
-    let vol = phantom::sphere([40, 40, 40]).unwrap();
-    let tf = presets::generic(SPHERE_ISO, 200.0).tf;
-    let refr = ReferenceRenderer::new(&vol);
+    let (vol, tf, refr) = common::sphere_scene();
     let opts = ReferenceOptions { step: 0.05, ..Default::default() };
     for rot in [DMat3::IDENTITY, rotate_eye(DMat3::IDENTITY, 1, 30.0), DMat3::from_euler(EulerRot::XYZ, 0.4, -0.6, 0.2)] {
         let cam = Camera::new(rot, [96, 96]);

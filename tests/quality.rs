@@ -9,7 +9,7 @@ mod common;
 use common::{bits, blobs, render};
 use glam::{DMat3, EulerRot};
 use shearwarp::accuracy::metrics::rmse;
-use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
+use shearwarp::accuracy::reference::{ReferenceOptions, Scene};
 use shearwarp::classify::TransferFunction;
 use shearwarp::classify::presets;
 use shearwarp::composite::Mode;
@@ -78,9 +78,7 @@ fn quality_rle_equals_brute_force_bit_for_bit_in_both_projections() {
 /// pixel per voxel.
 #[test]
 fn quality_images_track_the_reference_in_both_projections() {
-    let vol = phantom::sphere([40, 40, 40]).unwrap();
-    let tf = presets::generic(SPHERE_ISO, 200.0).tf;
-    let refr = ReferenceRenderer::new(&vol);
+    let (vol, tf, refr) = common::sphere_scene();
     let opts = ReferenceOptions { step: 0.1, ..Default::default() };
     let views = common::three_views();
     let mut report = vec![];

@@ -123,3 +123,13 @@ pub fn assert_recedes_to_parallel(par: &Image, distances: &[f64], mut at: impl F
     assert!(errs.last().is_some_and(|&l| l < 1e-3) && m < 0.02, "{what}: RMSE to parallel {errs:?}, max {m}");
     errs
 }
+
+/// The sphere phantom (40³) the reference-accuracy tests render, its generic
+/// transfer function at the analytic iso value, and its reference renderer.
+pub fn sphere_scene() -> (Volume, TransferFunction, shearwarp::accuracy::reference::ReferenceRenderer) {
+    use shearwarp::data::phantom;
+    let vol = phantom::sphere([40, 40, 40]).unwrap();
+    let tf = shearwarp::classify::presets::generic(phantom::SPHERE_ISO, 200.0).tf;
+    let refr = shearwarp::accuracy::reference::ReferenceRenderer::new(&vol);
+    (vol, tf, refr)
+}

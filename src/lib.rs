@@ -43,7 +43,7 @@ pub use composite::Mode;
 pub use data::volume::{Volume, VoxelData, VoxelType};
 pub use error::{Error, Result};
 pub use memory::Memory;
-pub use render::{FrameStats, Method, Renderer, Settings};
+pub use render::{Deluxe, FrameStats, Lattice, Method, Renderer, Settings};
 pub use view::{Camera, NamedView};
 pub use warp::{Image, Image8};
 

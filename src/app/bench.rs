@@ -40,7 +40,7 @@ use shearwarp::accuracy::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_d
 use shearwarp::classify::presets;
 use shearwarp::classify::shading::Shading;
 use shearwarp::composite::Mode;
-use shearwarp::data::phantom::{ML_ISO, Phantom, SPHERE_ISO};
+use shearwarp::data::phantom::{Phantom, SPHERE_ISO};
 use shearwarp::data::volume::Volume;
 use shearwarp::encode::depth::Search;
 use shearwarp::render::{Deluxe, FrameStats, Lattice, Method, Renderer, Settings, WordSize};
@@ -454,11 +454,7 @@ impl BenchCmd {
         if self.volume.file.is_some() || self.volume.raw.is_some() || self.volume.den.is_some() {
             return None;
         }
-        Some(match self.volume.phantom {
-            Phantom::Head => Phantom::Head,
-            Phantom::Sphere => Phantom::Sphere,
-            Phantom::MarschnerLobb => Phantom::MarschnerLobb,
-        })
+        Some(self.volume.phantom)
     }
 
     /// The settings every variant of `mode` starts from: the peers' material
@@ -487,11 +483,7 @@ impl BenchCmd {
                 return Err(usage(format!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "))));
             }
         }
-        let iso = self.iso.or(match self.phantom() {
-            Some(Phantom::Sphere) => Some(SPHERE_ISO),
-            Some(Phantom::MarschnerLobb) => Some(ML_ISO),
-            _ => None,
-        });
+        let iso = self.iso.or(self.phantom().and_then(Phantom::iso));
         if let Some(iso) = iso {
             match mode {
                 Mode::Blend => r.set_transfer_function(&presets::generic(iso, hi).tf),

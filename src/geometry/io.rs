@@ -103,8 +103,10 @@ fn read_ply(path: &Path) -> std::result::Result<Triangles, String> {
             p => p.to_f32_lossy().map(f64::from).ok_or_else(|| format!("vertex property '{k}' is a list")),
         }
     };
-    let vertices =
-        verts.iter().map(|e| Ok(DVec3::new(coord(e, "x")?, coord(e, "y")?, coord(e, "z")?))).collect::<std::result::Result<Vec<_>, String>>()?;
+    let vertices = verts
+        .iter()
+        .map(|e| Ok(DVec3::new(coord(e, "x")?, coord(e, "y")?, coord(e, "z")?)))
+        .collect::<std::result::Result<Vec<_>, String>>()?;
     let mut triangles = vec![];
     for face in ply.payload.get("face").map(|v| v.as_slice()).unwrap_or(&[]) {
         let list = face.get("vertex_indices").or_else(|| face.get("vertex_index")).ok_or("a face has no 'vertex_indices' list")?;

@@ -255,7 +255,10 @@ impl ClipRegion {
         match region {
             Region::Sphere { centre, radius } => {
                 if !(centre.iter().all(|c| c.is_finite()) && radius.is_finite() && radius > 0.0) {
-                    return Err(Error::value("clip sphere", format!("centre {centre:?}, radius {radius} (needs finite numbers, radius > 0)")));
+                    return Err(Error::value(
+                        "clip sphere",
+                        format!("centre {centre:?}, radius {radius} (needs finite numbers, radius > 0)"),
+                    ));
                 }
             }
             Region::Box { lo, hi } => {
@@ -289,7 +292,9 @@ impl ClipRegion {
         match self.region {
             Region::Sphere { centre, radius } => {
                 let unit = self.spacing.iter().fold(f64::INFINITY, |a, &b| a.min(b));
-                let w = |v: DVec3, c: bool| DVec3::from_array([0, 1, 2].map(|a| (v[a] - if c { centre[a] } else { 0.0 }) * self.spacing[a] / unit));
+                let w = |v: DVec3, c: bool| {
+                    DVec3::from_array([0, 1, 2].map(|a| (v[a] - if c { centre[a] } else { 0.0 }) * self.spacing[a] / unit))
+                };
                 let (o, d) = (w(o, true), w(d, false));
                 // |o + t d|² = r²
                 let (a, b, c) = (d.length_squared(), o.dot(d), o.length_squared() - radius * radius);
@@ -459,7 +464,12 @@ mod tests {
                         let [a, b] = l.get(p, q);
                         for k in 0..plan.slices() {
                             let inside = a <= b && (a as usize..=b as usize).contains(&k);
-                            assert_eq!(inside, clip.contains(sample_voxel(&plan, k, p, q)), "{r:?} pixel ({p}, {q}) slice {k}: {:?}", [a, b]);
+                            assert_eq!(
+                                inside,
+                                clip.contains(sample_voxel(&plan, k, p, q)),
+                                "{r:?} pixel ({p}, {q}) slice {k}: {:?}",
+                                [a, b]
+                            );
                             kept += inside as usize;
                         }
                     }

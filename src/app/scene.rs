@@ -195,7 +195,7 @@ impl Scene {
         let proj = Projector::new(cam, &r.projection(), self.dims, self.spacing)?;
         let mut geo = GeometryImage::new(cam.size[0], cam.size[1]);
         for m in &self.meshes {
-            rasterize(m, &self.material, Cull::Back, &proj, &mut geo)?;
+            rasterize(m, &self.material, Cull::None, &proj, &mut geo)?;
         }
         cost.raster_ms = t.elapsed().as_secs_f64() * 1e3;
         let geometry = Arc::new(GeometryLimits::new(proj, &geo));

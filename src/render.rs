@@ -390,6 +390,9 @@ struct MaskKey {
     word: WordSize,
     cell: usize,
     generation: u64,
+    /// Deluxe I: each bit also covers the midpoint after its slice
+    /// ([`CellCodes::build_half`]).
+    half: bool,
 }
 
 #[derive(Debug)]
@@ -915,6 +918,7 @@ impl Renderer {
             word: self.settings.word,
             cell: self.settings.cell,
             generation: self.generation,
+            half: self.settings.deluxe.intermediate,
         }
     }
 
@@ -1009,19 +1013,29 @@ impl Renderer {
                     (_, Some(ns)) => ns,
                     _ => return Err(missing("the densities", axis)),
                 };
-                // cell codes depend only on the classification; cell size and word size reuse them
-                let codes_key = key.generation * 2 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64);
+                // cell codes depend only on the classification (and Deluxe I's
+                // dilation); cell size and word size reuse them
+                let codes_key = key.generation * 4 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64) * 2 + key.half as u64;
                 if self.codes[axis].as_ref().map(|c| c.0) != Some(codes_key) {
                     let t = Instant::now();
+                    let half = key.half;
                     let codes = self.pool.install(|| match (&self.tissues, self.settings.mode) {
+                        (Some(ts), _) if half => {
+                            CellCodes::thresholds_half(stack, &ts.thresholds).expect("thresholds validated in with_tissues")
+                        }
                         (Some(ts), _) => CellCodes::thresholds(stack, &ts.thresholds).expect("thresholds validated in with_tissues"),
                         (None, Mode::Iso) => {
                             let iso = self.iso;
-                            CellCodes::binary(stack, |_, hi| hi >= iso)
+                            if half {
+                                CellCodes::binary_half(stack, |_, hi| hi >= iso)
+                            } else {
+                                CellCodes::binary(stack, |_, hi| hi >= iso)
+                            }
                         }
                         (None, Mode::Blend) => {
                             let cls = &self.classifier;
-                            CellCodes::binary(stack, |lo, hi| cls.may_be_visible(lo, hi))
+                            let visible = |lo, hi| cls.may_be_visible(lo, hi);
+                            if half { CellCodes::binary_half(stack, visible) } else { CellCodes::binary(stack, visible) }
                         }
                     });
                     self.codes[axis] = Some((codes_key, codes));
@@ -1446,7 +1460,8 @@ fn check_settings(s: &Settings) -> Result<()> {
 fn check_deluxe(s: &Settings) -> Result<()> {
     let d = s.deluxe;
     let unsupported = |what: &str| Err(Error::value("settings", format!("{what} is not available with --method {}", s.method.name())));
-    if d.intermediate {
+    // I on the raycast paths: a midpoint sample per slice pair (RayContext::with_intermediate)
+    if d.intermediate && !matches!(s.method, Method::Binary | Method::Brute) {
         return unsupported("the intermediate slices (Deluxe I)");
     }
     if d.post {
@@ -1487,7 +1502,8 @@ fn ray_context<'a>(
     normals: Option<&'a NormalStack>,
     shade: &'a mut ShadeTable,
 ) -> RayContext<'a> {
-    let ctx = RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert);
+    let ctx = RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert)
+        .with_intermediate(settings.deluxe.intermediate);
     match (settings.normals, normals) {
         (Normals::Codes, Some(ns)) => {
             shade.update(headlight_object(&plan.view), settings.shading);

@@ -1159,7 +1159,10 @@ impl Renderer {
             None => plan.set_parallel(&f, spacing),
             Some((_, pv)) => plan.set_perspective(pv, &f, spacing, NEAR_SLICES),
         }
-        self.finish_plan(&mut plan, limits);
+        if let Err(e) = self.finish_plan(&mut plan, limits) {
+            self.plan = Some(plan);
+            return Err(e);
+        }
         self.last_split = false;
         let result = self.composite_plan(&plan, &mut stats, |inter: &Intermediate| {
             out.prepare(camera.size[0], camera.size[1]);
@@ -1173,19 +1176,46 @@ impl Renderer {
     /// What every plan takes after its projection's producer made it (one
     /// place for the plain frame and each pyramid of a split one): each ray's
     /// opacity correction in blend mode (iso opacities are 0 or 1: never
-    /// corrected), the adaptive image size (the same rays resampled at
-    /// another pitch), the footprint of minified slices, and the limiter's ray
+    /// corrected), the intermediate image's pitch (the same rays resampled:
+    /// the adaptive image size of `--quality`, and Deluxe M's matched
+    /// sampling), the footprint of minified slices, and the limiter's ray
     /// limits (on the renderer's pool: a limiter may work in parallel), into
     /// `limits`, the buffer the plan held before.
-    fn finish_plan(&self, plan: &mut FramePlan, limits: Option<RayLimits>) {
+    ///
+    /// Deluxe M sets `ns = max(ns_a, ns_b)` samples per voxel along both axes
+    /// ([`FramePlan::matched_samples`]: from the warp's magnification; a
+    /// perspective plan's largest, at its base plane, the front slice): the
+    /// grid is isotropic (one pitch; [`Grid::pitch`] is read by the clip
+    /// regions, the reference and the RLE traversal as a scalar), so an
+    /// anisotropic warp takes `ns²` rather than `ns_a·ns_b` samples a voxel
+    /// square. With `--quality` the finer pitch wins: M never samples coarser
+    /// than matched, a quality above it still refines. A grid past
+    /// [`MAX_INTERMEDIATE_PIXELS`] is an error naming it.
+    fn finish_plan(&self, plan: &mut FramePlan, limits: Option<RayLimits>) -> Result<()> {
         plan.set_ray_opacity(self.settings.mode == Mode::Blend);
-        if self.quality != 1.0 {
-            plan.set_pitch(1.0 / self.quality);
+        let mut pitch = 1.0 / self.quality;
+        if self.settings.deluxe.matched {
+            let ns = plan.matched_samples();
+            pitch = pitch.min(1.0 / ns[0].max(ns[1]) as f64);
+        }
+        if pitch != 1.0 {
+            plan.set_pitch(pitch);
+        }
+        let [w, h] = plan.grid.size;
+        if w as u64 * h as u64 > MAX_INTERMEDIATE_PIXELS {
+            return Err(Error::value(
+                "intermediate image",
+                format!(
+                    "{w}×{h} pixels at {:.3} samples per voxel (limit {MAX_INTERMEDIATE_PIXELS}): lower the zoom, --quality or matched sampling (Deluxe M)",
+                    1.0 / pitch
+                ),
+            ));
         }
         plan.set_box_footprint(self.settings.footprint == Footprint::Box);
         if let Some((l, _)) = &self.limiter {
             self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
         }
+        Ok(())
     }
 
     /// Stamps `out` as this frame's image (see [`Renderer::render`]'s skip).
@@ -1232,7 +1262,7 @@ impl Renderer {
                 let plan = &mut plans[i];
                 let limits = plan.take_limits();
                 plan.set_perspective(pv, &f, spacing, NEAR_SLICES);
-                self.finish_plan(plan, limits);
+                self.finish_plan(plan, limits)?;
                 let plan = &plans[i];
                 let owned = Owned { rays, pyramid: (pv.axis, pv.ascending) };
                 self.composite_plan(plan, &mut stats, |inter: &Intermediate| warp_owned(inter, plan, out, &owned))
@@ -1467,9 +1497,7 @@ fn check_deluxe(s: &Settings) -> Result<()> {
     if d.post {
         return unsupported("post-classification (Deluxe P)");
     }
-    if d.matched {
-        return unsupported("matched sampling (Deluxe M)");
-    }
+    // M on every path: a producer of plans (the pitch, Renderer::finish_plan)
     if s.lattice == Lattice::Bcc {
         return unsupported("the BCC grid");
     }

@@ -390,6 +390,9 @@ struct MaskKey {
     word: WordSize,
     cell: usize,
     generation: u64,
+    /// Deluxe I: each bit also covers the midpoint after its slice
+    /// ([`CellCodes::build_half`]).
+    half: bool,
 }
 
 #[derive(Debug)]
@@ -915,6 +918,7 @@ impl Renderer {
             word: self.settings.word,
             cell: self.settings.cell,
             generation: self.generation,
+            half: self.settings.deluxe.intermediate,
         }
     }
 
@@ -1009,19 +1013,29 @@ impl Renderer {
                     (_, Some(ns)) => ns,
                     _ => return Err(missing("the densities", axis)),
                 };
-                // cell codes depend only on the classification; cell size and word size reuse them
-                let codes_key = key.generation * 2 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64);
+                // cell codes depend only on the classification (and Deluxe I's
+                // dilation); cell size and word size reuse them
+                let codes_key = key.generation * 4 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64) * 2 + key.half as u64;
                 if self.codes[axis].as_ref().map(|c| c.0) != Some(codes_key) {
                     let t = Instant::now();
+                    let half = key.half;
                     let codes = self.pool.install(|| match (&self.tissues, self.settings.mode) {
+                        (Some(ts), _) if half => {
+                            CellCodes::thresholds_half(stack, &ts.thresholds).expect("thresholds validated in with_tissues")
+                        }
                         (Some(ts), _) => CellCodes::thresholds(stack, &ts.thresholds).expect("thresholds validated in with_tissues"),
                         (None, Mode::Iso) => {
                             let iso = self.iso;
-                            CellCodes::binary(stack, |_, hi| hi >= iso)
+                            if half {
+                                CellCodes::binary_half(stack, |_, hi| hi >= iso)
+                            } else {
+                                CellCodes::binary(stack, |_, hi| hi >= iso)
+                            }
                         }
                         (None, Mode::Blend) => {
                             let cls = &self.classifier;
-                            CellCodes::binary(stack, |lo, hi| cls.may_be_visible(lo, hi))
+                            let visible = |lo, hi| cls.may_be_visible(lo, hi);
+                            if half { CellCodes::binary_half(stack, visible) } else { CellCodes::binary(stack, visible) }
                         }
                     });
                     self.codes[axis] = Some((codes_key, codes));
@@ -1145,7 +1159,10 @@ impl Renderer {
             None => plan.set_parallel(&f, spacing),
             Some((_, pv)) => plan.set_perspective(pv, &f, spacing, NEAR_SLICES),
         }
-        self.finish_plan(&mut plan, limits);
+        if let Err(e) = self.finish_plan(&mut plan, limits) {
+            self.plan = Some(plan);
+            return Err(e);
+        }
         self.last_split = false;
         let result = self.composite_plan(&plan, &mut stats, |inter: &Intermediate| {
             out.prepare(camera.size[0], camera.size[1]);
@@ -1159,19 +1176,46 @@ impl Renderer {
     /// What every plan takes after its projection's producer made it (one
     /// place for the plain frame and each pyramid of a split one): each ray's
     /// opacity correction in blend mode (iso opacities are 0 or 1: never
-    /// corrected), the adaptive image size (the same rays resampled at
-    /// another pitch), the footprint of minified slices, and the limiter's ray
+    /// corrected), the intermediate image's pitch (the same rays resampled:
+    /// the adaptive image size of `--quality`, and Deluxe M's matched
+    /// sampling), the footprint of minified slices, and the limiter's ray
     /// limits (on the renderer's pool: a limiter may work in parallel), into
     /// `limits`, the buffer the plan held before.
-    fn finish_plan(&self, plan: &mut FramePlan, limits: Option<RayLimits>) {
+    ///
+    /// Deluxe M sets `ns = max(ns_a, ns_b)` samples per voxel along both axes
+    /// ([`FramePlan::matched_samples`]: from the warp's magnification; a
+    /// perspective plan's largest, at its base plane, the front slice): the
+    /// grid is isotropic (one pitch; [`Grid::pitch`] is read by the clip
+    /// regions, the reference and the RLE traversal as a scalar), so an
+    /// anisotropic warp takes `ns²` rather than `ns_a·ns_b` samples a voxel
+    /// square. With `--quality` the finer pitch wins: M never samples coarser
+    /// than matched, a quality above it still refines. A grid past
+    /// [`MAX_INTERMEDIATE_PIXELS`] is an error naming it.
+    fn finish_plan(&self, plan: &mut FramePlan, limits: Option<RayLimits>) -> Result<()> {
         plan.set_ray_opacity(self.settings.mode == Mode::Blend);
-        if self.quality != 1.0 {
-            plan.set_pitch(1.0 / self.quality);
+        let mut pitch = 1.0 / self.quality;
+        if self.settings.deluxe.matched {
+            let ns = plan.matched_samples();
+            pitch = pitch.min(1.0 / ns[0].max(ns[1]) as f64);
+        }
+        if pitch != 1.0 {
+            plan.set_pitch(pitch);
+        }
+        let [w, h] = plan.grid.size;
+        if w as u64 * h as u64 > MAX_INTERMEDIATE_PIXELS {
+            return Err(Error::value(
+                "intermediate image",
+                format!(
+                    "{w}×{h} pixels at {:.3} samples per voxel (limit {MAX_INTERMEDIATE_PIXELS}): lower the zoom, --quality or matched sampling (Deluxe M)",
+                    1.0 / pitch
+                ),
+            ));
         }
         plan.set_box_footprint(self.settings.footprint == Footprint::Box);
         if let Some((l, _)) = &self.limiter {
             self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
         }
+        Ok(())
     }
 
     /// Stamps `out` as this frame's image (see [`Renderer::render`]'s skip).
@@ -1218,7 +1262,7 @@ impl Renderer {
                 let plan = &mut plans[i];
                 let limits = plan.take_limits();
                 plan.set_perspective(pv, &f, spacing, NEAR_SLICES);
-                self.finish_plan(plan, limits);
+                self.finish_plan(plan, limits)?;
                 let plan = &plans[i];
                 let owned = Owned { rays, pyramid: (pv.axis, pv.ascending) };
                 self.composite_plan(plan, &mut stats, |inter: &Intermediate| warp_owned(inter, plan, out, &owned))
@@ -1446,15 +1490,14 @@ fn check_settings(s: &Settings) -> Result<()> {
 fn check_deluxe(s: &Settings) -> Result<()> {
     let d = s.deluxe;
     let unsupported = |what: &str| Err(Error::value("settings", format!("{what} is not available with --method {}", s.method.name())));
-    if d.intermediate {
+    // I on the raycast paths: a midpoint sample per slice pair (RayContext::with_intermediate)
+    if d.intermediate && !matches!(s.method, Method::Binary | Method::Brute) {
         return unsupported("the intermediate slices (Deluxe I)");
     }
     if d.post {
         return unsupported("post-classification (Deluxe P)");
     }
-    if d.matched {
-        return unsupported("matched sampling (Deluxe M)");
-    }
+    // M on every path: a producer of plans (the pitch, Renderer::finish_plan)
     if s.lattice == Lattice::Bcc {
         return unsupported("the BCC grid");
     }
@@ -1487,7 +1530,8 @@ fn ray_context<'a>(
     normals: Option<&'a NormalStack>,
     shade: &'a mut ShadeTable,
 ) -> RayContext<'a> {
-    let ctx = RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert);
+    let ctx = RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert)
+        .with_intermediate(settings.deluxe.intermediate);
     match (settings.normals, normals) {
         (Normals::Codes, Some(ns)) => {
             shade.update(headlight_object(&plan.view), settings.shading);

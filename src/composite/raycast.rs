@@ -61,6 +61,10 @@ pub struct RayContext<'a> {
     /// Table shading ([`RayContext::with_normals`]): every voxel's normal code
     /// and the view's shade table. `None` shades from the exact gradient.
     normals: Option<(&'a NormalStack, &'a ShadeTable)>,
+    /// Shear-Warp Deluxe I ([`RayContext::with_intermediate`]): a sample at
+    /// the midpoint between each pair of slices too, every sample at the
+    /// half-step opacity.
+    half: bool,
 }
 
 /// What one ray produced.
@@ -72,6 +76,26 @@ pub struct RayResult {
 }
 
 const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN };
+
+/// A located sample of Deluxe I: slice `k`, or (`mid`) the midpoint between
+/// slices `k` and `k + 1`, in cell `(ci, cj)` at weights `(wi, wj)`.
+#[derive(Clone, Copy, Debug)]
+struct Pt {
+    k: usize,
+    mid: bool,
+    ci: usize,
+    cj: usize,
+    wi: f32,
+    wj: f32,
+}
+
+impl Pt {
+    /// The sample's fractional slice index.
+    #[inline(always)]
+    fn depth(&self) -> f32 {
+        if self.mid { self.k as f32 + 0.5 } else { self.k as f32 }
+    }
+}
 
 /// How a ray reads one cell of slice memory at stack index `b`: its four corner
 /// densities, its four corner normal codes (table shading) and the cache hint
@@ -195,7 +219,40 @@ impl<'a> RayContext<'a> {
             grad_m: f.grad_to_eye_z.map(|x| x as f32),
             grad_s: f.grad_scale.map(|x| x as f32),
             normals: None,
+            half: false,
         }
+    }
+
+    /// Shear-Warp Deluxe I (`on`): each ray also samples the intermediate
+    /// slice halfway between slices `k` and `k + 1` (index order) where it
+    /// meets slice `k` inside the volume, at its own position at depth
+    /// `k + ½` ([`Ray::locate_mid`]): the trilinear sample there, the mean of
+    /// the two slices' bilinear samples at that in-slice position (shaded by
+    /// the mean of their shade entries or gradients). Samples are composited
+    /// in depth order (`k`, `k + ½`, `k + 1`, …), every one (slice or
+    /// midpoint) with the half-step opacity `α_n = 1 − √(1 − α)`
+    /// ([`Ray::half_opacity`]: post-classified straight colour, so no colour
+    /// normalization); iso mode takes the first sample of either kind at or
+    /// above the iso value and refines the hit against the sample before it.
+    /// The binary path needs a mask whose bit `k` also covers the midpoint
+    /// after slice `k` ([`crate::encode::cells::CellCodes::build_half`]).
+    pub fn with_intermediate(mut self, on: bool) -> Self {
+        self.half = on;
+        self
+    }
+
+    /// The density a Deluxe I ray samples at slice `k` (`mid` false) or at
+    /// its midpoint between slices `k` and `k + 1` (`mid`), read from the f32
+    /// stack; `None` where the ray meets slice `k` outside the volume (or the
+    /// midpoint lies outside). For tests: the trilinear check of the midpoint.
+    pub fn half_sample<R: Ray>(&self, ray: R, k: usize, mid: bool) -> Option<f32> {
+        let p = self.locate_pt(ray, k, mid)?;
+        Some(self.density_pt(&self.split(), p))
+    }
+
+    /// True with Deluxe I ([`RayContext::with_intermediate`]).
+    pub fn intermediate(&self) -> bool {
+        self.half
     }
 
     /// Shades by table instead of by gradient: a sample's shade is the bilinear
@@ -281,10 +338,160 @@ impl<'a> RayContext<'a> {
     /// an iso hit's refinement.
     #[inline(always)]
     pub fn trace<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
-        match self.mode {
-            Mode::Blend => self.trace_blend(v, ray, ks),
-            Mode::Iso => self.trace_iso(v, ray, ks, lo, hi),
+        match (self.mode, self.half) {
+            (Mode::Blend, false) => self.trace_blend(v, ray, ks),
+            (Mode::Iso, false) => self.trace_iso(v, ray, ks, lo, hi),
+            (Mode::Blend, true) => self.trace_blend_half(v, ray, ks, hi),
+            (Mode::Iso, true) => self.trace_iso_half(v, ray, ks, lo, hi),
         }
+    }
+
+    /// Deluxe I: the sample of candidate slice `k` (`mid` false) or of the
+    /// midpoint between `k` and `k + 1` (`mid`; only where the ray meets slice
+    /// `k` inside the volume, the cell its mask bit `k` codes), if inside.
+    #[inline(always)]
+    fn locate_pt<R: Ray>(&self, ray: R, k: usize, mid: bool) -> Option<Pt> {
+        let (ci, cj, wi, wj) = ray.locate(self, k)?;
+        if !mid {
+            return Some(Pt { k, mid, ci, cj, wi, wj });
+        }
+        let (ci, cj, wi, wj) = ray.locate_mid(self, k)?;
+        Some(Pt { k, mid, ci, cj, wi, wj })
+    }
+
+    /// The density of a Deluxe I sample (trilinear at a midpoint: the mean of
+    /// the two slices' bilinear samples).
+    #[inline(always)]
+    fn density_pt<V: Cells>(&self, v: &V, p: Pt) -> f32 {
+        let d = self.sample(v, p.ci, p.cj, p.k, p.wi, p.wj);
+        if p.mid { 0.5 * (d + self.sample(v, p.ci, p.cj, p.k + 1, p.wi, p.wj)) } else { d }
+    }
+
+    /// The shade entry of a Deluxe I sample (table shading; a midpoint's is
+    /// the mean of the two slices').
+    #[inline(always)]
+    fn entry_pt<V: Cells>(&self, v: &V, table: &ShadeTable, p: Pt) -> [f32; 2] {
+        let e = table.blend(v.codes(self.stack.index(p.ci, p.cj, p.k)), p.wi, p.wj);
+        if !p.mid {
+            return e;
+        }
+        let e1 = table.blend(v.codes(self.stack.index(p.ci, p.cj, p.k + 1)), p.wi, p.wj);
+        [0.5 * (e[0] + e1[0]), 0.5 * (e[1] + e1[1])]
+    }
+
+    /// The gradient of a Deluxe I sample (gradient shading; a midpoint's is
+    /// the mean of the two slices').
+    #[inline(always)]
+    fn gradient_pt(&self, p: Pt) -> [f32; 3] {
+        let g = self.stack.gradient(p.ci, p.cj, p.k, p.wi, p.wj);
+        if !p.mid {
+            return g;
+        }
+        let g1 = self.stack.gradient(p.ci, p.cj, p.k + 1, p.wi, p.wj);
+        [0, 1, 2].map(|c| 0.5 * (g[c] + g1[c]))
+    }
+
+    /// Composites the Deluxe I sample `(k, mid)` of `ray` into `acc` at the
+    /// half-step opacity.
+    #[inline(always)]
+    fn blend_pt<V: Cells, R: Ray>(&self, v: &V, ray: R, k: usize, mid: bool, acc: &mut [f32; 4]) {
+        let Some(p) = self.locate_pt(ray, k, mid) else { return };
+        let d = self.density_pt(v, p);
+        let alpha = self.classifier.alpha(d);
+        if alpha <= 0.0 {
+            return;
+        }
+        let alpha = ray.half_opacity(alpha);
+        let c = self.classifier.classify(d);
+        let rgb = [c.r, c.g, c.b];
+        let rgb = match self.normals {
+            Some((_, table)) => apply_shade(rgb, self.entry_pt(v, table, p)),
+            None => self.shading.shade(rgb, headlight_ndl(self.gradient_pt(p), self.grad_m, self.grad_s)),
+        };
+        composite(acc, rgb, alpha);
+    }
+
+    /// [`RayContext::trace_blend`] with Deluxe I: each candidate slice `k`
+    /// brings its own sample and the midpoint after it in index order (when
+    /// `k + 1 ≤ hi`), composited in walking order.
+    #[inline(always)]
+    fn trace_blend_half<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, hi: usize) -> RayResult {
+        let mut acc = [0f32; 4];
+        'ray: for k in ks {
+            let order = if self.ascending { [(k, false), (k, true)] } else { [(k, true), (k, false)] };
+            for (k, mid) in order {
+                if mid && k >= hi {
+                    continue;
+                }
+                if terminated(acc[3], self.ert) {
+                    break 'ray;
+                }
+                self.blend_pt(v, ray, k, mid, &mut acc);
+            }
+        }
+        RayResult { rgba: acc, depth: f32::NAN }
+    }
+
+    /// [`RayContext::trace_iso`] with Deluxe I: the first sample, slice or
+    /// midpoint, at or above the iso value.
+    #[inline(always)]
+    fn trace_iso_half<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
+        for k in ks {
+            let order = if self.ascending { [(k, false), (k, true)] } else { [(k, true), (k, false)] };
+            for (k, mid) in order {
+                if mid && k >= hi {
+                    continue;
+                }
+                let Some(p) = self.locate_pt(ray, k, mid) else { continue };
+                let d = self.density_pt(v, p);
+                if d >= self.iso {
+                    return self.iso_hit_half(v, ray, p, d, lo, hi);
+                }
+            }
+        }
+        MISS
+    }
+
+    /// The Deluxe I sample before `(k, mid)` in walking order within `[lo, hi]`.
+    #[inline(always)]
+    fn prev_pt(&self, k: usize, mid: bool, lo: usize, hi: usize) -> Option<(usize, bool)> {
+        match (self.ascending, mid) {
+            (true, false) => (k > lo).then(|| (k - 1, true)),
+            (true, true) => Some((k, false)),
+            (false, false) => (k < hi).then_some((k, true)),
+            (false, true) => Some((k + 1, false)),
+        }
+    }
+
+    /// [`RayContext::iso_hit`] with Deluxe I: the hit refined against the
+    /// sample before it (a slice or a midpoint, half a slice away).
+    #[inline(never)]
+    fn iso_hit_half<V: Cells, R: Ray>(&self, v: &V, ray: R, p: Pt, d: f32, lo: usize, hi: usize) -> RayResult {
+        let before = self.prev_pt(p.k, p.mid, lo, hi).and_then(|(kp, mp)| {
+            let pp = self.locate_pt(ray, kp, mp)?;
+            let dp = self.density_pt(v, pp);
+            (dp < self.iso).then(|| (pp, ((self.iso - dp) / (d - dp)).clamp(0.0, 1.0)))
+        });
+        let depth = before.map_or(p.depth(), |(pp, t)| pp.depth() + (p.depth() - pp.depth()) * t);
+        let rgb = match self.normals {
+            Some((_, table)) => {
+                let mut e = self.entry_pt(v, table, p);
+                if let Some((pp, t)) = before {
+                    let ep = self.entry_pt(v, table, pp);
+                    e = [0, 1].map(|a| ep[a] + (e[a] - ep[a]) * t);
+                }
+                apply_shade(self.iso_rgb, e)
+            }
+            None => {
+                let mut g = self.gradient_pt(p);
+                if let Some((pp, t)) = before {
+                    let gp = self.gradient_pt(pp);
+                    g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
+                }
+                self.shading.shade(self.iso_rgb, headlight_ndl(g, self.grad_m, self.grad_s))
+            }
+        };
+        RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }
 
     #[inline(always)]
@@ -385,9 +592,35 @@ impl<'a> RayContext<'a> {
 /// ([`MapKind::ScaleTranslate`]: perspective, or another pixel pitch).
 pub trait Ray: Copy {
     fn locate(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)>;
+    /// The cell and weights of the ray's point at depth `k + ½` (Deluxe I),
+    /// halfway between its samples in slices `k` and `k + 1` (`k + 1` must
+    /// be a slice): the mean of the two positions, since the maps are affine
+    /// in `k`. Its cell is within one of the slice-`k` sample's along each
+    /// axis while the ray moves at most two voxels a slice.
+    fn locate_mid(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)>;
     /// The opacity `alpha` (corrected to the plan's uniform spacing) corrected
     /// to this ray's spacing.
     fn opacity(&self, alpha: f32) -> f32;
+    /// The opacity `alpha` (corrected to the plan's uniform spacing) corrected
+    /// to half this ray's spacing (Deluxe I): `1 − (1 − α)^(e/2)`.
+    fn half_opacity(&self, alpha: f32) -> f32;
+}
+
+/// `α` at half its sample spacing, `1 − √(1 − α)` (Deluxe I, eq. 6).
+#[inline(always)]
+pub fn half_step_alpha(alpha: f32) -> f32 {
+    1.0 - (1.0 - alpha).sqrt()
+}
+
+/// The cell (in `[0, cells)`) and weight of in-slice positions `(x, y)`.
+#[inline(always)]
+fn cell_at(ctx: &RayContext, x: f64, y: f64) -> Option<(usize, usize, f32, f32)> {
+    let (ci, cj) = (floor_i64(x), floor_i64(y));
+    if (ci as u64) < ctx.cells[0] as u64 && (cj as u64) < ctx.cells[1] as u64 {
+        Some((ci as usize, cj as usize, (x - ci as f64) as f32, (y - cj as f64) as f32))
+    } else {
+        None
+    }
 }
 
 /// The ray of intermediate pixel `(p, q)` of a translated plan: its sample in
@@ -411,8 +644,18 @@ impl Ray for GridRay {
         }
     }
     #[inline(always)]
+    fn locate_mid(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)> {
+        let t = &ctx.plan.shear.trans;
+        let (a, b) = ((self.p - ctx.pad) as f64, (self.q - ctx.pad) as f64);
+        cell_at(ctx, a + 0.5 * (t[0][k] + t[0][k + 1]), b + 0.5 * (t[1][k] + t[1][k + 1]))
+    }
+    #[inline(always)]
     fn opacity(&self, alpha: f32) -> f32 {
         alpha
+    }
+    #[inline(always)]
+    fn half_opacity(&self, alpha: f32) -> f32 {
+        half_step_alpha(alpha)
     }
 }
 
@@ -439,8 +682,18 @@ impl Ray for ScaledRay {
         }
     }
     #[inline(always)]
+    fn locate_mid(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)> {
+        let (m0, m1) = (&ctx.plan.scaled[k], &ctx.plan.scaled[k + 1]);
+        let at = |m: &crate::view::plan::ScaledMap, a: usize| m.scale * self.at[a] + m.trans[a];
+        cell_at(ctx, 0.5 * (at(m0, 0) + at(m1, 0)), 0.5 * (at(m0, 1) + at(m1, 1)))
+    }
+    #[inline(always)]
     fn opacity(&self, alpha: f32) -> f32 {
         correct_alpha(alpha, self.e)
+    }
+    #[inline(always)]
+    fn half_opacity(&self, alpha: f32) -> f32 {
+        if self.e == 1.0 { half_step_alpha(alpha) } else { correct_alpha(alpha, 0.5 * self.e) }
     }
 }
 

@@ -195,6 +195,77 @@ impl CellCodes {
         CellCodes { cells: [ci_n, cj_n], nk, nb, codes: Arc::new(codes) }
     }
 
+    /// Codes for Shear-Warp Deluxe I ([`crate::composite::raycast::RayContext::with_intermediate`]):
+    /// `code(lo, hi)` of the range of voxels `[ci − 1, ci + 2] × [cj − 1, cj + 2]
+    /// × [k, k + 1]` (clipped to the volume) instead of the cell's four corners.
+    /// A ray whose sample in slice `k` lies in cell `(ci, cj)` reads, at its
+    /// midpoint between slices `k` and `k + 1`, a cell within one of it along
+    /// each axis (it moves at most two voxels a slice, so at most one in half
+    /// a slice) in both slices, and the trilinear sample there lies within
+    /// the range of those eight voxels: so bit `k` of a mask packed from these
+    /// codes covers the sample of slice `k` and the midpoint after it, for
+    /// either walking order, and the mask stays conservative (one slice of
+    /// dilation along depth, one cell in the slice).
+    pub fn build_half(stack: &(impl Densities + ?Sized), nb: u32, code: impl Fn(f32, f32) -> u8 + Sync) -> Self {
+        let n = stack.dims();
+        let [ci_n, cj_n] = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
+        let nk = n[2];
+        let mut codes = PackedCodes::new(nb, ci_n, cj_n * nk);
+        if ci_n * cj_n > 0 {
+            let rw = codes.row_words;
+            let (n0, n1) = (n[0], n[1]);
+            codes.chunks_mut(cj_n).enumerate().for_each(|(k, out)| {
+                let k1 = (k + 1).min(nk - 1);
+                let (mut a, mut b) = (vec![0f32; n0], vec![0f32; n0]);
+                // per voxel row j, the range over both slices and voxels [ci − 1, ci + 2]
+                let (mut rlo, mut rhi) = (vec![0f32; n1 * ci_n], vec![0f32; n1 * ci_n]);
+                for j in 0..n1 {
+                    stack.row(j, k, &mut a);
+                    stack.row(j, k1, &mut b);
+                    // a: the two slices' minima, b: their maxima
+                    for (x, y) in a.iter_mut().zip(b.iter_mut()) {
+                        (*x, *y) = (x.min(*y), x.max(*y));
+                    }
+                    let mx = &b;
+                    for ci in 0..ci_n {
+                        let (i0, i1) = (ci.saturating_sub(1), (ci + 2).min(n0 - 1));
+                        rlo[j * ci_n + ci] = a[i0..=i1].iter().fold(f32::INFINITY, |m, &x| m.min(x));
+                        rhi[j * ci_n + ci] = mx[i0..=i1].iter().fold(f32::NEG_INFINITY, |m, &x| m.max(x));
+                    }
+                }
+                let mut line = vec![0u8; ci_n];
+                for cj in 0..cj_n {
+                    let (j0, j1) = (cj.saturating_sub(1), (cj + 2).min(n1 - 1));
+                    for (ci, o) in line.iter_mut().enumerate() {
+                        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                        for j in j0..=j1 {
+                            lo = lo.min(rlo[j * ci_n + ci]);
+                            hi = hi.max(rhi[j * ci_n + ci]);
+                        }
+                        *o = code(lo, hi);
+                    }
+                    PackedCodes::pack_row(nb, &line, &mut out[cj * rw..(cj + 1) * rw]);
+                }
+            });
+        }
+        CellCodes { cells: [ci_n, cj_n], nk, nb, codes: Arc::new(codes) }
+    }
+
+    /// [`CellCodes::binary`] for Deluxe I ([`CellCodes::build_half`]).
+    pub fn binary_half(stack: &(impl Densities + ?Sized), visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
+        Self::build_half(stack, 1, |lo, hi| visible(lo, hi) as u8)
+    }
+
+    /// [`CellCodes::thresholds`] for Deluxe I ([`CellCodes::build_half`]).
+    pub fn thresholds_half(stack: &(impl Densities + ?Sized), thresholds: &[f32]) -> Result<Self> {
+        if thresholds.is_empty() || !thresholds.windows(2).all(|w| w[0] < w[1]) || thresholds.iter().any(|t| t.is_nan()) {
+            return Err(Error::value("thresholds", format!("{thresholds:?} (need 1..=15 strictly ascending values)")));
+        }
+        let nb = code_width_for(thresholds.len())
+            .ok_or_else(|| Error::value("thresholds", format!("{} thresholds (at most 15)", thresholds.len())))?;
+        Ok(Self::build_half(stack, nb, |_, hi| thresholds.iter().map(|&t| (t <= hi) as u8).sum()))
+    }
+
     /// 1-bit codes: 1 where `visible(lo, hi)`.
     pub fn binary(stack: &(impl Densities + ?Sized), visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
         Self::build(stack, 1, |lo, hi| visible(lo, hi) as u8)

@@ -234,6 +234,11 @@ impl<F: Fn(&FramePlan, &mut RayLimits) + Send + Sync> Limiter for F {
     }
 }
 
+/// The most samples per voxel along one axis Deluxe M takes
+/// ([`FramePlan::matched_samples`]): past a 16× magnification the warp
+/// magnifies the rest.
+pub const MAX_MATCHED: usize = 16;
+
 /// The widest box footprint, in voxels: a slice minified more than this is
 /// filtered at this width ([`FramePlan::footprint`]).
 pub const MAX_FOOTPRINT: f64 = 4.0;
@@ -504,7 +509,8 @@ impl FramePlan {
     /// are recomputed for the new pixels. Call it after the projection's
     /// producer and before a [`Limiter`]; `pitch` 1 on a pitch-1 plan changes
     /// nothing. `pitch` must be finite and > 0 (the renderer keeps it in
-    /// `[0.5, 4]`).
+    /// `[1/`[`MAX_MATCHED`]`, 4]`: `--quality` 0.25–2, Deluxe M down to
+    /// 1/16, and checks the grid against its pixel limit).
     pub fn set_pitch(&mut self, pitch: f64) {
         assert!(pitch.is_finite() && pitch > 0.0, "pitch {pitch}");
         let old = self.grid.pitch;
@@ -529,6 +535,49 @@ impl FramePlan {
         if !self.exponents.is_empty() {
             self.set_ray_opacity(true);
         }
+    }
+
+    /// Shear-Warp Deluxe M (matched sampling on zoom, Sweeney & Mueller §3.3):
+    /// the samples per voxel `[ns_a, ns_b]` along the sheared axes that make
+    /// the warped intermediate image's pixels at most one output pixel apart,
+    /// `ns = ⌈|∂(u, v)/∂a|⌉` and `⌈|∂(u, v)/∂b|⌉`, the lengths of the warp's
+    /// columns (the paper's eq. 3; its eq. 1 is written display → base plane,
+    /// while these are the columns of the base → display map, [`Warp::forward`],
+    /// in voxels of the base plane), each in `1..=`[`MAX_MATCHED`].
+    /// An affine warp has one Jacobian; a projective one (perspective) is
+    /// evaluated at the four corners of the grid, the base plane (where the
+    /// plan samples at one pixel per voxel: the front slice, the most
+    /// magnified) and the largest taken (a projective map's scale is monotone
+    /// in `w`, which is affine, so it is largest at a corner). A length within
+    /// 1e-9 above an integer counts as that integer (a zoom of exactly 7 is 7
+    /// samples, not 8).
+    pub fn matched_samples(&self) -> [usize; 2] {
+        let f = &self.warp.forward;
+        let pad = self.grid.pad as f64;
+        let jac = |a: f64, b: f64| -> Option<[f64; 2]> {
+            let x = f.x_axis.x * a + f.y_axis.x * b + f.z_axis.x;
+            let y = f.x_axis.y * a + f.y_axis.y * b + f.z_axis.y;
+            let w = f.x_axis.z * a + f.y_axis.z * b + f.z_axis.z;
+            if w <= 0.0 || !w.is_finite() {
+                return None;
+            }
+            let col = |c: glam::DVec3| {
+                let du = (c.x * w - x * c.z) / (w * w);
+                let dv = (c.y * w - y * c.z) / (w * w);
+                (du * du + dv * dv).sqrt()
+            };
+            Some([col(f.x_axis), col(f.y_axis)])
+        };
+        let [w, h] = self.grid.size;
+        let (a1, b1) = ((w as f64 - 1.0 - pad) * self.grid.pitch, (h as f64 - 1.0 - pad) * self.grid.pitch);
+        let (a0, b0) = (-pad * self.grid.pitch, -pad * self.grid.pitch);
+        let mut m = [0f64; 2];
+        for (a, b) in [(a0, b0), (a1, b0), (a0, b1), (a1, b1)] {
+            if let Some(l) = jac(a, b) {
+                m = [m[0].max(l[0]), m[1].max(l[1])];
+            }
+        }
+        m.map(|l| if l.is_finite() { ((l - 1e-9).ceil().max(1.0) as usize).min(MAX_MATCHED) } else { 1 })
     }
 
     /// Whether each ray's opacity is corrected to its own sample spacing

@@ -77,6 +77,9 @@ pub struct Spec {
     /// The interactive clip plane (C key): the half-space `normal · w ≤ offset`
     /// in world millimetres from the volume centre, beside any `--clip-plane`.
     pub clip: Option<Plane>,
+    /// A still view (no drag under way): the worker renders it with matched
+    /// sampling (Deluxe M) where the zoom magnifies.
+    pub still: bool,
 }
 
 /// A clip plane in world millimetres from the volume centre: the side kept is
@@ -357,6 +360,7 @@ impl State {
             projection: self.projection,
             quality,
             clip: self.clip,
+            still: self.drag.is_none(),
         }
     }
 

@@ -20,7 +20,7 @@ use super::state::{Class, Kind, Plane, Spec};
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
-use shearwarp::render::{Footprint, FrameStats, Renderer, Settings};
+use shearwarp::render::{Deluxe, Footprint, FrameStats, Renderer, Settings};
 use shearwarp::view::Projection;
 use shearwarp::view::clip::{ClipPlane, ClipPlanes};
 use shearwarp::warp::{Canvas, Image8, Texel};
@@ -230,7 +230,22 @@ impl Renderers {
             let footprint = if q < 1.0 { Footprint::Bilinear } else { Footprint::Box };
             r.set_settings(Settings { footprint, ..r.settings() })?;
         }
-        let st = r.render(&spec.camera, img)?;
+        // a still view (the release render after a drag) with matched sampling
+        // (Deluxe M): as many samples per voxel as the zoom magnifies, none
+        // more where it does not; a drag's frames without it
+        let d = r.settings().deluxe;
+        if d.matched != spec.still {
+            r.set_settings(Settings { deluxe: Deluxe { matched: spec.still, ..d }, ..r.settings() })?;
+        }
+        let st = match r.render(&spec.camera, img) {
+            // a zoom whose matched grid is past the memory limit: the frame without M
+            Err(_) if spec.still => {
+                let s = r.settings();
+                r.set_settings(Settings { deluxe: Deluxe { matched: false, ..s.deluxe }, ..s })?;
+                r.render(&spec.camera, img)?
+            }
+            st => st?,
+        };
         self.stale[st.axis] = false;
         Ok(st)
     }
@@ -401,7 +416,19 @@ mod tests {
         let tissues = presets::tissues_for(&vol);
         let r = Renderers::new(vol, &tissues, Settings { mode, threads: 1, ..Settings::default() }).unwrap();
         let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-        (r, Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0, clip: None })
+        (
+            r,
+            Spec {
+                seq: 1,
+                camera: cam,
+                class: Class::Tissue(0),
+                cell: 1,
+                projection: Projection::Parallel,
+                quality: 1.0,
+                clip: None,
+                still: true,
+            },
+        )
     }
 
     fn frame(rx: &mpsc::Receiver<Reply>) -> Frame {
@@ -414,6 +441,23 @@ mod tests {
         }
     }
 
+    /// A still view that magnifies renders with matched sampling (Deluxe M:
+    /// 4 samples per voxel at a zoom of 4), a drag's frame without it, and a
+    /// still view that does not magnify at one sample per voxel.
+    #[test]
+    fn still_views_use_matched_sampling_when_the_zoom_magnifies() {
+        let (mut r, spec) = setup(Mode::Iso);
+        let cam = Camera { zoom: Some(4.0), size: [96, 96], ..spec.camera };
+        let mut img = Image::new(96, 96);
+        let pitch = |r: &mut Renderers| r.select(Class::Tissue(0), 1).unwrap().last_plan().unwrap().grid.pitch;
+        r.render(&Spec { camera: cam, ..spec }, &mut img).unwrap();
+        assert_eq!(pitch(&mut r), 0.25);
+        r.render(&Spec { camera: cam, still: false, ..spec }, &mut img).unwrap();
+        assert_eq!(pitch(&mut r), 1.0);
+        r.render(&spec, &mut img).unwrap();
+        assert_eq!(pitch(&mut r), 1.0);
+    }
+
     /// `view --method rle --perspective FOV`: the preview, the blend display
     /// and a custom iso all render the perspective projection.
     #[test]
@@ -424,8 +468,16 @@ mod tests {
             let s = Settings { mode, threads: 1, method: shearwarp::render::Method::Rle, ..Settings::default() };
             let mut r = Renderers::new(vol, &tissues, s).unwrap();
             let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec =
-                Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0, clip: None };
+            let spec = Spec {
+                seq: 1,
+                camera: cam,
+                class: Class::Tissue(0),
+                cell: 1,
+                projection: Projection::Parallel,
+                quality: 1.0,
+                clip: None,
+                still: true,
+            };
             let mut par = Image::new(64, 48);
             r.render(&spec, &mut par).unwrap();
             // the spec's projection is what renders
@@ -451,8 +503,16 @@ mod tests {
             let s = Settings { mode, threads: 1, ..Settings::default() };
             let mut r = Renderers::new(vol, &tissues, s).unwrap();
             let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec =
-                Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0, clip: None };
+            let spec = Spec {
+                seq: 1,
+                camera: cam,
+                class: Class::Tissue(0),
+                cell: 1,
+                projection: Projection::Parallel,
+                quality: 1.0,
+                clip: None,
+                still: true,
+            };
             let mut whole = Image::new(64, 48);
             r.render(&spec, &mut whole).unwrap();
             let r3 = cam.rotation;
@@ -481,8 +541,16 @@ mod tests {
             let sp = vol.spacing();
             let mut r = Renderers::new(vol, &tissues, s).unwrap();
             let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec =
-                Spec { seq: 1, camera: cam, class: Class::Tissue(0), cell: 1, projection: Projection::Parallel, quality: 1.0, clip: None };
+            let spec = Spec {
+                seq: 1,
+                camera: cam,
+                class: Class::Tissue(0),
+                cell: 1,
+                projection: Projection::Parallel,
+                quality: 1.0,
+                clip: None,
+                still: true,
+            };
             let half = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], 0.0).unwrap()], sp).unwrap();
             let none = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], -1e6).unwrap()], sp).unwrap();
             for class in [Class::Tissue(0), Class::Custom(100.0)] {

@@ -25,7 +25,7 @@ use crate::view::plan::{FramePlan, MapKind, floor_i64};
 /// What a sample is made of (a sampler of the one slice traversal): each
 /// voxel read becomes a 4-vector ([`Sampler::voxel`], [`Sampler::MISSING`]
 /// for one the encoding left out), four (a cell) are blended bilinearly with
-/// the one [`blend`], and [`Sampler::finish`] turns the blend into the
+/// the one bilinear `blend`, and [`Sampler::finish`] turns the blend into the
 /// premultiplied sample that is composited.
 ///
 /// - Pre-classified ([`ViewTables`]): the voxel's shaded, opacity-corrected,

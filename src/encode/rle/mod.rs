@@ -50,6 +50,44 @@
 //!   for bit; the tests assert that with early termination off and allow 1e-5
 //!   otherwise.
 //!
+//! Shear-Warp Deluxe (Sweeney & Mueller 2002), options I and P, on this path:
+//!
+//! - **I, intermediate slices** (a producer of plans:
+//!   [`FramePlan::set_intermediate`]): between each pair of consecutive
+//!   slices one more sample, at the ray's point at depth `k + ½`
+//!   ([`FramePlan::mid_map`]: the mean of the two slices' maps, exact for a
+//!   straight ray, parallel or perspective), the mean of the two slices'
+//!   bilinear blends there (trilinear interpolation). Every sample's opacity
+//!   is corrected to half the slice spacing ([`FramePlan::sample_ratio`]:
+//!   the tables' own correction at half the ratio, `α_n = 1 − √(1 − α)`,
+//!   colour premultiplied with it; the perspective rays' exponents are
+//!   ratios of spacings and stay). A pass per slice pair walks the four
+//!   scanlines under each row with one set of weights, skipping opaque
+//!   pixels through the links and pixels whose eight voxels are all outside
+//!   the runs; minified slices' intermediate samples are bilinear (the box
+//!   footprint is the slices'). Its cost is measured in the issue: several
+//!   times a slice pass, not the paper's third.
+//! - **P, post-classification** (a sampler,
+//!   [`crate::composite::slices::Sampler`]): the same traversal reads each
+//!   stored voxel as `[node, normal]` ([`PostTables`]), blends it with the
+//!   same bilinear (trilinear with I) weights, then classifies the
+//!   interpolated node and shades the normalized interpolated normal with the
+//!   one shading model. Its encoding ([`RleVolume::encode_post`]) stores a
+//!   voxel, transparent or not, whenever one of the 2×2×2 cells around it may
+//!   be visible ([`PostVisible`]: any non-transparent node of the cell's node
+//!   range widened by one, so rounding in the blend cannot reach a visible
+//!   node), so a sample reading a voxel left out (NaN, finished to zero) is
+//!   invisible and skipping stays lossless. The visible set is the union of
+//!   the renderer's tissue presets of the mode ([`RleCache::reset_post`]), so
+//!   a tissue switch re-classifies without re-encoding. Minified slices are
+//!   sampled bilinearly (a box average of densities would classify densities
+//!   no voxel has).
+//!
+//! Both options have brute forces in the same reference
+//! ([`crate::composite::slices::render_brute_preclassified`] with the plan and
+//! sampler), equal to the accelerated images bit for bit with early ray
+//! termination off (tests/deluxe_rle.rs).
+//!
 //! The sample geometry is the frame plan's ([`crate::view::plan::FramePlan`]):
 //! intermediate pixel `(p, q)` samples cell `(p − pad + floor_i[k], q − pad +
 //! floor_j[k])` of slice `k` with in-cell weights `(weight_i[k], weight_j[k])`,

@@ -134,6 +134,7 @@ impl PostTables {
     /// A blend of voxels' 4-vectors → the premultiplied, shaded sample; exact
     /// zeros where the interpolated opacity is zero or the blend is NaN (it
     /// read a voxel the encoding left out).
+    #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN takes the "zero" branch
     #[inline(always)]
     pub fn finish(&self, s: [f32; 4]) -> [f32; 4] {
         let p = s[0];

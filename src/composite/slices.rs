@@ -857,6 +857,28 @@ impl<S: Sampler> RleFrame<'_, S> {
                 let v = &cell.1;
                 let smp = mid(blend(v[0], v[1], v[2], v[3], &w), blend(v[4], v[5], v[6], v[7], &w));
                 self.composite_sample([k, k + 1], x, q, smp, prow, lrow, p0);
+                // the fast continuation: while the next pixel is not opaque and
+                // samples the next cell, whose right column lies inside all four
+                // scanlines' current runs, read that column straight from the runs
+                let (s_max, e_min) = cur.iter().fold((0u32, INF), |(s, e), cu| (s.max(cu.s), e.min(cu.e)));
+                while x < x1 && lrow[(x + 1 - p0) as usize] == 0 {
+                    let (cn, wn) = imap.cell(x + 1);
+                    let c1 = cell.0.wrapping_add(2);
+                    if cn != cell.0 as i64 + 1 || c1 < s_max || c1 >= e_min {
+                        break;
+                    }
+                    x += 1;
+                    let mut v = [[0f32; 4]; 8];
+                    for (t, cu) in cur.iter().enumerate() {
+                        v[2 * t] = cell.1[2 * t + 1];
+                        v[2 * t + 1] = self.tables.voxel(cu.vox[cu.base.wrapping_add(c1) as usize]);
+                    }
+                    cell = (cn as u32, v);
+                    next = c1;
+                    let w = cell_weights(wn, wj);
+                    let smp = mid(blend(v[0], v[1], v[2], v[3], &w), blend(v[4], v[5], v[6], v[7], &w));
+                    self.composite_sample([k, k + 1], x, q, smp, prow, lrow, p0);
+                }
                 x += 1;
             }
         }

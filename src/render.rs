@@ -893,10 +893,16 @@ impl Renderer {
     }
 
     /// What the pre-classified state depends on: classification generation,
-    /// tissue and mode.
+    /// tissue, mode and the sampler (pre- or post-classified, Deluxe P).
     fn rle_key(&self) -> ClassKey {
         let tissue = self.tissues.as_ref().map_or(0, |t| t.current as u64 + 1);
-        (self.generation << 8) | (tissue << 1) | (self.settings.mode == Mode::Blend) as u64
+        self.rle_enc_key() | (tissue << 2)
+    }
+
+    /// What a post-classified encoding depends on (the key without the
+    /// tissue: it keeps the cells every tissue preset may show).
+    fn rle_enc_key(&self) -> ClassKey {
+        (self.generation << 10) | ((self.settings.deluxe.post as u64) << 1) | (self.settings.mode == Mode::Blend) as u64
     }
 
     /// The classifier the pre-classified paths encode: the current mode's, with
@@ -1060,7 +1066,17 @@ impl Renderer {
             let key = self.rle_key();
             if !self.rle.is_for(key) {
                 let cls = self.preclass_classifier().into_owned();
-                self.rle.reset(key, &cls, self.volume.spacing());
+                if self.settings.deluxe.post {
+                    // the encoding keeps the cells any tissue preset of the mode may show
+                    let visible: Vec<&Classifier> = match (&self.tissues, self.settings.mode) {
+                        (Some(ts), Mode::Iso) => ts.iso_cls.iter().collect(),
+                        (Some(ts), Mode::Blend) => ts.blend_cls.iter().collect(),
+                        (None, _) => vec![&cls],
+                    };
+                    self.rle.reset_post(key, self.rle_enc_key(), &cls, &visible, self.volume.spacing());
+                } else {
+                    self.rle.reset(key, &cls, self.volume.spacing());
+                }
             }
             if self.settings.method == Method::Rle && self.rle.axis(axis).is_none() {
                 let t = Instant::now();
@@ -1212,6 +1228,7 @@ impl Renderer {
             ));
         }
         plan.set_box_footprint(self.settings.footprint == Footprint::Box);
+        plan.set_intermediate(self.settings.deluxe.intermediate);
         if let Some((l, _)) = &self.limiter {
             self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
         }
@@ -1353,8 +1370,9 @@ impl Renderer {
                     rect
                 }
                 Method::Rle | Method::BruteRle => {
-                    // the per-view tables; iso opacities are 0 or 1, so iso needs no correction
-                    let ratio = if mode == Mode::Blend { plan.opacity_ratio } else { 1.0 };
+                    // the per-view tables, corrected to the plan's sample spacing (half
+                    // the slices' with Deluxe I); iso opacities are 0 or 1, so iso needs no correction
+                    let ratio = if mode == Mode::Blend { plan.sample_ratio() } else { 1.0 };
                     rle.prepare_view(plan, ratio, settings.shading);
                     let rect = match settings.method {
                         Method::Rle => {
@@ -1487,17 +1505,16 @@ fn check_settings(s: &Settings) -> Result<()> {
 
 /// The Deluxe options and lattices each path renders (a combination a path
 /// does not render is an error naming it, never a silent fall-back).
+///
+/// - I (intermediate slices): every method — the RLE slice traversal's
+///   intermediate pass and the raycast paths' midpoint samples.
+/// - P (post-classification): the RLE path and its brute force; the raycast
+///   paths (`binary`, `brute`) classify after interpolation already, so P is
+///   accepted there and changes nothing.
+/// - M (matched sampling): every method (a producer of plans: the pitch,
+///   [`Renderer::finish_plan`]).
 fn check_deluxe(s: &Settings) -> Result<()> {
-    let d = s.deluxe;
     let unsupported = |what: &str| Err(Error::value("settings", format!("{what} is not available with --method {}", s.method.name())));
-    // I on the raycast paths: a midpoint sample per slice pair (RayContext::with_intermediate)
-    if d.intermediate && !matches!(s.method, Method::Binary | Method::Brute) {
-        return unsupported("the intermediate slices (Deluxe I)");
-    }
-    if d.post {
-        return unsupported("post-classification (Deluxe P)");
-    }
-    // M on every path: a producer of plans (the pitch, Renderer::finish_plan)
     if s.lattice == Lattice::Bcc {
         return unsupported("the BCC grid");
     }
@@ -1531,7 +1548,7 @@ fn ray_context<'a>(
     shade: &'a mut ShadeTable,
 ) -> RayContext<'a> {
     let ctx = RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert)
-        .with_intermediate(settings.deluxe.intermediate);
+        .with_intermediate(plan.intermediate());
     match (settings.normals, normals) {
         (Normals::Codes, Some(ns)) => {
             shade.update(headlight_object(&plan.view), settings.shading);

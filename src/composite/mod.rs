@@ -10,8 +10,11 @@
 //! frame plan ([`crate::view::plan`]) and nothing else about the view:
 //! - [`raycast`]: the ray traversal (the binary rotator's rows and their brute
 //!   force), post-classified and shaded per sample;
-//! - [`slices`]: the slice traversal of the pre-classified RLE path and its
-//!   brute force.
+//! - [`slices`]: the slice traversal of the RLE path and its brute force,
+//!   generic over what a sample is made of ([`slices::Sampler`]:
+//!   pre-classified voxels, or post-classified densities and normals —
+//!   Shear-Warp Deluxe P), with the intermediate samples between slices of
+//!   a half-step plan (Deluxe I).
 
 pub mod raycast;
 pub mod slices;

@@ -19,8 +19,93 @@ use crate::composite::{Intermediate, composite_premultiplied, terminated};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::data::slices::SliceStack;
 use crate::encode::rle::runs::{Cursor, INF};
-use crate::encode::rle::{Preclass, RleVolume, RleVoxel, ViewTables};
+use crate::encode::rle::{PostTables, Preclass, RleVolume, RleVoxel, ViewTables};
 use crate::view::plan::{FramePlan, MapKind, floor_i64};
+
+/// What a sample is made of (a sampler of the one slice traversal): each
+/// voxel read becomes a 4-vector ([`Sampler::voxel`], [`Sampler::MISSING`]
+/// for one the encoding left out), four (a cell) are blended bilinearly with
+/// the one bilinear `blend`, and [`Sampler::finish`] turns the blend into the
+/// premultiplied sample that is composited.
+///
+/// - Pre-classified ([`ViewTables`]): the voxel's shaded, opacity-corrected,
+///   premultiplied colour; `finish` is the identity.
+/// - Post-classified ([`PostTables`], Shear-Warp Deluxe P): the voxel's
+///   density (as its classifier node, a float) and its unit normal; `finish`
+///   classifies the interpolated density and shades the normalized
+///   interpolated normal. A voxel left out is NaN, so a cell with one
+///   finishes to zero: the encoding stores every voxel of each cell that may
+///   be visible, so such a cell is invisible (its brute force classifies to
+///   zero opacity).
+pub trait Sampler: Sync {
+    /// Whether minified slices are box-filtered (pre-classified only: a box
+    /// average of densities would classify a density no voxel has, so the
+    /// post-classified sampler samples every slice bilinearly).
+    const BOX: bool;
+    /// The 4-vector of a voxel the encoding left out.
+    const MISSING: [f32; 4];
+    /// The 4-vector of a stored voxel.
+    fn voxel(&self, v: RleVoxel) -> [f32; 4];
+    /// A blend of 4-vectors → the premultiplied sample.
+    fn finish(&self, s: [f32; 4]) -> [f32; 4];
+    /// The brute force's 4-vector of voxel `(i, j, k)` of `stack`.
+    fn brute_voxel(&self, pre: &Preclass, stack: &SliceStack, i: usize, j: usize, k: usize) -> [f32; 4];
+    /// [`Sampler::voxel`], [`Sampler::MISSING`] for `None`.
+    #[inline(always)]
+    fn get_or_missing(&self, v: Option<RleVoxel>) -> [f32; 4] {
+        match v {
+            Some(v) => self.voxel(v),
+            None => Self::MISSING,
+        }
+    }
+}
+
+impl Sampler for ViewTables {
+    const BOX: bool = true;
+    const MISSING: [f32; 4] = [0.0; 4];
+    #[inline(always)]
+    fn voxel(&self, v: RleVoxel) -> [f32; 4] {
+        ViewTables::voxel(self, v)
+    }
+    #[inline(always)]
+    fn finish(&self, s: [f32; 4]) -> [f32; 4] {
+        s
+    }
+    #[inline(always)]
+    fn brute_voxel(&self, pre: &Preclass, stack: &SliceStack, i: usize, j: usize, k: usize) -> [f32; 4] {
+        self.get(pre.classify_voxel(stack, i, j, k))
+    }
+}
+
+impl Sampler for PostTables {
+    const BOX: bool = false;
+    const MISSING: [f32; 4] = [f32::NAN; 4];
+    #[inline(always)]
+    fn voxel(&self, v: RleVoxel) -> [f32; 4] {
+        PostTables::voxel(self, v)
+    }
+    #[inline(always)]
+    fn finish(&self, s: [f32; 4]) -> [f32; 4] {
+        PostTables::finish(self, s)
+    }
+    #[inline(always)]
+    fn brute_voxel(&self, pre: &Preclass, stack: &SliceStack, i: usize, j: usize, k: usize) -> [f32; 4] {
+        PostTables::voxel(self, pre.post_voxel(stack, i, j, k))
+    }
+}
+
+/// The intermediate sample between slices `k` and `k + 1` from its bilinear
+/// blends `a` (slice `k`) and `b` (slice `k + 1`) at the same in-slice point:
+/// their mean, trilinear interpolation at depth `k + ½` (both paths use
+/// exactly this).
+#[inline(always)]
+fn mid(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+    let mut s = [0f32; 4];
+    for c in 0..4 {
+        s[c] = 0.5 * (a[c] + b[c]);
+    }
+    s
+}
 
 /// Intermediate rows per parallel band.
 const BAND: usize = 16;
@@ -136,14 +221,14 @@ fn find(links: &mut [u32], x: usize) -> usize {
 /// some non-transparent voxel.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn composite_row<const LIM: bool>(
+fn composite_row<S: Sampler, const LIM: bool>(
     mut bot: Cursor,
     mut top: Cursor,
     ci_lo: u32,
     ci_hi: u32,
     off: isize,
     w: &Weights,
-    t: &ViewTables,
+    t: &S,
     ert: f32,
     px: &mut [[f32; 4]],
     links: &mut [u32],
@@ -168,7 +253,7 @@ fn composite_row<const LIM: bool>(
             ci = nx - 1;
             continue;
         }
-        ci = span::<LIM>(&mut bot, &mut top, ci, ci_hi, off, w, t, ert, px, links, lim);
+        ci = span::<S, LIM>(&mut bot, &mut top, ci, ci_hi, off, w, t, ert, px, links, lim);
         if ci > ci_hi {
             return;
         }
@@ -185,21 +270,21 @@ fn composite_row<const LIM: bool>(
 /// so each voxel is shaded once per row.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)] // one small function per span keeps the loops' state in registers
-fn span<const LIM: bool>(
+fn span<S: Sampler, const LIM: bool>(
     bot: &mut Cursor,
     top: &mut Cursor,
     mut ci: u32,
     ci_hi: u32,
     off: isize,
     w: &Weights,
-    t: &ViewTables,
+    t: &S,
     ert: f32,
     px: &mut [[f32; 4]],
     links: &mut [u32],
     lim: Limits,
 ) -> u32 {
     let (vb, vt) = (bot.at(ci), top.at(ci));
-    let mut left = Left { b: t.get(vb), t: t.get(vt), any: vb.is_some() || vt.is_some() };
+    let mut left = Left { b: t.get_or_missing(vb), t: t.get_or_missing(vt), any: vb.is_some() || vt.is_some() };
     loop {
         let c1 = ci + 1;
         bot.step(c1);
@@ -214,15 +299,15 @@ fn span<const LIM: bool>(
         let bv = if bin { &bot.vox[bot.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let tv = if tin { &top.vox[top.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let (want, done) = match (bin, tin) {
-            (true, true) => (n, segment::<true, true, LIM>(p, l, bv, tv, &mut left, w, t, ert, lm)),
-            (true, false) => (n, segment::<true, false, LIM>(p, l, bv, &[], &mut left, w, t, ert, lm)),
-            (false, true) => (n, segment::<false, true, LIM>(p, l, &[], tv, &mut left, w, t, ert, lm)),
+            (true, true) => (n, segment::<S, true, true, LIM>(p, l, bv, tv, &mut left, w, t, ert, lm)),
+            (true, false) => (n, segment::<S, true, false, LIM>(p, l, bv, &[], &mut left, w, t, ert, lm)),
+            (false, true) => (n, segment::<S, false, true, LIM>(p, l, &[], tv, &mut left, w, t, ert, lm)),
             (false, false) => {
                 if !left.any {
                     return ci; // all four voxels transparent: back to run skipping
                 }
                 let lm1 = Limits { row: if LIM { &lm.row[..1] } else { &[][..] }, k: lm.k };
-                (1, segment::<false, false, LIM>(&mut p[..1], &mut l[..1], &[], &[], &mut left, w, t, ert, lm1))
+                (1, segment::<S, false, false, LIM>(&mut p[..1], &mut l[..1], &[], &[], &mut left, w, t, ert, lm1))
             }
         };
         ci += done as u32;
@@ -258,14 +343,14 @@ impl Limits<'_> {
 /// Stops before the first opaque pixel; returns how many it did.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn segment<const B: bool, const T: bool, const LIM: bool>(
+fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
     px: &mut [[f32; 4]],
     links: &mut [u32],
     bv: &[RleVoxel],
     tv: &[RleVoxel],
     left: &mut Left,
     w: &Weights,
-    t: &ViewTables,
+    t: &S,
     ert: f32,
     lim: Limits,
 ) -> usize {
@@ -281,15 +366,15 @@ fn segment<const B: bool, const T: bool, const LIM: bool>(
             done = s;
             break;
         }
-        let rb = if B { t.voxel(bv[s]) } else { [0.0; 4] };
-        let rt = if T { t.voxel(tv[s]) } else { [0.0; 4] };
+        let rb = if B { t.voxel(bv[s]) } else { S::MISSING };
+        let rt = if T { t.voxel(tv[s]) } else { S::MISSING };
         let inside = !LIM || {
             let [k0, k1] = lim.row[s];
             k0 <= lim.k && lim.k <= k1
         };
         if inside {
             let acc = &mut px[s];
-            composite_premultiplied(acc, blend(lb, rb, lt, rt, w));
+            composite_premultiplied(acc, t.finish(blend(lb, rb, lt, rt, w)));
             if terminated(acc[3], ert) {
                 links[s] = 1;
             }
@@ -315,9 +400,9 @@ fn clear_rows(px: &mut [[f32; 4]], depth: &mut [f32], gw: usize, r: &Rect) {
 /// `links` is scratch space, sized for the whole grid on first use and reused
 /// across frames.
 #[allow(clippy::too_many_arguments)]
-pub fn render_rle(
+pub fn render_rle<S: Sampler>(
     rle: &RleVolume,
-    tables: &ViewTables,
+    tables: &S,
     plan: &FramePlan,
     ert: f32,
     rect: Option<Rect>,
@@ -343,9 +428,9 @@ pub fn render_rle(
 }
 
 /// The per-frame constants of [`render_rle`].
-struct RleFrame<'a> {
+struct RleFrame<'a, S> {
     rle: &'a RleVolume,
-    tables: &'a ViewTables,
+    tables: &'a S,
     plan: &'a FramePlan,
     pad: isize,
     ert: f32,
@@ -356,7 +441,7 @@ struct RleFrame<'a> {
     lw: usize,
 }
 
-impl RleFrame<'_> {
+impl<S: Sampler> RleFrame<'_, S> {
     /// Renders the band of intermediate rows from `q_first` (`px`, `depth` and
     /// `links` hold its rows): clears it, then composites every slice front to back.
     #[inline(never)]
@@ -370,13 +455,19 @@ impl RleFrame<'_> {
             return;
         }
         let nrows = px.len() / gw;
+        let mut prev: Option<usize> = None;
         for k in self.plan.front_to_back() {
+            // Deluxe I: the intermediate samples between the last slice and this one
+            if let Some(kp) = prev.filter(|_| self.plan.intermediate()) {
+                self.mid_slice(kp.min(k), q_first, px, links);
+            }
+            prev = Some(k);
             let bb = rle.bbox[k];
             if bb[0] > bb[1] {
                 continue;
             }
             if self.plan.kind == MapKind::ScaleTranslate {
-                if self.plan.footprint(k) > 1.0 {
+                if S::BOX && self.plan.footprint(k) > 1.0 {
                     self.box_slice(k, q_first, px, links);
                 } else {
                     self.scaled_slice(k, q_first, px, links);
@@ -422,11 +513,11 @@ impl RleFrame<'_> {
                 let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
                 match &self.plan.limits {
                     None => {
-                        composite_row::<false>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, Limits::NONE)
+                        composite_row::<S, false>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, Limits::NONE)
                     }
                     Some(l) => {
                         let lim = Limits { row: &l.row(q_first + row)[r.p0..=r.p1], k: k as u32 };
-                        composite_row::<true>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, lim)
+                        composite_row::<S, true>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, lim)
                     }
                 }
             }
@@ -434,7 +525,7 @@ impl RleFrame<'_> {
     }
 }
 
-impl RleFrame<'_> {
+impl<S: Sampler> RleFrame<'_, S> {
     /// Composites slice `k` of a scaled plan ([`MapKind::ScaleTranslate`]: a
     /// perspective view) into the band from `q_first`. The same skips as the
     /// translated slices (opaque pixels through the links, transparent voxels
@@ -537,11 +628,15 @@ impl RleFrame<'_> {
                         x = xn.max(x + 1);
                         continue;
                     }
-                    let (c00, c01) = if adjacent { (cell.1[1], cell.1[3]) } else { (self.tables.get(cb.at(c)), self.tables.get(ct.at(c))) };
+                    let (c00, c01) = if adjacent {
+                        (cell.1[1], cell.1[3])
+                    } else {
+                        (self.tables.get_or_missing(cb.at(c)), self.tables.get_or_missing(ct.at(c)))
+                    };
                     cb.step(c + 1);
                     ct.step(c + 1);
                     (lo_run, hi_run) = (cb.s.max(ct.s), cb.e.min(ct.e));
-                    [c00, self.tables.get(cb.at(c + 1)), c01, self.tables.get(ct.at(c + 1))]
+                    [c00, self.tables.get_or_missing(cb.at(c + 1)), c01, self.tables.get_or_missing(ct.at(c + 1))]
                 };
                 cell = (c, [c00, c10, c01, c11]);
                 next = c + 1;
@@ -642,12 +737,148 @@ impl RleFrame<'_> {
                     ring[col % RING] = box_column(&wj[..nb], |t| {
                         let d = &mut dec[t];
                         d.seek(c);
-                        self.tables.get(d.at(c))
+                        self.tables.get_or_missing(d.at(c))
                     });
                 }
                 decoded = decoded.max(i0 + na);
                 let smp = box_sample(&wi[..na], |u| ring[(i0 + u) % RING]);
-                self.composite_sample(k, x, q, smp, prow, lrow, p0);
+                self.composite_sample([k, k], x, q, smp, prow, lrow, p0);
+                x += 1;
+            }
+        }
+    }
+
+    /// Composites the intermediate samples between slices `k` and `k + 1`
+    /// (index order; Shear-Warp Deluxe I) into the band from `q_first`: pixel
+    /// `(x, q)` samples both slices at the ray's point at depth `k + ½`
+    /// ([`FramePlan::mid_map`]), the mean ([`mid`]) of the two bilinear blends
+    /// there (trilinear interpolation), composited if its ray limits keep
+    /// both slices. One walk for translated and scaled plans: the four
+    /// scanlines under a row (two per slice) are walked together with one set
+    /// of row weights; opaque pixels are skipped through the links, and a
+    /// pixel whose eight voxels are all outside the runs (so its sample is
+    /// zero under either sampler) with the runs, to the first pixel whose
+    /// cell reaches the next stored column. A cell's right column is the next
+    /// pixel's left one when their cells are adjacent, so each voxel is read
+    /// once per row. Minified slices are sampled bilinearly here too (the box
+    /// footprint is the slice samples').
+    #[inline(never)]
+    fn mid_slice(&self, k: usize, q_first: usize, px: &mut [[f32; 4]], links: &mut [u32]) {
+        let (r, gw, lw, rle, plan) = (&self.r, self.gw, self.lw, self.rle, self.plan);
+        let [ni, nj, _] = rle.n;
+        let (ba, bb) = (rle.bbox[k], rle.bbox[k + 1]);
+        // the union of the two slices' boxes (an empty box is [MAX, 0, MAX, 0])
+        let bx = [ba[0].min(bb[0]), ba[1].max(bb[1]), ba[2].min(bb[2]), ba[3].max(bb[3])];
+        if bx[0] > bx[1] {
+            return;
+        }
+        let (ci_lo, ci_hi) = ((bx[0] as i64 - 1).max(0), (bx[1] as i64).min(ni as i64 - 2));
+        if ci_lo > ci_hi {
+            return;
+        }
+        let (imap, jmap) = (plan.mid_map(k, 0), plan.mid_map(k, 1));
+        let nrows = px.len() / gw;
+        let p0 = r.p0 as i64;
+        for row in 0..nrows {
+            let q = q_first + row;
+            let (cj, wj) = jmap.cell(q as i64);
+            if cj < 0 || cj > nj as i64 - 2 || cj + 1 < bx[2] as i64 || cj > bx[3] as i64 {
+                continue;
+            }
+            let s0 = cj as usize + nj * k;
+            let scan = [s0, s0 + 1, s0 + nj, s0 + nj + 1];
+            let (mut lo, mut hi) = (i64::MAX, i64::MIN);
+            for &s in &scan {
+                let e = rle.extent[s];
+                if e[0] <= e[1] {
+                    lo = lo.min(e[0] as i64);
+                    hi = hi.max(e[1] as i64);
+                }
+            }
+            let (lo, hi) = ((lo - 1).max(ci_lo), hi.min(ci_hi));
+            if lo > hi {
+                continue;
+            }
+            let [x0, x1] = imap.pixels_of_cells(lo, hi);
+            let (x0, x1) = (x0.max(p0), x1.min(r.p1 as i64));
+            if x0 > x1 {
+                continue;
+            }
+            let lrow = &mut links[row * lw..(row + 1) * lw];
+            let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
+            let mut cur = scan.map(|s| rle.cursor(s));
+            // the first column the cursors may still be asked for
+            let mut next = 0u32;
+            // the last cell read and its eight 4-vectors: per scanline t (slice
+            // k's bottom and top, slice k + 1's), columns c at 2t and c + 1 at 2t + 1
+            let mut cell = (INF, [[0f32; 4]; 8]);
+            let mut x = x0;
+            loop {
+                if x > x1 {
+                    break;
+                }
+                x = find(lrow, (x - p0) as usize) as i64 + p0;
+                if x > x1 {
+                    break;
+                }
+                let (ci, wi) = imap.cell(x);
+                let c = ci as u32;
+                if c != cell.0 {
+                    if c < next {
+                        // (rounding made two pixels share a cell: start the walk again)
+                        cur = scan.map(|s| rle.cursor(s));
+                    }
+                    let mut nx = INF;
+                    for cu in cur.iter_mut() {
+                        cu.seek(c);
+                        nx = nx.min(cu.first_from(c));
+                    }
+                    if nx > c + 1 {
+                        // columns c and c + 1 empty in all four scanlines
+                        if nx == INF || nx as i64 - 1 > hi {
+                            break;
+                        }
+                        next = c;
+                        let [xn, _] = imap.pixels_of_cells(nx as i64 - 1, nx as i64 - 1);
+                        x = xn.max(x + 1);
+                        continue;
+                    }
+                    let adjacent = cell.0 != INF && cell.0 + 1 == c;
+                    let mut v = [[0f32; 4]; 8];
+                    for (t, cu) in cur.iter_mut().enumerate() {
+                        v[2 * t] = if adjacent { cell.1[2 * t + 1] } else { self.tables.get_or_missing(cu.at(c)) };
+                        cu.step(c + 1);
+                        v[2 * t + 1] = self.tables.get_or_missing(cu.at(c + 1));
+                    }
+                    cell = (c, v);
+                    next = c + 1;
+                }
+                let w = cell_weights(wi, wj);
+                let v = &cell.1;
+                let smp = mid(blend(v[0], v[1], v[2], v[3], &w), blend(v[4], v[5], v[6], v[7], &w));
+                self.composite_sample([k, k + 1], x, q, smp, prow, lrow, p0);
+                // the fast continuation: while the next pixel is not opaque and
+                // samples the next cell, whose right column lies inside all four
+                // scanlines' current runs, read that column straight from the runs
+                let (s_max, e_min) = cur.iter().fold((0u32, INF), |(s, e), cu| (s.max(cu.s), e.min(cu.e)));
+                while x < x1 && lrow[(x + 1 - p0) as usize] == 0 {
+                    let (cn, wn) = imap.cell(x + 1);
+                    let c1 = cell.0.wrapping_add(2);
+                    if cn != cell.0 as i64 + 1 || c1 < s_max || c1 >= e_min {
+                        break;
+                    }
+                    x += 1;
+                    let mut v = [[0f32; 4]; 8];
+                    for (t, cu) in cur.iter().enumerate() {
+                        v[2 * t] = cell.1[2 * t + 1];
+                        v[2 * t + 1] = self.tables.voxel(cu.vox[cu.base.wrapping_add(c1) as usize]);
+                    }
+                    cell = (cn as u32, v);
+                    next = c1;
+                    let w = cell_weights(wn, wj);
+                    let smp = mid(blend(v[0], v[1], v[2], v[3], &w), blend(v[4], v[5], v[6], v[7], &w));
+                    self.composite_sample([k, k + 1], x, q, smp, prow, lrow, p0);
+                }
                 x += 1;
             }
         }
@@ -671,27 +902,28 @@ impl RleFrame<'_> {
         p0: i64,
     ) {
         let smp = blend(c[0], c[1], c[2], c[3], &cell_weights(wi, wj));
-        self.composite_sample(k, x, q, smp, prow, lrow, p0);
+        self.composite_sample([k, k], x, q, smp, prow, lrow, p0);
     }
 
-    /// Composites `smp`, pixel `(x, q)`'s sample of slice `k`, if its ray
-    /// limits keep slice `k`, with the ray's own opacity correction; marks the
-    /// pixel in the links when it terminates.
+    /// Composites `smp` (a blend, [`Sampler::finish`]ed here), pixel `(x,
+    /// q)`'s sample between slices `ks[0]` and `ks[1]` (the same slice for a
+    /// slice's sample), if its ray limits keep both, with the ray's own
+    /// opacity correction; marks the pixel in the links when it terminates.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn composite_sample(&self, k: usize, x: i64, q: usize, smp: [f32; 4], prow: &mut [[f32; 4]], lrow: &mut [u32], p0: i64) {
+    fn composite_sample(&self, ks: [usize; 2], x: i64, q: usize, smp: [f32; 4], prow: &mut [[f32; 4]], lrow: &mut [u32], p0: i64) {
         let plan = self.plan;
         let inside = match &plan.limits {
             None => true,
             Some(l) => {
                 let [k0, k1] = l.get(x as usize, q);
-                k0 as usize <= k && k <= k1 as usize
+                k0 as usize <= ks[0] && ks[1] <= k1 as usize
             }
         };
         if inside {
             let xr = (x - p0) as usize;
             let acc = &mut prow[xr];
-            composite_premultiplied(acc, plan.correct_opacity(x as usize, q, smp));
+            composite_premultiplied(acc, plan.correct_opacity(x as usize, q, self.tables.finish(smp)));
             if terminated(acc[3], self.ert) {
                 lrow[xr] = 1;
             }
@@ -700,14 +932,16 @@ impl RleFrame<'_> {
 }
 
 /// The reference for [`render_rle`]: slice by slice, front to back, every voxel
-/// of the slice is classified from the densities into `slice_buf` (reused), then
-/// every pixel of `rect` whose opacity is below `ert` composites its cell's
-/// sample. No runs, no links; same positions, weights and arithmetic.
+/// of the slice is classified from the densities into `slice_buf` (reused; two
+/// slices), then every pixel of `rect` whose opacity is below `ert` composites
+/// its cell's sample; with the plan's intermediate samples (Deluxe I), the
+/// sample between the last slice and this one first. No runs, no links; same
+/// positions, weights, sampler and arithmetic.
 #[allow(clippy::too_many_arguments)]
-pub fn render_brute_preclassified(
+pub fn render_brute_preclassified<S: Sampler>(
     stack: &SliceStack,
     pre: &Preclass,
-    tables: &ViewTables,
+    tables: &S,
     plan: &FramePlan,
     ert: f32,
     rect: Option<Rect>,
@@ -721,15 +955,50 @@ pub fn render_brute_preclassified(
     let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
     let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];
     px.par_chunks_mut(gw).zip(depth.par_chunks_mut(gw)).for_each(|(p, d)| clear_rows(p, d, gw, &r));
-    slice_buf.resize(ni * nj, [0.0; 4]);
+    let n = ni * nj;
+    slice_buf.resize(2 * n, [0.0; 4]);
+    let mut prev: Option<usize> = None;
     for k in plan.front_to_back() {
-        slice_buf.par_chunks_mut(ni).enumerate().for_each(|(j, row)| {
+        // slice k's voxels in half k % 2 of the buffer (the last slice's in the other)
+        slice_buf[(k % 2) * n..][..n].par_chunks_mut(ni).enumerate().for_each(|(j, row)| {
             for (i, c) in row.iter_mut().enumerate() {
-                *c = tables.get(pre.classify_voxel(stack, i, j, k));
+                *c = tables.brute_voxel(pre, stack, i, j, k);
             }
         });
         let buf = &slice_buf[..];
-        let fp = plan.footprint(k);
+        if let Some(kp) = prev.filter(|_| plan.intermediate()) {
+            // the intermediate samples between slices kl and kl + 1
+            let kl = kp.min(k);
+            let (lo, hi) = (&buf[(kl % 2) * n..][..n], &buf[((kl + 1) % 2) * n..][..n]);
+            let (imap, jmap) = (plan.mid_map(kl, 0), plan.mid_map(kl, 1));
+            px.par_chunks_mut(gw).enumerate().for_each(|(row, prow)| {
+                let q = r.q0 + row;
+                let (cj, wj) = jmap.cell(q as i64);
+                if cj < 0 || cj > nj as i64 - 2 {
+                    return;
+                }
+                for (p, acc) in prow.iter_mut().enumerate().take(r.p1 + 1).skip(r.p0) {
+                    let (ci, wi) = imap.cell(p as i64);
+                    if ci < 0 || ci > ni as i64 - 2 || terminated(acc[3], ert) {
+                        continue;
+                    }
+                    let [k0, k1] = plan.limits.as_ref().map_or([0, u32::MAX], |l| l.get(p, q));
+                    if (kl as u32) < k0 || kl as u32 + 1 > k1 {
+                        continue;
+                    }
+                    let b = ci as usize + ni * cj as usize;
+                    let w = cell_weights(wi, wj);
+                    let smp = mid(
+                        blend(lo[b], lo[b + 1], lo[b + ni], lo[b + ni + 1], &w),
+                        blend(hi[b], hi[b + 1], hi[b + ni], hi[b + ni + 1], &w),
+                    );
+                    composite_premultiplied(acc, plan.correct_opacity(p, q, tables.finish(smp)));
+                }
+            });
+        }
+        prev = Some(k);
+        let buf = &buf[(k % 2) * n..][..n];
+        let fp = if S::BOX { plan.footprint(k) } else { 1.0 };
         px.par_chunks_mut(gw).enumerate().for_each(|(row, prow)| {
             let q = r.q0 + row;
             let (cj, wj) = plan.cell_of(k, 1, q);
@@ -761,7 +1030,7 @@ pub fn render_brute_preclassified(
                     let b = ci as usize + ni * cj as usize;
                     blend(buf[b], buf[b + 1], buf[b + ni], buf[b + ni + 1], &cell_weights(wi, wj))
                 };
-                composite_premultiplied(acc, plan.correct_opacity(p, q, smp));
+                composite_premultiplied(acc, plan.correct_opacity(p, q, tables.finish(smp)));
             }
         });
     }

@@ -50,6 +50,44 @@
 //!   for bit; the tests assert that with early termination off and allow 1e-5
 //!   otherwise.
 //!
+//! Shear-Warp Deluxe (Sweeney & Mueller 2002), options I and P, on this path:
+//!
+//! - **I, intermediate slices** (a producer of plans:
+//!   [`FramePlan::set_intermediate`]): between each pair of consecutive
+//!   slices one more sample, at the ray's point at depth `k + ½`
+//!   ([`FramePlan::mid_map`]: the mean of the two slices' maps, exact for a
+//!   straight ray, parallel or perspective), the mean of the two slices'
+//!   bilinear blends there (trilinear interpolation). Every sample's opacity
+//!   is corrected to half the slice spacing ([`FramePlan::sample_ratio`]:
+//!   the tables' own correction at half the ratio, `α_n = 1 − √(1 − α)`,
+//!   colour premultiplied with it; the perspective rays' exponents are
+//!   ratios of spacings and stay). A pass per slice pair walks the four
+//!   scanlines under each row with one set of weights, skipping opaque
+//!   pixels through the links and pixels whose eight voxels are all outside
+//!   the runs; minified slices' intermediate samples are bilinear (the box
+//!   footprint is the slices'). Its cost is measured in the issue: several
+//!   times a slice pass, not the paper's third.
+//! - **P, post-classification** (a sampler,
+//!   [`crate::composite::slices::Sampler`]): the same traversal reads each
+//!   stored voxel as `[node, normal]` ([`PostTables`]), blends it with the
+//!   same bilinear (trilinear with I) weights, then classifies the
+//!   interpolated node and shades the normalized interpolated normal with the
+//!   one shading model. Its encoding ([`RleVolume::encode_post`]) stores a
+//!   voxel, transparent or not, whenever one of the 2×2×2 cells around it may
+//!   be visible ([`PostVisible`]: any non-transparent node of the cell's node
+//!   range widened by one, so rounding in the blend cannot reach a visible
+//!   node), so a sample reading a voxel left out (NaN, finished to zero) is
+//!   invisible and skipping stays lossless. The visible set is the union of
+//!   the renderer's tissue presets of the mode ([`RleCache::reset_post`]), so
+//!   a tissue switch re-classifies without re-encoding. Minified slices are
+//!   sampled bilinearly (a box average of densities would classify densities
+//!   no voxel has).
+//!
+//! Both options have brute forces in the same reference
+//! ([`crate::composite::slices::render_brute_preclassified`] with the plan and
+//! sampler), equal to the accelerated images bit for bit with early ray
+//! termination off (tests/deluxe_rle.rs).
+//!
 //! The sample geometry is the frame plan's ([`crate::view::plan::FramePlan`]):
 //! intermediate pixel `(p, q)` samples cell `(p − pad + floor_i[k], q − pad +
 //! floor_j[k])` of slice `k` with in-cell weights `(weight_i[k], weight_j[k])`,
@@ -65,9 +103,9 @@ pub mod preclass;
 pub mod runs;
 pub mod tables;
 
-pub use preclass::{BRIDGE, BRIDGE_NORMAL, Preclass, RleVoxel};
+pub use preclass::{BRIDGE, BRIDGE_NORMAL, PostVisible, Preclass, RleVoxel};
 pub use runs::RleVolume;
-pub use tables::ViewTables;
+pub use tables::{PostTables, ViewTables};
 
 use crate::classify::Classifier;
 use crate::classify::shading::Shading;
@@ -87,8 +125,14 @@ pub type ClassKey = u64;
 pub struct RleCache {
     key: Option<ClassKey>,
     pre: Option<Preclass>,
+    /// What the encodings were built for: the classification's key
+    /// (pre-classified), or the post-classified encoding's own.
+    enc_key: Option<ClassKey>,
+    /// The post-classified encoding's cells (Deluxe P; None: pre-classified).
+    post: Option<PostVisible>,
     axes: [Option<RleVolume>; 3],
     tables: ViewTables,
+    post_tables: Option<Box<PostTables>>,
     links: Vec<u32>,
     slice_buf: Vec<[f32; 4]>,
 }
@@ -108,7 +152,29 @@ impl RleCache {
     pub fn reset(&mut self, key: ClassKey, cls: &Classifier, spacing: [f32; 3]) {
         self.key = Some(key);
         self.pre = Some(Preclass::new(cls, spacing));
+        (self.enc_key, self.post) = (Some(key), None);
         self.axes = [None, None, None];
+    }
+
+    /// Adopts classification `cls` under `key` for the post-classified
+    /// sampler (Deluxe P), its encodings keyed by `enc_key` and keeping every
+    /// cell that may be visible under one of `visible` (a renderer's tissue
+    /// presets, `cls` among them; all with `cls`'s density range). The
+    /// encodings are kept when `enc_key` is the one they were built for (a
+    /// switch between the presets re-classifies, it does not re-encode).
+    pub fn reset_post(&mut self, key: ClassKey, enc_key: ClassKey, cls: &Classifier, visible: &[&Classifier], spacing: [f32; 3]) {
+        self.key = Some(key);
+        self.pre = Some(Preclass::new(cls, spacing));
+        if self.post.is_none() || self.enc_key != Some(enc_key) {
+            (self.enc_key, self.post) = (Some(enc_key), Some(PostVisible::new(visible)));
+            self.axes = [None, None, None];
+        }
+        self.post_tables.get_or_insert_with(Default::default);
+    }
+
+    /// True when the encodings are post-classified ones (Deluxe P).
+    pub fn is_post(&self) -> bool {
+        self.post.is_some()
     }
 
     /// The classification (after [`RleCache::reset`]).
@@ -128,7 +194,10 @@ impl RleCache {
         if self.axes[stack.axis].is_some() {
             return false;
         }
-        self.axes[stack.axis] = Some(RleVolume::encode(stack, pre));
+        self.axes[stack.axis] = Some(match &self.post {
+            None => RleVolume::encode(stack, pre),
+            Some(vis) => RleVolume::encode_post(stack, pre, vis),
+        });
         true
     }
 
@@ -146,9 +215,10 @@ impl RleCache {
 
     /// Brings the per-view tables up to date (see [`ViewTables::update`]).
     pub fn prepare_view(&mut self, plan: &FramePlan, ratio: f32, shading: Shading) -> bool {
-        match &self.pre {
-            Some(pre) => self.tables.update(pre, ratio, headlight_object(&plan.view), shading),
-            None => false,
+        match (&self.pre, &mut self.post_tables) {
+            (Some(pre), Some(pt)) if self.post.is_some() => pt.update(pre, ratio, headlight_object(&plan.view), shading),
+            (Some(pre), _) => self.tables.update(pre, ratio, headlight_object(&plan.view), shading),
+            (None, _) => false,
         }
     }
 
@@ -161,18 +231,22 @@ impl RleCache {
     /// Composites view `f` from the encoding of its axis (see [`render_rle`]);
     /// an axis that is not encoded renders transparent.
     pub fn render(&mut self, plan: &FramePlan, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
-        match &self.axes[plan.view.axis] {
-            Some(rle) => render_rle(rle, &self.tables, plan, ert, rect, &mut self.links, out),
-            None => out.seal(None),
+        match (&self.axes[plan.view.axis], &self.post_tables) {
+            (Some(rle), Some(pt)) if self.post.is_some() => render_rle(rle, pt.as_ref(), plan, ert, rect, &mut self.links, out),
+            (Some(rle), _) => render_rle(rle, &self.tables, plan, ert, rect, &mut self.links, out),
+            (None, _) => out.seal(None),
         }
     }
 
     /// The brute-force pre-classified reference of view `f` over `rect` (see
     /// [`render_brute_preclassified`]).
     pub fn render_brute(&mut self, stack: &SliceStack, plan: &FramePlan, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
-        match &self.pre {
-            Some(pre) => render_brute_preclassified(stack, pre, &self.tables, plan, ert, rect, &mut self.slice_buf, out),
-            None => out.seal(None),
+        match (&self.pre, &self.post_tables) {
+            (Some(pre), Some(pt)) if self.post.is_some() => {
+                render_brute_preclassified(stack, pre, pt.as_ref(), plan, ert, rect, &mut self.slice_buf, out)
+            }
+            (Some(pre), _) => render_brute_preclassified(stack, pre, &self.tables, plan, ert, rect, &mut self.slice_buf, out),
+            (None, _) => out.seal(None),
         }
     }
 }

@@ -78,6 +78,19 @@ impl Preclass {
         Some(RleVoxel { class: node as u16, normal: voxel_normal(stack, i, j, k, self.inv_spacing) })
     }
 
+    /// Voxel `(i, j, k)` of `stack` as the post-classified encoding stores it
+    /// (Deluxe P): its node and normal code, transparent or not.
+    #[inline]
+    pub fn post_voxel(&self, stack: &SliceStack, i: usize, j: usize, k: usize) -> RleVoxel {
+        RleVoxel { class: self.cls.nearest_node(stack.at(i, j, k)) as u16, normal: voxel_normal(stack, i, j, k, self.inv_spacing) }
+    }
+
+    /// The class node of voxel `(i, j, k)`.
+    #[inline]
+    pub(crate) fn node(&self, stack: &SliceStack, i: usize, j: usize, k: usize) -> u16 {
+        self.cls.nearest_node(stack.at(i, j, k)) as u16
+    }
+
     /// The stored form of transparent voxel `(i, j, k)` inside a bridged gap:
     /// its own (zero-opacity) class, so it shades to exact zeros, and the
     /// [`BRIDGE_NORMAL`] code.
@@ -94,5 +107,40 @@ impl Preclass {
     /// Unshaded colour of a voxel.
     pub fn color(&self, v: RleVoxel) -> [f32; 3] {
         self.rgb[v.class as usize]
+    }
+}
+
+/// Which cells the post-classified encoding (Deluxe P) keeps: the union of
+/// the non-transparent nodes of a set of classifiers (a renderer's tissue
+/// presets, so a switch between them needs no re-encoding), asked per cell
+/// by its range of nodes.
+#[derive(Clone, Debug)]
+pub struct PostVisible {
+    /// `prefix[i]`: how many nodes below `i` have non-zero opacity in some classifier.
+    prefix: Vec<u32>,
+}
+
+impl PostVisible {
+    /// The union of `classifiers`' non-transparent nodes (each with the
+    /// same node densities: one density range).
+    pub fn new(classifiers: &[&Classifier]) -> Self {
+        let mut prefix = Vec::with_capacity(TABLE_NODES + 1);
+        prefix.push(0);
+        for i in 0..TABLE_NODES {
+            let on = classifiers.iter().any(|c| c.raw_node(i).a > 0.0);
+            prefix.push(prefix[i] + on as u32);
+        }
+        PostVisible { prefix }
+    }
+
+    /// True when a sample interpolated between voxels of nodes `lo ..= hi` may
+    /// have non-zero opacity: some node of `lo − 1 ..= hi + 1` is non-transparent
+    /// (the node on each side covers an interpolated node that rounding put
+    /// just outside `[lo, hi]`; the opacity is linear between nodes).
+    #[inline(always)]
+    pub fn cell(&self, lo: u16, hi: u16) -> bool {
+        let a = (lo as usize).saturating_sub(1);
+        let b = (hi as usize + 2).min(TABLE_NODES);
+        self.prefix[b] > self.prefix[a]
     }
 }

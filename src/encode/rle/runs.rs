@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use super::preclass::{BRIDGE, BRIDGE_NORMAL, Preclass, RleVoxel};
+use super::preclass::{BRIDGE, BRIDGE_NORMAL, PostVisible, Preclass, RleVoxel};
 use crate::composite::Rect;
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::data::slices::{SliceStack, prefetch};
@@ -52,10 +52,70 @@ impl RleVolume {
     /// Encodes `stack` (one principal axis) under classification `pre`, in
     /// parallel over slices (on the current rayon pool).
     pub fn encode(stack: &SliceStack, pre: &Preclass) -> Self {
+        Self::encode_with(stack, pre, None)
+    }
+
+    /// The post-classified encoding (Deluxe P): a voxel is stored (with its
+    /// node and normal code, transparent or not) when some cell around it —
+    /// the 2×2×2 cells it is a corner of, which hold the in-slice 2×2 ones —
+    /// may be visible under `vis`, so every voxel of such a cell is stored and
+    /// a sample that reads a voxel left out is invisible. Bridged gaps store
+    /// their voxels in full too.
+    pub fn encode_post(stack: &SliceStack, pre: &Preclass, vis: &PostVisible) -> Self {
+        Self::encode_with(stack, pre, Some(vis))
+    }
+
+    /// Per voxel of slice `k`, whether the post-classified encoding stores it
+    /// (see [`RleVolume::encode_post`]).
+    fn post_mask(stack: &SliceStack, pre: &Preclass, vis: &PostVisible, k: usize) -> Vec<bool> {
+        let [ni, nj, nk] = stack.n;
+        // cells along each axis: c covers voxels c and min(c + 1, n − 1)
+        let cells = |n: usize| n.saturating_sub(1).max(1);
+        let (ci_n, cj_n, ck_n) = (cells(ni), cells(nj), cells(nk));
+        let nodes = |kk: usize| -> Vec<u16> {
+            (0..nj).flat_map(|j| (0..ni).map(move |i| (i, j))).map(|(i, j)| pre.node(stack, i, j, kk)).collect()
+        };
+        let mut keep = vec![false; ni * nj];
+        for ck in [k.wrapping_sub(1), k] {
+            if ck >= ck_n {
+                continue;
+            }
+            let (a, b) = (nodes(ck), nodes((ck + 1).min(nk - 1)));
+            // per voxel column, the range over the two slices
+            let lo: Vec<u16> = a.iter().zip(&b).map(|(x, y)| *x.min(y)).collect();
+            let hi: Vec<u16> = a.iter().zip(&b).map(|(x, y)| *x.max(y)).collect();
+            for cj in 0..cj_n {
+                let (j0, j1) = (cj, (cj + 1).min(nj - 1));
+                for ci in 0..ci_n {
+                    let (i0, i1) = (ci, (ci + 1).min(ni - 1));
+                    let at = [i0 + ni * j0, i1 + ni * j0, i0 + ni * j1, i1 + ni * j1];
+                    let l = at.iter().map(|&x| lo[x]).min().unwrap_or(0);
+                    let h = at.iter().map(|&x| hi[x]).max().unwrap_or(0);
+                    if vis.cell(l, h) {
+                        for x in at {
+                            keep[x] = true;
+                        }
+                    }
+                }
+            }
+        }
+        keep
+    }
+
+    fn encode_with(stack: &SliceStack, pre: &Preclass, post: Option<&PostVisible>) -> Self {
         let [ni, nj, nk] = stack.n;
         let slices: Vec<SliceRuns> = (0..nk)
             .into_par_iter()
             .map(|k| {
+                let keep = post.map(|vis| Self::post_mask(stack, pre, vis, k));
+                let voxel = |i: usize, j: usize| match &keep {
+                    None => pre.classify_voxel(stack, i, j, k),
+                    Some(m) => m[i + ni * j].then(|| pre.post_voxel(stack, i, j, k)),
+                };
+                let bridge = |i: usize, j: usize| match &keep {
+                    None => pre.bridge_voxel(stack, i, j, k),
+                    Some(_) => pre.post_voxel(stack, i, j, k),
+                };
                 let mut s = SliceRuns {
                     runs: Vec::new(),
                     voxels: Vec::new(),
@@ -70,11 +130,11 @@ impl RleVolume {
                     // transparent voxels since its last non-transparent one
                     let (mut gap, mut run, mut pending): (usize, Option<usize>, usize) = (0, None, 0);
                     for i in 0..ni {
-                        match pre.classify_voxel(stack, i, j, k) {
+                        match voxel(i, j) {
                             Some(v) => {
                                 // a short gap inside the run: bridge it with its transparent voxels
                                 if run.is_some() {
-                                    s.voxels.extend((i - pending..i).map(|b| pre.bridge_voxel(stack, b, j, k)));
+                                    s.voxels.extend((i - pending..i).map(|b| bridge(b, j)));
                                 }
                                 run.get_or_insert(i);
                                 pending = 0;
@@ -230,6 +290,25 @@ impl RleVolume {
                 if x0 <= x1 {
                     lo[a] = lo[a].min(x0);
                     hi[a] = hi[a].max(x1);
+                }
+            }
+        }
+        if plan.intermediate() && plan.slices() > 0 {
+            // the intermediate samples between slices k and k + 1 read both
+            let [k0, k1] = plan.k_range;
+            for k in k0..k1.min(plan.slices() - 1) {
+                let (a, b) = (self.bbox[k], self.bbox[k + 1]);
+                let bx = [a[0].min(b[0]), a[1].max(b[1]), a[2].min(b[2]), a[3].max(b[3])];
+                if bx[0] > bx[1] {
+                    continue;
+                }
+                let span = [(bx[0], bx[1], ni), (bx[2], bx[3], nj)];
+                for (a, &(v0, v1, n)) in span.iter().enumerate() {
+                    let [x0, x1] = plan.mid_map(k, a).pixels_of_cells((v0 as i64 - 1).max(0), (v1 as i64).min(n as i64 - 2));
+                    if x0 <= x1 {
+                        lo[a] = lo[a].min(x0);
+                        hi[a] = hi[a].max(x1);
+                    }
                 }
             }
         }

@@ -4,7 +4,7 @@
 
 use super::preclass::{Preclass, RleVoxel};
 use crate::classify::TABLE_NODES;
-use crate::classify::shading::Shading;
+use crate::classify::shading::{Shading, apply_shade, pow_int};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::data::normals::{ShadeTable, boxed};
 
@@ -69,5 +69,92 @@ impl ViewTables {
             Some(v) => self.voxel(v),
             None => [0.0; 4],
         }
+    }
+}
+
+/// The per-view tables of the post-classified sampler (Shear-Warp Deluxe P,
+/// [`crate::composite::slices::Sampler`]): per class node its colour and
+/// opacity-corrected opacity `[r, g, b, α']` (the classifier's table, corrected
+/// like [`ViewTables`]' premultiplied one), the decoded unit normal of every
+/// normal code (zero for [`ZERO_NORMAL`]), the object-space headlight and the
+/// material. A voxel is the 4-vector `[node, n_x, n_y, n_z]` (its classifier
+/// node as a float: interpolating nodes is interpolating densities, the
+/// node spacing being uniform); a blend of them is classified at its
+/// interpolated node (linear between nodes, as
+/// [`crate::classify::Classifier::classify`]) and shaded with its normalized
+/// interpolated normal by the one shading model (`|n·l|`, [`Shading::entry`],
+/// [`crate::classify::shading::apply_shade`]; a zero normal faces the viewer).
+#[derive(Clone, Debug)]
+pub struct PostTables {
+    lut: Box<[[f32; 4]; TABLE_NODES]>,
+    normals: Box<[[f32; 3]; NORMAL_CODES]>,
+    light: [f32; 3],
+    shading: Shading,
+    pow: i32,
+    lut_key: Option<(u64, u32)>,
+}
+
+impl Default for PostTables {
+    fn default() -> Self {
+        let mut normals: Box<[[f32; 3]; NORMAL_CODES]> = boxed([0.0; 3]);
+        for (c, n) in normals.iter_mut().enumerate() {
+            *n = decode_normal(c as u16).unwrap_or([0.0; 3]);
+        }
+        PostTables { lut: boxed([0.0; 4]), normals, light: [0.0, 0.0, 1.0], shading: Shading::default(), pow: 0, lut_key: None }
+    }
+}
+
+impl PostTables {
+    /// Brings the tables up to date (arguments as [`ViewTables::update`]).
+    /// Returns true if the classification table was rebuilt.
+    pub fn update(&mut self, pre: &Preclass, ratio: f32, light: [f32; 3], shading: Shading) -> bool {
+        let ratio = if ratio.is_finite() && ratio > 0.0 { ratio } else { 1.0 };
+        (self.light, self.shading, self.pow) = (light, shading, shading.exponent() as i32);
+        let lut_key = Some((pre.id, ratio.to_bits()));
+        if self.lut_key == lut_key {
+            return false;
+        }
+        for (i, out) in self.lut.iter_mut().enumerate() {
+            let a = pre.alpha[i];
+            let a = if a <= 0.0 || a >= 1.0 || ratio == 1.0 { a.clamp(0.0, 1.0) } else { 1.0 - (ratio * pre.ln_clear[i]).exp() };
+            let c = pre.rgb[i];
+            *out = [c[0], c[1], c[2], a];
+        }
+        self.lut_key = lut_key;
+        true
+    }
+
+    /// The 4-vector `[node, n]` of a stored voxel.
+    #[inline(always)]
+    pub fn voxel(&self, v: RleVoxel) -> [f32; 4] {
+        let n = self.normals[v.normal as usize & (NORMAL_CODES - 1)];
+        [v.class as f32, n[0], n[1], n[2]]
+    }
+
+    /// A blend of voxels' 4-vectors → the premultiplied, shaded sample; exact
+    /// zeros where the interpolated opacity is zero or the blend is NaN (it
+    /// read a voxel the encoding left out).
+    #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN takes the "zero" branch
+    #[inline(always)]
+    pub fn finish(&self, s: [f32; 4]) -> [f32; 4] {
+        let p = s[0];
+        if !(p >= 0.0) {
+            return [0.0; 4];
+        }
+        let p = p.min((TABLE_NODES - 1) as f32);
+        let i = (p as usize).min(TABLE_NODES - 2);
+        let t = p - i as f32;
+        let (a, b) = (self.lut[i], self.lut[i + 1]);
+        let alpha = a[3] + (b[3] - a[3]) * t;
+        if !(alpha > 0.0) {
+            return [0.0; 4];
+        }
+        let rgb = [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t, a[2] + (b[2] - a[2]) * t];
+        let l = self.light;
+        let (nx, ny, nz) = (s[1], s[2], s[3]);
+        let len2 = nx * nx + ny * ny + nz * nz;
+        let ndl = if len2 > 1e-30 { ((nx * l[0] + ny * l[1] + nz * l[2]).abs() / len2.sqrt()).min(1.0) } else { 1.0 };
+        let c = apply_shade(rgb, self.shading.entry(ndl, pow_int(ndl, self.pow)));
+        [alpha * c[0], alpha * c[1], alpha * c[2], alpha]
     }
 }

@@ -51,7 +51,14 @@ fn intermediate(r: &Renderer) -> Vec<u32> {
 /// oblique view too.
 fn views(dims: [usize; 3], sp: [f32; 3], seed: u64) -> Vec<DMat3> {
     let id = DMat3::IDENTITY;
-    let mut v = vec![id, rotate_eye(id, 1, 180.0), rotate_eye(id, 1, 90.0), rotate_eye(id, 1, -90.0), rotate_eye(id, 0, 90.0), rotate_eye(id, 0, -90.0)];
+    let mut v = vec![
+        id,
+        rotate_eye(id, 1, 180.0),
+        rotate_eye(id, 1, 90.0),
+        rotate_eye(id, 1, -90.0),
+        rotate_eye(id, 0, 90.0),
+        rotate_eye(id, 0, -90.0),
+    ];
     let mut rnd = uniform(seed);
     let mut seen = [[false; 2]; 3];
     for _ in 0..400 {
@@ -69,7 +76,8 @@ fn views(dims: [usize; 3], sp: [f32; 3], seed: u64) -> Vec<DMat3> {
 fn tf(seed: u64) -> TransferFunction {
     match seed % 2 {
         0 => TransferFunction::ramp(30.0, 150.0, 0.6, [0.9, 0.7, 0.5]),
-        _ => TransferFunction::new(vec![(40.0, 0.0), (60.0, 0.8), (90.0, 0.1)], vec![(0.0, [1.0, 0.3, 0.2]), (250.0, [0.2, 0.4, 1.0])]).unwrap(),
+        _ => TransferFunction::new(vec![(40.0, 0.0), (60.0, 0.8), (90.0, 0.1)], vec![(0.0, [1.0, 0.3, 0.2]), (250.0, [0.2, 0.4, 1.0])])
+            .unwrap(),
     }
 }
 
@@ -227,7 +235,11 @@ fn reuse_memory_deluxe_head() {
         sep.prepare_all_axes();
         reu.prepare_all_axes();
         let (a, b) = (sep.rle_bytes(), reu.rle_bytes());
-        assert!(b as f64 <= 0.7 * a as f64, "{mode:?}: {b} bytes with reuse vs {a} without ({:.1} % less)", 100.0 * (1.0 - b as f64 / a as f64));
+        assert!(
+            b as f64 <= 0.7 * a as f64,
+            "{mode:?}: {b} bytes with reuse vs {a} without ({:.1} % less)",
+            100.0 * (1.0 - b as f64 / a as f64)
+        );
         assert_eq!(reu.memory().rle.iter().sum::<u64>(), b as u64);
         assert_eq!((sep.rle_cache().encodings_built(), reu.rle_cache().encodings_built()), (3, 2));
         let c = reu.rle_cache();

@@ -37,7 +37,7 @@ pub struct RleVolume {
     /// from; `perm[2] == axis`).
     pub perm: [usize; 3],
     /// The runs and voxels, in the order of the axis that encoded them.
-    lines: Arc<Scanlines>,
+    lines: Scanlines,
     /// The pointer table: scanline `s = j + nj·k` is `lines`' scanline
     /// `map[s]`; empty for the axis that encoded them (the identity).
     map: Vec<u32>,
@@ -51,17 +51,19 @@ pub struct RleVolume {
 }
 
 /// The scanlines of one encoding, in the order of the axis that encoded them
-/// (shared with the axis that re-uses them).
-#[derive(Debug)]
+/// (shared with the axis that re-uses them). Each array is an `Arc<[T]>`: a
+/// fat pointer held inline, so reading it costs what a `Vec` does (no second
+/// pointer to follow in the traversal's per-row cursor set-up).
+#[derive(Clone, Debug)]
 struct Scanlines {
     /// Run lengths: per scanline `(transparent, non-transparent)` pairs.
-    runs: Vec<u16>,
+    runs: Arc<[u16]>,
     /// Scanline `t` owns `runs[scan_runs[t]..scan_runs[t + 1]]` ...
-    scan_runs: Vec<u32>,
+    scan_runs: Arc<[u32]>,
     /// ... and `voxels[scan_voxels[t]..scan_voxels[t + 1]]`.
-    scan_voxels: Vec<u32>,
+    scan_voxels: Arc<[u32]>,
     /// The non-transparent voxels, scanline by scanline, in `i` order.
-    voxels: Vec<RleVoxel>,
+    voxels: Arc<[RleVoxel]>,
 }
 
 impl Scanlines {
@@ -135,26 +137,24 @@ impl RleVolume {
             .collect();
         let total_runs: usize = slices.iter().map(|s| s.runs.len()).sum();
         let total_voxels: usize = slices.iter().map(|s| s.voxels.len()).sum();
-        let mut lines = Scanlines {
-            runs: Vec::with_capacity(total_runs),
-            scan_runs: Vec::with_capacity(nj * nk + 1),
-            scan_voxels: Vec::with_capacity(nj * nk + 1),
-            voxels: Vec::with_capacity(total_voxels),
-        };
+        let mut runs = Vec::with_capacity(total_runs);
+        let mut voxels = Vec::with_capacity(total_voxels);
+        let (mut scan_runs, mut scan_voxels) = (Vec::with_capacity(nj * nk + 1), Vec::with_capacity(nj * nk + 1));
         let (mut extent, mut bbox) = (Vec::with_capacity(nj * nk), Vec::with_capacity(nk));
-        lines.scan_runs.push(0);
-        lines.scan_voxels.push(0);
+        scan_runs.push(0);
+        scan_voxels.push(0);
         for s in slices {
             // run and voxel counts fit u32: the volume has at most 2^30 voxels
-            let (r0, v0) = (lines.runs.len() as u32, lines.voxels.len() as u32);
-            lines.scan_runs.extend(s.ends.iter().map(|e| r0 + e.0));
-            lines.scan_voxels.extend(s.ends.iter().map(|e| v0 + e.1));
-            lines.runs.extend_from_slice(&s.runs);
-            lines.voxels.extend_from_slice(&s.voxels);
+            let (r0, v0) = (runs.len() as u32, voxels.len() as u32);
+            scan_runs.extend(s.ends.iter().map(|e| r0 + e.0));
+            scan_voxels.extend(s.ends.iter().map(|e| v0 + e.1));
+            runs.extend_from_slice(&s.runs);
+            voxels.extend_from_slice(&s.voxels);
             extent.extend_from_slice(&s.extent);
             bbox.push(s.bbox);
         }
-        RleVolume { axis: stack.axis, n: stack.n, perm: stack.perm(), lines: Arc::new(lines), map: Vec::new(), extent, bbox }
+        let lines = Scanlines { runs: runs.into(), scan_runs: scan_runs.into(), scan_voxels: scan_voxels.into(), voxels: voxels.into() };
+        RleVolume { axis: stack.axis, n: stack.n, perm: stack.perm(), lines, map: Vec::new(), extent, bbox }
     }
 
     /// The encoding of the axis whose permutation is this one's with `j` and
@@ -186,7 +186,7 @@ impl RleVolume {
             axis: self.perm[1],
             n: [ni, nk, nj],
             perm: [self.perm[0], self.perm[2], self.perm[1]],
-            lines: Arc::clone(&self.lines),
+            lines: self.lines.clone(),
             map,
             extent,
             bbox,
@@ -196,7 +196,7 @@ impl RleVolume {
     /// True when `other` reads the same runs and voxels (one of them built
     /// from the other by [`RleVolume::transposed`]).
     pub fn shares_scanlines(&self, other: &RleVolume) -> bool {
-        Arc::ptr_eq(&self.lines, &other.lines)
+        Arc::ptr_eq(&self.lines.voxels, &other.lines.voxels)
     }
 
     /// True when this axis reads another axis's scanlines through its pointer table.
@@ -245,7 +245,7 @@ impl RleVolume {
     /// The `(transparent, non-transparent)` run-length pairs of scanline `(j, k)`
     /// (a non-transparent run may contain bridged transparent voxels).
     pub fn scanline_runs(&self, j: usize, k: usize) -> &[u16] {
-        let (l, t) = (&*self.lines, self.line(j + self.n[1] * k));
+        let (l, t) = (&self.lines, self.line(j + self.n[1] * k));
         &l.runs[l.scan_runs[t] as usize..l.scan_runs[t + 1] as usize]
     }
 
@@ -258,7 +258,7 @@ impl RleVolume {
     /// Every voxel stored for scanline `(j, k)` with its `i`, bridged
     /// transparent voxels included.
     pub fn stored_scanline(&self, j: usize, k: usize) -> impl Iterator<Item = (usize, RleVoxel)> + '_ {
-        let (l, t) = (&*self.lines, self.line(j + self.n[1] * k));
+        let (l, t) = (&self.lines, self.line(j + self.n[1] * k));
         let vox = &l.voxels[l.scan_voxels[t] as usize..l.scan_voxels[t + 1] as usize];
         let mut pos = 0usize;
         let mut next = 0usize;
@@ -280,7 +280,7 @@ impl RleVolume {
         if s >= self.extent.len() {
             return;
         }
-        let (l, t) = (&*self.lines, self.line(s));
+        let (l, t) = (&self.lines, self.line(s));
         let (v0, v1) = (l.scan_voxels[t] as usize, l.scan_voxels[t + 1] as usize);
         if v0 == v1 {
             return;
@@ -295,7 +295,7 @@ impl RleVolume {
     /// pointer table of a transposed axis).
     #[inline(always)]
     pub(crate) fn cursor(&self, s: usize) -> Cursor<'_> {
-        let (l, t) = (&*self.lines, self.line(s));
+        let (l, t) = (&self.lines, self.line(s));
         let runs = &l.runs[l.scan_runs[t] as usize..l.scan_runs[t + 1] as usize];
         let vox = &l.voxels[l.scan_voxels[t] as usize..l.scan_voxels[t + 1] as usize];
         Cursor::new(runs, vox)

@@ -292,12 +292,12 @@ pub struct Settings {
     pub deluxe: Deluxe,
     /// The sample lattice ([`Lattice`]).
     pub lattice: Lattice,
-    /// RLE paths, parallel projection: one encoding serves the y and z axes
-    /// (Sweeney & Mueller's re-use of RLE runs): y views read the volume
-    /// through the mirrored permutation (x, z, y)
-    /// ([`crate::view::reuse_permutation`]), whose scanlines are z's, through a
-    /// pointer table; x keeps its own encoding. The same samples (the
-    /// intermediate image of a y view is transposed), so the image equals the
+    /// RLE paths, parallel projection: one encoding serves the x and z axes
+    /// (Sweeney & Mueller's re-use of RLE runs): z views read the volume
+    /// through the mirrored permutation (y, x, z)
+    /// ([`crate::view::reuse_permutation`]), whose scanlines are x's, through a
+    /// pointer table (or x reads z's); y keeps its own encoding. The same samples (the
+    /// intermediate image of a z view is transposed), so the image equals the
     /// separate encodings' to float rounding; about a third less RLE memory.
     /// A perspective frame uses the separate encodings (cyclic permutations).
     pub rle_reuse: bool,
@@ -902,7 +902,7 @@ impl Renderer {
     /// The object axes `(i, j, k)` of principal axis `axis` this renderer's
     /// frames use: the cyclic [`crate::view::permutation`], or with
     /// [`Settings::rle_reuse`] on an RLE path under a parallel projection
-    /// [`crate::view::reuse_permutation`] (y mirrored to share z's scanlines).
+    /// [`crate::view::reuse_permutation`] (z mirrored to share x's scanlines).
     fn axis_perm(&self, axis: usize) -> [usize; 3] {
         let rle = matches!(self.settings.method, Method::Rle | Method::BruteRle);
         if self.settings.rle_reuse && rle && !self.projection.is_perspective() {

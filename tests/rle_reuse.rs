@@ -1,7 +1,7 @@
 //! Shear-Warp Deluxe's re-use of RLE runs (Sweeney & Mueller §3.1;
-//! `Settings::rle_reuse`): one encoding serves the y and z axes, y read
-//! through the mirrored permutation (x, z, y) and a pointer table over z's
-//! scanlines. The image equals the separate encodings' to float rounding, the
+//! `Settings::rle_reuse`): one encoding serves the x and z axes, z read
+//! through the mirrored permutation (y, x, z) and a pointer table over x's
+//! scanlines (or x through one over z's). The image equals the separate encodings' to float rounding, the
 //! accelerated path equals its brute force bit for bit, the RLE memory is at
 //! least 30 % smaller on the head, the shared encoding is built once, and a
 //! classification change re-encodes (no stale pointer table).
@@ -83,7 +83,7 @@ fn tf(seed: u64) -> TransferFunction {
 
 /// With reuse the images equal the separate encodings' within 1e-5 per
 /// channel, over random volumes (anisotropic too) and views of every axis in
-/// both slice orders, blend and iso, early termination off; the y views really
+/// both slice orders, blend and iso, early termination off; the z views really
 /// read the mirrored permutation, and the iso depth follows it.
 #[test]
 fn reuse_equals_separate_encodings_deluxe() {
@@ -161,16 +161,17 @@ fn reuse_accelerated_equals_brute_bit_for_bit() {
     }
 }
 
-/// The pointer table over z's scanlines is exactly the encoding of the
-/// mirrored y stack: the same runs and voxels per scanline, in both
-/// directions (y built from z and z built from y), sharing the data.
+/// The pointer table over x's scanlines is exactly the encoding of the
+/// mirrored z stack: the same runs and voxels per scanline, in both
+/// directions (z built from x and x built from z), sharing the data.
 #[test]
 fn transposed_encoding_is_the_mirrored_axis_encoding_reuse() {
     let vol: Volume = blobs([14, 11, 9], 21, [1.0, 0.8, 1.3]);
     let cls = shearwarp::classify::Classifier::new(&tf(1), 0.0, 260.0);
     let pre = Preclass::new(&cls, vol.spacing());
     let z = SliceStack::try_permuted(&vol, reuse_permutation(2)).unwrap();
-    let y = SliceStack::try_permuted(&vol, reuse_permutation(1)).unwrap();
+    let y = SliceStack::try_permuted(&vol, reuse_permutation(0)).unwrap();
+    assert_eq!((z.perm(), y.perm()), ([1, 0, 2], [1, 2, 0]));
     let (ez, ey) = (RleVolume::encode(&z, &pre), RleVolume::encode(&y, &pre));
     for (direct, other) in [(&ey, &ez), (&ez, &ey)] {
         let t = other.transposed();
@@ -193,12 +194,12 @@ fn transposed_encoding_is_the_mirrored_axis_encoding_reuse() {
 /// permutation's (transposed); bad permutations are an error.
 #[test]
 fn mirrored_factorization_same_rays_deluxe() {
-    let (dims, sp) = ([20, 30, 40], [1.0f32, 0.5, 3.0]);
-    let cam = Camera::new(rotate_eye(rotate_eye(DMat3::IDENTITY, 0, 70.0), 1, 15.0), [64, 48]);
+    let (dims, sp) = ([20, 30, 40], [1.0f32, 1.5, 0.7]);
+    let cam = Camera::new(rotate_eye(rotate_eye(DMat3::IDENTITY, 0, 20.0), 1, 15.0), [64, 48]);
     let cyc = Factorization::new(&cam, dims, sp).unwrap();
-    assert_eq!(cyc.axis, 1);
+    assert_eq!(cyc.axis, 2);
     let mir = Factorization::with_permutations(&cam, dims, sp, [0, 1, 2].map(reuse_permutation)).unwrap();
-    assert_eq!((mir.axis, mir.perm, mir.ascending, mir.n), (1, [0, 2, 1], cyc.ascending, [cyc.n[1], cyc.n[0], cyc.n[2]]));
+    assert_eq!((mir.axis, mir.perm, mir.ascending, mir.n), (2, [1, 0, 2], cyc.ascending, [cyc.n[1], cyc.n[0], cyc.n[2]]));
     assert_eq!(mir.shear, [cyc.shear[1], cyc.shear[0]]);
     assert!((mir.sample_spacing - cyc.sample_spacing).abs() < 1e-12);
     for (a, b, k) in [(3.25, 7.5, 4.0), (0.0, 0.0, 0.0), (11.0, 2.5, 19.5)] {
@@ -224,7 +225,7 @@ fn mirrored_factorization_same_rays_deluxe() {
 
 /// On the head phantom, with all three axes prepared, reuse holds at least
 /// 30 % less RLE memory (blend and iso), builds two encodings instead of three,
-/// and y and z share theirs.
+/// and x and z share theirs.
 #[test]
 fn reuse_memory_deluxe_head() {
     let vol = phantom::head([128, 128, 113]).unwrap();
@@ -243,8 +244,8 @@ fn reuse_memory_deluxe_head() {
         assert_eq!(reu.memory().rle.iter().sum::<u64>(), b as u64);
         assert_eq!((sep.rle_cache().encodings_built(), reu.rle_cache().encodings_built()), (3, 2));
         let c = reu.rle_cache();
-        assert!(c.axis(1).unwrap().shares_scanlines(c.axis(2).unwrap()));
-        assert!(!c.axis(0).unwrap().shares_scanlines(c.axis(2).unwrap()));
+        assert!(c.axis(0).unwrap().shares_scanlines(c.axis(2).unwrap()));
+        assert!(!c.axis(1).unwrap().shares_scanlines(c.axis(2).unwrap()));
         eprintln!("{mode:?}: RLE bytes {a} → {b} ({:.1} % less)", 100.0 * (1.0 - b as f64 / a as f64));
     }
 }

@@ -251,9 +251,9 @@ pub struct RenderArgs {
     /// body-centred cubic grid resampled from it (about 70 % of the samples).
     #[arg(long = "grid", value_name = "GRID", value_enum, default_value = "cartesian")]
     pub grid: shearwarp::Lattice,
-    /// RLE paths, parallel projection: one run-length encoding serves the y
-    /// and z axes (y read through the mirrored permutation, a pointer table
-    /// over z's scanlines; Sweeney & Mueller): about a third less RLE memory,
+    /// RLE paths, parallel projection: one run-length encoding serves the x
+    /// and z axes (z read through the mirrored permutation, a pointer table
+    /// over x's scanlines; Sweeney & Mueller): about a third less RLE memory,
     /// the same image to float rounding.
     #[arg(long)]
     pub rle_reuse: bool,

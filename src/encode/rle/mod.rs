@@ -22,9 +22,9 @@
 //!   the compositing loop changes run less often. Built from a [`SliceStack`]
 //!   when a view first needs the axis; a new transfer function or tissue
 //!   re-encodes. Two axes may share one encoding (Sweeney & Mueller's re-use
-//!   of RLE runs, §3.1): when the RLE paths read y through the mirrored
-//!   permutation (x, z, y) ([`crate::view::reuse_permutation`]), its scanlines
-//!   run along x like z's, and the second of the two to be needed is the
+//!   of RLE runs, §3.1): when the RLE paths read z through the mirrored
+//!   permutation (y, x, z) ([`crate::view::reuse_permutation`]), its scanlines
+//!   run along y like x's (y, z, x), and the second of the two to be needed is the
 //!   first's [`RleVolume::transposed`]: a pointer table over the same runs and
 //!   voxels, nothing encoded.
 //! - [`ViewTables`]: the per-view lookup tables: the opacity-corrected,

@@ -20,7 +20,7 @@ pub(crate) const INF: u32 = u32::MAX;
 /// [`Scanlines`] it may share with another axis.
 ///
 /// Two axes whose permutations run their scanlines along the same object axis
-/// ([`crate::view::reuse_permutation`]: z = (x, y, z) and y = (x, z, y)) hold
+/// ([`crate::view::reuse_permutation`]: x = (y, z, x) and z = (y, x, z)) hold
 /// the same scanlines, in another order: scanline `(j, k)` of one is scanline
 /// `(k, j)` of the other. [`RleVolume::transposed`] makes the second axis's
 /// encoding from the first's without encoding anything (Sweeney & Mueller's

@@ -634,7 +634,9 @@ pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>>
         Some((cam, distance)) => (cam, Some(PerspectiveView::new(&cam, distance, dims, spacing)?)),
     };
     let f = &plan.view;
-    if *f != Factorization::new(&cam, dims, spacing)? || pv.is_some() != plan.perspective.is_some() {
+    // (the permutation the frame was rendered with: the RLE paths' reuse mirrors y)
+    let perms = [0, 1, 2].map(|a| if a == f.axis { f.perm } else { crate::view::permutation(a) });
+    if *f != Factorization::with_permutations(&cam, dims, spacing, perms)? || pv.is_some() != plan.perspective.is_some() {
         return Err(Error::value("fast path depth", "the last frame was rendered with a different camera"));
     }
     let shift = plan.perspective.map_or([0.0; 2], |r| r.shift);

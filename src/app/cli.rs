@@ -251,6 +251,12 @@ pub struct RenderArgs {
     /// body-centred cubic grid resampled from it (about 70 % of the samples).
     #[arg(long = "grid", value_name = "GRID", value_enum, default_value = "cartesian")]
     pub grid: shearwarp::Lattice,
+    /// RLE paths, parallel projection: one run-length encoding serves the x
+    /// and z axes (z read through the mirrored permutation, a pointer table
+    /// over x's scanlines; Sweeney & Mueller): about a third less RLE memory,
+    /// the same image to float rounding.
+    #[arg(long)]
+    pub rle_reuse: bool,
     #[command(flatten)]
     pub scene: crate::app::scene::SceneArgs,
     /// Starting view: anterior (face), posterior, left, right, superior, inferior.
@@ -639,6 +645,7 @@ impl RenderArgs {
             footprint: self.footprint,
             deluxe: self.deluxe,
             lattice: self.grid,
+            rle_reuse: self.rle_reuse,
             ert: self.ert,
             cell: self.cell,
             threads: self.threads,
@@ -940,6 +947,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         j["quality"] = r.quality().into();
         j["deluxe"] = r.settings().deluxe.label().into();
         j["grid"] = r.settings().lattice.name().into();
+        j["rle_reuse"] = r.settings().rle_reuse.into();
         say!("{j}");
     } else {
         say!(

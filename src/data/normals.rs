@@ -27,7 +27,7 @@ use crate::classify::shading::{ShadeEntry, Shading};
 use crate::data::packing::{InPlace, restride};
 use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch_cell};
 use crate::data::volume::{Volume, VoxelData, VoxelType};
-use crate::view::{Factorization, permutation};
+use crate::view::Factorization;
 
 /// Cells per side of the hemi-octahedral normal grid.
 pub const NORMAL_SIDE: usize = 128;
@@ -95,7 +95,7 @@ pub(crate) fn boxed<T: Clone, const N: usize>(v: T) -> Box<[T; N]> {
 /// gradient in object space (`inv_spacing` = `1 / spacing` per object axis).
 #[inline]
 pub fn voxel_normal(stack: &SliceStack, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
-    object_normal(stack.gradient_at(i, j, k), permutation(stack.axis), inv_spacing)
+    object_normal(stack.gradient_at(i, j, k), stack.perm(), inv_spacing)
 }
 
 /// The normal code of a voxel-space gradient `g` of a stack with axis
@@ -399,7 +399,7 @@ pub(crate) fn code_slices<T: Send>(
 ) {
     let n = stack.n;
     let inv = spacing.map(|s| 1.0 / s);
-    let perm = permutation(stack.axis);
+    let perm = stack.perm();
     let (n0, n01, d) = (n[0], n[0] * n[1], stack.data());
     // the stack axis c whose difference feeds object axis perm[c]
     let mut src = [0usize; 3];

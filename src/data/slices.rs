@@ -18,6 +18,9 @@ pub struct SliceStack {
     pub axis: usize,
     /// Sizes along `(i, j, k)`.
     pub n: [usize; 3],
+    /// Object axes of `(i, j, k)`: [`permutation`]`(axis)`, or another
+    /// permutation with `perm[2] == axis` ([`SliceStack::try_permuted`]).
+    perm: [usize; 3],
     data: Vec<f32>,
 }
 
@@ -118,7 +121,19 @@ impl SliceStack {
     /// builds an axis's normal codes a few slices at a time, without the
     /// whole f32 stack in memory.
     pub fn try_window(vol: &Volume, axis: usize, ks: std::ops::Range<usize>) -> crate::Result<Self> {
-        let perm = permutation(axis);
+        Self::try_window_permuted(vol, permutation(axis), ks)
+    }
+
+    /// [`SliceStack::try_new`] with object axes `perm` for `(i, j, k)` (any
+    /// permutation of 0, 1, 2; the principal axis is `perm[2]`): what the
+    /// RLE paths' mirrored permutation reads ([`crate::view::reuse_permutation`]).
+    pub fn try_permuted(vol: &Volume, perm: [usize; 3]) -> crate::Result<Self> {
+        assert!(crate::view::is_permutation(perm), "{perm:?} is not a permutation of the axes");
+        Self::try_window_permuted(vol, perm, 0..vol.dims()[perm[2]])
+    }
+
+    fn try_window_permuted(vol: &Volume, perm: [usize; 3], ks: std::ops::Range<usize>) -> crate::Result<Self> {
+        let axis = perm[2];
         let d = vol.dims();
         let ks = ks.start.min(d[perm[2]])..ks.end.min(d[perm[2]]);
         let n = [d[perm[0]], d[perm[1]], ks.len()];
@@ -133,7 +148,7 @@ impl SliceStack {
             VoxelData::I16(v) => gather(&v[from..], &mut data, n, st, |x| x as f32),
             VoxelData::F32(v) => gather(&v[from..], &mut data, n, st, |x| x),
         }
-        Ok(SliceStack { axis, n, data })
+        Ok(SliceStack { axis, n, perm, data })
     }
 
     /// Bytes held.
@@ -144,7 +159,7 @@ impl SliceStack {
     /// A stack of `n` densities `data` (in `(i, j, k)` order) along `axis`.
     pub(crate) fn from_parts(axis: usize, n: [usize; 3], data: Vec<f32>) -> Self {
         assert_eq!(data.len(), n[0] * n[1] * n[2], "densities of another size");
-        SliceStack { axis, n, data }
+        SliceStack { axis, n, perm: permutation(axis), data }
     }
 
     /// The densities, given back.
@@ -158,7 +173,12 @@ impl SliceStack {
     /// needs. Reading a density from it panics; [`SliceStack::is_resident`] says which it is.
     pub fn shell(vol: &Volume, axis: usize) -> Self {
         let (perm, d) = (permutation(axis), vol.dims());
-        SliceStack { axis, n: [d[perm[0]], d[perm[1]], d[perm[2]]], data: Vec::new() }
+        SliceStack { axis, n: [d[perm[0]], d[perm[1]], d[perm[2]]], perm, data: Vec::new() }
+    }
+
+    /// Object axes of `(i, j, k)`.
+    pub fn perm(&self) -> [usize; 3] {
+        self.perm
     }
 
     /// False for a [`SliceStack::shell`].

@@ -3,7 +3,11 @@
 //! Owns the camera and its standard views ([`camera`]), Lacroute's
 //! factorization of the viewing transform into a shear of the slices and a
 //! warp of the intermediate image ([`factor`], re-exported here), and the
-//! per-frame plan every traversal reads ([`plan`]). [`perspective`] holds the
+//! per-frame plan every traversal reads ([`plan`]). A factorization takes
+//! the object axes of each principal axis it is given
+//! ([`Factorization::with_permutations`]): the cyclic [`permutation`] by
+//! default, or [`reuse_permutation`] (z mirrored to (y, x, z)) when the RLE
+//! paths share one encoding between x and z. [`perspective`] holds the
 //! perspective projection and factorization, whose plans
 //! [`FramePlan::set_perspective`] makes. [`clip`] holds clipping planes: the
 //! half-spaces kept, as per-pixel ray limits of any plan.

@@ -21,7 +21,12 @@
 //!   zero-opacity voxels, which shade to exact zeros, so the runs are longer and
 //!   the compositing loop changes run less often. Built from a [`SliceStack`]
 //!   when a view first needs the axis; a new transfer function or tissue
-//!   re-encodes.
+//!   re-encodes. Two axes may share one encoding (Sweeney & Mueller's re-use
+//!   of RLE runs, §3.1): when the RLE paths read z through the mirrored
+//!   permutation (y, x, z) ([`crate::view::reuse_permutation`]), its scanlines
+//!   run along y like x's (y, z, x), and the second of the two to be needed is the
+//!   first's [`RleVolume::transposed`]: a pointer table over the same runs and
+//!   voxels, nothing encoded.
 //! - [`ViewTables`]: the per-view lookup tables: the opacity-corrected,
 //!   premultiplied colour of every class node (`α' = 1 − (1 − α)^ratio`, rebuilt
 //!   when the ratio changes — VolPack's opacity-correction table) and the shade
@@ -131,6 +136,9 @@ pub struct RleCache {
     /// The post-classified encoding's cells (Deluxe P; None: pre-classified).
     post: Option<PostVisible>,
     axes: [Option<RleVolume>; 3],
+    /// Encodings built since the last [`RleCache::reset`] (a transposed axis
+    /// builds none).
+    encoded: usize,
     tables: ViewTables,
     post_tables: Option<Box<PostTables>>,
     links: Vec<u32>,
@@ -154,6 +162,7 @@ impl RleCache {
         self.pre = Some(Preclass::new(cls, spacing));
         (self.enc_key, self.post) = (Some(key), None);
         self.axes = [None, None, None];
+        self.encoded = 0;
     }
 
     /// Adopts classification `cls` under `key` for the post-classified
@@ -168,6 +177,7 @@ impl RleCache {
         if self.post.is_none() || self.enc_key != Some(enc_key) {
             (self.enc_key, self.post) = (Some(enc_key), Some(PostVisible::new(visible)));
             self.axes = [None, None, None];
+            self.encoded = 0;
         }
         self.post_tables.get_or_insert_with(Default::default);
     }
@@ -187,18 +197,38 @@ impl RleCache {
         self.axes[axis].as_ref()
     }
 
-    /// Encodes `stack`'s axis unless it is already encoded (on the current rayon
-    /// pool). Returns true if it encoded; false also when there is no classification.
+    /// Makes the encoding of `stack`'s axis, with `stack`'s permutation,
+    /// unless it is already there (on the current rayon pool): the
+    /// [`RleVolume::transposed`] of another axis's encoding whose scanlines are
+    /// the same (its permutation with `j` and `k` swapped), else a new
+    /// encoding of `stack`. An encoding of the axis under another permutation
+    /// is replaced. Returns true if it built anything; false also when there
+    /// is no classification.
     pub fn ensure_axis(&mut self, stack: &SliceStack) -> bool {
         let Some(pre) = &self.pre else { return false };
-        if self.axes[stack.axis].is_some() {
+        let (axis, perm) = (stack.axis, stack.perm());
+        if self.axes[axis].as_ref().is_some_and(|e| e.perm == perm && e.n == stack.n) {
             return false;
         }
-        self.axes[stack.axis] = Some(match &self.post {
-            None => RleVolume::encode(stack, pre),
-            Some(vis) => RleVolume::encode_post(stack, pre, vis),
+        let swapped = [perm[0], perm[2], perm[1]];
+        let shared = self.axes.iter().flatten().find(|e| e.perm == swapped && e.n == [stack.n[0], stack.n[2], stack.n[1]]);
+        self.axes[axis] = Some(match (shared, &self.post) {
+            (Some(e), _) => e.transposed(),
+            (None, post) => {
+                self.encoded += 1;
+                match post {
+                    None => RleVolume::encode(stack, pre),
+                    Some(vis) => RleVolume::encode_post(stack, pre, vis),
+                }
+            }
         });
         true
+    }
+
+    /// Encodings built since the classification was adopted (an axis that
+    /// re-uses another's scanlines counts none).
+    pub fn encodings_built(&self) -> usize {
+        self.encoded
     }
 
     /// Frees the encoding of principal axis `axis` (rebuilt when a view needs it).
@@ -208,9 +238,15 @@ impl RleCache {
         }
     }
 
-    /// Bytes of each axis's encoding (0 where not built).
+    /// Bytes of each axis's encoding (0 where not built). Runs and voxels two
+    /// axes share count once, at the first of them: the sum is what is held.
     pub fn bytes(&self) -> [usize; 3] {
-        [0, 1, 2].map(|a| self.axes[a].as_ref().map_or(0, RleVolume::bytes))
+        [0, 1, 2].map(|a| {
+            self.axes[a].as_ref().map_or(0, |e| {
+                let counted = self.axes[..a].iter().flatten().any(|o| o.shares_scanlines(e));
+                e.table_bytes() + if counted { 0 } else { e.shared_bytes() }
+            })
+        })
     }
 
     /// Brings the per-view tables up to date (see [`ViewTables::update`]).
@@ -223,15 +259,20 @@ impl RleCache {
     }
 
     /// The rectangle [`RleCache::render`] writes for view `f` (None if the axis
-    /// is not encoded or nothing is visible).
+    /// is not encoded under the plan's permutation, or nothing is visible).
     pub fn rect(&self, plan: &FramePlan) -> Option<Rect> {
-        self.axes[plan.view.axis].as_ref()?.rect(plan)
+        self.axis_for(plan)?.rect(plan)
+    }
+
+    /// The encoding view `plan` reads: its axis's, if built under the plan's permutation.
+    pub fn axis_for(&self, plan: &FramePlan) -> Option<&RleVolume> {
+        self.axes[plan.view.axis].as_ref().filter(|e| e.perm == plan.view.perm)
     }
 
     /// Composites view `f` from the encoding of its axis (see [`render_rle`]);
-    /// an axis that is not encoded renders transparent.
+    /// an axis that is not encoded (under the plan's permutation) renders transparent.
     pub fn render(&mut self, plan: &FramePlan, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
-        match (&self.axes[plan.view.axis], &self.post_tables) {
+        match (self.axes[plan.view.axis].as_ref().filter(|e| e.perm == plan.view.perm), &self.post_tables) {
             (Some(rle), Some(pt)) if self.post.is_some() => render_rle(rle, pt.as_ref(), plan, ert, rect, &mut self.links, out),
             (Some(rle), _) => render_rle(rle, &self.tables, plan, ert, rect, &mut self.links, out),
             (None, _) => out.seal(None),

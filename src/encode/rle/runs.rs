@@ -3,6 +3,8 @@
 //! per-slice bounding boxes and per-scanline extents, and the run [`Cursor`]
 //! the slice traversal walks two scanlines with.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use super::preclass::{BRIDGE, BRIDGE_NORMAL, PostVisible, Preclass, RleVoxel};
@@ -14,21 +16,31 @@ use crate::view::plan::FramePlan;
 /// End of a scanline for the run cursors.
 pub(crate) const INF: u32 = u32::MAX;
 
-/// One principal axis of the volume, run-length encoded.
+/// One principal axis of the volume, run-length encoded: a pointer table over
+/// [`Scanlines`] it may share with another axis.
+///
+/// Two axes whose permutations run their scanlines along the same object axis
+/// ([`crate::view::reuse_permutation`]: x = (y, z, x) and z = (y, x, z)) hold
+/// the same scanlines, in another order: scanline `(j, k)` of one is scanline
+/// `(k, j)` of the other. [`RleVolume::transposed`] makes the second axis's
+/// encoding from the first's without encoding anything (Sweeney & Mueller's
+/// re-use of RLE runs, §3.1): the runs and voxels are shared, and the second
+/// keeps only its pointer table (which shared scanline each of its own is),
+/// its per-scanline extents and its per-slice boxes.
 #[derive(Clone, Debug)]
 pub struct RleVolume {
     /// Principal axis (0 = x, 1 = y, 2 = z).
     pub axis: usize,
     /// Sizes along `(i, j, k)`.
     pub n: [usize; 3],
-    /// Run lengths: per scanline `(transparent, non-transparent)` pairs.
-    runs: Vec<u16>,
-    /// Scanline `s = j + nj·k` owns `runs[scan_runs[s]..scan_runs[s + 1]]`.
-    scan_runs: Vec<u32>,
-    /// ... and `voxels[scan_voxels[s]..scan_voxels[s + 1]]`.
-    scan_voxels: Vec<u32>,
-    /// The non-transparent voxels, scanline by scanline, in `i` order.
-    voxels: Vec<RleVoxel>,
+    /// Object axes of `(i, j, k)` (the permutation of the stack it was built
+    /// from; `perm[2] == axis`).
+    pub perm: [usize; 3],
+    /// The runs and voxels, in the order of the axis that encoded them.
+    lines: Scanlines,
+    /// The pointer table: scanline `s = j + nj·k` is `lines`' scanline
+    /// `map[s]`; empty for the axis that encoded them (the identity).
+    map: Vec<u32>,
     /// Per scanline, the first and last column of its non-transparent voxels
     /// (`[u16::MAX, 0]` when it has none): lets a row pair that has nothing to do
     /// be rejected without walking its runs.
@@ -36,6 +48,28 @@ pub struct RleVolume {
     /// Per slice, the bounding box `[i0, i1, j0, j1]` (inclusive) of its
     /// non-transparent voxels; `i0 > i1` when the slice is empty.
     pub(crate) bbox: Vec<[u32; 4]>,
+}
+
+/// The scanlines of one encoding, in the order of the axis that encoded them
+/// (shared with the axis that re-uses them). Each array is an `Arc<[T]>`: a
+/// fat pointer held inline, so reading it costs what a `Vec` does (no second
+/// pointer to follow in the traversal's per-row cursor set-up).
+#[derive(Clone, Debug)]
+struct Scanlines {
+    /// Run lengths: per scanline `(transparent, non-transparent)` pairs.
+    runs: Arc<[u16]>,
+    /// Scanline `t` owns `runs[scan_runs[t]..scan_runs[t + 1]]` ...
+    scan_runs: Arc<[u32]>,
+    /// ... and `voxels[scan_voxels[t]..scan_voxels[t + 1]]`.
+    scan_voxels: Arc<[u32]>,
+    /// The non-transparent voxels, scanline by scanline, in `i` order.
+    voxels: Arc<[RleVoxel]>,
+}
+
+impl Scanlines {
+    fn bytes(&self) -> usize {
+        self.runs.len() * 2 + (self.scan_runs.len() + self.scan_voxels.len()) * 4 + self.voxels.len() * 4
+    }
 }
 
 /// One slice's part of an encoding (built in parallel, then concatenated).
@@ -163,59 +197,116 @@ impl RleVolume {
             .collect();
         let total_runs: usize = slices.iter().map(|s| s.runs.len()).sum();
         let total_voxels: usize = slices.iter().map(|s| s.voxels.len()).sum();
-        let mut rle = RleVolume {
-            axis: stack.axis,
-            n: stack.n,
-            runs: Vec::with_capacity(total_runs),
-            scan_runs: Vec::with_capacity(nj * nk + 1),
-            scan_voxels: Vec::with_capacity(nj * nk + 1),
-            voxels: Vec::with_capacity(total_voxels),
-            extent: Vec::with_capacity(nj * nk),
-            bbox: Vec::with_capacity(nk),
-        };
-        rle.scan_runs.push(0);
-        rle.scan_voxels.push(0);
+        let mut runs = Vec::with_capacity(total_runs);
+        let mut voxels = Vec::with_capacity(total_voxels);
+        let (mut scan_runs, mut scan_voxels) = (Vec::with_capacity(nj * nk + 1), Vec::with_capacity(nj * nk + 1));
+        let (mut extent, mut bbox) = (Vec::with_capacity(nj * nk), Vec::with_capacity(nk));
+        scan_runs.push(0);
+        scan_voxels.push(0);
         for s in slices {
             // run and voxel counts fit u32: the volume has at most 2^30 voxels
-            let (r0, v0) = (rle.runs.len() as u32, rle.voxels.len() as u32);
-            rle.scan_runs.extend(s.ends.iter().map(|e| r0 + e.0));
-            rle.scan_voxels.extend(s.ends.iter().map(|e| v0 + e.1));
-            rle.runs.extend_from_slice(&s.runs);
-            rle.voxels.extend_from_slice(&s.voxels);
-            rle.extent.extend_from_slice(&s.extent);
-            rle.bbox.push(s.bbox);
+            let (r0, v0) = (runs.len() as u32, voxels.len() as u32);
+            scan_runs.extend(s.ends.iter().map(|e| r0 + e.0));
+            scan_voxels.extend(s.ends.iter().map(|e| v0 + e.1));
+            runs.extend_from_slice(&s.runs);
+            voxels.extend_from_slice(&s.voxels);
+            extent.extend_from_slice(&s.extent);
+            bbox.push(s.bbox);
         }
-        rle
+        let lines = Scanlines { runs: runs.into(), scan_runs: scan_runs.into(), scan_voxels: scan_voxels.into(), voxels: voxels.into() };
+        RleVolume { axis: stack.axis, n: stack.n, perm: stack.perm(), lines, map: Vec::new(), extent, bbox }
     }
 
-    /// Bytes held by the encoding.
+    /// The encoding of the axis whose permutation is this one's with `j` and
+    /// `k` swapped (`[perm[0], perm[2], perm[1]]`, principal axis `perm[1]`),
+    /// sharing this one's runs and voxels: its scanline `(j, k)` is this
+    /// one's scanline `(k, j)`, so it needs only the pointer table, the
+    /// extents in its order and its slices' boxes (from the extents: exactly
+    /// what encoding its own stack would give).
+    pub fn transposed(&self) -> RleVolume {
+        let [ni, nj, nk] = self.n;
+        let mut map = Vec::with_capacity(nj * nk);
+        let mut extent = Vec::with_capacity(nj * nk);
+        let mut bbox = Vec::with_capacity(nj);
+        // its slice kt is this one's row j = kt; its row jt is this one's slice k = jt
+        for kt in 0..nj {
+            let mut b = [u32::MAX, 0, u32::MAX, 0];
+            for jt in 0..nk {
+                let s = kt + nj * jt;
+                map.push(self.line(s) as u32);
+                let e = self.extent[s];
+                extent.push(e);
+                if e[0] <= e[1] {
+                    b = [b[0].min(e[0] as u32), b[1].max(e[1] as u32), b[2].min(jt as u32), b[3].max(jt as u32)];
+                }
+            }
+            bbox.push(b);
+        }
+        RleVolume {
+            axis: self.perm[1],
+            n: [ni, nk, nj],
+            perm: [self.perm[0], self.perm[2], self.perm[1]],
+            lines: self.lines.clone(),
+            map,
+            extent,
+            bbox,
+        }
+    }
+
+    /// True when `other` reads the same runs and voxels (one of them built
+    /// from the other by [`RleVolume::transposed`]).
+    pub fn shares_scanlines(&self, other: &RleVolume) -> bool {
+        Arc::ptr_eq(&self.lines.voxels, &other.lines.voxels)
+    }
+
+    /// True when this axis reads another axis's scanlines through its pointer table.
+    pub fn is_transposed(&self) -> bool {
+        !self.map.is_empty()
+    }
+
+    /// The shared scanline of scanline `s`.
+    #[inline(always)]
+    fn line(&self, s: usize) -> usize {
+        if self.map.is_empty() { s } else { self.map[s] as usize }
+    }
+
+    /// Bytes held by the encoding: [`RleVolume::table_bytes`] plus
+    /// [`RleVolume::shared_bytes`] (held once by the axes that share them).
     pub fn bytes(&self) -> usize {
-        self.runs.len() * 2
-            + (self.scan_runs.len() + self.scan_voxels.len() + self.extent.len()) * 4
-            + self.voxels.len() * 4
-            + self.bbox.len() * 16
+        self.table_bytes() + self.shared_bytes()
+    }
+
+    /// Bytes of this axis's own tables: the pointer table, the extents and
+    /// the slices' boxes.
+    pub fn table_bytes(&self) -> usize {
+        (self.map.len() + self.extent.len()) * 4 + self.bbox.len() * 16
+    }
+
+    /// Bytes of the runs and voxels (shared with a transposed axis, if any).
+    pub fn shared_bytes(&self) -> usize {
+        self.lines.bytes()
     }
 
     /// Number of voxels stored: the non-transparent ones and the bridged transparent ones.
     pub fn voxel_count(&self) -> usize {
-        self.voxels.len()
+        self.lines.voxels.len()
     }
 
     /// Number of bridged transparent voxels stored (see [`BRIDGE`]).
     pub fn bridged_count(&self) -> usize {
-        self.voxels.iter().filter(|v| v.normal == BRIDGE_NORMAL).count()
+        self.lines.voxels.iter().filter(|v| v.normal == BRIDGE_NORMAL).count()
     }
 
     /// Number of non-transparent runs.
     pub fn run_count(&self) -> usize {
-        self.runs.len() / 2
+        self.lines.runs.len() / 2
     }
 
     /// The `(transparent, non-transparent)` run-length pairs of scanline `(j, k)`
     /// (a non-transparent run may contain bridged transparent voxels).
     pub fn scanline_runs(&self, j: usize, k: usize) -> &[u16] {
-        let s = j + self.n[1] * k;
-        &self.runs[self.scan_runs[s] as usize..self.scan_runs[s + 1] as usize]
+        let (l, t) = (&self.lines, self.line(j + self.n[1] * k));
+        &l.runs[l.scan_runs[t] as usize..l.scan_runs[t + 1] as usize]
     }
 
     /// Decodes scanline `(j, k)`: its non-transparent voxels with their `i`
@@ -227,8 +318,8 @@ impl RleVolume {
     /// Every voxel stored for scanline `(j, k)` with its `i`, bridged
     /// transparent voxels included.
     pub fn stored_scanline(&self, j: usize, k: usize) -> impl Iterator<Item = (usize, RleVoxel)> + '_ {
-        let s = j + self.n[1] * k;
-        let vox = &self.voxels[self.scan_voxels[s] as usize..self.scan_voxels[s + 1] as usize];
+        let (l, t) = (&self.lines, self.line(j + self.n[1] * k));
+        let vox = &l.voxels[l.scan_voxels[t] as usize..l.scan_voxels[t + 1] as usize];
         let mut pos = 0usize;
         let mut next = 0usize;
         self.scanline_runs(j, k).chunks_exact(2).flat_map(move |pair| {
@@ -246,24 +337,27 @@ impl RleVolume {
     /// objects, a harmless guess otherwise).
     #[inline(always)]
     pub(crate) fn prefetch_scanline(&self, s: usize, a: usize, b: usize) {
-        if s + 1 >= self.scan_voxels.len() {
+        if s >= self.extent.len() {
             return;
         }
-        let (v0, v1) = (self.scan_voxels[s] as usize, self.scan_voxels[s + 1] as usize);
+        let (l, t) = (&self.lines, self.line(s));
+        let (v0, v1) = (l.scan_voxels[t] as usize, l.scan_voxels[t + 1] as usize);
         if v0 == v1 {
             return;
         }
         let lo = self.extent[s][0] as usize;
         let at = |c: usize| (v0 + c.saturating_sub(lo)).min(v1 - 1);
-        prefetch(&self.voxels, at(a));
-        prefetch(&self.voxels, at(b));
+        prefetch(&l.voxels, at(a));
+        prefetch(&l.voxels, at(b));
     }
 
-    /// A run cursor at the start of scanline `s = j + nj·k`.
+    /// A run cursor at the start of scanline `s = j + nj·k` (through the
+    /// pointer table of a transposed axis).
     #[inline(always)]
     pub(crate) fn cursor(&self, s: usize) -> Cursor<'_> {
-        let runs = &self.runs[self.scan_runs[s] as usize..self.scan_runs[s + 1] as usize];
-        let vox = &self.voxels[self.scan_voxels[s] as usize..self.scan_voxels[s + 1] as usize];
+        let (l, t) = (&self.lines, self.line(s));
+        let runs = &l.runs[l.scan_runs[t] as usize..l.scan_runs[t + 1] as usize];
+        let vox = &l.voxels[l.scan_voxels[t] as usize..l.scan_voxels[t + 1] as usize];
         Cursor::new(runs, vox)
     }
 

@@ -219,7 +219,8 @@ pub fn registry(base: Settings) -> Vec<Variant> {
 /// The Shear-Warp Deluxe variants (issue 22): the RLE path with every
 /// combination of I, P and M (`rle-deluxe-I`, …, `rle-deluxe-IMP`), the binary
 /// rotator with I, M and IM (it classifies after interpolation already: P
-/// adds nothing), and the RLE path on the BCC grid with S and the paper's
+/// adds nothing), the RLE path with one encoding serving two axes
+/// (`rle-reuse`), and the RLE path on the BCC grid with S and the paper's
 /// columns I, IP, IM, IMP (`rle-bcc`, `rle-bcc-deluxe-I`, …).
 pub fn deluxe_variants(base: Settings) -> Vec<Variant> {
     let par = Projection::Parallel;
@@ -233,6 +234,8 @@ pub fn deluxe_variants(base: Settings) -> Vec<Variant> {
     };
     let mut v: Vec<Variant> = Deluxe::all().into_iter().filter(|d| !d.is_standard()).map(|d| named(rle, "rle", d)).collect();
     v.extend(Deluxe::all().into_iter().filter(|d| !d.is_standard() && !d.post).map(|d| named(binary, "binary-c1-u64-bitscan", d)));
+    // one encoding serving two axes (Deluxe's RLE reuse)
+    v.push(Variant { name: "rle-reuse".into(), settings: Settings { rle_reuse: true, ..rle }, projection: par, quality: 1.0 });
     let bcc = Settings { lattice: Lattice::Bcc, ..rle };
     v.push(Variant { name: "rle-bcc".into(), settings: bcc, projection: par, quality: 1.0 });
     v.extend(PAPER_COLUMNS.iter().map(|l| named(bcc, "rle-bcc", Deluxe::parse(l).expect("a valid label"))));
@@ -1369,10 +1372,10 @@ mod tests {
     #[test]
     fn registry_covers_the_matrix() {
         let v = registry(Settings::default());
-        // (+ 7 RLE Deluxe combinations, 3 binary ones, 5 BCC)
-        assert_eq!(v.len(), 4 * 2 * 2 + 5 + 15);
+        // (+ 7 RLE Deluxe combinations, 3 binary ones, RLE reuse, 5 BCC)
+        assert_eq!(v.len(), 4 * 2 * 2 + 5 + 16);
         let b = registry(Settings { mode: Mode::Blend, ..Settings::default() });
-        assert_eq!(b.len(), 4 * 2 * 2 + 6 + 15);
+        assert_eq!(b.len(), 4 * 2 * 2 + 6 + 16);
         assert!(b.iter().any(|x| x.settings.ert == 1.0 && x.name.ends_with("noert")));
         let names: std::collections::BTreeSet<&str> = v.iter().map(|x| x.name.as_str()).collect();
         assert_eq!(names.len(), v.len(), "names are unique");
@@ -1385,7 +1388,7 @@ mod tests {
             let n = format!("rle-deluxe-{}", d.label());
             assert!(v.iter().any(|x| x.name == n && x.settings.deluxe == d && x.settings.method == Method::Rle), "{n}");
         }
-        for n in ["binary-c1-u64-bitscan-deluxe-I", "binary-c1-u64-bitscan-deluxe-IM", "rle-bcc", "rle-bcc-deluxe-IMP"] {
+        for n in ["binary-c1-u64-bitscan-deluxe-I", "binary-c1-u64-bitscan-deluxe-IM", "rle-reuse", "rle-bcc", "rle-bcc-deluxe-IMP"] {
             assert!(names.contains(n), "{n}");
         }
         assert!(v.iter().filter(|x| x.name.starts_with("rle-bcc")).all(|x| x.settings.lattice == shearwarp::Lattice::Bcc));

@@ -17,9 +17,8 @@ use rayon::prelude::*;
 use crate::composite::Rect;
 use crate::composite::{Intermediate, composite_premultiplied, terminated};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
-use crate::data::slices::SliceStack;
 use crate::encode::rle::runs::{Cursor, INF};
-use crate::encode::rle::{Preclass, RleVolume, RleVoxel, ViewTables};
+use crate::encode::rle::{Preclass, RleVolume, RleVoxel, ViewTables, VoxelSource};
 use crate::view::plan::{FramePlan, MapKind, floor_i64};
 
 /// Intermediate rows per parallel band.
@@ -704,8 +703,8 @@ impl RleFrame<'_> {
 /// every pixel of `rect` whose opacity is below `ert` composites its cell's
 /// sample. No runs, no links; same positions, weights and arithmetic.
 #[allow(clippy::too_many_arguments)]
-pub fn render_brute_preclassified(
-    stack: &SliceStack,
+pub fn render_brute_preclassified<S: VoxelSource + ?Sized>(
+    stack: &S,
     pre: &Preclass,
     tables: &ViewTables,
     plan: &FramePlan,
@@ -716,7 +715,7 @@ pub fn render_brute_preclassified(
 ) {
     out.seal(rect);
     let Some(r) = rect else { return };
-    let [ni, nj, _] = stack.n;
+    let [ni, nj, _] = stack.slices().n;
     let gw = out.size[0];
     let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
     let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];

@@ -9,7 +9,7 @@
 //!   index stores both. A voxel whose node has zero opacity is transparent. Its
 //!   shading index ([`RleVoxel::normal`]) is the 14-bit hemi-octahedral code
 //!   ([`encode_normal`]) of the central-difference gradient
-//!   ([`SliceStack::gradient_at`]) mapped to object (world) space with the voxel
+//!   ([`crate::data::slices::SliceStack::gradient_at`]) mapped to object (world) space with the voxel
 //!   spacing, up to sign because the headlight shading is two-sided; code
 //!   [`ZERO_NORMAL`] is a zero gradient, which faces the viewer like
 //!   [`crate::classify::shading::headlight_ndl`]'s.
@@ -19,7 +19,7 @@
 //!   the voxels of the non-transparent runs are stored. A gap of at most
 //!   [`BRIDGE`] transparent voxels between two runs is bridged: stored as
 //!   zero-opacity voxels, which shade to exact zeros, so the runs are longer and
-//!   the compositing loop changes run less often. Built from a [`SliceStack`]
+//!   the compositing loop changes run less often. Built from a [`crate::data::slices::SliceStack`]
 //!   when a view first needs the axis; a new transfer function or tissue
 //!   re-encodes.
 //! - [`ViewTables`]: the per-view lookup tables: the opacity-corrected,
@@ -65,7 +65,7 @@ pub mod preclass;
 pub mod runs;
 pub mod tables;
 
-pub use preclass::{BRIDGE, BRIDGE_NORMAL, Preclass, RleVoxel};
+pub use preclass::{BRIDGE, BRIDGE_NORMAL, Preclass, RleVoxel, VoxelSource};
 pub use runs::RleVolume;
 pub use tables::ViewTables;
 
@@ -75,7 +75,6 @@ use crate::composite::Intermediate;
 use crate::composite::Rect;
 use crate::composite::slices::{render_brute_preclassified, render_rle};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
-use crate::data::slices::SliceStack;
 use crate::view::plan::FramePlan;
 
 /// What a [`RleCache`]'s encodings were built for (chosen by the owner).
@@ -123,12 +122,15 @@ impl RleCache {
 
     /// Encodes `stack`'s axis unless it is already encoded (on the current rayon
     /// pool). Returns true if it encoded; false also when there is no classification.
-    pub fn ensure_axis(&mut self, stack: &SliceStack) -> bool {
+    /// (`stack` is a [`crate::data::slices::SliceStack`] or the interleaved slices of a BCC grid;
+    /// the owner resets the cache when it switches between them.)
+    pub fn ensure_axis<S: VoxelSource + ?Sized>(&mut self, stack: &S) -> bool {
         let Some(pre) = &self.pre else { return false };
-        if self.axes[stack.axis].is_some() {
+        let axis = stack.slices().axis;
+        if self.axes[axis].is_some() {
             return false;
         }
-        self.axes[stack.axis] = Some(RleVolume::encode(stack, pre));
+        self.axes[axis] = Some(RleVolume::encode(stack, pre));
         true
     }
 
@@ -169,7 +171,14 @@ impl RleCache {
 
     /// The brute-force pre-classified reference of view `f` over `rect` (see
     /// [`render_brute_preclassified`]).
-    pub fn render_brute(&mut self, stack: &SliceStack, plan: &FramePlan, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
+    pub fn render_brute<S: VoxelSource + ?Sized>(
+        &mut self,
+        stack: &S,
+        plan: &FramePlan,
+        ert: f32,
+        rect: Option<Rect>,
+        out: &mut Intermediate,
+    ) {
         match &self.pre {
             Some(pre) => render_brute_preclassified(stack, pre, &self.tables, plan, ert, rect, &mut self.slice_buf, out),
             None => out.seal(None),

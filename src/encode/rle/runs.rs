@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use super::preclass::{BRIDGE, BRIDGE_NORMAL, Preclass, RleVoxel};
+use super::preclass::{BRIDGE, BRIDGE_NORMAL, Preclass, RleVoxel, VoxelSource};
 use crate::composite::Rect;
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::data::slices::{SliceStack, prefetch};
@@ -49,9 +49,11 @@ struct SliceRuns {
 }
 
 impl RleVolume {
-    /// Encodes `stack` (one principal axis) under classification `pre`, in
+    /// Encodes `src` (one principal axis's slices: a [`SliceStack`], or the
+    /// interleaved slices of a BCC grid) under classification `pre`, in
     /// parallel over slices (on the current rayon pool).
-    pub fn encode(stack: &SliceStack, pre: &Preclass) -> Self {
+    pub fn encode<S: VoxelSource + ?Sized>(src: &S, pre: &Preclass) -> Self {
+        let stack: &SliceStack = src.slices();
         let [ni, nj, nk] = stack.n;
         let slices: Vec<SliceRuns> = (0..nk)
             .into_par_iter()
@@ -70,7 +72,7 @@ impl RleVolume {
                     // transparent voxels since its last non-transparent one
                     let (mut gap, mut run, mut pending): (usize, Option<usize>, usize) = (0, None, 0);
                     for i in 0..ni {
-                        match pre.classify_voxel(stack, i, j, k) {
+                        match pre.classify_voxel(src, i, j, k) {
                             Some(v) => {
                                 // a short gap inside the run: bridge it with its transparent voxels
                                 if run.is_some() {

@@ -1190,12 +1190,13 @@ impl Renderer {
         let limits = plan.take_limits();
         match &persp {
             // the BCC grid: the interleaved slices' factorization (the opacity
-            // ratio relative to the volume's own spacing), each sub-grid's
-            // slices at their in-slice offset
+            // ratio relative to the volume's own spacing), sub-grid B's slices
+            // half a cell off A's, whose samples the sheared grid meets
             None if bcc => {
                 let lattice = BccLattice::new(dims)?;
                 plan.set_parallel(&lattice.factorization(camera, spacing, f.axis, f.zoom)?, spacing);
                 plan.offset_slices(BccLattice::slice_offset);
+                plan.shift_sheared(BccLattice::SHEARED_SHIFT);
             }
             None => plan.set_parallel(&f, spacing),
             Some((_, pv)) => plan.set_perspective(pv, &f, spacing, NEAR_SLICES),

@@ -400,6 +400,17 @@ impl FramePlan {
         st.ends = [0, 1].map(|a| [st.trans[a].first().copied().unwrap_or(0.0), st.trans[a].last().copied().unwrap_or(0.0)]);
     }
 
+    /// Moves the plan's sheared coordinates by `d` voxels: the plan's
+    /// sheared point `(a, b)` is its view's `(a − d_a, b − d_b)` (the warp and
+    /// its inverse follow; the slices' maps are the caller's to shift, with
+    /// [`FramePlan::offset_slices`]). The BCC grid's sheared grid meets
+    /// sub-grid A's samples ([`crate::data::bcc::BccLattice::SHEARED_SHIFT`]).
+    pub fn shift_sheared(&mut self, d: [f64; 2]) {
+        let t = |x: f64, y: f64| DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(x, y, 1.0));
+        self.warp.forward *= t(-d[0], -d[1]);
+        self.warp.inverse = t(d[0], d[1]) * self.warp.inverse;
+    }
+
     /// Overwrites this plan with that of perspective view `pv`, reusing its
     /// arrays. `f` is the parallel factorization of the same camera (same
     /// principal axis and slice order): the plan's [`FramePlan::view`], read for

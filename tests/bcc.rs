@@ -204,7 +204,7 @@ fn bcc_homogeneous_slab_has_the_cartesian_opacity() {
         };
         let (c, b) = (centre(s), centre(bcc(s)));
         // the cartesian opacity is the analytic one of its n samples along the ray
-        let depth = n as f64 / (deg as f64).to_radians().cos();
+        let depth = n as f64 / deg.to_radians().cos();
         let analytic = 1.0 - (1.0 - alpha as f64).powf(depth);
         assert!((c - analytic).abs() < 0.02, "{deg}°: cartesian {c} vs analytic {analytic}");
         // (the BCC ray has 2·33 samples √2/2 apart: 46.7 voxels of depth against 48)
@@ -228,7 +228,7 @@ fn bcc_unsupported_combinations_are_errors() {
     let mut r = Renderer::new(vol, &tf, bcc(Settings { method: Method::Rle, ..Settings::default() })).unwrap();
     r.set_projection(Projection::perspective(40.0, 2.0).unwrap()).unwrap();
     let mut img = Image::new(32, 32);
-    let e = r.render(&Camera::new(DMat3::IDENTITY, [32, 32]), &mut img).err().expect("refused");
+    let e = r.render(&Camera::new(DMat3::IDENTITY, [32, 32]), &mut img).expect_err("refused");
     assert!(e.to_string().contains("BCC"), "{e}");
     let tiny = common::blobs([3, 20, 20], 3, [1.0; 3]);
     let mut r = Renderer::new(tiny, &tf, bcc(Settings { method: Method::Rle, ..Settings::default() })).unwrap();

@@ -118,7 +118,7 @@ impl BccLattice {
     /// Fig. 10), in sub-grid cells: 0 for A (even `k`), `−½` for B (odd `k`),
     /// in the sheared coordinates of [`BccLattice::SHEARED_SHIFT`].
     pub fn slice_offset(k: usize) -> [f64; 2] {
-        let o = if k % 2 == 0 { 0.0 } else { -0.5 };
+        let o = if k.is_multiple_of(2) { 0.0 } else { -0.5 };
         [o, o]
     }
 

@@ -388,9 +388,8 @@ impl FramePlan {
         assert_eq!(self.kind, MapKind::Translate, "offset_slices needs a parallel plan");
         let st = &mut self.shear;
         for k in 0..st.slices() {
-            let o = off(k);
-            for a in 0..2 {
-                let t = st.trans[a][k] + o[a];
+            for (a, o) in off(k).into_iter().enumerate() {
+                let t = st.trans[a][k] + o;
                 st.trans[a][k] = t;
                 st.floor[a][k] = t.floor() as i32;
                 self.maps[k].floor[a] = st.floor[a][k];

@@ -426,3 +426,105 @@ fn clip_halves_composite_to_the_unclipped_image() {
     }
     assert!(checked >= 12, "only {checked} cases rendered");
 }
+
+/// A convex clip box on the sphere phantom (`--clip-box`, keep inside): the
+/// binary path's iso depth is the analytic CSG depth of sphere ∩ box — the
+/// first point of the ray inside both — within 0.5 voxel of the box quantized
+/// to the first kept slice (as the limits are), and within one slice step
+/// more of the exact box face; rays that miss sphere ∩ box are background.
+#[test]
+fn clip_box_on_the_sphere_is_the_analytic_csg_depth() {
+    use shearwarp::view::clip::{ClipRegion, Region};
+    let dims = [44, 44, 44];
+    let vol = sphere(dims).unwrap();
+    let (c, radius) = sphere_geometry(dims);
+    let c = DVec3::from_array(c);
+    // a box over one corner of the ball: three faces cut it
+    let (lo, hi) = (c - DVec3::new(25.0, 6.0, 25.0), c + DVec3::new(5.5, 25.0, 4.0));
+    let region = ClipRegion::new(Region::Box { lo: lo.to_array(), hi: hi.to_array() }, vol.spacing()).unwrap();
+    let (mut face_hits, mut missed) = (0, 0);
+    for rot in views() {
+        let mut r = renderer(&vol, settings(Method::Binary, Mode::Iso, 0.99), SPHERE_ISO, None, None);
+        r.set_limiter(Some(Arc::new(region.clone())));
+        let mut img = Image::new(64, 64);
+        r.render(&Camera::new(rot, [64, 64]), &mut img).unwrap();
+        let plan = r.last_plan().unwrap();
+        let inter = r.intermediate();
+        let last = plan.slices() - 1;
+        let [w, h] = plan.grid.size;
+        let mut checked = 0;
+        for q in 0..h {
+            for p in 0..w {
+                let x0 = sample(plan, 0, p, q);
+                let dx = sample(plan, 1, p, q) - x0;
+                // the box along the ray: the slab intersection, in slices
+                let (mut ka, mut kb) = (0.0f64, last as f64);
+                for a in 0..3 {
+                    if dx[a].abs() < 1e-12 {
+                        if x0[a] < lo[a] || x0[a] > hi[a] {
+                            (ka, kb) = (1.0, 0.0);
+                        }
+                    } else {
+                        let (s, t) = ((lo[a] - x0[a]) / dx[a], (hi[a] - x0[a]) / dx[a]);
+                        ka = ka.max(s.min(t));
+                        kb = kb.min(s.max(t));
+                    }
+                }
+                let d = inter.depth_at(p, q) as f64;
+                let (Some(exact), Some(far)) =
+                    (first_hit(x0, dx, c, radius, ka, kb, plan.view.ascending), first_hit(x0, dx, c, radius, ka, kb, !plan.view.ascending))
+                else {
+                    // no point of the ray inside both, by a margin: background
+                    if ka > kb + 1.0 || first_hit(x0, dx, c, radius + 2.0, ka - 1.0, kb + 1.0, true).is_none() {
+                        assert!(!d.is_finite(), "pixel ({p}, {q}) hits slice {d} outside sphere ∩ box");
+                        missed += 1;
+                    }
+                    continue;
+                };
+                // well inside: no grazing rays, no slivers of the box
+                let closest = (x0 - c).reject_from(dx).length();
+                if closest > radius - 2.0 || (far - exact).abs() < 2.0 {
+                    continue;
+                }
+                let quant = first_hit(x0, dx, c, radius, (ka - 1e-6).ceil(), (kb + 1e-6).floor(), plan.view.ascending).unwrap();
+                assert!(d.is_finite(), "pixel ({p}, {q}) has no hit, want slice {exact:.2}");
+                let err = (d - quant).abs() * dx.length();
+                assert!(err <= 0.5, "pixel ({p}, {q}) hits slice {d:.3}, want {quant:.3} (exact {exact:.3}): {err:.3} voxels off");
+                assert!((d - exact).abs() * dx.length() <= 0.5 + 3f64.sqrt(), "pixel ({p}, {q}): {d:.3} vs the exact {exact:.3}");
+                checked += 1;
+                face_hits += ((exact - ka).abs() < 1e-9 || (exact - kb).abs() < 1e-9) as usize;
+            }
+        }
+        assert!(checked > 100, "{checked} pixels checked");
+    }
+    assert!(face_hits > 200 && missed > 200, "{face_hits} hits on the box faces, {missed} background pixels checked");
+}
+
+/// The convex clip regions on the command line: a box and a sphere render
+/// (and a box keeping everything is the unclipped frame), `--clip-keep
+/// outside` and bad regions are usage errors naming the problem.
+#[test]
+fn clip_box_and_sphere_on_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = |n: &str| dir.path().join(n);
+    let run = |extra: &[&str], name: &str| {
+        let mut args = vec!["render", "--phantom", "sphere", "--phantom-dims", "32,32,32", "--size", "64", "--quiet", "-o"];
+        let o = out(name);
+        args.push(o.to_str().unwrap());
+        args.extend_from_slice(extra);
+        Command::cargo_bin("shearwarp").unwrap().args(&args).assert()
+    };
+    run(&[], "plain.png").success();
+    run(&["--clip-box", "-5,-5,-5,40,40,40"], "all.png").success();
+    run(&["--clip-box", "0,0,0,15.5,31,31"], "half.png").success();
+    run(&["--clip-sphere", "16,16,16,9"], "ball.png").success();
+    let px = |n: &str| image::open(out(n)).unwrap().to_rgb8().into_raw();
+    assert_eq!(px("plain.png"), px("all.png"));
+    assert_ne!(px("plain.png"), px("half.png"));
+    assert_ne!(px("plain.png"), px("ball.png"));
+    run(&["--clip-box", "0,0,0,15,31,31", "--clip-keep", "outside"], "x.png").failure().code(2).stderr(predicate::str::contains("outside"));
+    run(&["--clip-box", "5,0,0,1,31,31"], "x.png").failure().code(2).stderr(predicate::str::contains("below its second"));
+    run(&["--clip-sphere", "1,2,3,-4"], "x.png").failure().code(2).stderr(predicate::str::contains("radius"));
+    run(&["--clip-sphere", "1,2,nan,4"], "x.png").failure().code(2);
+    run(&["--clip-box", "0,0,0,1,1,1", "--clip-sphere", "1,2,3,4"], "x.png").failure().code(2).stderr(predicate::str::contains("one of"));
+}

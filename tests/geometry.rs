@@ -69,3 +69,122 @@ fn geometry_accelerated_equals_brute_force() {
         }
     }
 }
+
+/// A mesh entirely in front of, behind and inside the opaque sphere phantom
+/// (binary iso and RLE blend, parallel and perspective): in front, the
+/// volume composites nothing where the mesh covers and the final image is the
+/// mesh there; behind, the volume's pixels are the plain render bit for bit
+/// and the mesh shows only where the volume is transparent; inside the ball
+/// (hidden by its surface), the final image is the plain render bit for bit
+/// wherever the sphere is opaque.
+#[test]
+fn geometry_mesh_in_front_behind_and_inside_the_volume() {
+    use shearwarp::data::phantom::{SPHERE_ISO, sphere, sphere_geometry};
+    use shearwarp::render::{Renderer, Settings};
+    use shearwarp::warp::Image;
+    let dims = [40, 40, 40];
+    let vol = sphere(dims).unwrap();
+    let (c, radius) = sphere_geometry(dims);
+    let c = DVec3::from_array(c);
+    let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, 0.3, -0.5, 0.1), [64, 64]);
+    // the view direction in voxel space: the camera looks along −z of eye space
+    let toward_eye = cam.rotation.transpose() * DVec3::Z;
+    let plate_at = |offset: f64| {
+        // a square plate facing the eye, `offset` voxels from the centre toward it
+        let (u, v) = (toward_eye.any_orthonormal_pair().0 * 60.0, toward_eye.any_orthonormal_pair().1 * 60.0);
+        let o = c + toward_eye * offset;
+        let vs = vec![o - u - v, o + u - v, o + u + v, o - u + v];
+        let mut m = Mesh::new(vs, vec![[0, 1, 2], [0, 2, 3]]).unwrap();
+        // wound to face the eye
+        if (m.vertices[1] - m.vertices[0]).cross(m.vertices[2] - m.vertices[0]).dot(toward_eye) < 0.0 {
+            m.triangles = vec![[0, 2, 1], [0, 3, 2]];
+        }
+        m
+    };
+    let inside = Mesh::cuboid(c - DVec3::splat(radius * 0.4), c + DVec3::splat(radius * 0.4)).unwrap();
+    for projection in [Projection::Parallel, Projection::perspective(40.0, 2.5).unwrap()] {
+        for (method, mode) in [(Method::Binary, Mode::Iso), (Method::Rle, Mode::Blend)] {
+            let tf = TransferFunction::threshold(SPHERE_ISO, [1.0; 3]);
+            let mut r = Renderer::new(vol.clone(), &tf, Settings { method, mode, threads: 2, ..Settings::default() }).unwrap();
+            r.set_iso(SPHERE_ISO).unwrap();
+            r.set_projection(projection).unwrap();
+            let mut plain = Image::new(64, 64);
+            r.render(&cam, &mut plain).unwrap();
+            let proj = Projector::new(&cam, &projection, dims, [1.0; 3]).unwrap();
+            for (name, mesh) in [("front", plate_at(radius + 6.0)), ("behind", plate_at(-radius - 6.0)), ("inside", inside.clone())] {
+                let mut geo = GeometryImage::new(64, 64);
+                rasterize(&mesh, &Material::default(), Cull::None, &proj, &mut geo).unwrap();
+                assert!(geo.coverage() > 0.01, "{name}: the mesh is on screen ({})", geo.coverage());
+                r.set_limiter(Some(Arc::new(GeometryLimits::new(proj.clone(), &geo))));
+                let mut img = Image::new(64, 64);
+                r.render(&cam, &mut img).unwrap();
+                r.set_limiter(None);
+                let vol_img = img.clone();
+                composite_over_geometry(&mut img, &geo);
+                let ctx = format!("{name} {projection:?} {method:?}");
+                for (i, (&v, &p)) in vol_img.data.iter().zip(&plain.data).enumerate() {
+                    let covered = geo.depth[i].is_finite();
+                    match name {
+                        "front" if covered => {
+                            assert_eq!(v, [0.0; 4], "{ctx}: pixel {i}: the volume behind the plate composites nothing");
+                            assert_eq!(img.data[i], geo.color[i], "{ctx}: pixel {i} is the plate");
+                        }
+                        "behind" | "inside" => {
+                            assert_eq!(v, p, "{ctx}: pixel {i}: the volume in front of the mesh is the plain render");
+                            if p[3] >= 1.0 {
+                                assert_eq!(img.data[i], p, "{ctx}: pixel {i}: the opaque volume hides the mesh");
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `--mesh` on the command line: an OBJ plate in front of the sphere
+/// phantom covers it (the output differs from the plain render and `--json`
+/// reports the geometry's costs), one far behind shows only around it, and a
+/// missing or malformed file is a usage error naming it.
+#[test]
+fn geometry_mesh_on_the_command_line() {
+    use assert_cmd::Command;
+    use predicates::prelude::*;
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("plate.obj");
+    // a plate across the whole volume at y = 1 (the anterior view looks along y)
+    std::fs::write(&obj, "v -10 1 -10\nv 45 1 -10\nv 45 1 45\nv -10 1 45\nf 1 2 3 4\n").unwrap();
+    let bad = dir.path().join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nf 1 2 3\n").unwrap();
+    let run = |extra: &[&str], name: &str| {
+        let o = dir.path().join(name);
+        let mut args =
+            vec!["render", "--phantom", "sphere", "--phantom-dims", "32,32,32", "--size", "64", "--quiet", "-o", o.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        Command::cargo_bin("shearwarp").unwrap().args(&args).assert()
+    };
+    run(&[], "plain.png").success();
+    let out = run(&["--mesh", obj.to_str().unwrap(), "--json"], "front.png").success();
+    let j: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    assert!(j["geometry"]["inverse_warp_ms"].as_f64().unwrap() >= 0.0, "{j}");
+    // the same plate moved behind the ball
+    run(&["--mesh", obj.to_str().unwrap(), "--mesh-translate", "0,30,0"], "behind.png").success();
+    let px = |n: &str| image::open(dir.path().join(n)).unwrap().to_rgb8();
+    let (plain, front, behind) = (px("plain.png"), px("front.png"), px("behind.png"));
+    assert!(plain != front, "the plate in front shows");
+    assert!(plain != behind, "the plate behind shows around the ball");
+    // the centre pixel: one placement is in front of the ball (the plate shows),
+    // the other behind it (the opaque ball shows, as without the plate)
+    let (a, b, p) = (front.get_pixel(32, 32), behind.get_pixel(32, 32), plain.get_pixel(32, 32));
+    assert!((a == p) != (b == p), "centre: {a:?} / {b:?}, plain {p:?}");
+    run(&["--mesh", dir.path().join("missing.obj").to_str().unwrap()], "x.png")
+        .failure()
+        .code(2)
+        .stderr(predicate::str::contains("missing.obj"));
+    run(&["--mesh", bad.to_str().unwrap()], "x.png").failure().code(2).stderr(predicate::str::contains("bad.obj"));
+    run(&["--mesh", obj.to_str().unwrap(), "--mesh-scale", "0"], "x.png")
+        .failure()
+        .code(2)
+        .stderr(predicate::str::contains("--mesh-scale"));
+}

@@ -40,10 +40,10 @@ use shearwarp::accuracy::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_d
 use shearwarp::classify::presets;
 use shearwarp::classify::shading::Shading;
 use shearwarp::composite::Mode;
-use shearwarp::data::phantom::{ML_ISO, Phantom, SPHERE_ISO};
+use shearwarp::data::phantom::{Phantom, SPHERE_ISO};
 use shearwarp::data::volume::Volume;
 use shearwarp::encode::depth::Search;
-use shearwarp::render::{FrameStats, Method, Renderer, Settings, WordSize};
+use shearwarp::render::{Deluxe, FrameStats, Lattice, Method, Renderer, Settings, WordSize};
 use shearwarp::view::{Camera, Factorization, NamedView, Projection, View, standard_views};
 use shearwarp::warp::Image;
 
@@ -140,6 +140,17 @@ pub struct BenchCmd {
     /// directory under the system's temporary directory).
     #[arg(long, requires = "peers")]
     pub peer_dir: Option<PathBuf>,
+    /// Shear-Warp Deluxe options (a comma-separated subset of I,P,M) applied
+    /// to every variant, whose names then end in `-deluxe-<LABEL>` (e.g.
+    /// `rle-deluxe-IP`). Without it the matrix already holds every option
+    /// combination of the RLE path and the raycast paths' I, M and IM.
+    #[arg(long, value_name = "LIST", value_parser = crate::app::cli::parse_deluxe)]
+    pub deluxe: Option<shearwarp::Deluxe>,
+    /// The sample lattice of every variant: `bcc` renders each variant on the
+    /// body-centred cubic grid (names end in `-bcc`); without it the matrix
+    /// holds the RLE path's BCC variants beside the cartesian ones.
+    #[arg(long = "grid", value_name = "GRID", value_enum)]
+    pub grid: Option<shearwarp::Lattice>,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -199,7 +210,55 @@ pub fn registry(base: Settings) -> Vec<Variant> {
     v.push(variant("rle", rle, 1.0));
     v.push(variant("rle-q2", rle, FINE_QUALITY));
     v.push(variant("brute-rle", Settings { method: Method::BruteRle, cell: 1, ..base }, 1.0));
+    if base.deluxe.is_standard() && base.lattice == Lattice::Cartesian {
+        v.extend(deluxe_variants(base));
+    }
     v
+}
+
+/// The Shear-Warp Deluxe variants (issue 22): the RLE path with every
+/// combination of I, P and M (`rle-deluxe-I`, …, `rle-deluxe-IMP`), the binary
+/// rotator with I, M and IM (it classifies after interpolation already: P
+/// adds nothing), and the RLE path on the BCC grid with S and the paper's
+/// columns I, IP, IM, IMP (`rle-bcc`, `rle-bcc-deluxe-I`, …).
+pub fn deluxe_variants(base: Settings) -> Vec<Variant> {
+    let par = Projection::Parallel;
+    let binary = Settings { method: Method::Binary, cell: 1, word: WordSize::U64, search: Search::Bitscan, ..base };
+    let rle = Settings { method: Method::Rle, cell: 1, ..base };
+    let named = |settings: Settings, prefix: &str, d: Deluxe| Variant {
+        name: format!("{prefix}-deluxe-{}", d.label()),
+        settings: Settings { deluxe: d, ..settings },
+        projection: par,
+        quality: 1.0,
+    };
+    let mut v: Vec<Variant> = Deluxe::all().into_iter().filter(|d| !d.is_standard()).map(|d| named(rle, "rle", d)).collect();
+    v.extend(Deluxe::all().into_iter().filter(|d| !d.is_standard() && !d.post).map(|d| named(binary, "binary-c1-u64-bitscan", d)));
+    let bcc = Settings { lattice: Lattice::Bcc, ..rle };
+    v.push(Variant { name: "rle-bcc".into(), settings: bcc, projection: par, quality: 1.0 });
+    v.extend(PAPER_COLUMNS.iter().map(|l| named(bcc, "rle-bcc", Deluxe::parse(l).expect("a valid label"))));
+    v
+}
+
+/// The option columns of the paper's Table 1 at 512² (after S).
+pub const PAPER_COLUMNS: [&str; 4] = ["I", "I,P", "I,M", "I,M,P"];
+
+/// `variants` with the benchmark's `--deluxe` and `--grid` applied to every
+/// one, their names suffixed `-deluxe-<LABEL>` and `-bcc`.
+pub fn with_options(variants: Vec<Variant>, deluxe: Option<Deluxe>, grid: Option<Lattice>) -> Vec<Variant> {
+    variants
+        .into_iter()
+        .map(|mut v| {
+            if let Some(g) = grid.filter(|&g| g != Lattice::Cartesian) {
+                v.settings.lattice = g;
+                v.name = format!("{}-{}", v.name, g.name());
+            }
+            if let Some(d) = deluxe.filter(|d| !d.is_standard()) {
+                v.settings.deluxe = d;
+                v.name = format!("{}-deluxe-{}", v.name, d.label());
+            }
+            v
+        })
+        .collect()
 }
 
 /// The variants that render `projection` (a perspective one): the RLE path
@@ -395,11 +454,7 @@ impl BenchCmd {
         if self.volume.file.is_some() || self.volume.raw.is_some() || self.volume.den.is_some() {
             return None;
         }
-        Some(match self.volume.phantom {
-            Phantom::Head => Phantom::Head,
-            Phantom::Sphere => Phantom::Sphere,
-            Phantom::MarschnerLobb => Phantom::MarschnerLobb,
-        })
+        Some(self.volume.phantom)
     }
 
     /// The settings every variant of `mode` starts from: the peers' material
@@ -428,11 +483,7 @@ impl BenchCmd {
                 return Err(usage(format!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "))));
             }
         }
-        let iso = self.iso.or(match self.phantom() {
-            Some(Phantom::Sphere) => Some(SPHERE_ISO),
-            Some(Phantom::MarschnerLobb) => Some(ML_ISO),
-            _ => None,
-        });
+        let iso = self.iso.or(self.phantom().and_then(Phantom::iso));
         if let Some(iso) = iso {
             match mode {
                 Mode::Blend => r.set_transfer_function(&presets::generic(iso, hi).tf),
@@ -592,6 +643,11 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
             for p in &projections {
                 all.extend(perspective_variants(base, *p, &projection_suffix(p, projections.len())));
             }
+            let mut all = with_options(all, cmd.deluxe, cmd.grid);
+            if cmd.deluxe.is_some_and(|d| !d.is_standard()) || cmd.grid.is_some_and(|g| g != Lattice::Cartesian) {
+                // (the matrix's own Deluxe rows would repeat the options)
+                all.retain(|v| v.name.matches("-deluxe-").count() < 2 && v.name.matches("-bcc").count() < 2);
+            }
             let exact = |o: &str| all.iter().any(|v| v.name == o);
             let picked = |v: &Variant| cmd.only.iter().any(|o| if exact(o) { v.name == *o } else { v.name.contains(o.as_str()) });
             let vs: Vec<Variant> = all.iter().filter(|v| cmd.only.is_empty() || picked(v)).cloned().collect();
@@ -704,7 +760,14 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
         let mut acc: Vec<Acc> = (0..variants.len() * nv).map(|_| Acc::default()).collect();
         for round in 0..cmd.rounds {
             for (vi, variant) in variants.iter().enumerate() {
-                r.set_settings(variant.settings)?;
+                if let Err(e) = r.set_settings(variant.settings) {
+                    // a combination no path renders (yet): listed, not fatal
+                    for a in &mut acc[vi * nv..(vi + 1) * nv] {
+                        a.skipped.get_or_insert_with(|| e.to_string());
+                    }
+                    pb.inc(nv as u64);
+                    continue;
+                }
                 r.set_projection(variant.projection)?;
                 r.set_quality(variant.quality)?;
                 r.prepare_all_axes();
@@ -1306,9 +1369,10 @@ mod tests {
     #[test]
     fn registry_covers_the_matrix() {
         let v = registry(Settings::default());
-        assert_eq!(v.len(), 4 * 2 * 2 + 5);
+        // (+ 7 RLE Deluxe combinations, 3 binary ones, 5 BCC)
+        assert_eq!(v.len(), 4 * 2 * 2 + 5 + 15);
         let b = registry(Settings { mode: Mode::Blend, ..Settings::default() });
-        assert_eq!(b.len(), 4 * 2 * 2 + 6);
+        assert_eq!(b.len(), 4 * 2 * 2 + 6 + 15);
         assert!(b.iter().any(|x| x.settings.ert == 1.0 && x.name.ends_with("noert")));
         let names: std::collections::BTreeSet<&str> = v.iter().map(|x| x.name.as_str()).collect();
         assert_eq!(names.len(), v.len(), "names are unique");
@@ -1316,6 +1380,19 @@ mod tests {
         assert!(names.contains("rle") && names.contains("brute-rle"));
         assert!(v.iter().all(|x| x.projection == Projection::Parallel));
         // the fine variants: the fast paths at two intermediate pixels per voxel, the rest at one
+        // every Deluxe combination and the paper's BCC columns
+        for d in Deluxe::all().into_iter().filter(|d| !d.is_standard()) {
+            let n = format!("rle-deluxe-{}", d.label());
+            assert!(v.iter().any(|x| x.name == n && x.settings.deluxe == d && x.settings.method == Method::Rle), "{n}");
+        }
+        for n in ["binary-c1-u64-bitscan-deluxe-I", "binary-c1-u64-bitscan-deluxe-IM", "rle-bcc", "rle-bcc-deluxe-IMP"] {
+            assert!(names.contains(n), "{n}");
+        }
+        assert!(v.iter().filter(|x| x.name.starts_with("rle-bcc")).all(|x| x.settings.lattice == shearwarp::Lattice::Bcc));
+        // --deluxe / --grid apply to every variant, renamed
+        let w = with_options(vec![v[0].clone()], Some(Deluxe::parse("P,I").unwrap()), Some(shearwarp::Lattice::Bcc));
+        assert_eq!(w[0].name, format!("{}-bcc-deluxe-IP", v[0].name));
+        assert!(w[0].settings.deluxe.intermediate && w[0].settings.deluxe.post && w[0].settings.lattice == shearwarp::Lattice::Bcc);
         let fine: Vec<&str> = v.iter().filter(|x| x.quality == FINE_QUALITY).map(|x| x.name.as_str()).collect();
         assert_eq!(fine, ["binary-c1-u64-bitscan-q2", "rle-q2"]);
         assert!(v.iter().all(|x| x.quality == FINE_QUALITY || x.quality == 1.0));

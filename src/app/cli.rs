@@ -251,6 +251,8 @@ pub struct RenderArgs {
     /// body-centred cubic grid resampled from it (about 70 % of the samples).
     #[arg(long = "grid", value_name = "GRID", value_enum, default_value = "cartesian")]
     pub grid: shearwarp::Lattice,
+    #[command(flatten)]
+    pub scene: crate::app::scene::SceneArgs,
     /// Starting view: anterior (face), posterior, left, right, superior, inferior.
     #[arg(long, value_enum, default_value = "anterior")]
     pub view: NamedView,
@@ -520,7 +522,11 @@ impl RenderArgs {
     /// presets (CT in Hounsfield units, else from the histogram) share one
     /// threshold-coded mask, so `--tissue` and `--cycle-tissues` switch in O(1);
     /// `--iso` makes a custom threshold instead.
-    pub fn renderer(&self, vol: Volume) -> Result<Renderer> {
+    /// With it, the scene of `--mesh` / `--clip-box` /
+    /// `--clip-sphere` / `--clip-plane` (its clip limiter installed; render
+    /// each frame through [`crate::app::scene::Scene::render`] so the meshes
+    /// are drawn).
+    pub fn renderer_and_scene(&self, vol: Volume) -> Result<(Renderer, crate::app::scene::Scene)> {
         let settings = self.settings()?;
         shearwarp::checks::check_renderable(vol.dims())?;
         let tissues = presets::tissues_for(&vol);
@@ -531,9 +537,8 @@ impl RenderArgs {
         if let Some(q) = self.quality()? {
             r.set_quality(q)?;
         }
-        if let Some(clip) = self.clip_planes(r.dims(), r.spacing())? {
-            r.set_limiter(Some(clip));
-        }
+        let scene = crate::app::scene::Scene::new(&self.scene, self.clip_planes(r.dims(), r.spacing())?, r.dims(), r.spacing())?;
+        scene.install(&mut r);
         match self.tissue.as_deref() {
             None | Some("auto") => {}
             Some(name) => {
@@ -559,7 +564,7 @@ impl RenderArgs {
                 r.set_iso(iso)?;
             }
         }
-        Ok(r)
+        Ok((r, scene))
     }
 
     /// The `--clip-plane` half-spaces in the library's frame (world
@@ -750,10 +755,10 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let load_ms = crate::app::since_start_ms();
     let dims = vol.dims();
     let cam = cmd.render.camera(vol.frame())?;
-    let mut r = cmd.render.renderer(vol)?;
+    let (mut r, scene) = cmd.render.renderer_and_scene(vol)?;
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let build_ms = prepare_first(&mut r, &cam)?;
-    let stats = r.render(&cam, &mut img)?;
+    let (stats, geometry) = scene.render(&mut r, &cam, &mut img)?;
     img.save_png(&cmd.output)?;
     let first_frame_ms = crate::app::since_start_ms();
     let warnings = shearwarp::checks::frame_warnings(&r, img.coverage());
@@ -770,6 +775,10 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,
             "load_ms": load_ms, "first_frame_ms": first_frame_ms, "memory": memory_json(&r), "build": build_json(&r),
+            "geometry": scene.has_meshes().then(|| serde_json::json!({
+                "raster_ms": geometry.raster_ms, "inverse_warp_ms": geometry.inverse_warp_ms, "composite_ms": geometry.composite_ms,
+                "inverse_warp_ns_per_output_pixel": geometry.inverse_warp_ms * 1e6 / (cam.size[0] * cam.size[1]) as f64,
+            })),
         });
         say!("{j}");
     } else {
@@ -813,7 +822,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         usage!("{frames} frames is too many (raise --step-deg)");
     }
     let cam0 = cmd.render.camera(vol.frame())?;
-    let mut r = cmd.render.renderer(vol)?;
+    let (mut r, scene) = cmd.render.renderer_and_scene(vol)?;
     if cmd.cycle_tissues > 0 && r.tissues().is_none_or(|(t, _)| t.len() < 2) {
         usage!("--cycle-tissues needs tissue presets (it cannot be combined with --iso)");
     }
@@ -857,7 +866,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             switch_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
         let t = std::time::Instant::now();
-        let st = r.render(&cam, &mut img)?;
+        let (st, _) = scene.render(&mut r, &cam, &mut img)?;
         let wall = t.elapsed().as_secs_f64() * 1e3;
         frames_wall_ms += wall;
         if switched {

@@ -7,11 +7,13 @@
 //!   variant against the reference renderer, with tables and plots;
 //! - [`peers`]: `shearwarp bench --peers`, VTK run at the benchmark's views
 //!   with the shared peer model, its frames read back for the metrics;
+//! - [`scene`]: the meshes and clip regions of the command line, per frame;
 //! - [`viewer`] (feature `viewer`): `shearwarp view`, the interactive window.
 
 pub mod bench;
 pub mod cli;
 pub mod peers;
+pub mod scene;
 pub mod viewer;
 
 use std::sync::OnceLock;

@@ -41,11 +41,16 @@ pub enum Phantom {
     Sphere,
     /// The Marschner–Lobb signal of [`marschner_lobb`] (`f32`).
     MarschnerLobb,
+    /// The solid cube of [`cube`] (`f32`): flat faces and sharp edges.
+    Cube,
+    /// The engine-like block of [`engine`] (`f32`): two materials, bores,
+    /// a shaft and bolts.
+    Engine,
 }
 
 impl Phantom {
     /// Every phantom, in a stable order.
-    pub const ALL: [Phantom; 3] = [Phantom::Head, Phantom::Sphere, Phantom::MarschnerLobb];
+    pub const ALL: [Phantom; 5] = [Phantom::Head, Phantom::Sphere, Phantom::MarschnerLobb, Phantom::Cube, Phantom::Engine];
 
     /// Parses `head`, `sphere`, `marschner-lobb` (also `marschner_lobb`,
     /// `marschnerlobb` and `ml`), ignoring case and surrounding blanks.
@@ -54,7 +59,9 @@ impl Phantom {
             "head" => Ok(Phantom::Head),
             "sphere" => Ok(Phantom::Sphere),
             "marschner-lobb" | "marschner_lobb" | "marschnerlobb" | "ml" => Ok(Phantom::MarschnerLobb),
-            other => Err(Error::value("phantom", format!("'{other}' (expected head, sphere or marschner-lobb)"))),
+            "cube" => Ok(Phantom::Cube),
+            "engine" => Ok(Phantom::Engine),
+            other => Err(Error::value("phantom", format!("'{other}' (expected head, sphere, marschner-lobb, cube or engine)"))),
         }
     }
 
@@ -64,15 +71,32 @@ impl Phantom {
             Phantom::Head => "head",
             Phantom::Sphere => "sphere",
             Phantom::MarschnerLobb => "marschner-lobb",
+            Phantom::Cube => "cube",
+            Phantom::Engine => "engine",
         }
     }
 
-    /// The default grid size: head 128×128×113, sphere 128³, Marschner–Lobb 41³.
+    /// The iso value the phantom is made for (`None`: the head, whose
+    /// tissue presets choose).
+    pub fn iso(self) -> Option<f32> {
+        match self {
+            Phantom::Head => None,
+            Phantom::Sphere => Some(SPHERE_ISO),
+            Phantom::MarschnerLobb => Some(ML_ISO),
+            Phantom::Cube => Some(CUBE_ISO),
+            Phantom::Engine => Some(ENGINE_ISO),
+        }
+    }
+
+    /// The default grid size: head 128×128×113, sphere 128³, Marschner–Lobb
+    /// 41³, cube 64³ and engine 128³ (the Shear-Warp Deluxe paper's sizes).
     pub fn default_dims(self) -> [usize; 3] {
         match self {
             Phantom::Head => [128, 128, 113],
             Phantom::Sphere => [128, 128, 128],
             Phantom::MarschnerLobb => [41, 41, 41],
+            Phantom::Cube => [64, 64, 64],
+            Phantom::Engine => [128, 128, 128],
         }
     }
 
@@ -82,6 +106,8 @@ impl Phantom {
             Phantom::Head => head(dims),
             Phantom::Sphere => sphere(dims),
             Phantom::MarschnerLobb => marschner_lobb(dims),
+            Phantom::Cube => cube(dims),
+            Phantom::Engine => engine(dims),
         }
     }
 }
@@ -153,6 +179,95 @@ pub fn sphere(dims: [usize; 3]) -> Result<Volume> {
             for (x, out) in row.iter_mut().enumerate() {
                 let dx = x as f64 - centre[0];
                 *out = sphere_density((dx * dx + dy * dy + dz * dz).sqrt(), radius) as f32;
+            }
+        }
+    })?;
+    Volume::new(d, [1.0; 3], VoxelData::F32(data))
+}
+
+// ---------------------------------------------------------------------------
+// Cube and engine (the Shear-Warp Deluxe paper's test objects)
+// ---------------------------------------------------------------------------
+
+/// The iso-value whose iso-surface in [`cube`] is exactly the cube of
+/// [`cube_geometry`] (its faces at half the solid density).
+pub const CUBE_ISO: f32 = 100.0;
+
+/// The cube of [`cube`] at `dims`: its lower and upper corners in voxel
+/// coordinates, the grid centre ± 0.3 · the axis's size (0.2 of each axis is
+/// clear on either side, so every view sees six faces' worth of edges and a
+/// 64³ grid has 38.4-voxel sides).
+pub fn cube_geometry(dims: [usize; 3]) -> ([f64; 3], [f64; 3]) {
+    let c = dims.map(|n| (n as f64 - 1.0) / 2.0);
+    let h = dims.map(|n| 0.3 * n as f64);
+    ([c[0] - h[0], c[1] - h[1], c[2] - h[2]], [c[0] + h[0], c[1] + h[1], c[2] + h[2]])
+}
+
+/// The overlap of voxel `x`'s box `[x − ½, x + ½]` with `[lo, hi]`, in `[0, 1]`.
+fn box_coverage(x: f64, lo: f64, hi: f64) -> f64 {
+    ((x + 0.5).min(hi) - (x - 0.5).max(lo)).clamp(0.0, 1.0)
+}
+
+/// A solid, axis-aligned cube of density 200 in air (0), `f32`, each voxel
+/// the cube's share of its box (the exact partial-volume value of a box
+/// filter): a face is a one-voxel linear ramp whose [`CUBE_ISO`] surface is
+/// the face exactly, an edge and a corner the product of two and three. The
+/// hardest flat faces for shear-warp (staircases along the diagonals) and
+/// the sharpest edges for a zoom. Spacing 1.
+pub fn cube(dims: [usize; 3]) -> Result<Volume> {
+    let (lo, hi) = cube_geometry(dims);
+    let (d, data) = build_slices(dims, |z, s: &mut [f32]| {
+        let cz = box_coverage(z as f64, lo[2], hi[2]);
+        for (y, row) in s.chunks_mut(dims[0]).enumerate() {
+            let cy = cz * box_coverage(y as f64, lo[1], hi[1]);
+            for (x, out) in row.iter_mut().enumerate() {
+                *out = (200.0 * cy * box_coverage(x as f64, lo[0], hi[0])) as f32;
+            }
+        }
+    })?;
+    Volume::new(d, [1.0; 3], VoxelData::F32(data))
+}
+
+/// The iso-value of [`engine`]'s surfaces (half its lighter material).
+pub const ENGINE_ISO: f32 = 60.0;
+
+/// The material at normalized point `(u, v, w)` of [`engine`]: 0 air, 120 the
+/// cast block, 240 the steel shaft and bolts.
+fn engine_material(u: f64, v: f64, w: f64) -> f64 {
+    let in_box = |c: [f64; 3], h: [f64; 3]| (u - c[0]).abs() < h[0] && (v - c[1]).abs() < h[1] && (w - c[2]).abs() < h[2];
+    let r2 = |a: f64, b: f64| a * a + b * b;
+    // steel: the shaft along u under the block, four bolts along w at its corners
+    let shaft = r2(v - 0.5, w - 0.14) < 0.045 * 0.045 && (0.08..0.92).contains(&u);
+    let bolt = [(0.22, 0.32), (0.78, 0.32), (0.22, 0.68), (0.78, 0.68)]
+        .iter()
+        .any(|&(bu, bv)| r2(u - bu, v - bv) < 0.025 * 0.025 && (0.17..0.80).contains(&w));
+    if shaft || bolt {
+        return 240.0;
+    }
+    // cast block with a flange on top, three bores from the top, a gallery across
+    let block = in_box([0.5, 0.5, 0.45], [0.32, 0.22, 0.28]) || in_box([0.5, 0.5, 0.73], [0.35, 0.25, 0.03]);
+    let bore = [0.32, 0.5, 0.68].iter().any(|&bu| r2(u - bu, v - 0.5) < 0.07 * 0.07 && w > 0.32);
+    let gallery = r2(v - 0.5, w - 0.25) < 0.05 * 0.05;
+    if block && !bore && !gallery { 120.0 } else { 0.0 }
+}
+
+/// An engine-like block (after the paper's engine data set), `f32`: a cast
+/// block (density 120) with a flange, three cylinder bores open at the top, a
+/// gallery through it, a steel shaft (240) beneath and four steel bolts, in
+/// air; each voxel the mean of 3×3×3 point samples of its box (partial
+/// volume). Surfaces at [`ENGINE_ISO`]. Spacing 1; the shape keeps the grid's
+/// proportions.
+pub fn engine(dims: [usize; 3]) -> Result<Volume> {
+    const S: usize = 3;
+    let (d, data) = build_slices(dims, |z, s: &mut [f32]| {
+        for (y, row) in s.chunks_mut(dims[0]).enumerate() {
+            for (x, out) in row.iter_mut().enumerate() {
+                let mut sum = 0.0;
+                for (dz, dy, dx) in (0..S * S * S).map(|t| (t / (S * S), (t / S) % S, t % S)) {
+                    let at = |i: usize, di: usize, n: usize| (i as f64 + (di as f64 + 0.5) / S as f64) / n.max(1) as f64;
+                    sum += engine_material(at(x, dx, dims[0]), at(y, dy, dims[1]), at(z, dz, dims[2]));
+                }
+                *out = (sum / (S * S * S) as f64) as f32;
             }
         }
     })?;
@@ -1431,5 +1546,37 @@ mod tests {
         assert_eq!(Phantom::Sphere.default_dims(), [128, 128, 128]);
         assert_eq!(Phantom::MarschnerLobb.default_dims(), [41, 41, 41]);
         assert!(Phantom::Sphere.build([0, 1, 1]).is_err());
+        assert_eq!(Phantom::Cube.default_dims(), [64, 64, 64]);
+        assert_eq!(Phantom::parse("Engine").unwrap(), Phantom::Engine);
+    }
+
+    #[test]
+    fn the_cube_is_its_partial_volume_and_its_faces_sit_at_the_iso_value() {
+        let v = cube([64, 64, 64]).unwrap();
+        let (lo, hi) = cube_geometry([64, 64, 64]);
+        assert_eq!((lo[0], hi[0]), (31.5 - 19.2, 31.5 + 19.2));
+        assert_eq!(v.get(32, 32, 32), 200.0);
+        assert_eq!(v.get(0, 32, 32), 0.0);
+        // along x through the middle the profile is 200 · coverage: the face at 12.3
+        // lies between voxels 12 (0.2 covered) and 13 (full)
+        assert!((v.get(12, 32, 32) - 40.0).abs() < 1e-3, "{}", v.get(12, 32, 32));
+        assert_eq!(v.get(13, 32, 32), 200.0);
+        // the linear interpolation between voxel centres crosses CUBE_ISO exactly at the face
+        let (a, b) = (v.get(12, 32, 32) as f64, v.get(13, 32, 32) as f64);
+        let t = (CUBE_ISO as f64 - a) / (b - a);
+        assert!((12.0 + t - 12.3).abs() < 0.26, "{}", 12.0 + t);
+        // an edge voxel is the product of its two coverages
+        assert!((v.get(12, 12, 32) - 200.0 * 0.2 * 0.2).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_engine_has_two_materials_bores_and_air() {
+        let v = engine([64, 64, 64]).unwrap();
+        let (lo, hi) = v.value_range();
+        assert_eq!((lo, hi), (0.0, 240.0));
+        // the middle bore is air at the top of the block, the block beside it cast
+        assert_eq!(v.get(32, 32, 40), 0.0);
+        assert_eq!(v.get(26, 32, 40), 120.0);
+        assert_eq!(v.get(2, 2, 2), 0.0);
     }
 }

@@ -5,6 +5,7 @@
 //! - [`mesh`]: triangle meshes in voxel-index coordinates (with a transform)
 //!   and the analytic primitives for quick use and for tests: sphere, box,
 //!   cylinder ("needle") and plane;
+//! - [`io`]: meshes from OBJ, STL and PLY files;
 //! - [`raster`]: the CPU rasterizer that draws meshes into a colour and depth
 //!   buffer at the output resolution, in the renderer's own image coordinates
 //!   and for both projections (near-plane clipping, the top-left fill rule,
@@ -19,9 +20,11 @@
 //! geometry and volume depths compare directly.
 
 pub mod inverse_warp;
+pub mod io;
 pub mod mesh;
 pub mod raster;
 
 pub use inverse_warp::{GeometryLimits, composite_over_geometry};
+pub use io::load_mesh;
 pub use mesh::Mesh;
 pub use raster::{Cull, GeometryImage, Material, Projector, rasterize};

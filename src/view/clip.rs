@@ -21,7 +21,16 @@
 //! Every traversal (binary rays, RLE slices, both brute-force references)
 //! reads these limits through [`FramePlan::ray_range`]; a pixel with no
 //! slice left composites nothing and stays background.
+//!
+//! Convex clip regions ([`ClipRegion`]: a sphere or a box in voxel-index
+//! coordinates, the samples *inside* kept) work the same way: a straight ray
+//! meets a convex region in one interval, solved analytically and then
+//! checked on the samples themselves. [`Limiters`] applies several limiters
+//! in turn (each only narrows a ray's interval: the intersection).
 
+use std::sync::Arc;
+
+use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
@@ -218,6 +227,171 @@ impl Limiter for ClipPlanes {
     }
 }
 
+/// A convex region of the volume, in voxel-index coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Region {
+    /// A ball: centre in voxel indices, radius in units of the smallest voxel
+    /// spacing (voxels on an isotropic grid), round in world space.
+    Sphere { centre: [f64; 3], radius: f64 },
+    /// The axis-aligned box `[lo, hi]` of voxel indices.
+    Box { lo: [f64; 3], hi: [f64; 3] },
+}
+
+/// A convex clip region whose inside is kept (see the [module docs](self)):
+/// a [`Limiter`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClipRegion {
+    region: Region,
+    spacing: [f64; 3],
+}
+
+impl ClipRegion {
+    /// The region `region` of a volume with voxel `spacing`, checked (finite
+    /// numbers, a radius > 0, `lo < hi` on every axis).
+    pub fn new(region: Region, spacing: [f32; 3]) -> Result<Self> {
+        if spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(Error::value("clip region", format!("the voxel spacing must be finite and > 0, got {spacing:?}")));
+        }
+        match region {
+            Region::Sphere { centre, radius } => {
+                if !(centre.iter().all(|c| c.is_finite()) && radius.is_finite() && radius > 0.0) {
+                    return Err(Error::value(
+                        "clip sphere",
+                        format!("centre {centre:?}, radius {radius} (needs finite numbers, radius > 0)"),
+                    ));
+                }
+            }
+            Region::Box { lo, hi } => {
+                if !(lo.iter().chain(&hi).all(|c| c.is_finite()) && (0..3).all(|a| lo[a] < hi[a])) {
+                    return Err(Error::value("clip box", format!("{lo:?} .. {hi:?} (needs finite corners, lo < hi on every axis)")));
+                }
+            }
+        }
+        Ok(ClipRegion { region, spacing: spacing.map(|s| s as f64) })
+    }
+
+    /// The region.
+    pub fn region(&self) -> Region {
+        self.region
+    }
+
+    /// Whether voxel-index point `v` is inside (boundary included).
+    pub fn contains(&self, v: DVec3) -> bool {
+        match self.region {
+            Region::Sphere { centre, radius } => {
+                let unit = self.spacing.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+                let d = DVec3::from_array([0, 1, 2].map(|a| (v[a] - centre[a]) * self.spacing[a] / unit));
+                d.length_squared() <= radius * radius
+            }
+            Region::Box { lo, hi } => (0..3).all(|a| lo[a] <= v[a] && v[a] <= hi[a]),
+        }
+    }
+
+    /// The real interval `[t0, t1]` of `t` with `o + t·d` inside (empty: `t0 > t1`).
+    fn line_interval(&self, o: DVec3, d: DVec3) -> [f64; 2] {
+        match self.region {
+            Region::Sphere { centre, radius } => {
+                let unit = self.spacing.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+                let w = |v: DVec3, c: bool| {
+                    DVec3::from_array([0, 1, 2].map(|a| (v[a] - if c { centre[a] } else { 0.0 }) * self.spacing[a] / unit))
+                };
+                let (o, d) = (w(o, true), w(d, false));
+                // |o + t d|² = r²
+                let (a, b, c) = (d.length_squared(), o.dot(d), o.length_squared() - radius * radius);
+                if a == 0.0 {
+                    return if c <= 0.0 { [f64::NEG_INFINITY, f64::INFINITY] } else { [1.0, 0.0] };
+                }
+                let disc = b * b - a * c;
+                if disc < 0.0 {
+                    // (no crossing, or a tangent lost to rounding: the closest
+                    // approach, which the samples then decide)
+                    return [-b / a, -b / a];
+                }
+                let s = disc.sqrt();
+                [(-b - s) / a, (-b + s) / a]
+            }
+            Region::Box { lo, hi } => {
+                let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+                for a in 0..3 {
+                    if d[a] == 0.0 {
+                        if o[a] < lo[a] || o[a] > hi[a] {
+                            return [1.0, 0.0];
+                        }
+                    } else {
+                        let (x, y) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
+                        t0 = t0.max(x.min(y));
+                        t1 = t1.min(x.max(y));
+                    }
+                }
+                [t0, t1]
+            }
+        }
+    }
+}
+
+/// The voxel-index position of pixel `(p, q)`'s sample in slice `k`.
+fn sample_voxel(plan: &FramePlan, k: usize, p: usize, q: usize) -> DVec3 {
+    crate::view::unpermute(plan.view.perm, DVec3::new(plan.sample_at(k, 0, p), plan.sample_at(k, 1, q), k as f64))
+}
+
+impl Limiter for ClipRegion {
+    fn limit(&self, plan: &FramePlan, limits: &mut RayLimits) {
+        let nk = plan.slices();
+        if nk == 0 {
+            return;
+        }
+        let last = nk as i64 - 1;
+        limits.par_rows_mut().enumerate().for_each(|(q, row)| {
+            for (p, l) in row.iter_mut().enumerate() {
+                if l[0] > l[1] {
+                    continue;
+                }
+                // the ray's samples are affine in k: o + k·d
+                let o = sample_voxel(plan, 0, p, q);
+                let d = if last > 0 { (sample_voxel(plan, last as usize, p, q) - o) / last as f64 } else { DVec3::ZERO };
+                let inside = |k: i64| self.contains(sample_voxel(plan, k as usize, p, q));
+                let [t0, t1] = self.line_interval(o, d);
+                // a one-sample margin for rounding (an interval empty by rounding
+                // alone is checked around where it closed)
+                let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t0.clamp(-1.0, last as f64 + 1.0), t0.clamp(-1.0, last as f64 + 1.0)) };
+                let edge = |t: f64| t.clamp(-2.0, last as f64 + 2.0);
+                let mut a = (edge(t0).floor() as i64 - 1).clamp(0, last);
+                let mut b = (edge(t1).ceil() as i64 + 1).clamp(0, last);
+                // the interval's ends checked on the samples themselves
+                while a <= b && !inside(a) {
+                    a += 1;
+                }
+                while b >= a && !inside(b) {
+                    b -= 1;
+                }
+                if a <= b {
+                    while a > 0 && inside(a - 1) {
+                        a -= 1;
+                    }
+                    while b < last && inside(b + 1) {
+                        b += 1;
+                    }
+                }
+                let (lo, hi) = ((l[0] as i64).max(a), (l[1] as i64).min(b));
+                *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
+            }
+        });
+    }
+}
+
+/// Several limiters applied in turn: each narrows the rays' intervals, so the
+/// result keeps the samples every one keeps.
+#[derive(Clone, Default)]
+pub struct Limiters(pub Vec<Arc<dyn Limiter>>);
+
+impl Limiter for Limiters {
+    fn limit(&self, plan: &FramePlan, limits: &mut RayLimits) {
+        for l in &self.0 {
+            l.limit(plan, limits);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -265,6 +439,77 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn clip_region_limits_are_exactly_the_samples_inside() {
+        let sp = [1.0f32, 0.8, 1.5];
+        let regions = [
+            Region::Sphere { centre: [7.0, 8.0, 5.0], radius: 4.5 },
+            Region::Sphere { centre: [0.0, 0.0, 0.0], radius: 6.0 },
+            Region::Sphere { centre: [70.0, 8.0, 5.0], radius: 2.0 },
+            Region::Box { lo: [2.5, 3.0, 1.2], hi: [9.0, 12.5, 8.0] },
+            Region::Box { lo: [-5.0, -5.0, -5.0], hi: [50.0, 50.0, 50.0] },
+            Region::Box { lo: [6.0, 0.0, 0.0], hi: [7.2, 17.0, 11.0] },
+        ];
+        for plan in plans() {
+            for r in regions {
+                let clip = ClipRegion::new(r, sp).unwrap();
+                let mut l = RayLimits::open(plan.grid.size, plan.slices());
+                clip.limit(&plan, &mut l);
+                let [w, h] = plan.grid.size;
+                let mut kept = 0;
+                for q in 0..h {
+                    for p in 0..w {
+                        let [a, b] = l.get(p, q);
+                        for k in 0..plan.slices() {
+                            let inside = a <= b && (a as usize..=b as usize).contains(&k);
+                            assert_eq!(
+                                inside,
+                                clip.contains(sample_voxel(&plan, k, p, q)),
+                                "{r:?} pixel ({p}, {q}) slice {k}: {:?}",
+                                [a, b]
+                            );
+                            kept += inside as usize;
+                        }
+                    }
+                }
+                assert_eq!(kept > 0, !matches!(r, Region::Sphere { centre: [70.0, ..], .. }), "{r:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn chained_limiters_keep_the_samples_every_one_keeps() {
+        let sp = [1.0f32, 0.8, 1.5];
+        let plane = ClipPlanes::new(&[ClipPlane::new([0.3, -0.5, 0.8], 1.3).unwrap()], sp).unwrap();
+        let ball = ClipRegion::new(Region::Sphere { centre: [7.0, 8.0, 5.0], radius: 5.0 }, sp).unwrap();
+        let both = Limiters(vec![Arc::new(plane.clone()), Arc::new(ball.clone())]);
+        for plan in plans() {
+            let mut l = RayLimits::open(plan.grid.size, plan.slices());
+            both.limit(&plan, &mut l);
+            let [w, h] = plan.grid.size;
+            for q in 0..h {
+                for p in 0..w {
+                    let [a, b] = l.get(p, q);
+                    for k in 0..plan.slices() {
+                        let inside = a <= b && (a as usize..=b as usize).contains(&k);
+                        let want = sample_kept(&plane, &plan, k, p, q) && ball.contains(sample_voxel(&plan, k, p, q));
+                        assert_eq!(inside, want, "pixel ({p}, {q}) slice {k}: {:?}", [a, b]);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_clip_regions_are_errors() {
+        let sp = [1.0f32; 3];
+        assert!(ClipRegion::new(Region::Sphere { centre: [0.0; 3], radius: 0.0 }, sp).is_err());
+        assert!(ClipRegion::new(Region::Sphere { centre: [f64::NAN, 0.0, 0.0], radius: 1.0 }, sp).is_err());
+        assert!(ClipRegion::new(Region::Box { lo: [0.0; 3], hi: [1.0, 0.0, 1.0] }, sp).is_err());
+        assert!(ClipRegion::new(Region::Box { lo: [0.0; 3], hi: [1.0, f64::INFINITY, 1.0] }, sp).is_err());
+        assert!(ClipRegion::new(Region::Box { lo: [0.0; 3], hi: [1.0; 3] }, [0.0, 1.0, 1.0]).is_err());
     }
 
     #[test]

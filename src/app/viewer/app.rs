@@ -50,6 +50,12 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     }
     // check the options before loading anything
     let settings = cmd.render.settings()?;
+    let sc = &cmd.render.scene;
+    if !sc.mesh.is_empty() || sc.clip_box.is_some() || sc.clip_sphere.is_some() {
+        return Err(anyhow::Error::new(Usage(
+            "--mesh, --clip-box and --clip-sphere are not available in the viewer yet (render and rotate take them; the viewer takes --clip-plane)".into(),
+        )));
+    }
     let (vol, name) = cmd.volume.load()?;
     let load_ms = t_start.elapsed().as_secs_f64() * 1e3;
     let t_setup = Instant::now();

@@ -1,0 +1,236 @@
+//! Geometry and clip regions from the command line, per frame: meshes
+//! (`--mesh FILE` placed with `--mesh-scale`, `--mesh-rotate`,
+//! `--mesh-translate`, in voxel indices or with `--mesh-world` in world
+//! millimetres from the volume centre), convex clip regions (`--clip-box`,
+//! `--clip-sphere`, `--clip-keep`) and the clip planes (`--clip-plane`).
+//!
+//! The clip regions and planes are one limiter set once; a mesh is drawn
+//! every frame at the output resolution (the library's rasterizer), its depth
+//! inverse-warped into the frame plan's ray limits beside the clip regions,
+//! and the volume composited over its colour (see `shearwarp::geometry`).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::Result;
+use clap::{Args, ValueEnum};
+use glam::{DAffine3, DMat3, DVec3, EulerRot};
+
+use shearwarp::geometry::{Cull, GeometryImage, GeometryLimits, Material, Mesh, Projector, composite_over_geometry, load_mesh, rasterize};
+use shearwarp::render::{FrameStats, Renderer};
+use shearwarp::view::Camera;
+use shearwarp::view::clip::{ClipRegion, Limiters, Region};
+use shearwarp::view::plan::Limiter;
+use shearwarp::warp::Image;
+
+use crate::app::cli::Usage;
+
+/// Which side of a convex clip region is kept.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum Keep {
+    /// The samples inside the region.
+    #[default]
+    Inside,
+    /// The samples outside it (the volume cut open).
+    Outside,
+}
+
+/// Geometry and clip-region arguments (flattened into `render`, `rotate`, `view`).
+#[derive(Args, Debug, Clone, Default)]
+pub struct SceneArgs {
+    /// A triangle mesh (OBJ, STL or PLY) drawn inside the volume: the rays
+    /// stop at it and the volume in front is composited over it (repeatable).
+    /// Coordinates are voxel indices unless --mesh-world.
+    #[arg(long, value_name = "FILE")]
+    pub mesh: Vec<PathBuf>,
+    /// Scale the meshes by S about their own origin (before rotating and moving).
+    #[arg(long, value_name = "S", default_value_t = 1.0, allow_negative_numbers = true)]
+    pub mesh_scale: f64,
+    /// Rotate the meshes by RX,RY,RZ degrees about their origin's x, y, z axes (after scaling).
+    #[arg(long, value_name = "RX,RY,RZ", value_parser = parse_triple_f64, allow_hyphen_values = true)]
+    pub mesh_rotate: Option<[f64; 3]>,
+    /// Move the meshes by TX,TY,TZ (after scaling and rotating).
+    #[arg(long, value_name = "TX,TY,TZ", value_parser = parse_triple_f64, allow_hyphen_values = true)]
+    pub mesh_translate: Option<[f64; 3]>,
+    /// The meshes' coordinates are world millimetres from the volume centre
+    /// along the volume's x, y, z axes (default: voxel indices).
+    #[arg(long)]
+    pub mesh_world: bool,
+    /// Mesh colour R,G,B in [0, 1].
+    #[arg(long, value_name = "R,G,B", value_parser = parse_triple_f64, default_value = "0.85,0.75,0.3")]
+    pub mesh_color: [f64; 3],
+    /// A convex clip box x0,y0,z0,x1,y1,z1 in voxel indices (see --clip-keep).
+    #[arg(long, value_name = "X0,Y0,Z0,X1,Y1,Z1", value_parser = parse_box, allow_hyphen_values = true)]
+    pub clip_box: Option<[f64; 6]>,
+    /// A convex clip sphere x,y,z,r: centre in voxel indices, radius in
+    /// voxels of the smallest spacing (round in world space; see --clip-keep).
+    #[arg(long, value_name = "X,Y,Z,R", value_parser = parse_sphere, allow_hyphen_values = true)]
+    pub clip_sphere: Option<[f64; 4]>,
+    /// Which side of --clip-box / --clip-sphere is rendered.
+    #[arg(long, value_enum, default_value = "inside")]
+    pub clip_keep: Keep,
+}
+
+fn parse_numbers<const N: usize>(s: &str, what: &str) -> std::result::Result<[f64; N], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != N {
+        return Err(format!("expected {what} ({N} numbers separated by commas), got '{s}'"));
+    }
+    let mut v = [0.0; N];
+    for (o, p) in v.iter_mut().zip(&parts) {
+        *o = p.parse::<f64>().map_err(|_| format!("'{p}' is not a number"))?;
+        if !o.is_finite() {
+            return Err(format!("'{p}' is not a finite number"));
+        }
+    }
+    Ok(v)
+}
+
+fn parse_triple_f64(s: &str) -> std::result::Result<[f64; 3], String> {
+    parse_numbers::<3>(s, "three values")
+}
+
+fn parse_box(s: &str) -> std::result::Result<[f64; 6], String> {
+    let b = parse_numbers::<6>(s, "x0,y0,z0,x1,y1,z1")?;
+    if (0..3).any(|a| b[a] >= b[a + 3]) {
+        return Err(format!("the box's first corner must be below its second on every axis, got '{s}'"));
+    }
+    Ok(b)
+}
+
+fn parse_sphere(s: &str) -> std::result::Result<[f64; 4], String> {
+    let v = parse_numbers::<4>(s, "x,y,z,r")?;
+    if v[3] <= 0.0 {
+        return Err(format!("the radius must be > 0, got '{s}'"));
+    }
+    Ok(v)
+}
+
+fn usage(msg: String) -> anyhow::Error {
+    anyhow::Error::new(Usage(msg))
+}
+
+/// The geometry and clip regions of a run, for a volume of `dims` voxels with `spacing`.
+pub struct Scene {
+    meshes: Vec<Mesh>,
+    material: Material,
+    /// The clip planes and regions (None: none).
+    clip: Option<Arc<dyn Limiter>>,
+    dims: [usize; 3],
+    spacing: [f32; 3],
+}
+
+/// What the geometry cost in one frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GeometryCost {
+    /// Drawing the meshes into the colour and depth buffer.
+    pub raster_ms: f64,
+    /// The inverse warp: the depth buffer into the plan's ray limits.
+    pub inverse_warp_ms: f64,
+    /// The volume over the geometry's colour.
+    pub composite_ms: f64,
+}
+
+impl Scene {
+    /// The scene of `args` plus the clip planes `planes` (already a limiter, or None).
+    pub fn new(args: &SceneArgs, planes: Option<Arc<dyn Limiter>>, dims: [usize; 3], spacing: [f32; 3]) -> Result<Scene> {
+        let mut limiters: Vec<Arc<dyn Limiter>> = planes.into_iter().collect();
+        let region = match (args.clip_box, args.clip_sphere) {
+            (Some(_), Some(_)) => return Err(usage("give one of --clip-box and --clip-sphere".into())),
+            (Some(b), None) => Some(Region::Box { lo: [b[0], b[1], b[2]], hi: [b[3], b[4], b[5]] }),
+            (None, Some(s)) => Some(Region::Sphere { centre: [s[0], s[1], s[2]], radius: s[3] }),
+            (None, None) => None,
+        };
+        if let Some(region) = region {
+            if args.clip_keep == Keep::Outside {
+                return Err(usage(
+                    "--clip-keep outside is not available yet: it needs two slice intervals per ray, and the frame plan's ray limits hold one (use --clip-keep inside, or --clip-plane for a half-space)"
+                        .into(),
+                ));
+            }
+            limiters.push(Arc::new(ClipRegion::new(region, spacing).map_err(|e| usage(format!("clip region: {e}")))?));
+        }
+        if !(args.mesh_scale.is_finite() && args.mesh_scale != 0.0) {
+            return Err(usage(format!("--mesh-scale must be a finite number other than 0, got {}", args.mesh_scale)));
+        }
+        if args.mesh_color.iter().any(|c| !(0.0..=1.0).contains(c)) {
+            return Err(usage(format!("--mesh-color components must be in [0, 1], got {:?}", args.mesh_color)));
+        }
+        let place = placement(args, dims, spacing);
+        let mut meshes = vec![];
+        for path in &args.mesh {
+            let m = load_mesh(path).map_err(|e| usage(e.to_string()))?;
+            meshes.push(m.transformed(place).map_err(|e| usage(format!("{}: {e}", path.display())))?);
+        }
+        let clip: Option<Arc<dyn Limiter>> = match limiters.len() {
+            0 => None,
+            1 => limiters.pop(),
+            _ => Some(Arc::new(Limiters(limiters))),
+        };
+        let material = Material { color: args.mesh_color.map(|c| c as f32), ..Material::default() };
+        Ok(Scene { meshes, material, clip, dims, spacing })
+    }
+
+    /// True when the scene has meshes (drawn every frame).
+    pub fn has_meshes(&self) -> bool {
+        !self.meshes.is_empty()
+    }
+
+    /// Gives `r` the clip planes and regions (the whole job when there are no meshes).
+    pub fn install(&self, r: &mut Renderer) {
+        if self.clip.is_some() {
+            r.set_limiter(self.clip.clone());
+        }
+    }
+
+    /// Renders one frame of `cam` into `img`: with meshes, draws them, stops
+    /// the rays at them and composites the volume over them.
+    pub fn render(&self, r: &mut Renderer, cam: &Camera, img: &mut Image) -> Result<(FrameStats, GeometryCost)> {
+        if self.meshes.is_empty() {
+            return Ok((r.render(cam, img)?, GeometryCost::default()));
+        }
+        let mut cost = GeometryCost::default();
+        let t = Instant::now();
+        let proj = Projector::new(cam, &r.projection(), self.dims, self.spacing)?;
+        let mut geo = GeometryImage::new(cam.size[0], cam.size[1]);
+        for m in &self.meshes {
+            rasterize(m, &self.material, Cull::None, &proj, &mut geo)?;
+        }
+        cost.raster_ms = t.elapsed().as_secs_f64() * 1e3;
+        let geometry = Arc::new(GeometryLimits::new(proj, &geo));
+        let limiter: Arc<dyn Limiter> = match &self.clip {
+            None => geometry.clone(),
+            Some(c) => Arc::new(Limiters(vec![c.clone(), geometry.clone()])),
+        };
+        r.set_limiter(Some(limiter));
+        let st = r.render(cam, img)?;
+        // the inverse warp's own cost, on this frame's plan(s)
+        let t = Instant::now();
+        for plan in r.last_plans() {
+            let mut l = shearwarp::view::plan::RayLimits::open(plan.grid.size, plan.slices());
+            geometry.limit(plan, &mut l);
+        }
+        cost.inverse_warp_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        composite_over_geometry(img, &geo);
+        cost.composite_ms = t.elapsed().as_secs_f64() * 1e3;
+        Ok((st, cost))
+    }
+}
+
+/// Mesh coordinates → voxel indices: scale, rotate, translate in the
+/// meshes' units, then (with --mesh-world) millimetres from the volume
+/// centre to voxel indices.
+fn placement(args: &SceneArgs, dims: [usize; 3], spacing: [f32; 3]) -> DAffine3 {
+    let [rx, ry, rz] = args.mesh_rotate.unwrap_or([0.0; 3]).map(f64::to_radians);
+    let rot = DMat3::from_euler(EulerRot::XYZ, rx, ry, rz);
+    let t = DVec3::from_array(args.mesh_translate.unwrap_or([0.0; 3]));
+    let local = DAffine3::from_translation(t) * DAffine3::from_mat3(rot) * DAffine3::from_scale(DVec3::splat(args.mesh_scale));
+    if !args.mesh_world {
+        return local;
+    }
+    let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
+    let centre = DVec3::new(dims[0] as f64 - 1.0, dims[1] as f64 - 1.0, dims[2] as f64 - 1.0) / 2.0;
+    DAffine3::from_translation(centre) * DAffine3::from_scale(1.0 / sp) * local
+}

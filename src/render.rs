@@ -21,6 +21,7 @@ use crate::classify::{Classifier, TransferFunction};
 use crate::composite::Mode;
 use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary, render_brute, volume_rect};
 use crate::composite::{Intermediate, Rect};
+use crate::data::bcc::{BccLattice, BccStack};
 use crate::data::normals::CellSource;
 use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
 use crate::data::slices::{Densities, SliceStack};
@@ -450,6 +451,9 @@ pub struct Renderer {
     /// Bumped whenever the classification changes (invalidates masks).
     generation: u64,
     stacks: [Option<SliceStack>; 3],
+    /// Per axis, the interleaved slices of the BCC grid ([`Lattice::Bcc`]; the
+    /// RLE paths read them instead of [`Renderer::stacks`]).
+    bcc: [Option<BccStack>; 3],
     /// Per axis, every voxel's normal code (raycast paths with [`Normals::Codes`]).
     normals: [Option<NormalStack>; 3],
     /// The shade table of the raycast paths' table shading (kept across frames,
@@ -502,6 +506,7 @@ impl Renderer {
             settings,
             generation: 0,
             stacks: [None, None, None],
+            bcc: [None, None, None],
             normals: [None, None, None],
             shade: ShadeTable::default(),
             codes: [None, None, None],
@@ -785,7 +790,7 @@ impl Renderer {
         let per = |f: &dyn Fn(usize) -> usize| [0, 1, 2].map(|a| f(a) as u64);
         Memory {
             volume: self.volume.bytes(),
-            stacks: per(&|a| self.stacks[a].as_ref().map_or(0, SliceStack::bytes)),
+            stacks: per(&|a| self.stacks[a].as_ref().map_or(0, SliceStack::bytes) + self.bcc[a].as_ref().map_or(0, BccStack::bytes)),
             normals: per(&|a| self.normals[a].as_ref().map_or(0, NormalStack::bytes)),
             cell_codes: per(&|a| self.codes[a].as_ref().map_or(0, |c| c.1.bytes())),
             masks: per(&|a| {
@@ -823,7 +828,12 @@ impl Renderer {
     /// and are current count 0), and the intermediate image's growth.
     fn missing_bytes(&self, axis: usize) -> Memory {
         let mut m = estimate_axis(&self.volume, &self.settings, self.code_bits(), axis);
-        if self.stacks[axis].as_ref().is_some_and(|s| s.is_resident() && s.perm() == self.axis_perm(axis)) {
+        if self.stacks[axis].as_ref().is_some_and(|s| s.is_resident() && s.perm() == self.axis_perm(axis))
+            && self.settings.lattice == Lattice::Cartesian
+        {
+            m.stacks[axis] = 0;
+        }
+        if self.bcc[axis].is_some() && self.settings.lattice == Lattice::Bcc {
             m.stacks[axis] = 0;
         }
         if self.normals[axis].is_some() {
@@ -845,6 +855,7 @@ impl Renderer {
             self.unpark()?;
         }
         self.stacks[axis] = None;
+        self.bcc[axis] = None;
         self.normals[axis] = None;
         self.codes[axis] = None;
         self.masks[axis] = None;
@@ -923,9 +934,10 @@ impl Renderer {
     }
 
     /// What a post-classified encoding depends on (the key without the
-    /// tissue: it keeps the cells every tissue preset may show).
+    /// tissue: it keeps the cells every tissue preset may show), and the lattice.
     fn rle_enc_key(&self) -> ClassKey {
-        (self.generation << 10) | ((self.settings.deluxe.post as u64) << 1) | (self.settings.mode == Mode::Blend) as u64
+        let bcc = (self.settings.lattice == Lattice::Bcc) as u64;
+        (self.generation << 10) | (bcc << 9) | ((self.settings.deluxe.post as u64) << 1) | (self.settings.mode == Mode::Blend) as u64
     }
 
     /// The classifier the pre-classified paths encode: the current mode's, with
@@ -994,9 +1006,25 @@ impl Renderer {
         self.check_axis_size(axis)?;
         self.fit_budget(axis)?;
         let t = Instant::now();
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        if self.settings.lattice == Lattice::Bcc {
+            // the RLE paths on the BCC grid (check_deluxe allows no other):
+            // the interleaved slices, their classification and encoding
+            if self.bcc[axis].is_none() {
+                let t = Instant::now();
+                self.unpark()?;
+                let vol = &self.volume;
+                self.bcc[axis] = Some(self.pool.install(|| BccStack::try_new(vol, axis))?);
+                self.build_times.stacks[axis] = ms(t);
+            }
+            self.ensure_rle(axis, true);
+            return Ok(t.elapsed().as_secs_f64() * 1e3);
+        }
+        if self.bcc.iter().any(Option::is_some) {
+            self.bcc = [None, None, None];
+        }
         let compact = compact_binary(&self.volume, &self.settings);
         let raycast = matches!(self.settings.method, Method::Binary | Method::Brute);
-        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         if compact && self.normals[axis].is_none() {
             // the densities and codes packed in 3 (8-bit) or 4 bytes a voxel,
             // no f32 stack, and the volume let go once the cells hold its voxels
@@ -1087,31 +1115,46 @@ impl Renderer {
             }
         }
         if matches!(self.settings.method, Method::Rle | Method::BruteRle) {
-            let key = self.rle_key();
-            if !self.rle.is_for(key) {
-                let cls = self.preclass_classifier().into_owned();
-                if self.settings.deluxe.post {
-                    // the encoding keeps the cells any tissue preset of the mode may show
-                    let visible: Vec<&Classifier> = match (&self.tissues, self.settings.mode) {
-                        (Some(ts), Mode::Iso) => ts.iso_cls.iter().collect(),
-                        (Some(ts), Mode::Blend) => ts.blend_cls.iter().collect(),
-                        (None, _) => vec![&cls],
-                    };
-                    self.rle.reset_post(key, self.rle_enc_key(), &cls, &visible, self.volume.spacing());
-                } else {
-                    self.rle.reset(key, &cls, self.volume.spacing());
-                }
-            }
-            if self.settings.method == Method::Rle {
-                // (an encoding, or a pointer table over another axis's: see RleCache::ensure_axis)
-                let t = Instant::now();
-                let (rle, stack) = (&mut self.rle, self.stacks[axis].as_ref().expect("stack built above"));
-                if self.pool.install(|| rle.ensure_axis(stack)) {
-                    self.build_times.rle[axis] = ms(t);
-                }
-            }
+            self.ensure_rle(axis, false);
         }
         Ok(t.elapsed().as_secs_f64() * 1e3)
+    }
+
+    /// The pre-classified state of `axis`: the classification, and (for
+    /// [`Method::Rle`]) the encoding of the axis's slices — the cartesian
+    /// stack, or the interleaved BCC slices when `bcc` (the classification
+    /// key tells the two apart).
+    fn ensure_rle(&mut self, axis: usize, bcc: bool) {
+        let key = self.rle_key();
+        if !self.rle.is_for(key) {
+            let cls = self.preclass_classifier().into_owned();
+            if self.settings.deluxe.post {
+                // the encoding keeps the cells any tissue preset of the mode may show
+                let visible: Vec<&Classifier> = match (&self.tissues, self.settings.mode) {
+                    (Some(ts), Mode::Iso) => ts.iso_cls.iter().collect(),
+                    (Some(ts), Mode::Blend) => ts.blend_cls.iter().collect(),
+                    (None, _) => vec![&cls],
+                };
+                self.rle.reset_post(key, self.rle_enc_key(), &cls, &visible, self.volume.spacing());
+            } else {
+                self.rle.reset(key, &cls, self.volume.spacing());
+            }
+        }
+        if self.settings.method == Method::Rle {
+            // (an encoding, or a pointer table over another axis's: see RleCache::ensure_axis)
+            let t = Instant::now();
+            let rle = &mut self.rle;
+            let built = if bcc {
+                let src = self.bcc[axis].as_ref().expect("BCC slices built above");
+                self.pool.install(|| rle.ensure_axis(src))
+            } else {
+                let stack = self.stacks[axis].as_ref().expect("stack built above");
+                self.pool.install(|| rle.ensure_axis(stack))
+            };
+            if built {
+                self.build_times.rle[axis] = t.elapsed().as_secs_f64() * 1e3;
+            }
+        }
     }
 
     /// Builds the stack and mask of every axis now (so frames measure only shear,
@@ -1166,6 +1209,13 @@ impl Renderer {
             }
         }
         let (dims, spacing) = (self.volume.dims(), self.volume.spacing());
+        let bcc = self.settings.lattice == Lattice::Bcc;
+        if bcc && self.projection.is_perspective() {
+            return Err(Error::value("settings", "the BCC grid (--grid bcc) renders parallel projections only"));
+        }
+        if bcc && self.limiter.is_some() {
+            return Err(Error::value("settings", "the BCC grid (--grid bcc) does not take clip regions or geometry"));
+        }
         // a perspective frame: the camera scaled by its field of view, and its views
         let persp = match self.projection.resolve(camera, dims, spacing)? {
             None => None,
@@ -1199,6 +1249,15 @@ impl Renderer {
         let mut plan = self.plan.take().unwrap_or_else(|| FramePlan::parallel(&f, spacing));
         let limits = plan.take_limits();
         match &persp {
+            // the BCC grid: the interleaved slices' factorization (the opacity
+            // ratio relative to the volume's own spacing), sub-grid B's slices
+            // half a cell off A's, whose samples the sheared grid meets
+            None if bcc => {
+                let lattice = BccLattice::new(dims)?;
+                plan.set_parallel(&lattice.factorization(camera, spacing, f.axis, f.zoom)?, spacing);
+                plan.offset_slices(BccLattice::slice_offset);
+                plan.shift_sheared(BccLattice::SHEARED_SHIFT);
+            }
             None => plan.set_parallel(&f, spacing),
             Some((_, pv)) => plan.set_perspective(pv, &f, spacing, NEAR_SLICES),
         }
@@ -1338,7 +1397,12 @@ impl Renderer {
                 None => self.classifier.set_sample_ratio(plan.opacity_ratio),
             }
         }
-        let stack = self.stacks[axis].as_ref().expect("ensure_axis builds the stack");
+        // the BCC grid's interleaved slices (RLE paths only), else the cartesian stack
+        let bcc = self.bcc[axis].as_ref().filter(|_| self.settings.lattice == Lattice::Bcc);
+        let stack = match bcc {
+            Some(b) => &b.stack,
+            None => self.stacks[axis].as_ref().expect("ensure_axis builds the stack"),
+        };
         let (cls, iso, matcher): (&Classifier, f32, &Matcher) = match (&self.tissues, mode) {
             (Some(ts), Mode::Iso) => (&ts.iso_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
             (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
@@ -1411,9 +1475,10 @@ impl Renderer {
                     stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
-                    match settings.method {
-                        Method::Rle => rle.render(plan, settings.ert, rect, inter),
-                        _ => rle.render_brute(stack, plan, settings.ert, rect, inter),
+                    match (settings.method, bcc) {
+                        (Method::Rle, _) => rle.render(plan, settings.ert, rect, inter),
+                        (_, Some(b)) => rle.render_brute(b, plan, settings.ert, rect, inter),
+                        (_, None) => rle.render_brute(stack, plan, settings.ert, rect, inter),
                     }
                     stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
                     rect
@@ -1496,7 +1561,12 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
         ..Default::default()
     };
     let a = axis.min(2);
-    m.stacks[a] = if compact { 0 } else { voxels * 4 };
+    m.stacks[a] = match settings.lattice {
+        _ if compact => 0,
+        Lattice::Cartesian => voxels * 4,
+        // the interleaved BCC slices (f32)
+        Lattice::Bcc => BccLattice::new(dims).map_or(0, |l| l.samples() as u64 * 4),
+    };
     let raycast = matches!(settings.method, Method::Binary | Method::Brute);
     if raycast && settings.normals == Normals::Codes {
         m.normals[a] = if compact {
@@ -1542,8 +1612,13 @@ fn check_settings(s: &Settings) -> Result<()> {
 ///   [`Renderer::finish_plan`]).
 fn check_deluxe(s: &Settings) -> Result<()> {
     let unsupported = |what: &str| Err(Error::value("settings", format!("{what} is not available with --method {}", s.method.name())));
-    if s.lattice == Lattice::Bcc {
-        return unsupported("the BCC grid");
+    // the BCC grid: the pre-classified paths (parallel projection; the
+    // renderer refuses a perspective BCC frame)
+    if s.lattice == Lattice::Bcc && !matches!(s.method, Method::Rle | Method::BruteRle) {
+        return unsupported("the BCC grid (--grid bcc)");
+    }
+    if s.lattice == Lattice::Bcc && s.rle_reuse {
+        return Err(Error::value("settings", "--rle-reuse shares a cartesian grid's scanlines; it does not combine with --grid bcc"));
     }
     Ok(())
 }

@@ -17,9 +17,8 @@ use rayon::prelude::*;
 use crate::composite::Rect;
 use crate::composite::{Intermediate, composite_premultiplied, terminated};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
-use crate::data::slices::SliceStack;
 use crate::encode::rle::runs::{Cursor, INF};
-use crate::encode::rle::{PostTables, Preclass, RleVolume, RleVoxel, ViewTables};
+use crate::encode::rle::{PostTables, Preclass, RleVolume, RleVoxel, ViewTables, VoxelSource};
 use crate::view::plan::{FramePlan, MapKind, floor_i64};
 
 /// What a sample is made of (a sampler of the one slice traversal): each
@@ -49,7 +48,7 @@ pub trait Sampler: Sync {
     /// A blend of 4-vectors → the premultiplied sample.
     fn finish(&self, s: [f32; 4]) -> [f32; 4];
     /// The brute force's 4-vector of voxel `(i, j, k)` of `stack`.
-    fn brute_voxel(&self, pre: &Preclass, stack: &SliceStack, i: usize, j: usize, k: usize) -> [f32; 4];
+    fn brute_voxel<V: VoxelSource + ?Sized>(&self, pre: &Preclass, stack: &V, i: usize, j: usize, k: usize) -> [f32; 4];
     /// [`Sampler::voxel`], [`Sampler::MISSING`] for `None`.
     #[inline(always)]
     fn get_or_missing(&self, v: Option<RleVoxel>) -> [f32; 4] {
@@ -72,7 +71,7 @@ impl Sampler for ViewTables {
         s
     }
     #[inline(always)]
-    fn brute_voxel(&self, pre: &Preclass, stack: &SliceStack, i: usize, j: usize, k: usize) -> [f32; 4] {
+    fn brute_voxel<V: VoxelSource + ?Sized>(&self, pre: &Preclass, stack: &V, i: usize, j: usize, k: usize) -> [f32; 4] {
         self.get(pre.classify_voxel(stack, i, j, k))
     }
 }
@@ -89,7 +88,7 @@ impl Sampler for PostTables {
         PostTables::finish(self, s)
     }
     #[inline(always)]
-    fn brute_voxel(&self, pre: &Preclass, stack: &SliceStack, i: usize, j: usize, k: usize) -> [f32; 4] {
+    fn brute_voxel<V: VoxelSource + ?Sized>(&self, pre: &Preclass, stack: &V, i: usize, j: usize, k: usize) -> [f32; 4] {
         PostTables::voxel(self, pre.post_voxel(stack, i, j, k))
     }
 }
@@ -938,8 +937,8 @@ impl<S: Sampler> RleFrame<'_, S> {
 /// sample between the last slice and this one first. No runs, no links; same
 /// positions, weights, sampler and arithmetic.
 #[allow(clippy::too_many_arguments)]
-pub fn render_brute_preclassified<S: Sampler>(
-    stack: &SliceStack,
+pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
+    stack: &V,
     pre: &Preclass,
     tables: &S,
     plan: &FramePlan,
@@ -950,7 +949,7 @@ pub fn render_brute_preclassified<S: Sampler>(
 ) {
     out.seal(rect);
     let Some(r) = rect else { return };
-    let [ni, nj, _] = stack.n;
+    let [ni, nj, _] = stack.slices().n;
     let gw = out.size[0];
     let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
     let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];

@@ -8,8 +8,11 @@
 //! out along one principal axis, with the shared bilinear sample and gradient)
 //! and the per-axis normal codes ([`normals`]: VolPack's 14-bit quantized
 //! gradients, alone or packed with the densities; [`packing`] builds the
-//! packed cells of an integer scan in place, without the volume beside them).
+//! packed cells of an integer scan in place, without the volume beside them)
+//! and the volume resampled to a body-centred cubic grid ([`bcc`]: two
+//! interleaved sub-grids, slices alternating between them).
 
+pub mod bcc;
 pub mod io;
 pub mod normals;
 pub mod orientation;

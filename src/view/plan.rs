@@ -409,6 +409,39 @@ impl FramePlan {
         self.exponents.clear();
     }
 
+    /// Moves each slice's samples by its own in-slice offset `off(k)` (voxels
+    /// along `(i, j)`): the exact translations, their integer parts and the
+    /// maps together, so every traversal sees it. What a lattice whose slices
+    /// are not stacked straight needs: the two sub-grids of a BCC grid, half a
+    /// cell apart ([`crate::data::bcc::BccLattice::slice_offset`]). For a
+    /// parallel plan (after [`FramePlan::set_parallel`], before
+    /// [`FramePlan::set_pitch`], which keeps the offsets).
+    pub fn offset_slices(&mut self, off: impl Fn(usize) -> [f64; 2]) {
+        assert_eq!(self.kind, MapKind::Translate, "offset_slices needs a parallel plan");
+        let st = &mut self.shear;
+        for k in 0..st.slices() {
+            for (a, o) in off(k).into_iter().enumerate() {
+                let t = st.trans[a][k] + o;
+                st.trans[a][k] = t;
+                st.floor[a][k] = t.floor() as i32;
+                self.maps[k].floor[a] = st.floor[a][k];
+                self.maps[k].weight[a] = (t - st.floor[a][k] as f64) as f32;
+            }
+        }
+        st.ends = [0, 1].map(|a| [st.trans[a].first().copied().unwrap_or(0.0), st.trans[a].last().copied().unwrap_or(0.0)]);
+    }
+
+    /// Moves the plan's sheared coordinates by `d` voxels: the plan's
+    /// sheared point `(a, b)` is its view's `(a − d_a, b − d_b)` (the warp and
+    /// its inverse follow; the slices' maps are the caller's to shift, with
+    /// [`FramePlan::offset_slices`]). The BCC grid's sheared grid meets
+    /// sub-grid A's samples ([`crate::data::bcc::BccLattice::SHEARED_SHIFT`]).
+    pub fn shift_sheared(&mut self, d: [f64; 2]) {
+        let t = |x: f64, y: f64| DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(x, y, 1.0));
+        self.warp.forward *= t(-d[0], -d[1]);
+        self.warp.inverse = t(d[0], d[1]) * self.warp.inverse;
+    }
+
     /// Overwrites this plan with that of perspective view `pv`, reusing its
     /// arrays. `f` is the parallel factorization of the same camera (same
     /// principal axis and slice order): the plan's [`FramePlan::view`], read for

@@ -9,7 +9,7 @@
 //!   index stores both. A voxel whose node has zero opacity is transparent. Its
 //!   shading index ([`RleVoxel::normal`]) is the 14-bit hemi-octahedral code
 //!   ([`encode_normal`]) of the central-difference gradient
-//!   ([`SliceStack::gradient_at`]) mapped to object (world) space with the voxel
+//!   ([`crate::data::slices::SliceStack::gradient_at`]) mapped to object (world) space with the voxel
 //!   spacing, up to sign because the headlight shading is two-sided; code
 //!   [`ZERO_NORMAL`] is a zero gradient, which faces the viewer like
 //!   [`crate::classify::shading::headlight_ndl`]'s.
@@ -19,7 +19,7 @@
 //!   the voxels of the non-transparent runs are stored. A gap of at most
 //!   [`BRIDGE`] transparent voxels between two runs is bridged: stored as
 //!   zero-opacity voxels, which shade to exact zeros, so the runs are longer and
-//!   the compositing loop changes run less often. Built from a [`SliceStack`]
+//!   the compositing loop changes run less often. Built from a [`crate::data::slices::SliceStack`]
 //!   when a view first needs the axis; a new transfer function or tissue
 //!   re-encodes. Two axes may share one encoding (Sweeney & Mueller's re-use
 //!   of RLE runs, §3.1): when the RLE paths read z through the mirrored
@@ -108,7 +108,7 @@ pub mod preclass;
 pub mod runs;
 pub mod tables;
 
-pub use preclass::{BRIDGE, BRIDGE_NORMAL, PostVisible, Preclass, RleVoxel};
+pub use preclass::{BRIDGE, BRIDGE_NORMAL, PostVisible, Preclass, RleVoxel, VoxelSource};
 pub use runs::RleVolume;
 pub use tables::{PostTables, ViewTables};
 
@@ -118,7 +118,6 @@ use crate::composite::Intermediate;
 use crate::composite::Rect;
 use crate::composite::slices::{render_brute_preclassified, render_rle};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
-use crate::data::slices::SliceStack;
 use crate::view::plan::FramePlan;
 
 /// What a [`RleCache`]'s encodings were built for (chosen by the owner).
@@ -197,15 +196,18 @@ impl RleCache {
         self.axes[axis].as_ref()
     }
 
-    /// Makes the encoding of `stack`'s axis, with `stack`'s permutation,
-    /// unless it is already there (on the current rayon pool): the
+    /// Makes the encoding of `src`'s axis, with its permutation, unless it
+    /// is already there (on the current rayon pool): the
     /// [`RleVolume::transposed`] of another axis's encoding whose scanlines are
     /// the same (its permutation with `j` and `k` swapped), else a new
-    /// encoding of `stack`. An encoding of the axis under another permutation
+    /// encoding of `src`. An encoding of the axis under another permutation
     /// is replaced. Returns true if it built anything; false also when there
-    /// is no classification.
-    pub fn ensure_axis(&mut self, stack: &SliceStack) -> bool {
+    /// is no classification. (`src` is a [`SliceStack`] or the interleaved
+    /// slices of a BCC grid; the owner resets the cache when it switches
+    /// between them.)
+    pub fn ensure_axis<S: VoxelSource + ?Sized>(&mut self, src: &S) -> bool {
         let Some(pre) = &self.pre else { return false };
+        let stack = src.slices();
         let (axis, perm) = (stack.axis, stack.perm());
         if self.axes[axis].as_ref().is_some_and(|e| e.perm == perm && e.n == stack.n) {
             return false;
@@ -217,8 +219,8 @@ impl RleCache {
             (None, post) => {
                 self.encoded += 1;
                 match post {
-                    None => RleVolume::encode(stack, pre),
-                    Some(vis) => RleVolume::encode_post(stack, pre, vis),
+                    None => RleVolume::encode(src, pre),
+                    Some(vis) => RleVolume::encode_post(src, pre, vis),
                 }
             }
         });
@@ -281,7 +283,14 @@ impl RleCache {
 
     /// The brute-force pre-classified reference of view `f` over `rect` (see
     /// [`render_brute_preclassified`]).
-    pub fn render_brute(&mut self, stack: &SliceStack, plan: &FramePlan, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
+    pub fn render_brute<V: VoxelSource + ?Sized>(
+        &mut self,
+        stack: &V,
+        plan: &FramePlan,
+        ert: f32,
+        rect: Option<Rect>,
+        out: &mut Intermediate,
+    ) {
         match (&self.pre, &self.post_tables) {
             (Some(pre), Some(pt)) if self.post.is_some() => {
                 render_brute_preclassified(stack, pre, pt.as_ref(), plan, ert, rect, &mut self.slice_buf, out)

@@ -31,6 +31,33 @@ pub struct RleVoxel {
     pub normal: u16,
 }
 
+/// What the pre-classified paths read voxels from: slices of densities (a
+/// [`SliceStack`]: its sizes, axis and densities) and each voxel's normal
+/// code. A cartesian [`SliceStack`] is its own source (central differences
+/// between neighbouring voxels, [`voxel_normal`]); the interleaved slices of a
+/// BCC grid ([`crate::data::bcc::BccStack`]) differentiate across slices two
+/// apart (the same sub-grid). The encoder ([`super::RleVolume::encode`]) and
+/// the brute force ([`crate::composite::slices::render_brute_preclassified`])
+/// see only this.
+pub trait VoxelSource: Sync {
+    /// The slices' densities (sizes along `(i, j, k)`, principal axis).
+    fn slices(&self) -> &SliceStack;
+    /// The normal code of voxel `(i, j, k)` (`inv_spacing`: `1 / spacing` per
+    /// object axis of the cartesian volume).
+    fn normal(&self, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16;
+}
+
+impl VoxelSource for SliceStack {
+    #[inline(always)]
+    fn slices(&self) -> &SliceStack {
+        self
+    }
+    #[inline]
+    fn normal(&self, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
+        voxel_normal(self, i, j, k, inv_spacing)
+    }
+}
+
 /// Source of [`Preclass`] ids (tables remember which classification they were built for).
 static PRECLASS_IDS: AtomicU64 = AtomicU64::new(1);
 
@@ -70,19 +97,19 @@ impl Preclass {
 
     /// Voxel `(i, j, k)` of `stack`, or `None` when it is transparent.
     #[inline]
-    pub fn classify_voxel(&self, stack: &SliceStack, i: usize, j: usize, k: usize) -> Option<RleVoxel> {
-        let node = self.cls.nearest_node(stack.at(i, j, k));
+    pub fn classify_voxel<S: VoxelSource + ?Sized>(&self, stack: &S, i: usize, j: usize, k: usize) -> Option<RleVoxel> {
+        let node = self.cls.nearest_node(stack.slices().at(i, j, k));
         if !(self.alpha[node] > 0.0) {
             return None;
         }
-        Some(RleVoxel { class: node as u16, normal: voxel_normal(stack, i, j, k, self.inv_spacing) })
+        Some(RleVoxel { class: node as u16, normal: stack.normal(i, j, k, self.inv_spacing) })
     }
 
     /// Voxel `(i, j, k)` of `stack` as the post-classified encoding stores it
     /// (Deluxe P): its node and normal code, transparent or not.
     #[inline]
-    pub fn post_voxel(&self, stack: &SliceStack, i: usize, j: usize, k: usize) -> RleVoxel {
-        RleVoxel { class: self.cls.nearest_node(stack.at(i, j, k)) as u16, normal: voxel_normal(stack, i, j, k, self.inv_spacing) }
+    pub fn post_voxel<S: VoxelSource + ?Sized>(&self, stack: &S, i: usize, j: usize, k: usize) -> RleVoxel {
+        RleVoxel { class: self.cls.nearest_node(stack.slices().at(i, j, k)) as u16, normal: stack.normal(i, j, k, self.inv_spacing) }
     }
 
     /// The class node of voxel `(i, j, k)`.

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::preclass::{BRIDGE, BRIDGE_NORMAL, PostVisible, Preclass, RleVoxel};
+use super::preclass::{BRIDGE, BRIDGE_NORMAL, PostVisible, Preclass, RleVoxel, VoxelSource};
 use crate::composite::Rect;
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::data::slices::{SliceStack, prefetch};
@@ -83,10 +83,11 @@ struct SliceRuns {
 }
 
 impl RleVolume {
-    /// Encodes `stack` (one principal axis) under classification `pre`, in
+    /// Encodes `src` (one principal axis's slices: a [`SliceStack`], or the
+    /// interleaved slices of a BCC grid) under classification `pre`, in
     /// parallel over slices (on the current rayon pool).
-    pub fn encode(stack: &SliceStack, pre: &Preclass) -> Self {
-        Self::encode_with(stack, pre, None)
+    pub fn encode<S: VoxelSource + ?Sized>(src: &S, pre: &Preclass) -> Self {
+        Self::encode_with(src, pre, None)
     }
 
     /// The post-classified encoding (Deluxe P): a voxel is stored (with its
@@ -95,8 +96,8 @@ impl RleVolume {
     /// may be visible under `vis`, so every voxel of such a cell is stored and
     /// a sample that reads a voxel left out is invisible. Bridged gaps store
     /// their voxels in full too.
-    pub fn encode_post(stack: &SliceStack, pre: &Preclass, vis: &PostVisible) -> Self {
-        Self::encode_with(stack, pre, Some(vis))
+    pub fn encode_post<S: VoxelSource + ?Sized>(src: &S, pre: &Preclass, vis: &PostVisible) -> Self {
+        Self::encode_with(src, pre, Some(vis))
     }
 
     /// Per voxel of slice `k`, whether the post-classified encoding stores it
@@ -136,19 +137,20 @@ impl RleVolume {
         keep
     }
 
-    fn encode_with(stack: &SliceStack, pre: &Preclass, post: Option<&PostVisible>) -> Self {
+    fn encode_with<S: VoxelSource + ?Sized>(src: &S, pre: &Preclass, post: Option<&PostVisible>) -> Self {
+        let stack: &SliceStack = src.slices();
         let [ni, nj, nk] = stack.n;
         let slices: Vec<SliceRuns> = (0..nk)
             .into_par_iter()
             .map(|k| {
                 let keep = post.map(|vis| Self::post_mask(stack, pre, vis, k));
                 let voxel = |i: usize, j: usize| match &keep {
-                    None => pre.classify_voxel(stack, i, j, k),
-                    Some(m) => m[i + ni * j].then(|| pre.post_voxel(stack, i, j, k)),
+                    None => pre.classify_voxel(src, i, j, k),
+                    Some(m) => m[i + ni * j].then(|| pre.post_voxel(src, i, j, k)),
                 };
                 let bridge = |i: usize, j: usize| match &keep {
                     None => pre.bridge_voxel(stack, i, j, k),
-                    Some(_) => pre.post_voxel(stack, i, j, k),
+                    Some(_) => pre.post_voxel(src, i, j, k),
                 };
                 let mut s = SliceRuns {
                     runs: Vec::new(),

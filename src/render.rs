@@ -1649,8 +1649,7 @@ fn ray_context<'a>(
     normals: Option<&'a NormalStack>,
     shade: &'a mut ShadeTable,
 ) -> RayContext<'a> {
-    let ctx = RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert)
-        .with_intermediate(plan.intermediate());
+    let ctx = RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert).with_intermediate(plan.intermediate());
     match (settings.normals, normals) {
         (Normals::Codes, Some(ns)) => {
             shade.update(headlight_object(&plan.view), settings.shading);

@@ -115,7 +115,7 @@ fn geometry_mesh_in_front_behind_and_inside_the_volume() {
                 let mut geo = GeometryImage::new(64, 64);
                 rasterize(&mesh, &Material::default(), Cull::None, &proj, &mut geo).unwrap();
                 assert!(geo.coverage() > 0.01, "{name}: the mesh is on screen ({})", geo.coverage());
-                r.set_limiter(Some(Arc::new(GeometryLimits::new(proj.clone(), &geo))));
+                r.set_limiter(Some(Arc::new(GeometryLimits::new(proj, &geo))));
                 let mut img = Image::new(64, 64);
                 r.render(&cam, &mut img).unwrap();
                 r.set_limiter(None);

@@ -300,7 +300,7 @@ mod tests {
                     let proj = Projector::new(&cam, &projection, dims, [1.0; 3]).unwrap();
                     let mut geo = GeometryImage::new(96, 80);
                     rasterize(mesh, &Material::default(), Cull::None, &proj, &mut geo).unwrap();
-                    let (fast, full) = (GeometryLimits::new(proj.clone(), &geo), GeometryLimits::visiting_every_pixel(proj, &geo));
+                    let (fast, full) = (GeometryLimits::new(proj, &geo), GeometryLimits::visiting_every_pixel(proj, &geo));
                     let mut a = RayLimits::open(plan.grid.size, plan.slices());
                     let mut b = a.clone();
                     fast.limit(&plan, &mut a);

@@ -59,7 +59,7 @@ fn fan(face: &[u32], out: &mut Vec<[u32; 3]>) {
 }
 
 fn read_obj(path: &Path) -> std::result::Result<Triangles, String> {
-    let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true, ..Default::default() };
+    let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     // (materials are not needed: a missing .mtl is not an error)
     let (models, _materials) = tobj::load_obj(path, &opts).map_err(|e| format!("cannot read as OBJ: {e}"))?;
     let (mut vertices, mut triangles) = (vec![], vec![]);

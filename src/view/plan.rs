@@ -820,30 +820,8 @@ impl FramePlan {
                 let off = self.grid.pad as i64 - self.maps[k].floor[axis] as i64;
                 [c0 + off, c1 + off]
             }
-            MapKind::ScaleTranslate => {
-                let m = &self.scaled[k];
-                let pad = self.grid.pad as f64;
-                // the estimate from the inverse map, then exact by the map itself
-                // (monotone: σ > 0), over pixel indices that may be negative
-                let map = self.axis_map(k, axis);
-                let cell = |x: i64| map.cell(x).0;
-                let inv = |c: i64| floor_i64((c as f64 - m.trans[axis]) / m.scale / self.grid.pitch + pad);
-                let mut x0 = inv(c0);
-                while cell(x0) >= c0 {
-                    x0 -= 1;
-                }
-                while cell(x0) < c0 {
-                    x0 += 1;
-                }
-                let mut x1 = inv(c1 + 1);
-                while cell(x1) > c1 {
-                    x1 -= 1;
-                }
-                while cell(x1 + 1) <= c1 {
-                    x1 += 1;
-                }
-                [x0, x1]
-            }
+            // the estimate from the inverse map, then exact by the map itself
+            MapKind::ScaleTranslate => self.axis_map(k, axis).pixels_of_cells(c0, c1),
         }
     }
 

@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{bits, blobs};
+use common::{bits, blobs, random_tf};
 use glam::{DMat3, EulerRot};
 use shearwarp::accuracy::metrics::rmse;
 use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
@@ -29,18 +29,6 @@ const I: Deluxe = Deluxe { intermediate: true, post: false, matched: false };
 fn try_render(r: &mut Renderer, cam: &Camera) -> Option<Image> {
     let mut img = Image::new(cam.size[0], cam.size[1]);
     r.render(cam, &mut img).ok().map(|_| img)
-}
-
-/// The transfer functions of the invariant tests: a threshold, a ramp and a
-/// band of opacity (non-monotone: what the blend mask's range test is for).
-fn random_tf(seed: u64) -> TransferFunction {
-    let a = 20.0 + (seed % 80) as f32;
-    match seed % 3 {
-        0 => TransferFunction::threshold(a, [0.9, 0.8, 0.7]),
-        1 => TransferFunction::ramp(a, a + 60.0, 0.4 + (seed % 5) as f32 * 0.1, [0.5, 0.7, 0.9]),
-        _ => TransferFunction::new(vec![(a, 0.0), (a + 5.0, 0.8), (a + 10.0, 0.0)], vec![(0.0, [1.0, 0.2, 0.2]), (250.0, [0.2, 0.2, 1.0])])
-            .unwrap(),
-    }
 }
 
 fn renderer(vol: &Volume, tissues: bool, tf: &TransferFunction, s: Settings, proj: Projection) -> Renderer {

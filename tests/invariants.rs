@@ -1,6 +1,9 @@
 //! Correctness invariants of the binary fast rotator, as property tests over
 //! random volumes, transfer functions and views.
 
+mod common;
+
+use common::random_tf;
 use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
 use shearwarp::classify::{Classifier, TransferFunction};
@@ -61,17 +64,6 @@ fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
 fn as_u16(v: &Volume) -> Volume {
     let data = v.to_f32().iter().map(|x| x.round() as u16).collect();
     Volume::new(v.dims(), v.spacing(), VoxelData::U16(data)).unwrap()
-}
-
-fn random_tf(seed: u64) -> TransferFunction {
-    let a = 20.0 + (seed % 80) as f32;
-    match seed % 3 {
-        0 => TransferFunction::threshold(a, [0.9, 0.8, 0.7]),
-        1 => TransferFunction::ramp(a, a + 60.0, 0.4 + (seed % 5) as f32 * 0.1, [0.5, 0.7, 0.9]),
-        // non-monotone: a band of opacity
-        _ => TransferFunction::new(vec![(a, 0.0), (a + 5.0, 0.8), (a + 10.0, 0.0)], vec![(0.0, [1.0, 0.2, 0.2]), (250.0, [0.2, 0.2, 1.0])])
-            .unwrap(),
-    }
 }
 
 fn render(vol: &Volume, tf: &TransferFunction, s: Settings, cam: &Camera) -> (Image, Vec<[f32; 4]>, Vec<f32>) {

@@ -3,6 +3,9 @@
 //! across thread counts, its encoding round-trips to the classified voxels, it
 //! follows classification changes, and it draws the same object as the binary path.
 
+mod common;
+
+use common::random_tf;
 use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
 use shearwarp::classify::presets::{Tissue, ct_tissues};
@@ -59,17 +62,6 @@ fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
         }
     }
     Volume::new(dims, spacing, VoxelData::F32(data)).unwrap()
-}
-
-fn random_tf(seed: u64) -> TransferFunction {
-    let a = 20.0 + (seed % 80) as f32;
-    match seed % 3 {
-        0 => TransferFunction::threshold(a, [0.9, 0.8, 0.7]),
-        1 => TransferFunction::ramp(a, a + 60.0, 0.4 + (seed % 5) as f32 * 0.1, [0.5, 0.7, 0.9]),
-        // non-monotone: a band of opacity
-        _ => TransferFunction::new(vec![(a, 0.0), (a + 5.0, 0.8), (a + 10.0, 0.0)], vec![(0.0, [1.0, 0.2, 0.2]), (250.0, [0.2, 0.2, 1.0])])
-            .unwrap(),
-    }
 }
 
 /// One frame: the final image and the full intermediate grid (transparent

@@ -133,3 +133,16 @@ pub fn sphere_scene() -> (Volume, TransferFunction, shearwarp::accuracy::referen
     let refr = shearwarp::accuracy::reference::ReferenceRenderer::new(&vol);
     (vol, tf, refr)
 }
+
+/// The transfer functions of the invariant tests, by seed: a threshold, a
+/// ramp and a band of opacity (non-monotone: what the blend mask's range
+/// test is for).
+pub fn random_tf(seed: u64) -> TransferFunction {
+    let a = 20.0 + (seed % 80) as f32;
+    match seed % 3 {
+        0 => TransferFunction::threshold(a, [0.9, 0.8, 0.7]),
+        1 => TransferFunction::ramp(a, a + 60.0, 0.4 + (seed % 5) as f32 * 0.1, [0.5, 0.7, 0.9]),
+        _ => TransferFunction::new(vec![(a, 0.0), (a + 5.0, 0.8), (a + 10.0, 0.0)], vec![(0.0, [1.0, 0.2, 0.2]), (250.0, [0.2, 0.2, 1.0])])
+            .unwrap(),
+    }
+}

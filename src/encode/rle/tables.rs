@@ -124,19 +124,19 @@ impl PostTables {
         true
     }
 
-    /// The 4-vector `[node, n]` of a stored voxel, its normal turned toward
-    /// the light. A normal code holds a direction up to sign (the shading is
-    /// two-sided), so two neighbours' codes may point opposite ways; their
-    /// blend would cancel (dark seams where the surface's normal crosses the
-    /// codes' hemisphere boundary, seen between voxels under M and
-    /// `--quality`): facing every normal to the light first makes the blend
-    /// the two-sided shading's own.
+    /// The 4-vector `[node, n]` of a stored voxel. (A normal code holds a
+    /// direction up to sign, so two neighbours' codes may point opposite
+    /// ways where the surface's normal crosses the codes' hemisphere
+    /// boundary, and their blend partly cancels: dark seams between voxels,
+    /// seen under M and `--quality` at 0°. Facing every normal to the light
+    /// removes the seams but moves the cancellation to the silhouettes and
+    /// doubled the head phantom's IP error on the diagonal (0.0134 →
+    /// 0.0270), so it is not done; signed normals in P's encoding are the
+    /// fix.)
     #[inline(always)]
     pub fn voxel(&self, v: RleVoxel) -> [f32; 4] {
         let n = self.normals[v.normal as usize & (NORMAL_CODES - 1)];
-        let l = self.light;
-        let s = if n[0] * l[0] + n[1] * l[1] + n[2] * l[2] < 0.0 { -1.0 } else { 1.0 };
-        [v.class as f32, s * n[0], s * n[1], s * n[2]]
+        [v.class as f32, n[0], n[1], n[2]]
     }
 
     /// A blend of voxels' 4-vectors → the premultiplied, shaded sample; exact

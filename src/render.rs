@@ -1144,12 +1144,13 @@ impl Renderer {
             // (an encoding, or a pointer table over another axis's: see RleCache::ensure_axis)
             let t = Instant::now();
             let rle = &mut self.rle;
+            // (asked first: a frame whose encoding is current sends no job to the pool)
             let built = if bcc {
                 let src = self.bcc[axis].as_ref().expect("BCC slices built above");
-                self.pool.install(|| rle.ensure_axis(src))
+                !rle.is_current(src) && self.pool.install(|| rle.ensure_axis(src))
             } else {
                 let stack = self.stacks[axis].as_ref().expect("stack built above");
-                self.pool.install(|| rle.ensure_axis(stack))
+                !rle.is_current(stack) && self.pool.install(|| rle.ensure_axis(stack))
             };
             if built {
                 self.build_times.rle[axis] = t.elapsed().as_secs_f64() * 1e3;

@@ -196,6 +196,14 @@ impl RleCache {
         self.axes[axis].as_ref()
     }
 
+    /// True when the encoding of `src`'s axis exists under its permutation
+    /// and size (nothing for [`RleCache::ensure_axis`] to build: a frame asks
+    /// this before sending a job to the pool).
+    pub fn is_current<S: VoxelSource + ?Sized>(&self, src: &S) -> bool {
+        let stack = src.slices();
+        self.axes[stack.axis].as_ref().is_some_and(|e| e.perm == stack.perm() && e.n == stack.n)
+    }
+
     /// Makes the encoding of `src`'s axis, with its permutation, unless it
     /// is already there (on the current rayon pool): the
     /// [`RleVolume::transposed`] of another axis's encoding whose scanlines are
@@ -207,11 +215,11 @@ impl RleCache {
     /// between them.)
     pub fn ensure_axis<S: VoxelSource + ?Sized>(&mut self, src: &S) -> bool {
         let Some(pre) = &self.pre else { return false };
-        let stack = src.slices();
-        let (axis, perm) = (stack.axis, stack.perm());
-        if self.axes[axis].as_ref().is_some_and(|e| e.perm == perm && e.n == stack.n) {
+        if self.is_current(src) {
             return false;
         }
+        let stack = src.slices();
+        let (axis, perm) = (stack.axis, stack.perm());
         let swapped = [perm[0], perm[2], perm[1]];
         let shared = self.axes.iter().flatten().find(|e| e.perm == swapped && e.n == [stack.n[0], stack.n[2], stack.n[1]]);
         self.axes[axis] = Some(match (shared, &self.post) {

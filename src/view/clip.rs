@@ -412,6 +412,25 @@ mod tests {
         out
     }
 
+    /// Asserts that `limiter`'s limits on `plan` keep exactly the samples `kept(k, p, q)` keeps.
+    fn assert_limits_are(plan: &FramePlan, limiter: &dyn Limiter, kept: impl Fn(usize, usize, usize) -> bool, what: &str) -> usize {
+        let mut l = RayLimits::open(plan.grid.size, plan.slices());
+        limiter.limit(plan, &mut l);
+        let [w, h] = plan.grid.size;
+        let mut n = 0;
+        for q in 0..h {
+            for p in 0..w {
+                let [a, b] = l.get(p, q);
+                for k in 0..plan.slices() {
+                    let inside = a <= b && (a as usize..=b as usize).contains(&k);
+                    assert_eq!(inside, kept(k, p, q), "{what} pixel ({p}, {q}) slice {k}: {:?}", [a, b]);
+                    n += inside as usize;
+                }
+            }
+        }
+        n
+    }
+
     #[test]
     fn limits_are_exactly_the_samples_kept() {
         let sp = [1.0f32, 0.8, 1.5];
@@ -425,18 +444,7 @@ mod tests {
         for plan in plans() {
             for set in &sets {
                 let clip = ClipPlanes::new(set, sp).unwrap();
-                let mut l = RayLimits::open(plan.grid.size, plan.slices());
-                clip.limit(&plan, &mut l);
-                let [w, h] = plan.grid.size;
-                for q in 0..h {
-                    for p in 0..w {
-                        let [a, b] = l.get(p, q);
-                        for k in 0..plan.slices() {
-                            let inside = a <= b && (a as usize..=b as usize).contains(&k);
-                            assert_eq!(inside, sample_kept(&clip, &plan, k, p, q), "pixel ({p}, {q}) slice {k}: {:?}", [a, b]);
-                        }
-                    }
-                }
+                assert_limits_are(&plan, &clip, |k, p, q| sample_kept(&clip, &plan, k, p, q), "");
             }
         }
     }
@@ -455,25 +463,7 @@ mod tests {
         for plan in plans() {
             for r in regions {
                 let clip = ClipRegion::new(r, sp).unwrap();
-                let mut l = RayLimits::open(plan.grid.size, plan.slices());
-                clip.limit(&plan, &mut l);
-                let [w, h] = plan.grid.size;
-                let mut kept = 0;
-                for q in 0..h {
-                    for p in 0..w {
-                        let [a, b] = l.get(p, q);
-                        for k in 0..plan.slices() {
-                            let inside = a <= b && (a as usize..=b as usize).contains(&k);
-                            assert_eq!(
-                                inside,
-                                clip.contains(sample_voxel(&plan, k, p, q)),
-                                "{r:?} pixel ({p}, {q}) slice {k}: {:?}",
-                                [a, b]
-                            );
-                            kept += inside as usize;
-                        }
-                    }
-                }
+                let kept = assert_limits_are(&plan, &clip, |k, p, q| clip.contains(sample_voxel(&plan, k, p, q)), &format!("{r:?}"));
                 assert_eq!(kept > 0, !matches!(r, Region::Sphere { centre: [70.0, ..], .. }), "{r:?}");
             }
         }
@@ -486,19 +476,8 @@ mod tests {
         let ball = ClipRegion::new(Region::Sphere { centre: [7.0, 8.0, 5.0], radius: 5.0 }, sp).unwrap();
         let both = Limiters(vec![Arc::new(plane.clone()), Arc::new(ball.clone())]);
         for plan in plans() {
-            let mut l = RayLimits::open(plan.grid.size, plan.slices());
-            both.limit(&plan, &mut l);
-            let [w, h] = plan.grid.size;
-            for q in 0..h {
-                for p in 0..w {
-                    let [a, b] = l.get(p, q);
-                    for k in 0..plan.slices() {
-                        let inside = a <= b && (a as usize..=b as usize).contains(&k);
-                        let want = sample_kept(&plane, &plan, k, p, q) && ball.contains(sample_voxel(&plan, k, p, q));
-                        assert_eq!(inside, want, "pixel ({p}, {q}) slice {k}: {:?}", [a, b]);
-                    }
-                }
-            }
+            let want = |k, p, q| sample_kept(&plane, &plan, k, p, q) && ball.contains(sample_voxel(&plan, k, p, q));
+            assert_limits_are(&plan, &both, want, "");
         }
     }
 

@@ -32,6 +32,10 @@ use crate::view::plan::{FramePlan, Limiter, RayLimits};
 use crate::view::unpermute;
 use crate::warp::Image;
 
+/// The side of the output tiles whose coverage decides which intermediate
+/// pixels gather.
+const TILE: usize = 4;
+
 /// Geometry's depth in one frame, as a producer of ray limits.
 #[derive(Clone, Debug)]
 pub struct GeometryLimits {
@@ -40,6 +44,9 @@ pub struct GeometryLimits {
     size: [usize; 2],
     /// The output pixels holding geometry: `[x0, y0, x1, y1]` (None: none).
     bounds: Option<[usize; 4]>,
+    /// The covered output tiles ([`TILE`]² pixels), as runs of neighbouring
+    /// tiles along a tile row: output rectangles `[x0, y0, x1, y1]`.
+    runs: Vec<[usize; 4]>,
     /// Visit only the intermediate pixels that can reach `bounds` (false:
     /// every pixel, the reference the tests compare with).
     cull: bool,
@@ -50,15 +57,43 @@ impl GeometryLimits {
     pub fn new(projector: Projector, geometry: &GeometryImage) -> Self {
         let (w, h) = (geometry.width, geometry.height);
         let mut bounds: Option<[usize; 4]> = None;
-        for y in 0..h {
-            let row = &geometry.depth[y * w..(y + 1) * w];
-            let (Some(x0), Some(x1)) = (row.iter().position(|d| d.is_finite()), row.iter().rposition(|d| d.is_finite())) else { continue };
-            bounds = Some(match bounds {
-                None => [x0, y, x1, y],
-                Some([a, b, c, _]) => [a.min(x0), b, c.max(x1), y],
-            });
+        let tw = w.div_ceil(TILE);
+        let mut covered = vec![false; tw];
+        let mut runs = vec![];
+        for ty in 0..h.div_ceil(TILE) {
+            covered.fill(false);
+            let ys = ty * TILE..((ty + 1) * TILE).min(h);
+            for y in ys.clone() {
+                let row = &geometry.depth[y * w..(y + 1) * w];
+                let (Some(x0), Some(x1)) = (row.iter().position(|d| d.is_finite()), row.iter().rposition(|d| d.is_finite())) else {
+                    continue;
+                };
+                bounds = Some(match bounds {
+                    None => [x0, y, x1, y],
+                    Some([a, b, c, _]) => [a.min(x0), b, c.max(x1), y],
+                });
+                covered[x0 / TILE] = true;
+                covered[x1 / TILE] = true;
+                for tx in x0 / TILE + 1..x1 / TILE {
+                    if !covered[tx] && row[tx * TILE..(tx + 1) * TILE].iter().any(|d| d.is_finite()) {
+                        covered[tx] = true;
+                    }
+                }
+            }
+            let mut tx = 0;
+            while tx < tw {
+                if !covered[tx] {
+                    tx += 1;
+                    continue;
+                }
+                let t0 = tx;
+                while tx < tw && covered[tx] {
+                    tx += 1;
+                }
+                runs.push([t0 * TILE, ys.start, (tx * TILE).min(w) - 1, ys.end - 1]);
+            }
         }
-        GeometryLimits { projector, depth: geometry.depth.clone(), size: [w, h], bounds, cull: true }
+        GeometryLimits { projector, depth: geometry.depth.clone(), size: [w, h], bounds, runs, cull: true }
     }
 
     /// [`GeometryLimits::new`] visiting every intermediate pixel (the
@@ -71,37 +106,72 @@ impl GeometryLimits {
     /// can reach the geometry's rectangle in `plan` (None: none can).
     fn reach(&self, plan: &FramePlan) -> Option<[usize; 4]> {
         let [w, h] = plan.grid.size;
+        if !self.cull {
+            return self.bounds.map(|_| [0, 0, w.saturating_sub(1), h.saturating_sub(1)]);
+        }
+        reach_of(plan, self.bounds?)
+    }
+}
+
+/// The intermediate pixels `[p0, q0, p1, q1]` (inclusive) of `plan` whose
+/// footprint can reach the output rectangle `[x0, y0, x1, y1]` (inclusive;
+/// None: none can).
+fn reach_of(plan: &FramePlan, [x0, y0, x1, y1]: [usize; 4]) -> Option<[usize; 4]> {
+        let [w, h] = plan.grid.size;
         let all = Some([0, 0, w.saturating_sub(1), h.saturating_sub(1)]);
-        let [x0, y0, x1, y1] = self.bounds?;
-        if !self.cull || w == 0 || h == 0 {
+        if w == 0 || h == 0 {
             return all;
         }
-        // the rectangle widened by the footprint's rounding to the nearest
-        // output pixel (half a pixel) and one more for safety
-        let (u0, v0, u1, v1) = (x0 as f64 - 1.5, y0 as f64 - 1.5, x1 as f64 + 1.5, y1 as f64 + 1.5);
+        // the rectangle's corners back in the intermediate image, widened by
+        // (ex, ey) output pixels first (None: a corner behind the eye, where
+        // the projective map is not convex)
+        let back = |ex: f64, ey: f64| -> Option<[[f64; 2]; 4]> {
+            let (u0, v0, u1, v1) = (x0 as f64 - ex, y0 as f64 - ey, x1 as f64 + ex, y1 as f64 + ey);
+            let c = [(u0, v0), (u1, v0), (u0, v1), (u1, v1)].map(|(u, v)| plan.output_to_intermediate(u, v));
+            c.iter().all(|x| x.is_some_and(|x| x.iter().all(|c| c.is_finite()))).then(|| c.map(Option::unwrap))
+        };
+        let Some(inner) = back(0.0, 0.0) else { return all };
+        // an intermediate pixel's footprint (its square through the warp)
+        // reaches (hx, hy) output pixels from its centre's image, and the box
+        // takes the output pixel nearest it (half a pixel more): the pixels
+        // that can reach the rectangle have their centres' images in it
+        // widened by that much. Measured at the corners (the largest
+        // footprint of a projective warp is at one of them), a quarter more
+        // and a pixel for safety.
+        let (mut hx, mut hy) = (0.0f64, 0.0f64);
+        for [p, q] in inner {
+            let at = |dp: f64, dq: f64| {
+                let [a, b] = plan.intermediate_to_sheared(p + dp, q + dq);
+                plan.warp.to_output(a, b)
+            };
+            let (Some(o), Some(a), Some(b)) = (at(0.0, 0.0), at(1.0, 0.0), at(0.0, 1.0)) else { return all };
+            hx = hx.max(((a[0] - o[0]).abs() + (b[0] - o[0]).abs()) / 2.0);
+            hy = hy.max(((a[1] - o[1]).abs() + (b[1] - o[1]).abs()) / 2.0);
+        }
+        if !(hx.is_finite() && hy.is_finite()) {
+            return all;
+        }
+        let Some(outer) = back(1.25 * hx + 1.0, 1.25 * hy + 1.0) else { return all };
         let mut lo = [f64::INFINITY; 2];
         let mut hi = [f64::NEG_INFINITY; 2];
-        for (u, v) in [(u0, v0), (u1, v0), (u0, v1), (u1, v1)] {
-            // (a corner behind the eye: the projective map is not convex there)
-            let Some([p, q]) = plan.output_to_intermediate(u, v).filter(|x| x.iter().all(|c| c.is_finite())) else {
-                return all;
-            };
+        for [p, q] in outer {
             lo = [lo[0].min(p), lo[1].min(q)];
             hi = [hi[0].max(p), hi[1].max(q)];
         }
-        // a pixel's footprint reaches half a pixel past its centre: one more for rounding
+        // the pixels whose centres lie in the quad's bounding box, one more for rounding
         let clampi = |x: f64, n: usize| x.clamp(0.0, n as f64 - 1.0) as usize;
-        if hi[0] < -2.0 || hi[1] < -2.0 || lo[0] > w as f64 + 1.0 || lo[1] > h as f64 + 1.0 {
+        if hi[0] < -1.0 || hi[1] < -1.0 || lo[0] > w as f64 || lo[1] > h as f64 {
             return None;
         }
         Some([
-            clampi((lo[0] - 2.0).floor(), w),
-            clampi((lo[1] - 2.0).floor(), h),
-            clampi((hi[0] + 2.0).ceil(), w),
-            clampi((hi[1] + 2.0).ceil(), h),
+            clampi(lo[0].floor() - 1.0, w),
+            clampi(lo[1].floor() - 1.0, h),
+            clampi(hi[0].ceil() + 1.0, w),
+            clampi(hi[1].ceil() + 1.0, h),
         ])
-    }
+}
 
+impl GeometryLimits {
     /// The nearest geometry depth over the output pixels whose centres lie in
     /// the box `[u0, u1] × [v0, v1]` (at least the nearest pixel's), `+∞` for none.
     fn min_depth(&self, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
@@ -141,70 +211,113 @@ fn sample_voxel(plan: &FramePlan, k: usize, p: usize, q: usize) -> DVec3 {
     unpermute(plan.view.perm, DVec3::new(plan.sample_at(k, 0, p), plan.sample_at(k, 1, q), k as f64))
 }
 
-impl Limiter for GeometryLimits {
-    fn limit(&self, plan: &FramePlan, limits: &mut RayLimits) {
-        let nk = plan.slices();
-        if nk == 0 {
-            return;
-        }
-        let last = nk - 1;
+impl GeometryLimits {
+    /// Narrows pixel `(p, q)`'s limits `l` to the slices in front of the
+    /// nearest geometry depth over its footprint (the gather of one pixel).
+    #[inline]
+    fn limit_pixel(&self, plan: &FramePlan, p: usize, q: usize, l: &mut [u32; 2]) {
+        let last = plan.slices() - 1;
         let proj = &self.projector;
         let depth_of = |v: DVec3| -proj.eye_space(v).z;
-        let Some([p0, q0, p1, q1]) = self.reach(plan) else { return };
-        limits.par_rows_mut().enumerate().skip(q0).take(q1 + 1 - q0).for_each(|(q, row)| {
-            for (p, l) in row.iter_mut().enumerate().skip(p0).take(p1 + 1 - p0) {
-                if l[0] > l[1] {
-                    continue;
+        if l[0] > l[1] {
+            return;
+        }
+        // the footprint: the pixel's square through the warp
+        let corners = [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].map(|(dp, dq)| {
+            let [a, b] = plan.intermediate_to_sheared(p as f64 + dp, q as f64 + dq);
+            plan.warp.to_output(a, b)
+        });
+        if corners.iter().any(Option::is_none) {
+            return;
+        }
+        let c = corners.map(Option::unwrap);
+        let (u0, u1) =
+            (c.iter().map(|x| x[0]).fold(f64::INFINITY, f64::min), c.iter().map(|x| x[0]).fold(f64::NEG_INFINITY, f64::max));
+        let (v0, v1) =
+            (c.iter().map(|x| x[1]).fold(f64::INFINITY, f64::min), c.iter().map(|x| x[1]).fold(f64::NEG_INFINITY, f64::max));
+        let d = self.min_depth(u0, u1, v0, v1);
+        if !d.is_finite() {
+            return;
+        }
+        // the samples' depth is affine in k: keep those strictly in front of d
+        let (d0, d1) = (depth_of(sample_voxel(plan, 0, p, q)), depth_of(sample_voxel(plan, last, p, q)));
+        let keep = |k: usize| depth_of(sample_voxel(plan, k, p, q)) < d;
+        let (mut lo, mut hi) = (l[0] as i64, l[1] as i64);
+        if last == 0 || d0 == d1 {
+            if !keep(0) {
+                (lo, hi) = (1, 0);
+            }
+        } else {
+            let ks = ((d - d0) / (d1 - d0) * last as f64).clamp(0.0, last as f64);
+            if d1 > d0 {
+                // depth grows with k: keep k up to the crossing (checked on the samples themselves)
+                let mut b = ks.floor() as i64;
+                while b >= 0 && !keep(b as usize) {
+                    b -= 1;
                 }
-                // the footprint: the pixel's square through the warp
-                let corners = [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].map(|(dp, dq)| {
-                    let [a, b] = plan.intermediate_to_sheared(p as f64 + dp, q as f64 + dq);
-                    plan.warp.to_output(a, b)
-                });
-                if corners.iter().any(Option::is_none) {
-                    continue;
+                while b < last as i64 && keep(b as usize + 1) {
+                    b += 1;
                 }
-                let c = corners.map(Option::unwrap);
-                let (u0, u1) =
-                    (c.iter().map(|x| x[0]).fold(f64::INFINITY, f64::min), c.iter().map(|x| x[0]).fold(f64::NEG_INFINITY, f64::max));
-                let (v0, v1) =
-                    (c.iter().map(|x| x[1]).fold(f64::INFINITY, f64::min), c.iter().map(|x| x[1]).fold(f64::NEG_INFINITY, f64::max));
-                let d = self.min_depth(u0, u1, v0, v1);
-                if !d.is_finite() {
-                    continue;
+                hi = hi.min(b);
+            } else {
+                let mut a = ks.ceil() as i64;
+                while a <= last as i64 && !keep(a as usize) {
+                    a += 1;
                 }
-                // the samples' depth is affine in k: keep those strictly in front of d
-                let (d0, d1) = (depth_of(sample_voxel(plan, 0, p, q)), depth_of(sample_voxel(plan, last, p, q)));
-                let keep = |k: usize| depth_of(sample_voxel(plan, k, p, q)) < d;
-                let (mut lo, mut hi) = (l[0] as i64, l[1] as i64);
-                if last == 0 || d0 == d1 {
-                    if !keep(0) {
-                        (lo, hi) = (1, 0);
-                    }
-                } else {
-                    let ks = ((d - d0) / (d1 - d0) * last as f64).clamp(0.0, last as f64);
-                    if d1 > d0 {
-                        // depth grows with k: keep k up to the crossing (checked on the samples themselves)
-                        let mut b = ks.floor() as i64;
-                        while b >= 0 && !keep(b as usize) {
-                            b -= 1;
-                        }
-                        while b < last as i64 && keep(b as usize + 1) {
-                            b += 1;
-                        }
-                        hi = hi.min(b);
-                    } else {
-                        let mut a = ks.ceil() as i64;
-                        while a <= last as i64 && !keep(a as usize) {
-                            a += 1;
-                        }
-                        while a > 0 && keep(a as usize - 1) {
-                            a -= 1;
-                        }
-                        lo = lo.max(a);
-                    }
+                while a > 0 && keep(a as usize - 1) {
+                    a -= 1;
                 }
-                *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
+                lo = lo.max(a);
+            }
+        }
+        *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
+    }
+}
+
+impl GeometryLimits {
+    /// The intermediate pixels whose footprint can reach a covered output
+    /// tile (row by row), and each row's first and last of them (`p0 > p1`:
+    /// none).
+    fn marks(&self, plan: &FramePlan) -> (Vec<bool>, Vec<[usize; 2]>) {
+        let [w, h] = plan.grid.size;
+        let mut marks = vec![false; w * h];
+        let mut spans = vec![[usize::MAX, 0]; h];
+        for &run in &self.runs {
+            let Some([p0, q0, p1, q1]) = reach_of(plan, run) else { continue };
+            for q in q0..=q1 {
+                marks[q * w + p0..=q * w + p1].fill(true);
+                spans[q] = [spans[q][0].min(p0), spans[q][1].max(p1)];
+            }
+        }
+        (marks, spans)
+    }
+}
+
+impl Limiter for GeometryLimits {
+    fn limit(&self, plan: &FramePlan, limits: &mut RayLimits) {
+        if plan.slices() == 0 || plan.grid.pixels() == 0 {
+            return;
+        }
+        if !self.cull {
+            // the reference: every pixel gathers
+            let Some([p0, q0, p1, q1]) = self.reach(plan) else { return };
+            limits.par_rows_mut().enumerate().skip(q0).take(q1 + 1 - q0).for_each(|(q, row)| {
+                for (p, l) in row.iter_mut().enumerate().skip(p0).take(p1 + 1 - p0) {
+                    self.limit_pixel(plan, p, q, l);
+                }
+            });
+            return;
+        }
+        let (marks, spans) = self.marks(plan);
+        let w = plan.grid.size[0];
+        limits.par_rows_mut().zip(marks.par_chunks(w)).zip(&spans).enumerate().for_each(|(q, ((row, marks), &[p0, p1]))| {
+            if p0 > p1 {
+                return;
+            }
+            for p in p0..=p1 {
+                if marks[p] {
+                    self.limit_pixel(plan, p, q, &mut row[p]);
+                }
             }
         });
     }
@@ -283,33 +396,38 @@ mod tests {
             Mesh::sphere(c + DVec3::new(500.0, 0.0, 0.0), 3.0, 16).unwrap(),
             Mesh::cylinder(c - DVec3::new(0.0, 0.0, 400.0), c + DVec3::new(0.0, 0.0, 400.0), 2.0, 16).unwrap(),
         ];
-        for rot in
-            [DMat3::IDENTITY, DMat3::from_euler(glam::EulerRot::XYZ, 0.5, -0.8, 0.3), rotate_eye(NamedView::Anterior.rotation(), 1, 40.0)]
-        {
-            let cam = Camera::new(rot, [96, 80]);
-            for projection in [Projection::Parallel, Projection::perspective(50.0, 1.2).unwrap()] {
-                let plan = match projection.resolve(&cam, dims, [1.0; 3]).unwrap() {
-                    None => FramePlan::parallel(&Factorization::new(&cam, dims, [1.0; 3]).unwrap(), [1.0; 3]),
-                    Some((pc, d)) => {
-                        let f = Factorization::new(&pc, dims, [1.0; 3]).unwrap();
-                        let Ok(pv) = PerspectiveView::new(&pc, d, dims, [1.0; 3]) else { continue };
-                        FramePlan::perspective(&pv, &f, [1.0; 3], 0.5)
-                    }
-                };
-                for (i, mesh) in meshes.iter().enumerate() {
-                    let proj = Projector::new(&cam, &projection, dims, [1.0; 3]).unwrap();
-                    let mut geo = GeometryImage::new(96, 80);
-                    rasterize(mesh, &Material::default(), Cull::None, &proj, &mut geo).unwrap();
-                    let (fast, full) = (GeometryLimits::new(proj, &geo), GeometryLimits::visiting_every_pixel(proj, &geo));
-                    let mut a = RayLimits::open(plan.grid.size, plan.slices());
-                    let mut b = a.clone();
-                    fast.limit(&plan, &mut a);
-                    full.limit(&plan, &mut b);
-                    assert_eq!(a, b, "mesh {i}, {projection:?}");
-                    if i == 0 {
-                        let [p0, q0, p1, q1] = fast.reach(&plan).unwrap();
-                        let visited = (p1 + 1 - p0) * (q1 + 1 - q0);
-                        assert!(visited * 4 < plan.grid.pixels(), "a needle visits {visited} of {} pixels", plan.grid.pixels());
+        // isotropic and chest-CT-like voxels, a coarse and a fine output image
+        for (sp, size) in [([1.0f32; 3], [96, 80]), ([0.6, 0.6, 5.0], [96, 80]), ([1.0; 3], [300, 250]), ([0.6, 0.6, 5.0], [300, 250])] {
+            for rot in [
+                DMat3::IDENTITY,
+                DMat3::from_euler(glam::EulerRot::XYZ, 0.5, -0.8, 0.3),
+                rotate_eye(NamedView::Anterior.rotation(), 1, 40.0),
+                rotate_eye(NamedView::Anterior.rotation(), 0, 70.0),
+            ] {
+                let cam = Camera::new(rot, size);
+                for projection in [Projection::Parallel, Projection::perspective(50.0, 1.2).unwrap()] {
+                    let plan = match projection.resolve(&cam, dims, sp).unwrap() {
+                        None => FramePlan::parallel(&Factorization::new(&cam, dims, sp).unwrap(), sp),
+                        Some((pc, d)) => {
+                            let f = Factorization::new(&pc, dims, sp).unwrap();
+                            let Ok(pv) = PerspectiveView::new(&pc, d, dims, sp) else { continue };
+                            FramePlan::perspective(&pv, &f, sp, 0.5)
+                        }
+                    };
+                    for (i, mesh) in meshes.iter().enumerate() {
+                        let proj = Projector::new(&cam, &projection, dims, sp).unwrap();
+                        let mut geo = GeometryImage::new(size[0], size[1]);
+                        rasterize(mesh, &Material::default(), Cull::None, &proj, &mut geo).unwrap();
+                        let (fast, full) = (GeometryLimits::new(proj, &geo), GeometryLimits::visiting_every_pixel(proj, &geo));
+                        let mut a = RayLimits::open(plan.grid.size, plan.slices());
+                        let mut b = a.clone();
+                        fast.limit(&plan, &mut a);
+                        full.limit(&plan, &mut b);
+                        assert_eq!(a, b, "mesh {i}, {projection:?}, spacing {sp:?}, {size:?}, {rot}");
+                        if i == 0 && sp[2] == 1.0 {
+                            let visited = fast.marks(&plan).0.iter().filter(|&&m| m).count();
+                            assert!(visited * 4 < plan.grid.pixels(), "a needle visits {visited} of {} pixels", plan.grid.pixels());
+                        }
                     }
                 }
             }

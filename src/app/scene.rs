@@ -17,8 +17,11 @@ use anyhow::Result;
 use clap::{Args, ValueEnum};
 use glam::{DAffine3, DMat3, DVec3, EulerRot};
 
-use shearwarp::geometry::{Cull, GeometryImage, GeometryLimits, Material, Mesh, Projector, composite_over_geometry, load_mesh, rasterize};
-use shearwarp::render::{FrameStats, Renderer};
+use shearwarp::geometry::{
+    Cull, GeometryImage, GeometryLimits, Material, Mesh, Projector, composite_iso_over_geometry, composite_over_geometry, load_mesh, rasterize,
+};
+use shearwarp::composite::Mode;
+use shearwarp::render::{FrameStats, Method, Renderer};
 use shearwarp::view::Camera;
 use shearwarp::view::clip::{ClipRegion, Limiters, Region};
 use shearwarp::view::plan::Limiter;
@@ -198,7 +201,10 @@ impl Scene {
             rasterize(m, &self.material, Cull::None, &proj, &mut geo)?;
         }
         cost.raster_ms = t.elapsed().as_secs_f64() * 1e3;
-        let geometry = Arc::new(GeometryLimits::new(proj, &geo));
+        // iso on the raycaster: keep the crossing slice and depth-test the hits at composition
+        let settings = r.settings();
+        let crossing = settings.mode == Mode::Iso && matches!(settings.method, Method::Binary | Method::Brute);
+        let geometry = Arc::new(GeometryLimits::new(proj, &geo).with_iso_crossing(crossing));
         let limiter: Arc<dyn Limiter> = match &self.clip {
             None => geometry.clone(),
             Some(c) => Arc::new(Limiters(vec![c.clone(), geometry.clone()])),
@@ -213,7 +219,11 @@ impl Scene {
         }
         cost.inverse_warp_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
-        composite_over_geometry(img, &geo);
+        if crossing {
+            composite_iso_over_geometry(img, &geo, r, &geometry);
+        } else {
+            composite_over_geometry(img, &geo);
+        }
         cost.composite_ms = t.elapsed().as_secs_f64() * 1e3;
         Ok((st, cost))
     }

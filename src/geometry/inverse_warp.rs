@@ -50,6 +50,10 @@ pub struct GeometryLimits {
     /// Visit only the intermediate pixels that can reach `bounds` (false:
     /// every pixel, the reference the tests compare with).
     cull: bool,
+    /// Keep the first slice at or beyond the geometry too (iso mode of the
+    /// raycaster: the sample after an iso crossing in front of the geometry),
+    /// for [`composite_iso_over_geometry`] to reject hits behind it.
+    crossing: bool,
 }
 
 impl GeometryLimits {
@@ -93,13 +97,30 @@ impl GeometryLimits {
                 runs.push([t0 * TILE, ys.start, (tx * TILE).min(w) - 1, ys.end - 1]);
             }
         }
-        GeometryLimits { projector, depth: geometry.depth.clone(), size: [w, h], bounds, runs, cull: true }
+        GeometryLimits { projector, depth: geometry.depth.clone(), size: [w, h], bounds, runs, cull: true, crossing: false }
     }
 
     /// [`GeometryLimits::new`] visiting every intermediate pixel (the
     /// reference the rectangle's skip is tested against).
     pub fn visiting_every_pixel(projector: Projector, geometry: &GeometryImage) -> Self {
         GeometryLimits { cull: false, ..GeometryLimits::new(projector, geometry) }
+    }
+
+    /// Keeps (`on`) one more slice per limited ray: the first whose sample
+    /// lies at or beyond the geometry, so that an iso surface crossing less
+    /// than a slice in front of the geometry is found (the raycaster refines
+    /// a hit against the sample before it). Only for the binary rotator's and
+    /// its brute force's iso mode, with [`composite_iso_over_geometry`],
+    /// which hides the hits that land behind the geometry; blend mode and
+    /// the RLE path (pre-classified, unrefined) cut at the last slice in front.
+    pub fn with_iso_crossing(mut self, on: bool) -> Self {
+        self.crossing = on;
+        self
+    }
+
+    /// The geometry's projector (the frame's camera).
+    pub fn projector(&self) -> &Projector {
+        &self.projector
     }
 
     /// The intermediate pixels `[p0, q0, p1, q1]` (inclusive) whose footprint
@@ -243,8 +264,10 @@ impl GeometryLimits {
         let (d0, d1) = (depth_of(sample_voxel(plan, 0, p, q)), depth_of(sample_voxel(plan, last, p, q)));
         let keep = |k: usize| depth_of(sample_voxel(plan, k, p, q)) < d;
         let (mut lo, mut hi) = (l[0] as i64, l[1] as i64);
+        // (with the crossing slice: one more past the last kept, in walking order)
+        let extra = self.crossing as i64;
         if last == 0 || d0 == d1 {
-            if !keep(0) {
+            if !keep(0) && !self.crossing {
                 (lo, hi) = (1, 0);
             }
         } else {
@@ -258,7 +281,7 @@ impl GeometryLimits {
                 while b < last as i64 && keep(b as usize + 1) {
                     b += 1;
                 }
-                hi = hi.min(b);
+                hi = hi.min((b + extra).min(last as i64));
             } else {
                 let mut a = ks.ceil() as i64;
                 while a <= last as i64 && !keep(a as usize) {
@@ -267,7 +290,7 @@ impl GeometryLimits {
                 while a > 0 && keep(a as usize - 1) {
                     a -= 1;
                 }
-                lo = lo.max(a);
+                lo = lo.max((a - extra).max(0));
             }
         }
         *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
@@ -333,6 +356,71 @@ pub fn composite_over_geometry(image: &mut Image, geometry: &GeometryImage) {
             px[c] += t * g[c];
         }
     }
+}
+
+/// The final image of an iso frame whose rays kept the crossing slice
+/// ([`GeometryLimits::with_iso_crossing`]): at each output pixel the
+/// geometry covers, the volume's iso depth (its intermediate depth, the
+/// warp's bilinear weights over the hits, as [`crate::accuracy::reference::fast_path_depth`]
+/// reads it) is compared with the geometry's: a hit at or behind the
+/// geometry is hidden (the pixel is the geometry's colour), one in front is
+/// composed over it as in [`composite_over_geometry`]. Elsewhere the volume
+/// is over the geometry as there. A frame split into pyramids (a
+/// perspective eye beside the volume) has no single intermediate image: it is
+/// composed without the depth test.
+pub fn composite_iso_over_geometry(image: &mut Image, geometry: &GeometryImage, renderer: &crate::render::Renderer, limits: &GeometryLimits) {
+    let plans = renderer.last_plans();
+    let inter = renderer.intermediate();
+    let [Some(plan)] = [plans.first().filter(|p| plans.len() == 1 && inter.size == p.grid.size)] else {
+        composite_over_geometry(image, geometry);
+        return;
+    };
+    assert_eq!((image.width, image.height), (geometry.width, geometry.height), "image sizes");
+    let w = image.width;
+    let (nk, [gw, gh]) = (plan.slices(), plan.grid.size);
+    let proj = &limits.projector;
+    image.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(v, row)| {
+        for (u, px) in row.iter_mut().enumerate() {
+            let i = v * w + u;
+            let (gd, g) = (geometry.depth[i], geometry.color[i]);
+            if !gd.is_finite() {
+                continue;
+            }
+            // the volume's hit under this output pixel: the mean position of
+            // the neighbouring intermediate pixels' hits, by warp weight
+            let hidden = plan.output_to_intermediate(u as f64, v as f64).is_some_and(|[p, q]| {
+                let (x0, y0) = (p.floor(), q.floor());
+                let (fx, fy) = (p - x0, q - y0);
+                let (mut wsum, mut at) = (0.0, DVec3::ZERO);
+                for (dx, dy, wt) in [(0.0, 0.0, (1.0 - fx) * (1.0 - fy)), (1.0, 0.0, fx * (1.0 - fy)), (0.0, 1.0, (1.0 - fx) * fy), (1.0, 1.0, fx * fy)]
+                {
+                    let (x, y) = (x0 + dx, y0 + dy);
+                    if x < 0.0 || y < 0.0 || x >= gw as f64 || y >= gh as f64 || wt <= 0.0 {
+                        continue;
+                    }
+                    let k = inter.depth_at(x as usize, y as usize) as f64;
+                    if !k.is_finite() || nk == 0 {
+                        continue;
+                    }
+                    // the sample positions are affine in k: between the slices around k
+                    let k0 = (k.floor() as usize).min(nk - 1);
+                    let k1 = (k0 + 1).min(nk - 1);
+                    let (a, b) = (sample_voxel(plan, k0, x as usize, y as usize), sample_voxel(plan, k1, x as usize, y as usize));
+                    wsum += wt;
+                    at += wt * (a + (b - a) * (k - k0 as f64));
+                }
+                wsum >= 0.5 && -proj.eye_space(at / wsum).z >= gd
+            });
+            if hidden {
+                *px = g;
+            } else {
+                let t = 1.0 - px[3].clamp(0.0, 1.0);
+                for c in 0..4 {
+                    px[c] += t * g[c];
+                }
+            }
+        }
+    });
 }
 
 #[cfg(test)]
@@ -429,6 +517,112 @@ mod tests {
                             assert!(visited * 4 < plan.grid.pixels(), "a needle visits {visited} of {} pixels", plan.grid.pixels());
                         }
                     }
+                }
+            }
+        }
+    }
+
+    /// The plans of `cam` over a volume of `dims` (isotropic voxels), both
+    /// projections (a perspective view that needs the pyramid split is left out).
+    fn plans_of(cam: &Camera, dims: [usize; 3]) -> Vec<(Projection, FramePlan)> {
+        use crate::view::Factorization;
+        use crate::view::perspective::PerspectiveView;
+        let mut out = vec![];
+        for projection in [Projection::Parallel, Projection::perspective(40.0, 2.0).unwrap()] {
+            let plan = match projection.resolve(cam, dims, [1.0; 3]).unwrap() {
+                None => FramePlan::parallel(&Factorization::new(cam, dims, [1.0; 3]).unwrap(), [1.0; 3]),
+                Some((pc, d)) => {
+                    let f = Factorization::new(&pc, dims, [1.0; 3]).unwrap();
+                    let Ok(pv) = PerspectiveView::new(&pc, d, dims, [1.0; 3]) else { continue };
+                    FramePlan::perspective(&pv, &f, [1.0; 3], 0.5)
+                }
+            };
+            out.push((projection, plan));
+        }
+        out
+    }
+
+    /// The inverse-warped depth of a flat plane at 45° to the view has no
+    /// holes (parallel and perspective, an output image coarser and one finer
+    /// than the intermediate image, several views): every intermediate pixel
+    /// whose footprint lies on the plane (its centre's output pixel and the
+    /// output pixels its footprint box reaches, one more around, all covered)
+    /// is cut at the plane: the last sample kept, in walking order, lies in
+    /// front of the farthest plane depth over that neighbourhood (no sample
+    /// behind the plane everywhere around the pixel survives: no hole), and
+    /// the next sample lies behind the nearest (nothing in front of the
+    /// whole neighbourhood is cut).
+    #[test]
+    fn inverse_warp_of_a_plane_at_45_degrees_has_no_holes() {
+        let dims = [48, 40, 44];
+        let c = DVec3::new(23.5, 19.5, 21.5);
+        for size in [[64, 56], [320, 280]] {
+            for rot in [
+                rotate_eye(NamedView::Anterior.rotation(), 1, 20.0),
+                DMat3::from_euler(glam::EulerRot::XYZ, 0.5, -0.8, 0.3),
+                rotate_eye(NamedView::Anterior.rotation(), 0, 50.0),
+            ] {
+                let cam = Camera::new(rot, size);
+                // eye-space axes in voxel space; the plane's normal halfway between the view and screen x
+                let (ex, ey, ez) = (rot.transpose() * DVec3::X, rot.transpose() * DVec3::Y, rot.transpose() * DVec3::Z);
+                let (u, v) = ((ez - ex).normalize() * 80.0, ey * 80.0);
+                let plane = Mesh::new(vec![c - u - v, c + u - v, c + u + v, c - u + v], vec![[0, 1, 2], [0, 2, 3]]).unwrap();
+                for (projection, plan) in plans_of(&cam, dims) {
+                    let proj = Projector::new(&cam, &projection, dims, [1.0; 3]).unwrap();
+                    let mut geo = GeometryImage::new(size[0], size[1]);
+                    rasterize(&plane, &Material::default(), Cull::None, &proj, &mut geo).unwrap();
+                    let gl = GeometryLimits::new(proj, &geo);
+                    let mut l = RayLimits::open(plan.grid.size, plan.slices());
+                    gl.limit(&plan, &mut l);
+                    let (w, h) = (size[0] as i64, size[1] as i64);
+                    let depth_at = |x: i64, y: i64| {
+                        if x < 0 || y < 0 || x >= w || y >= h { f64::INFINITY } else { geo.depth[(y * w + x) as usize] }
+                    };
+                    let depth_of = |k: usize, p: usize, q: usize| -proj.eye_space(sample_voxel(&plan, k, p, q)).z;
+                    let last = plan.slices() - 1;
+                    let mut checked = 0;
+                    for q in 0..plan.grid.size[1] {
+                        for p in 0..plan.grid.size[0] {
+                            let out = |dp: f64, dq: f64| {
+                                let [a, b] = plan.intermediate_to_sheared(p as f64 + dp, q as f64 + dq);
+                                plan.warp.to_output(a, b)
+                            };
+                            let Some(o) = out(0.0, 0.0) else { continue };
+                            let Some(cs) = [out(-0.5, -0.5), out(0.5, -0.5), out(0.5, 0.5), out(-0.5, 0.5)].into_iter().collect::<Option<Vec<_>>>()
+                            else {
+                                continue;
+                            };
+                            // the footprint box, one output pixel more around
+                            let x0 = cs.iter().map(|c| c[0]).fold(o[0], f64::min).floor() as i64 - 1;
+                            let x1 = cs.iter().map(|c| c[0]).fold(o[0], f64::max).ceil() as i64 + 1;
+                            let y0 = cs.iter().map(|c| c[1]).fold(o[1], f64::min).floor() as i64 - 1;
+                            let y1 = cs.iter().map(|c| c[1]).fold(o[1], f64::max).ceil() as i64 + 1;
+                            let box_depths: Vec<f64> = (y0..=y1).flat_map(|y| (x0..=x1).map(move |x| (x, y))).map(|(x, y)| depth_at(x, y)).collect();
+                            if box_depths.iter().any(|d| !d.is_finite()) {
+                                continue;
+                            }
+                            let dmin = box_depths.iter().copied().fold(f64::INFINITY, f64::min);
+                            let dmax = box_depths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                            let (d0, d1) = (depth_of(0, p, q), depth_of(last, p, q));
+                            let [lo, hi] = l.get(p, q);
+                            // the last kept and the next sample in walking order (depth grows along it)
+                            let (kept, next) = if d1 >= d0 {
+                                ((lo <= hi).then_some(hi as usize), if lo > hi { Some(0) } else { (hi < last as u32).then(|| hi as usize + 1) })
+                            } else {
+                                ((lo <= hi).then_some(lo as usize), if lo > hi { Some(last) } else { (lo > 0).then(|| lo as usize - 1) })
+                            };
+                            let ctx = format!("{projection:?} {size:?} {rot}: pixel ({p}, {q}) limits [{lo}, {hi}], plane {dmin}..{dmax}");
+                            if let Some(k) = kept {
+                                assert!(depth_of(k, p, q) < dmax, "{ctx}: slice {k} kept at {}", depth_of(k, p, q));
+                            }
+                            if let Some(k) = next {
+                                // (the footprint box above is one pixel wider than the gather's)
+                                assert!(depth_of(k, p, q) >= dmin, "{ctx}: slice {k} cut at {}", depth_of(k, p, q));
+                            }
+                            checked += 1;
+                        }
+                    }
+                    assert!(checked * 10 > plan.grid.pixels(), "{projection:?} {size:?}: {checked} pixels on the plane");
                 }
             }
         }

@@ -24,7 +24,7 @@ pub mod io;
 pub mod mesh;
 pub mod raster;
 
-pub use inverse_warp::{GeometryLimits, composite_over_geometry};
+pub use inverse_warp::{GeometryLimits, composite_iso_over_geometry, composite_over_geometry};
 pub use io::load_mesh;
 pub use mesh::Mesh;
 pub use raster::{Cull, GeometryImage, Material, Projector, rasterize};

@@ -634,10 +634,15 @@ mod tests {
     /// analytic sphere and the analytic cylinder within half a voxel, at the
     /// pixels where the unlimited iso depth itself is that accurate, away from
     /// the needle's outline (where the intermediate image's coarser limits cut
-    /// the volume within a footprint of the edge) and where the two surfaces
-    /// are more than two voxels apart (the slice-quantized limit, see the
-    /// module documentation). Where no geometry falls in a pixel's footprint
-    /// the volume is untouched, bit for bit.
+    /// the volume within a footprint of the edge), also where the two
+    /// surfaces are less than a slice apart: the rays keep the crossing
+    /// slice ([`GeometryLimits::with_iso_crossing`]) and the visible surface
+    /// is the depth test of [`composite_iso_over_geometry`] (where the needle
+    /// pierces the sphere, within a quarter voxel of each other, ¾ voxel: the
+    /// warp's depth there is the mean of the neighbouring hits that survive).
+    /// Where no geometry falls in a pixel's footprint the volume is
+    /// untouched, bit for bit. The final image of the scene is the needle's
+    /// colour where its depth test hides the volume.
     #[test]
     fn inverse_warp_needle_through_the_sphere_is_the_nearer_surface() {
         let dims = [48, 48, 48];
@@ -660,10 +665,18 @@ mod tests {
             let mut img = Image::new(size, size);
             r.render(&cam, &mut img).unwrap();
             let plain = fast_path_depth(&r, &cam).unwrap();
-            r.set_limiter(Some(Arc::new(GeometryLimits::new(proj, &geo))));
+            r.set_limiter(Some(Arc::new(GeometryLimits::new(proj, &geo).with_iso_crossing(true))));
             r.render(&cam, &mut img).unwrap();
             let vdepth = fast_path_depth(&r, &cam).unwrap();
             let rays = Rays::with_projection(&cam, &projection, dims, [1.0; 3]).unwrap();
+            let mut fin = img.clone();
+            let gl = GeometryLimits::new(proj, &geo).with_iso_crossing(true);
+            composite_iso_over_geometry(&mut fin, &geo, &r, &gl);
+            for i in 0..size * size {
+                if geo.depth[i].is_finite() && vdepth[i] >= geo.depth[i] {
+                    assert_eq!(fin.data[i], geo.color[i], "{projection:?}: pixel {i}: the needle hides the volume behind it");
+                }
+            }
             let (mut checked, mut needle_px) = (0, 0);
             for y in 0..size {
                 for x in 0..size {
@@ -697,14 +710,6 @@ mod tests {
                     if !own_ok {
                         continue;
                     }
-                    // where the two surfaces are within two voxels the limit is slice-quantized
-                    // (see the module documentation): not yet within half a voxel there
-                    let needle_depth = tn.map(|t| rays.depth_of(o + t * d));
-                    if let (Some(a), Some(b)) = (sphere_depth, needle_depth)
-                        && (a - b).abs() < 2.0
-                    {
-                        continue;
-                    }
                     let truth = [ts, tn].into_iter().flatten().map(|t| rays.depth_of(o + t * d)).fold(f64::INFINITY, f64::min);
                     let seen = if vdepth[i].is_nan() { geo.depth[i] } else { vdepth[i].min(geo.depth[i]) };
                     if truth.is_infinite() {
@@ -713,8 +718,13 @@ mod tests {
                     }
                     checked += 1;
                     needle_px += here as usize;
+                    // where the needle pierces the sphere (surfaces within a quarter voxel) the
+                    // output depth is the warp's mean over the neighbouring hits that survive the
+                    // cut, which can lean toward the nearer ones: there within three quarters
+                    let pierce = matches!((sphere_depth, tn.map(|t| rays.depth_of(o + t * d))), (Some(a), Some(b)) if (a - b).abs() < 0.25);
+                    let tol = if pierce { 0.75 } else { 0.5 };
                     assert!(
-                        (seen - truth).abs() <= 0.5,
+                        (seen - truth).abs() <= tol,
                         "{projection:?} ({x}, {y}): seen {seen} (volume {}, needle {}), truth {truth} (sphere {:?}, needle {:?})",
                         vdepth[i],
                         geo.depth[i],
@@ -724,6 +734,91 @@ mod tests {
                 }
             }
             assert!(checked > 1000 && needle_px > 100, "{projection:?}: {checked} pixels checked, {needle_px} on the needle");
+        }
+    }
+
+    /// The needle through the sphere phantom on the paths and modes without
+    /// an iso depth (the RLE path in iso and blend mode, the binary rotator
+    /// in blend mode; an opaque step at the iso value with early ray
+    /// termination, so the visible surface is defined), both projections, by
+    /// colour: away from the needle's outline and from the sphere's
+    /// silhouette, where the needle is the nearer surface by more than 2.5
+    /// voxels (or the ray misses the sphere) the final image is the needle's
+    /// colour within 10⁻⁵ (the volume composites nothing in front of it); where the
+    /// sphere is nearer by more than 2.5 voxels (or the ray misses the
+    /// needle) the volume is the plain render's pixel, bit for bit. Within 2.5 voxels the per-slice cut decides (the paper's
+    /// behaviour: samples are a slice apart along the ray, up to √3 voxels,
+    /// the cut is at the footprint's nearest depth, and the warp mixes the
+    /// neighbouring rays; measured: the first wrong pixels at 2.0–2.2).
+    #[test]
+    fn inverse_warp_needle_through_the_sphere_by_colour_rle_and_blend() {
+        let dims = [48, 48, 48];
+        let vol = sphere(dims).unwrap();
+        let (c, radius) = sphere_geometry(dims);
+        let c = DVec3::from_array(c);
+        let (na, nb, nr) = (c + DVec3::new(-30.0, -6.0, -4.0), c + DVec3::new(30.0, 8.0, 5.0), 3.5);
+        let needle = Mesh::cylinder(na, nb, nr, 64).unwrap();
+        let size = 128;
+        let cam = Camera::new(rotate_eye(rotate_eye(NamedView::Anterior.rotation(), 1, 25.0), 0, 15.0), [size, size]);
+        let material = Material { color: [0.1, 0.9, 0.2], ..Material::default() };
+        for projection in [Projection::Parallel, Projection::perspective(40.0, 2.0).unwrap()] {
+            let proj = Projector::new(&cam, &projection, dims, [1.0; 3]).unwrap();
+            let mut geo = GeometryImage::new(size, size);
+            rasterize(&needle, &material, Cull::Back, &proj, &mut geo).unwrap();
+            let rays = Rays::with_projection(&cam, &projection, dims, [1.0; 3]).unwrap();
+            for (method, mode) in [(Method::Rle, Mode::Iso), (Method::Rle, Mode::Blend), (Method::Binary, Mode::Blend)] {
+                let settings = Settings { method, mode, threads: 1, ..Settings::default() };
+                let tf = crate::classify::TransferFunction::threshold(SPHERE_ISO, [1.0, 0.8, 0.6]);
+                let mut r = Renderer::new(vol.clone(), &tf, settings).unwrap();
+                r.set_iso(SPHERE_ISO).unwrap();
+                r.set_projection(projection).unwrap();
+                let mut plain = Image::new(size, size);
+                r.render(&cam, &mut plain).unwrap();
+                r.set_limiter(Some(Arc::new(GeometryLimits::new(proj, &geo))));
+                let mut img = Image::new(size, size);
+                r.render(&cam, &mut img).unwrap();
+                let vol_img = img.clone();
+                composite_over_geometry(&mut img, &geo);
+                let ctx = format!("{projection:?} {method:?} {mode:?}");
+                let near = |a: [f32; 4], b: [f32; 4]| a.iter().zip(&b).all(|(a, b)| (a - b).abs() <= 1e-5);
+                let (mut needle_px, mut sphere_px) = (0, 0);
+                for y in 0..size {
+                    for x in 0..size {
+                        let i = y * size + x;
+                        let covered = |x: i64, y: i64| {
+                            geo.depth[(y.clamp(0, size as i64 - 1) as usize) * size + x.clamp(0, size as i64 - 1) as usize].is_finite()
+                        };
+                        let here = covered(x as i64, y as i64);
+                        if (-2..=2).any(|dy| (-2..=2).any(|dx| covered(x as i64 + dx, y as i64 + dy) != here)) {
+                            continue;
+                        }
+                        let (o, d) = rays.ray(x as f64, y as f64);
+                        // away from the sphere's silhouette: the ray passes a voxel inside or outside it
+                        let oc = o - c;
+                        let dn = d.normalize();
+                        let miss = (oc - dn * oc.dot(dn)).length() - radius;
+                        if miss.abs() < 1.5 {
+                            continue;
+                        }
+                        let (a, b, cc) = (d.dot(d), oc.dot(d), oc.dot(oc) - radius * radius);
+                        let ts = (miss < 0.0).then(|| (-b - (b * b - a * cc).sqrt()) / a);
+                        let sphere_depth = ts.map(|t| rays.depth_of(o + t * d));
+                        let needle_depth = cylinder_hit(o, d, na, nb, nr).map(|t| rays.depth_of(o + t * d));
+                        match (sphere_depth, needle_depth) {
+                            (s, Some(n)) if s.is_none_or(|s| s > n + 2.5) => {
+                                needle_px += 1;
+                                assert!(near(img.data[i], geo.color[i]), "{ctx} ({x}, {y}): {:?}, the needle {:?}", img.data[i], geo.color[i]);
+                            }
+                            (Some(s), n) if n.is_none_or(|n| n > s + 2.5) => {
+                                sphere_px += 1;
+                                assert!(vol_img.data[i] == plain.data[i], "{ctx} ({x}, {y}): {:?}, the plain render {:?}", vol_img.data[i], plain.data[i]);
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+                assert!(needle_px > 30 && sphere_px > 500, "{ctx}: {needle_px} needle and {sphere_px} sphere pixels checked");
+            }
         }
     }
 }

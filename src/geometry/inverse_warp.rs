@@ -40,7 +40,11 @@ const TILE: usize = 4;
 #[derive(Clone, Debug)]
 pub struct GeometryLimits {
     projector: Projector,
-    depth: Vec<f64>,
+    /// The depth of the covered tiles, [`TILE`]² values each (row-major in
+    /// the tile), and each tile's block (`u32::MAX`: none, all `+∞`), row-major
+    /// over the tiles: a needle copies what it covers, not the whole buffer.
+    blocks: Vec<f64>,
+    tile_block: Vec<u32>,
     size: [usize; 2],
     /// The output pixels holding geometry: `[x0, y0, x1, y1]` (None: none).
     bounds: Option<[usize; 4]>,
@@ -64,11 +68,22 @@ impl GeometryLimits {
         let tw = w.div_ceil(TILE);
         let mut covered = vec![false; tw];
         let mut runs = vec![];
+        let (mut blocks, mut tile_block) = (vec![], vec![u32::MAX; tw * h.div_ceil(TILE)]);
         for ty in 0..h.div_ceil(TILE) {
             covered.fill(false);
             let ys = ty * TILE..((ty + 1) * TILE).min(h);
             for y in ys.clone() {
                 let row = &geometry.depth[y * w..(y + 1) * w];
+                // (a branch-free test per tile: the scan of the whole buffer is most of the cost)
+                let mut any = false;
+                for (tx, c) in row.chunks(TILE).enumerate() {
+                    let hit = c.iter().fold(false, |a, &d| a | (d != f64::INFINITY));
+                    covered[tx] |= hit;
+                    any |= hit;
+                }
+                if !any {
+                    continue;
+                }
                 let (Some(x0), Some(x1)) = (row.iter().position(|d| d.is_finite()), row.iter().rposition(|d| d.is_finite())) else {
                     continue;
                 };
@@ -76,11 +91,12 @@ impl GeometryLimits {
                     None => [x0, y, x1, y],
                     Some([a, b, c, _]) => [a.min(x0), b, c.max(x1), y],
                 });
-                covered[x0 / TILE] = true;
-                covered[x1 / TILE] = true;
-                for tx in x0 / TILE + 1..x1 / TILE {
-                    if !covered[tx] && row[tx * TILE..(tx + 1) * TILE].iter().any(|d| d.is_finite()) {
-                        covered[tx] = true;
+            }
+            for tx in (0..tw).filter(|&tx| covered[tx]) {
+                tile_block[ty * tw + tx] = (blocks.len() / (TILE * TILE)) as u32;
+                for y in ty * TILE..(ty + 1) * TILE {
+                    for x in tx * TILE..(tx + 1) * TILE {
+                        blocks.push(if x < w && y < h { geometry.depth[y * w + x] } else { f64::INFINITY });
                     }
                 }
             }
@@ -97,7 +113,7 @@ impl GeometryLimits {
                 runs.push([t0 * TILE, ys.start, (tx * TILE).min(w) - 1, ys.end - 1]);
             }
         }
-        GeometryLimits { projector, depth: geometry.depth.clone(), size: [w, h], bounds, runs, cull: true, crossing: false }
+        GeometryLimits { projector, blocks, tile_block, size: [w, h], bounds, runs, cull: true, crossing: false }
     }
 
     /// [`GeometryLimits::new`] visiting every intermediate pixel (the
@@ -193,6 +209,16 @@ fn reach_of(plan: &FramePlan, [x0, y0, x1, y1]: [usize; 4]) -> Option<[usize; 4]
 }
 
 impl GeometryLimits {
+    /// The geometry's depth at output pixel `(x, y)` (inside the image).
+    #[inline(always)]
+    fn depth_at(&self, x: usize, y: usize) -> f64 {
+        let tw = self.size[0].div_ceil(TILE);
+        match self.tile_block[(y / TILE) * tw + x / TILE] {
+            u32::MAX => f64::INFINITY,
+            b => self.blocks[b as usize * TILE * TILE + (y % TILE) * TILE + x % TILE],
+        }
+    }
+
     /// The nearest geometry depth over the output pixels whose centres lie in
     /// the box `[u0, u1] × [v0, v1]` (at least the nearest pixel's), `+∞` for none.
     fn min_depth(&self, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
@@ -219,7 +245,7 @@ impl GeometryLimits {
         let mut d = f64::INFINITY;
         for y in clampi(y0, h)..=clampi(y1, h) {
             for x in clampi(x0, w)..=clampi(x1, w) {
-                d = d.min(self.depth[y * w + x]);
+                d = d.min(self.depth_at(x, y));
             }
         }
         d
@@ -820,5 +846,87 @@ mod tests {
                 assert!(needle_px > 30 && sphere_px > 500, "{ctx}: {needle_px} needle and {sphere_px} sphere pixels checked");
             }
         }
+    }
+
+    /// The inverse warp's cost, one thread, in-process (no pool wake-ups):
+    /// `cargo test --release --lib inverse_warp_cost -- --ignored --nocapture`.
+    /// The gather over the rectangle the geometry's bounds reach (the design
+    /// before the tiles) against the tiled one, on the CLI's needles (/tmp/iw
+    /// in the branch's report) at 512²: the head phantom's 128×128×113 and
+    /// the chest CT's 512×512×48 at 0.57×0.57×5 mm, parallel and perspective.
+    #[test]
+    #[ignore]
+    fn inverse_warp_cost_of_the_gather_and_the_tiles() {
+        use crate::view::Factorization;
+        use crate::view::perspective::PerspectiveView;
+        let cases = [
+            ("head", [128usize, 128, 113], [1.0f32; 3], DVec3::new(10.0, 30.0, 20.0), DVec3::new(118.0, 100.0, 95.0), 2.0),
+            ("chest", [512, 512, 48], [0.57, 0.57, 5.0], DVec3::new(40.0, 100.0, 5.0), DVec3::new(470.0, 400.0, 42.0), 6.0),
+        ];
+        for (name, dims, sp, a, b, radius) in cases {
+            let needle = Mesh::cylinder(a, b, radius, 32).unwrap();
+            let cam = Camera::new(NamedView::Anterior.rotation(), [512, 512]);
+            for projection in [Projection::Parallel, Projection::perspective(40.0, 2.0).unwrap()] {
+                let plan = match projection.resolve(&cam, dims, sp).unwrap() {
+                    None => FramePlan::parallel(&Factorization::new(&cam, dims, sp).unwrap(), sp),
+                    Some((pc, d)) => {
+                        let f = Factorization::new(&pc, dims, sp).unwrap();
+                        let Ok(pv) = PerspectiveView::new(&pc, d, dims, sp) else { continue };
+                        FramePlan::perspective(&pv, &f, sp, 0.5)
+                    }
+                };
+                let proj = Projector::new(&cam, &projection, dims, sp).unwrap();
+                let mut geo = GeometryImage::new(512, 512);
+                rasterize(&needle, &Material::default(), Cull::None, &proj, &mut geo).unwrap();
+                let n = 20;
+                let (mut t_new, mut t_gather, mut t_make) = (vec![], vec![], vec![]);
+                let mut l = RayLimits::open(plan.grid.size, plan.slices());
+                for _ in 0..n {
+                    let t = std::time::Instant::now();
+                    let gl = GeometryLimits::new(proj, &geo);
+                    t_make.push(t.elapsed().as_secs_f64() * 1e3);
+                    // the tiles: marks, then the marked pixels
+                    l.reset(plan.grid.size, plan.slices());
+                    let t = std::time::Instant::now();
+                    let (marks, _) = gl.marks(&plan);
+                    let w = plan.grid.size[0];
+                    for (i, _) in marks.iter().enumerate().filter(|(_, m)| **m) {
+                        let mut x = l.get(i % w, i / w);
+                        gl.limit_pixel(&plan, i % w, i / w, &mut x);
+                        l.set(i % w, i / w, x);
+                    }
+                    t_new.push(t.elapsed().as_secs_f64() * 1e3);
+                    // the gather over the bounds' rectangle
+                    l.reset(plan.grid.size, plan.slices());
+                    let t = std::time::Instant::now();
+                    let [p0, q0, p1, q1] = gl.reach(&plan).unwrap();
+                    for q in q0..=q1 {
+                        for p in p0..=p1 {
+                            let mut x = l.get(p, q);
+                            gl.limit_pixel(&plan, p, q, &mut x);
+                            l.set(p, q, x);
+                        }
+                    }
+                    t_gather.push(t.elapsed().as_secs_f64() * 1e3);
+                }
+                let med = |v: &mut Vec<f64>| {
+                    v.sort_by(f64::total_cmp);
+                    v[v.len() / 2]
+                };
+                let (tn, tg, tm) = (med(&mut t_new), med(&mut t_gather), med(&mut t_make));
+                let marked = gl_marked(&GeometryLimits::new(proj, &geo), &plan);
+                println!(
+                    "{name} {projection:?}: grid {:?}, covered {:.1} %, marked {marked}; GeometryLimits::new {tm:.3} ms; rectangle gather {tg:.3} ms ({:.2} ns/output px), tiles {tn:.3} ms ({:.2} ns/output px)",
+                    plan.grid.size,
+                    geo.coverage() * 100.0,
+                    tg * 1e6 / (512.0 * 512.0),
+                    tn * 1e6 / (512.0 * 512.0)
+                );
+            }
+        }
+    }
+
+    fn gl_marked(gl: &GeometryLimits, plan: &FramePlan) -> usize {
+        gl.marks(plan).0.iter().filter(|&&m| m).count()
     }
 }

@@ -15,8 +15,8 @@ use shearwarp::view::{Camera, Projection};
 
 /// Accelerated equals brute force with geometry, bit for bit: the binary
 /// rotator and its brute force, the RLE path and its brute force, in iso and
-/// blend mode, parallel and perspective, with a needle and a plate limiting
-/// the rays; the geometry changes the image (it is really in the way), and
+/// blend mode (iso also with the crossing slice kept), parallel and
+/// perspective, with a needle and a plate limiting the rays; the geometry changes the image (it is really in the way), and
 /// the final image composes the volume over the geometry's colour.
 #[test]
 fn geometry_accelerated_equals_brute_force() {
@@ -36,8 +36,9 @@ fn geometry_accelerated_equals_brute_force() {
             let mut geo = GeometryImage::new(72, 64);
             rasterize(&mesh, &Material::default(), Cull::Back, &proj, &mut geo).unwrap();
             assert!(geo.coverage() > 0.1);
-            let limits = Arc::new(GeometryLimits::new(proj, &geo));
-            for mode in [Mode::Iso, Mode::Blend] {
+            // iso mode also with the crossing slice kept (the scene's iso limits on the raycaster)
+            for (mode, crossing) in [(Mode::Iso, false), (Mode::Iso, true), (Mode::Blend, false)] {
+                let limits = Arc::new(GeometryLimits::new(proj, &geo).with_iso_crossing(crossing));
                 let iso = if mode == Mode::Iso { Some(60.0) } else { None };
                 let frame = |method: Method, limited: bool| {
                     let mut r = renderer(&vol, &tf, method, mode, projection);
@@ -49,7 +50,7 @@ fn geometry_accelerated_equals_brute_force() {
                     }
                     render(&mut r, &cam)
                 };
-                let what = format!("{projection:?} {mode:?} ({rx}, {ry}, {rz})");
+                let what = format!("{projection:?} {mode:?} crossing {crossing} ({rx}, {ry}, {rz})");
                 let binary = frame(Method::Binary, true);
                 assert_eq!(bits(&binary), bits(&frame(Method::Brute, true)), "binary vs brute, {what}");
                 let rle = frame(Method::Rle, true);

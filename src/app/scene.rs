@@ -17,10 +17,11 @@ use anyhow::Result;
 use clap::{Args, ValueEnum};
 use glam::{DAffine3, DMat3, DVec3, EulerRot};
 
-use shearwarp::geometry::{
-    Cull, GeometryImage, GeometryLimits, Material, Mesh, Projector, composite_iso_over_geometry, composite_over_geometry, load_mesh, rasterize,
-};
 use shearwarp::composite::Mode;
+use shearwarp::geometry::{
+    Cull, GeometryImage, GeometryLimits, Material, Mesh, Projector, composite_iso_over_geometry, composite_over_geometry, load_mesh,
+    rasterize,
+};
 use shearwarp::render::{FrameStats, Method, Renderer};
 use shearwarp::view::Camera;
 use shearwarp::view::clip::{ClipRegion, Limiters, Region};

@@ -714,8 +714,8 @@ mod tests {
             let mut fin = img.clone();
             let gl = GeometryLimits::new(proj, &geo).with_iso_crossing(true);
             composite_iso_over_geometry(&mut fin, &geo, &r, &gl);
-            for i in 0..size * size {
-                if geo.depth[i].is_finite() && vdepth[i] >= geo.depth[i] {
+            for (i, (&vd, &gd)) in vdepth.iter().zip(&geo.depth).enumerate() {
+                if gd.is_finite() && vd >= gd {
                     assert_eq!(fin.data[i], geo.color[i], "{projection:?}: pixel {i}: the needle hides the volume behind it");
                 }
             }

@@ -918,7 +918,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
 /// most as wrong misses its time. Rows are compared within one projection
 /// (parallel rows with parallel, each perspective with its own).
 pub fn dominance(summary: &[Summary], mode: &str) -> Vec<String> {
-    let projection = |v: &str| v.split_once("-persp").map(|(_, r)| r.trim_start_matches("-q2").to_string());
+    let projection = |v: &str| v.split_once("-persp").map(|(_, r)| projection_key(r));
     let rows: Vec<&Summary> = summary.iter().filter(|x| x.mode == mode).collect();
     let mut out = vec![];
     for p in rows.iter().filter(|x| x.cold_shear_ms.is_nan()) {
@@ -950,6 +950,28 @@ pub fn dominance(summary: &[Summary], mode: &str) -> Vec<String> {
         out.push(format!("{head}: NOT MATCHED, no shearwarp row is as fast and as accurate: {}", why.join("; ")));
     }
     out
+}
+
+/// Which perspective a variant's name after `-persp` names: its projection
+/// suffix `-f<FOV>-d<D>` (empty for the single one), without the options
+/// that do not change the projection (`-q2`, `-bcc`, `-deluxe-<LABEL>`), so
+/// `binary-persp-q2-deluxe-I` meets `vtk-persp`.
+fn projection_key(rest: &str) -> String {
+    let mut key = String::new();
+    let mut parts = rest.split('-').skip(1).peekable();
+    while let Some(p) = parts.next() {
+        match p {
+            "q2" | "bcc" => {}
+            "deluxe" => {
+                parts.next();
+            }
+            _ => {
+                key.push('-');
+                key.push_str(p);
+            }
+        }
+    }
+    key
 }
 
 /// The suffix of a perspective variant's name when `n` projections are
@@ -1466,13 +1488,17 @@ mod tests {
             rec("volpack", 1.5, 0.05, true),
             rec("vtk", 50.0, 0.02, true),
             rec("vtk-persp", 1.0, 0.05, true),
+            rec("binary-persp-q2-f40-d2-deluxe-I", 3.0, 0.02, false),
+            rec("vtk-persp-f40-d2", 4.0, 0.025, true),
         ]);
         let d = dominance(&s, "blend");
-        assert_eq!(d.len(), 3);
+        assert_eq!(d.len(), 4);
         assert!(d[0].starts_with("volpack") && d[0].contains("matched or beaten by rle (1.000 ms"), "{}", d[0]);
         assert!(d[1].starts_with("vtk ") && d[1].contains("NOT MATCHED") && d[1].contains("binary, has +50 % RMSE"), "{}", d[1]);
         // the perspective peer meets only rle-persp, which is slower
         assert!(d[2].starts_with("vtk-persp") && d[2].contains("NOT MATCHED") && d[2].contains("rle-persp, takes +100 % time"), "{}", d[2]);
+        // options after the projection (q2, deluxe, bcc) do not hide a row from its peer
+        assert!(d[3].starts_with("vtk-persp-f40-d2") && d[3].contains("matched or beaten by binary-persp-q2-f40-d2-deluxe-I"), "{}", d[3]);
         assert!(dominance(&s, "iso").is_empty());
     }
 }

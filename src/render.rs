@@ -1760,6 +1760,7 @@ fn missing(what: &str, axis: usize) -> Error {
 /// The rays' context of a frame of `plan`: the classification, iso value and
 /// material, with table shading when the settings ask for it and the normal
 /// codes exist (the shade table brought up to date for the view).
+#[allow(clippy::too_many_arguments)]
 fn ray_context<'a>(
     stack: &'a SliceStack,
     cls: &'a Classifier,

@@ -378,11 +378,14 @@ impl<'a> RayContext<'a> {
         hi: usize,
         foc: [usize; 2],
     ) -> RayResult {
-        match (self.mode, self.half) {
-            (Mode::Blend, false) => self.trace_blend(v, ray, ks, foc),
-            (Mode::Iso, false) => self.trace_iso(v, ray, ks, lo, hi, foc),
-            (Mode::Blend, true) => self.trace_blend_half(v, ray, ks, hi),
-            (Mode::Iso, true) => self.trace_iso_half(v, ray, ks, lo, hi),
+        // (a ray without a focus interval runs the loops without the per-sample test)
+        match (self.mode, self.half, foc[0] <= foc[1]) {
+            (Mode::Blend, false, false) => self.trace_blend::<_, _, false>(v, ray, ks, foc),
+            (Mode::Blend, false, true) => self.trace_blend::<_, _, true>(v, ray, ks, foc),
+            (Mode::Iso, false, false) => self.trace_iso::<_, _, false>(v, ray, ks, lo, hi, foc),
+            (Mode::Iso, false, true) => self.trace_iso::<_, _, true>(v, ray, ks, lo, hi, foc),
+            (Mode::Blend, true, _) => self.trace_blend_half(v, ray, ks, hi),
+            (Mode::Iso, true, _) => self.trace_iso_half(v, ray, ks, lo, hi),
         }
     }
 
@@ -535,7 +538,7 @@ impl<'a> RayContext<'a> {
     }
 
     #[inline(always)]
-    fn trace_blend<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, foc: [usize; 2]) -> RayResult {
+    fn trace_blend<V: Cells, R: Ray, const F: bool>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, foc: [usize; 2]) -> RayResult {
         let mut acc = [0f32; 4];
         for k in ks {
             if terminated(acc[3], self.ert) {
@@ -545,7 +548,7 @@ impl<'a> RayContext<'a> {
                 continue;
             };
             let d = self.sample(v, ci, cj, k, wi, wj);
-            let cls = self.cls_at(k, foc);
+            let cls = if F { self.cls_at(k, foc) } else { self.classifier };
             let alpha = cls.alpha(d);
             if alpha <= 0.0 {
                 continue;
@@ -558,7 +561,7 @@ impl<'a> RayContext<'a> {
     }
 
     #[inline(always)]
-    fn trace_iso<V: Cells, R: Ray>(
+    fn trace_iso<V: Cells, R: Ray, const F: bool>(
         &self,
         v: &V,
         ray: R,
@@ -573,9 +576,10 @@ impl<'a> RayContext<'a> {
             };
             let d = self.sample(v, ci, cj, k, wi, wj);
             // the iso value that applies where the sample is (focus or context)
-            let (iso, rgb) = self.iso_at(k, foc);
+            let iso = if F { self.iso_at(k, foc).0 } else { self.iso };
             if d >= iso {
-                return self.iso_hit(v, ray, k, ci, cj, wi, wj, d, lo, hi, (iso, rgb));
+                let at = if F { self.iso_at(k, foc) } else { (self.iso, self.iso_rgb) };
+                return self.iso_hit(v, ray, k, ci, cj, wi, wj, d, lo, hi, at);
             }
         }
         MISS

@@ -562,25 +562,31 @@ impl<S: Sampler> RleFrame<'_, S> {
                 // edges this row starts and ends at (silhouettes move slowly)
                 rle.prefetch_scanline(s + 2, first as usize, hi as usize);
                 let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
-                let mut cells = |lo: u32, hi: u32, t: &S| {
-                    let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
-                    match &self.plan.limits {
-                        None => composite_row::<S, false>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, Limits::NONE),
-                        Some(l) => {
-                            let lim = Limits { row: &l.row(q_first + row)[r.p0..=r.p1], k: k as u32 };
-                            composite_row::<S, true>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, lim)
-                        }
-                    }
-                };
-                match (self.focus, &self.plan.focus) {
-                    // focus+context: the cells of each run of pixels in / out of the focus with its sampler
-                    (Some(ft), Some(fl)) => {
+                let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
+                match (&self.plan.limits, self.focus, &self.plan.focus) {
+                    // focus+context: the cells of each run of pixels in / out of
+                    // the focus with its sampler (the cursors afresh for each run)
+                    (limits, Some(ft), Some(fl)) => {
                         let op = op as i64;
                         focus_runs(fl.row(q_first + row), k as u32, first as i64 + op, hi as i64 + op, |x0, x1, f| {
-                            cells((x0 - op) as u32, (x1 - op) as u32, if f { ft } else { self.tables })
+                            let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
+                            let (lo, hi, t) = ((x0 - op) as u32, (x1 - op) as u32, if f { ft } else { self.tables });
+                            match limits {
+                                None => composite_row::<S, false>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, Limits::NONE),
+                                Some(l) => {
+                                    let lim = Limits { row: &l.row(q_first + row)[r.p0..=r.p1], k: k as u32 };
+                                    composite_row::<S, true>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, lim)
+                                }
+                            }
                         })
                     }
-                    _ => cells(first as u32, hi as u32, self.tables),
+                    (None, _, _) => {
+                        composite_row::<S, false>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, Limits::NONE)
+                    }
+                    (Some(l), _, _) => {
+                        let lim = Limits { row: &l.row(q_first + row)[r.p0..=r.p1], k: k as u32 };
+                        composite_row::<S, true>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, lim)
+                    }
                 }
             }
         }

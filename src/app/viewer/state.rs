@@ -833,7 +833,7 @@ pub fn short(v: f32) -> String {
 }
 
 /// The key help line.
-pub const HELP: &str = "drag rotate 1-4 tissue [ ] iso +- cell spc blend P persp wheel fly C clip (right-drag) L lens , . R S Q";
+pub const HELP: &str = "drag rotate 1-4 tissue L lens , . [ ] iso +- cell spc blend P persp wheel fly C clip (right-drag) R S Q";
 
 /// The eye distances (volume diagonals) the mouse wheel keeps to.
 pub const MIN_EYE_DISTANCE: f64 = 0.05;

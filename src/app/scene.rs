@@ -70,6 +70,49 @@ pub struct SceneArgs {
     /// Which side of --clip-box / --clip-sphere is rendered.
     #[arg(long, value_enum, default_value = "inside")]
     pub clip_keep: Keep,
+    /// Focus+context: inside this region the volume is classified by
+    /// --focus-tissue, outside by --tissue: `sphere:x,y,z,r` (centre in voxel
+    /// indices, radius in voxels of the smallest spacing) or
+    /// `box:x0,y0,z0,x1,y1,z1` (voxel indices).
+    #[arg(long, value_name = "sphere:X,Y,Z,R|box:X0,Y0,Z0,X1,Y1,Z1", value_parser = parse_focus, allow_hyphen_values = true)]
+    pub focus: Option<Region>,
+    /// The tissue preset inside --focus (a name as --tissue takes; default bone).
+    #[arg(long, value_name = "NAME")]
+    pub focus_tissue: Option<String>,
+}
+
+fn parse_focus(s: &str) -> std::result::Result<Region, String> {
+    let (kind, rest) = s.split_once(':').ok_or_else(|| format!("expected sphere:x,y,z,r or box:x0,y0,z0,x1,y1,z1, got '{s}'"))?;
+    match kind.trim() {
+        "sphere" => {
+            let v = parse_sphere(rest)?;
+            Ok(Region::Sphere { centre: [v[0], v[1], v[2]], radius: v[3] })
+        }
+        "box" => {
+            let b = parse_box(rest)?;
+            Ok(Region::Box { lo: [b[0], b[1], b[2]], hi: [b[3], b[4], b[5]] })
+        }
+        k => Err(format!("unknown focus region '{k}' (sphere:x,y,z,r or box:x0,y0,z0,x1,y1,z1)")),
+    }
+}
+
+/// The focus of `--focus` / `--focus-tissue` (None without --focus; an
+/// error for --focus-tissue alone).
+pub fn focus_of(args: &SceneArgs) -> Result<Option<shearwarp::render::Focus>> {
+    match (args.focus, &args.focus_tissue) {
+        (None, Some(_)) => Err(usage("--focus-tissue needs --focus (the region it classifies)".into())),
+        (None, None) => Ok(None),
+        (Some(region), t) => Ok(Some(shearwarp::render::Focus::new(region, t.as_deref().unwrap_or("bone")))),
+    }
+}
+
+/// Gives `r` the focus of `--focus` / `--focus-tissue`, if any (a bad
+/// region or tissue is a usage error).
+pub fn install_focus(args: &SceneArgs, r: &mut Renderer) -> Result<()> {
+    if let Some(f) = focus_of(args)? {
+        r.set_focus(Some(f)).map_err(|e| usage(format!("--focus: {e}")))?;
+    }
+    Ok(())
 }
 
 fn parse_numbers<const N: usize>(s: &str, what: &str) -> std::result::Result<[f64; N], String> {

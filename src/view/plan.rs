@@ -318,6 +318,11 @@ pub struct FramePlan {
     pub k_range: [usize; 2],
     /// Optional per-pixel limits within `k_range`.
     pub limits: Option<RayLimits>,
+    /// Optional per-pixel focus interval (focus+context): ray `(p, q)`'s
+    /// sample in slice `k` is classified by the focus classification iff `k`
+    /// lies in its interval `[f0, f1]` ([`FramePlan::in_focus`]), else by the
+    /// frame's own. Written by [`FramePlan::apply_focus`].
+    pub focus: Option<RayLimits>,
     /// Real sample spacing over the spacing opacities are defined at (the
     /// smallest voxel spacing): `α' = 1 − (1 − α)^ratio`. In a perspective
     /// plan each ray has its own spacing; this is the smallest of them (the
@@ -358,6 +363,7 @@ impl FramePlan {
             warp: Warp::default(),
             k_range: [0, 0],
             limits: None,
+            focus: None,
             opacity_ratio: 1.0,
             scaled: vec![],
             perspective: None,
@@ -402,6 +408,7 @@ impl FramePlan {
         };
         self.k_range = [0, f.n[2].saturating_sub(1)];
         self.limits = None;
+        self.focus = None;
         let min_sp = spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
         self.opacity_ratio = (f.sample_spacing / min_sp) as f32;
         self.scaled.clear();
@@ -542,6 +549,7 @@ impl FramePlan {
         let from_base = DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(-shift[0], -shift[1], 1.0));
         self.warp = Warp { forward: pv.warp.forward * to_base, inverse: from_base * pv.warp.inverse };
         self.limits = None;
+        self.focus = None;
         let min_sp = spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
         let p = pv.perm;
         let rays = PerspectiveRays {
@@ -592,6 +600,7 @@ impl FramePlan {
         let size = [0, 1].map(|a| new_pad + (hi[a] / pitch).ceil().max(0.0) as usize + 3);
         self.grid = Grid { size, pad: new_pad, pitch };
         self.limits = None;
+        self.focus = None;
         if !self.exponents.is_empty() {
             self.set_ray_opacity(true);
         }
@@ -836,6 +845,40 @@ impl FramePlan {
     /// Removes and returns the ray limits (their buffer, for reuse).
     pub fn take_limits(&mut self) -> Option<RayLimits> {
         self.limits.take()
+    }
+
+    /// Sets each ray's focus interval (focus+context): the slices whose
+    /// samples `region` keeps — any [`Limiter`] that narrows open limits to
+    /// a region's samples, e.g. [`crate::view::clip::ClipRegion`] — into
+    /// `buf` (reused across frames; taken back with [`FramePlan::take_focus`]).
+    pub fn apply_focus(&mut self, region: &dyn Limiter, mut buf: RayLimits) {
+        buf.reset(self.grid.size, self.slices());
+        region.limit(self, &mut buf);
+        self.focus = Some(buf);
+    }
+
+    /// Removes and returns the focus intervals (their buffer, for reuse).
+    pub fn take_focus(&mut self) -> Option<RayLimits> {
+        self.focus.take()
+    }
+
+    /// The focus interval `[f0, f1]` of ray `(p, q)` (empty, `f0 > f1`, without a focus region).
+    #[inline(always)]
+    pub fn focus_range(&self, p: usize, q: usize) -> [usize; 2] {
+        match &self.focus {
+            Some(f) => {
+                let [a, b] = f.get(p, q);
+                [a as usize, b as usize]
+            }
+            None => [1, 0],
+        }
+    }
+
+    /// Whether ray `(p, q)`'s sample in slice `k` lies in the focus region.
+    #[inline(always)]
+    pub fn in_focus(&self, p: usize, q: usize, k: usize) -> bool {
+        let [a, b] = self.focus_range(p, q);
+        a <= k && k <= b
     }
 
     /// Number of slices.

@@ -20,7 +20,7 @@ use glam::{DAffine3, DMat3, DVec3, EulerRot};
 use shearwarp::geometry::{Cull, GeometryImage, GeometryLimits, Material, Mesh, Projector, composite_over_geometry, load_mesh, rasterize};
 use shearwarp::render::{FrameStats, Renderer};
 use shearwarp::view::Camera;
-use shearwarp::view::clip::{ClipRegion, Limiters, Region};
+use shearwarp::view::clip::{self, ClipRegion, Limiters, Region};
 use shearwarp::view::plan::Limiter;
 use shearwarp::warp::Image;
 
@@ -67,7 +67,8 @@ pub struct SceneArgs {
     /// voxels of the smallest spacing (round in world space; see --clip-keep).
     #[arg(long, value_name = "X,Y,Z,R", value_parser = parse_sphere, allow_hyphen_values = true)]
     pub clip_sphere: Option<[f64; 4]>,
-    /// Which side of --clip-box / --clip-sphere is rendered.
+    /// Which side of --clip-box / --clip-sphere / --clip-mesh is rendered
+    /// (outside: the region is cut out of the volume; one such region at most).
     #[arg(long, value_enum, default_value = "inside")]
     pub clip_keep: Keep,
 }
@@ -142,14 +143,12 @@ impl Scene {
             (None, Some(s)) => Some(Region::Sphere { centre: [s[0], s[1], s[2]], radius: s[3] }),
             (None, None) => None,
         };
+        let keep = match args.clip_keep {
+            Keep::Inside => clip::Keep::Inside,
+            Keep::Outside => clip::Keep::Outside,
+        };
         if let Some(region) = region {
-            if args.clip_keep == Keep::Outside {
-                return Err(usage(
-                    "--clip-keep outside is not available yet: it needs two slice intervals per ray, and the frame plan's ray limits hold one (use --clip-keep inside, or --clip-plane for a half-space)"
-                        .into(),
-                ));
-            }
-            limiters.push(Arc::new(ClipRegion::new(region, spacing).map_err(|e| usage(format!("clip region: {e}")))?));
+            limiters.push(Arc::new(ClipRegion::new(region, spacing).map_err(|e| usage(format!("clip region: {e}")))?.keeping(keep)));
         }
         if !(args.mesh_scale.is_finite() && args.mesh_scale != 0.0) {
             return Err(usage(format!("--mesh-scale must be a finite number other than 0, got {}", args.mesh_scale)));
@@ -166,7 +165,7 @@ impl Scene {
         let clip: Option<Arc<dyn Limiter>> = match limiters.len() {
             0 => None,
             1 => limiters.pop(),
-            _ => Some(Arc::new(Limiters(limiters))),
+            _ => Some(Arc::new(Limiters::new(limiters).map_err(|e| usage(e.to_string()))?)),
         };
         let material = Material { color: args.mesh_color.map(|c| c as f32), ..Material::default() };
         Ok(Scene { meshes, material, clip, dims, spacing })

@@ -6,14 +6,17 @@
 //! twice at the output resolution with the frame's own [`Projector`]: its
 //! front faces ([`Cull::Back`]) into one depth buffer, its back faces
 //! ([`Cull::Front`]) into another. Each intermediate pixel reads both at the
-//! output position of its ray (the plan's warp of the pixel centre; the
-//! inverse warp's gather, [`GeometryLimits::min_depth`], over that point: the
-//! nearest output pixel), and its samples — whose depth is affine in the
+//! output position of its ray (the plan's warp of the pixel centre):
+//! bilinearly between the four output pixels around it where all four hold
+//! the surface, else (the silhouette) through the inverse warp's gather
+//! ([`GeometryLimits::min_depth`], the nearest depth over a pixel-sized box
+//! about the point, then two pixels) — a clip face is read at the ray, where the occlusion
+//! gather takes the minimum over the whole footprint. Its samples — whose depth is affine in the
 //! slice index in both projections — are kept from the first slice at or
 //! after the front depth to the last at or before the back depth (solved,
 //! then checked on the samples themselves). A ray whose front face is not
-//! drawn but whose back face is (a perspective eye inside the solid) enters
-//! at the eye. [`Keep::Inside`] narrows the ray's interval to those slices;
+//! drawn within two pixels but whose back face is (a perspective eye inside
+//! the solid) enters at the eye. [`Keep::Inside`] narrows the ray's interval to those slices;
 //! [`Keep::Outside`] cuts them out as the ray's hole
 //! ([`crate::view::plan::cut_ray`]).
 //!
@@ -25,11 +28,12 @@
 //! tolerance of `1e-6` of the mesh's size (convex). The check costs
 //! triangles × vertices: meant for clip solids of a few thousand triangles.
 //!
-//! Accuracy: the limits follow the rasterized faces, whose depth is read at
-//! the nearest output pixel centre, not at the ray itself: a face inclined to
-//! the view is off by its slope times up to ~0.7 output pixel, so a limit can
-//! differ by one slice from the analytic region's (tested against
-//! [`crate::view::clip::ClipRegion`] boxes).
+//! Accuracy: the limits follow the rasterized faces, interpolated between
+//! output pixel centres (exact on a flat face in parallel; second order
+//! across a curved or perspective one), and at the silhouette the nearest
+//! face over a pixel: a limit can differ by one slice from the analytic
+//! region's (tested against [`crate::view::clip::ClipRegion`] boxes and
+//! balls).
 
 use std::collections::HashMap;
 
@@ -154,8 +158,11 @@ impl ConvexMesh {
 #[derive(Clone, Debug)]
 pub struct MeshClip {
     projector: Projector,
-    front: GeometryLimits,
-    back: GeometryLimits,
+    /// The front and back faces' depth buffers, and each as the inverse
+    /// warp's gather (the fallback at the silhouette).
+    front: (Vec<f64>, GeometryLimits),
+    back: (Vec<f64>, GeometryLimits),
+    size: [usize; 2],
     keep: Keep,
 }
 
@@ -163,12 +170,39 @@ impl MeshClip {
     /// The clip of `mesh` keeping `keep`, drawn with `projector` (the frame's camera).
     pub fn new(mesh: &ConvexMesh, projector: Projector, keep: Keep) -> Result<Self> {
         let [w, h] = projector.size();
-        let draw = |cull| -> Result<GeometryLimits> {
+        let draw = |cull| -> Result<(Vec<f64>, GeometryLimits)> {
             let mut img = GeometryImage::new(w, h);
             rasterize(&mesh.mesh, &Material::default(), cull, &projector, &mut img)?;
-            Ok(GeometryLimits::new(projector, &img))
+            let g = GeometryLimits::new(projector, &img);
+            Ok((img.depth, g))
         };
-        Ok(MeshClip { projector, front: draw(Cull::Back)?, back: draw(Cull::Front)?, keep })
+        Ok(MeshClip { projector, front: draw(Cull::Back)?, back: draw(Cull::Front)?, size: [w, h], keep })
+    }
+
+    /// The depth of buffer `d` at output point `(u, v)`: interpolated
+    /// between the four pixel centres around it where all four hold the
+    /// surface (bilinearly in the screen-linear quantity: the depth in
+    /// parallel, `1/w = 1/(D + depth)` in perspective, so a flat face is
+    /// exact); else (the silhouette) the inverse warp's gather over the
+    /// pixel-sized box about the point, then over a box `reach` pixels wide
+    /// (the nearest depth there, `+∞` for none).
+    fn depth_at(&self, (d, gather): &(Vec<f64>, GeometryLimits), u: f64, v: f64, reach: f64) -> f64 {
+        let [w, h] = self.size;
+        let (x0, y0) = (u.floor(), v.floor());
+        if x0 >= 0.0 && y0 >= 0.0 && x0 + 1.0 < w as f64 && y0 + 1.0 < h as f64 {
+            let i = y0 as usize * w + x0 as usize;
+            let c = [d[i], d[i + 1], d[i + w], d[i + w + 1]];
+            if c.iter().all(|x| x.is_finite()) {
+                let (fx, fy) = (u - x0, v - y0);
+                let lerp = |c: [f64; 4]| (c[0] * (1.0 - fx) + c[1] * fx) * (1.0 - fy) + (c[2] * (1.0 - fx) + c[3] * fx) * fy;
+                return match self.projector.eye_distance() {
+                    None => lerp(c),
+                    Some(e) => 1.0 / lerp(c.map(|z| 1.0 / (e + z))) - e,
+                };
+            }
+        }
+        let near = gather.min_depth(u - 0.5, u + 0.5, v - 0.5, v + 0.5);
+        if near.is_finite() || reach <= 0.5 { near } else { gather.min_depth(u - reach, u + reach, v - reach, v + reach) }
     }
 
     /// The slices `[a, b]` (`a > b`: none) of `0 ..= last` of pixel `(p, q)`
@@ -177,11 +211,13 @@ impl MeshClip {
         const NONE: [i64; 2] = [1, 0];
         let [a, b] = plan.intermediate_to_sheared(p as f64, q as f64);
         let Some([u, v]) = plan.warp.to_output(a, b) else { return NONE };
-        let (front, back) = (self.front.min_depth(u, u, v, v), self.back.min_depth(u, u, v, v));
+        let back = self.depth_at(&self.back, u, v, 0.5);
         if !back.is_finite() {
             return NONE;
         }
-        // (a front face not drawn where a back face is: the eye inside the solid)
+        // (at the silhouette the nearest front face within two pixels; none
+        // there where a back face is drawn: the eye inside the solid)
+        let front = self.depth_at(&self.front, u, v, 2.0);
         let front = if front.is_finite() { front } else { f64::NEG_INFINITY };
         let depth = |k: i64| {
             let s = unpermute(plan.view.perm, DVec3::new(plan.sample_at(k as usize, 0, p), plan.sample_at(k as usize, 1, q), k as f64));

@@ -116,7 +116,7 @@ impl ConvexMesh {
             .map(|t| (vertices[t[0] as usize] - c).dot((vertices[t[1] as usize] - c).cross(vertices[t[2] as usize] - c)))
             .sum::<f64>()
             / 6.0;
-        if !(volume.abs() > 1e-9 * diameter.powi(3)) {
+        if volume.is_nan() || volume.abs() <= 1e-9 * diameter.powi(3) {
             return Err(Error::value(what, format!("the mesh encloses no volume ({volume})")));
         }
         if volume < 0.0 {

@@ -753,6 +753,63 @@ impl Ray for ScaledRay {
     }
 }
 
+/// A ray less its hole `[h0, h1]` ([`FramePlan::ray_hole`]): its samples in
+/// the hole's slices, and the Deluxe I midpoints next to them, are outside
+/// the volume to the trace (skipped when blending, never an iso hit nor the
+/// sample an iso hit is refined against), so every traversal that traces
+/// rays honours the hole with the one trace loop.
+#[derive(Clone, Copy, Debug)]
+pub struct HoledRay<R> {
+    pub ray: R,
+    pub hole: [usize; 2],
+}
+
+impl<R: Ray> HoledRay<R> {
+    #[inline(always)]
+    fn in_hole(&self, k: usize) -> bool {
+        self.hole[0] <= k && k <= self.hole[1]
+    }
+}
+
+impl<R: Ray> Ray for HoledRay<R> {
+    #[inline(always)]
+    fn locate(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)> {
+        if self.in_hole(k) { None } else { self.ray.locate(ctx, k) }
+    }
+    #[inline(always)]
+    fn locate_mid(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)> {
+        if self.in_hole(k) || self.in_hole(k + 1) { None } else { self.ray.locate_mid(ctx, k) }
+    }
+    #[inline(always)]
+    fn opacity(&self, alpha: f32) -> f32 {
+        self.ray.opacity(alpha)
+    }
+    #[inline(always)]
+    fn half_opacity(&self, alpha: f32) -> f32 {
+        self.ray.half_opacity(alpha)
+    }
+}
+
+/// The candidates of `it` outside the hole `[h0, h1]` (a walk's candidates in
+/// the hole are never hits: the walk goes on past them).
+struct SkipHole<I> {
+    it: I,
+    hole: [usize; 2],
+}
+
+impl<I: Iterator<Item = usize>> Iterator for SkipHole<I> {
+    type Item = usize;
+    #[inline(always)]
+    fn next(&mut self) -> Option<usize> {
+        loop {
+            let k = self.it.next()?;
+            if k < self.hole[0] || k > self.hole[1] {
+                return Some(k);
+            }
+        }
+    }
+}
+
 /// Rays of `rect` of the intermediate image through the sheared mask (for a
 /// scaled plan, with its block occupancy up to date for `m`:
 /// [`BinaryMask::update_occupancy`]): each ray
@@ -943,6 +1000,7 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
         if ctx.mode == Mode::Iso
             && lo <= hi
             && first / len == b
+            && plan.ray_hole(p, self.q).is_none_or(|[h0, h1]| first < h0 || first > h1)
             && let Some((ci, cj, wi, wj)) = ray.locate(ctx, first)
             && ctx.sample(v, ci, cj, first, wi, wj) >= ctx.iso_at(first, plan.focus_range(p, self.q)).0
         {
@@ -1028,7 +1086,11 @@ fn trace_ray<V: Cells, R: Ray, const LIMITED: bool>(
         if lo > hi {
             return MISS;
         }
-        ctx.trace(v, ray, Clip { it: ks, lo, hi, ascending: ctx.ascending }, lo, hi, foc)
+        let ks = Clip { it: ks, lo, hi, ascending: ctx.ascending };
+        match ctx.plan.ray_hole(p, q) {
+            None => ctx.trace(v, ray, ks, lo, hi, foc),
+            Some(hole) => ctx.trace(v, HoledRay { ray, hole }, SkipHole { it: ks, hole }, lo, hi, foc),
+        }
     } else {
         ctx.trace(v, ray, ks, 0, ctx.stack.n[2] - 1, foc)
     }
@@ -1127,10 +1189,13 @@ fn brute_rows<V: Cells, R: Ray>(
             let [lo, hi] = ctx.plan.ray_range(p, q);
             let r = ray(p, q);
             let foc = ctx.plan.focus_range(p, q);
-            let res = match (lo <= hi, ctx.ascending) {
-                (false, _) => MISS,
-                (true, true) => ctx.trace(v, r, lo..=hi, lo, hi, foc),
-                (true, false) => ctx.trace(v, r, (lo..=hi).rev(), lo, hi, foc),
+            let res = match (lo <= hi, ctx.ascending, ctx.plan.ray_hole(p, q)) {
+                (false, ..) => MISS,
+                (true, true, None) => ctx.trace(v, r, lo..=hi, lo, hi, foc),
+                (true, false, None) => ctx.trace(v, r, (lo..=hi).rev(), lo, hi, foc),
+                // every slice of the ray, the hole's too: its ray skips them
+                (true, true, Some(hole)) => ctx.trace(v, HoledRay { ray: r, hole }, lo..=hi, lo, hi, foc),
+                (true, false, Some(hole)) => ctx.trace(v, HoledRay { ray: r, hole }, (lo..=hi).rev(), lo, hi, foc),
             };
             *c = res.rgba;
             *d = res.depth;

@@ -19,7 +19,7 @@ use crate::composite::{Intermediate, composite_premultiplied, terminated};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::encode::rle::runs::{Cursor, INF};
 use crate::encode::rle::{PostTables, Preclass, RleVolume, RleVoxel, ViewTables, VoxelSource};
-use crate::view::plan::{FramePlan, MapKind, floor_i64};
+use crate::view::plan::{FramePlan, MapKind, RayLimits, floor_i64};
 
 /// What a sample is made of (a sampler of the one slice traversal): each
 /// voxel read becomes a 4-vector ([`Sampler::voxel`], [`Sampler::MISSING`]
@@ -317,7 +317,11 @@ fn span<S: Sampler, const LIM: bool>(
         let n = (end - c1) as usize;
         let x0 = (ci as isize + off) as usize;
         let (p, l) = (&mut px[x0..x0 + n], &mut links[x0..x0 + n]);
-        let lm = Limits { row: if LIM { &lim.row[x0..x0 + n] } else { &[][..] }, k: lim.k };
+        let lm = Limits {
+            row: if LIM { &lim.row[x0..x0 + n] } else { &[][..] },
+            holes: if LIM && !lim.holes.is_empty() { &lim.holes[x0..x0 + n] } else { &[][..] },
+            k: lim.k,
+        };
         let bv = if bin { &bot.vox[bot.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let tv = if tin { &top.vox[top.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let (want, done) = match (bin, tin) {
@@ -328,7 +332,11 @@ fn span<S: Sampler, const LIM: bool>(
                 if !left.any {
                     return ci; // all four voxels transparent: back to run skipping
                 }
-                let lm1 = Limits { row: if LIM { &lm.row[..1] } else { &[][..] }, k: lm.k };
+                let lm1 = Limits {
+                    row: if LIM { &lm.row[..1] } else { &[][..] },
+                    holes: if LIM && !lm.holes.is_empty() { &lm.holes[..1] } else { &[][..] },
+                    k: lm.k,
+                };
                 (1, segment::<S, false, false, LIM>(&mut p[..1], &mut l[..1], &[], &[], &mut left, w, t, ert, lm1))
             }
         };
@@ -361,15 +369,38 @@ struct Left {
 }
 
 /// The ray limits of a row's pixels and the slice being composited: with
-/// `LIM`, pixel `x` composites slice `k` only when `row[x] = [k0, k1]` holds it.
+/// `LIM`, pixel `x` composites slice `k` only when `row[x] = [k0, k1]` holds it
+/// and, when the plan has holes (`holes` not empty), `holes[x]` does not.
 #[derive(Clone, Copy)]
 struct Limits<'a> {
     row: &'a [[u32; 2]],
+    holes: &'a [[u32; 2]],
     k: u32,
 }
 
-impl Limits<'_> {
-    const NONE: Limits<'static> = Limits { row: &[], k: 0 };
+impl<'a> Limits<'a> {
+    const NONE: Limits<'static> = Limits { row: &[], holes: &[], k: 0 };
+
+    /// Slice `k`'s limits of intermediate row `q` over the rect's columns
+    /// `r.p0 ..= r.p1` (with the holes, when the limits have any).
+    #[inline(always)]
+    fn of(l: &'a RayLimits, q: usize, r: &Rect, k: usize) -> Self {
+        let holes = l.hole_row(q);
+        let holes = if holes.is_empty() { holes } else { &holes[r.p0..=r.p1] };
+        Limits { row: &l.row(q)[r.p0..=r.p1], holes, k: k as u32 }
+    }
+
+    /// Whether pixel `s` of the row composites the slice.
+    #[inline(always)]
+    fn keeps(&self, s: usize) -> bool {
+        let [k0, k1] = self.row[s];
+        k0 <= self.k
+            && self.k <= k1
+            && (self.holes.is_empty() || {
+                let [h0, h1] = self.holes[s];
+                !(h0 <= self.k && self.k <= h1)
+            })
+    }
 }
 
 /// Composites consecutive pixels `px` (their `links`) whose right columns are
@@ -403,10 +434,7 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
         }
         let rb = if B { t.voxel(bv[s]) } else { S::MISSING };
         let rt = if T { t.voxel(tv[s]) } else { S::MISSING };
-        let inside = !LIM || {
-            let [k0, k1] = lim.row[s];
-            k0 <= lim.k && lim.k <= k1
-        };
+        let inside = !LIM || lim.keeps(s);
         if inside {
             let acc = &mut px[s];
             composite_premultiplied(acc, t.finish(blend(lb, rb, lt, rt, w)));
@@ -574,7 +602,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                             match limits {
                                 None => composite_row::<S, false>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, Limits::NONE),
                                 Some(l) => {
-                                    let lim = Limits { row: &l.row(q_first + row)[r.p0..=r.p1], k: k as u32 };
+                                    let lim = Limits::of(l, q_first + row, r, k);
                                     composite_row::<S, true>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, lim)
                                 }
                             }
@@ -584,7 +612,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                         composite_row::<S, false>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, Limits::NONE)
                     }
                     (Some(l), _, _) => {
-                        let lim = Limits { row: &l.row(q_first + row)[r.p0..=r.p1], k: k as u32 };
+                        let lim = Limits::of(l, q_first + row, r, k);
                         composite_row::<S, true>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, lim)
                     }
                 }
@@ -1036,7 +1064,9 @@ impl<S: Sampler> RleFrame<'_, S> {
             None => true,
             Some(l) => {
                 let [k0, k1] = l.get(x as usize, q);
-                k0 as usize <= ks[0] && ks[1] <= k1 as usize
+                let [h0, h1] = l.hole(x as usize, q);
+                // (both slices kept: in the interval, and the hole not between or on them)
+                k0 as usize <= ks[0] && ks[1] <= k1 as usize && (h0 > h1 || (h1 as usize) < ks[0] || ks[1] < h0 as usize)
             }
         };
         if inside {
@@ -1116,8 +1146,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                     if ci < 0 || ci > ni as i64 - 2 || terminated(acc[3], ert) {
                         continue;
                     }
-                    let [k0, k1] = plan.limits.as_ref().map_or([0, u32::MAX], |l| l.get(p, q));
-                    if (kl as u32) < k0 || kl as u32 + 1 > k1 {
+                    if plan.limits.as_ref().is_some_and(|l| !l.keeps(p, q, kl) || !l.keeps(p, q, kl + 1)) {
                         continue;
                     }
                     let b = ci as usize + ni * cj as usize;
@@ -1149,11 +1178,8 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                 if terminated(acc[3], ert) {
                     continue;
                 }
-                if let Some(l) = &plan.limits {
-                    let [k0, k1] = l.get(p, r.q0 + row);
-                    if (k as u32) < k0 || (k as u32) > k1 {
-                        continue;
-                    }
+                if plan.limits.as_ref().is_some_and(|l| !l.keeps(p, q, k)) {
+                    continue;
                 }
                 // focus+context: the sample inside the focus from the focus's voxels and sampler
                 let (buf, tables) = match focus {

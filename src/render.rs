@@ -31,6 +31,7 @@ use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, PackedCodes, ShearWor
 use crate::encode::rle::{ClassKey, RleCache};
 use crate::error::{Error, Result};
 use crate::memory::Memory;
+use crate::view::clip::{ClipRegion, Region};
 use crate::view::plan::{FramePlan, Grid, Limiter, MapKind, RayLimits};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::{Canvas, Owned, Texel, clear_for_pyramids, warp, warp_owned};
@@ -412,6 +413,23 @@ struct AxisMask {
     mask: AnyMask,
 }
 
+/// Focus+context ([`Renderer::set_focus`]): inside `region` (voxel indices,
+/// as [`ClipRegion`] takes it) the samples are classified by the tissue
+/// preset named `tissue`, outside it by the renderer's current one.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Focus {
+    pub region: Region,
+    /// A preset name of the renderer's tissue set (e.g. "bone").
+    pub tissue: String,
+}
+
+impl Focus {
+    /// A focus region classified by tissue preset `tissue`.
+    pub fn new(region: Region, tissue: impl Into<String>) -> Self {
+        Focus { region, tissue: tissue.into() }
+    }
+}
+
 /// Tissue presets sharing one threshold-coded mask.
 struct TissueSet {
     tissues: Vec<Tissue>,
@@ -435,6 +453,7 @@ struct FrameKey {
     generation: u64,
     tissue: Option<usize>,
     limiter: Option<u64>,
+    focus: Option<(u64, usize)>,
 }
 
 static NEXT_STAMP: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
@@ -472,6 +491,9 @@ pub struct Renderer {
     views: Vec<PerspectiveView>,
     /// The producer of per-pixel ray limits, if any, and a counter bumped when it changes.
     limiter: Option<(std::sync::Arc<dyn Limiter>, u64)>,
+    /// Focus+context: the region, the focus tissue's index in the tissue
+    /// set, and a counter bumped when the region changes.
+    focus: Option<(ClipRegion, usize, u64)>,
     inter: Intermediate,
     /// The inputs and stamp of the last frame written.
     last_frame: Option<(FrameKey, u64)>,
@@ -517,6 +539,7 @@ impl Renderer {
             last_split: false,
             views: vec![],
             limiter: None,
+            focus: None,
             inter: Intermediate::default(),
             last_frame: None,
             pool,
@@ -741,6 +764,51 @@ impl Renderer {
         static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
         self.limiter = limiter.map(|l| (l, NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)));
     }
+    /// Sets (or, with `None`, removes) focus+context: inside the focus
+    /// region every following frame classifies its samples by the focus's
+    /// tissue preset, outside it by the current one ([`Renderer::select_tissue`]).
+    /// O(1) like a tissue switch: the binary path's walks visit the union of
+    /// the two presets' codes of the one threshold-coded mask; the RLE paths'
+    /// tables are per-view (a pre-classified encoding holds the voxels either
+    /// preset shows, so it is rebuilt when the focus tissue changes, as for a
+    /// tissue switch; Deluxe P's keeps every preset's already). Needs a
+    /// renderer with tissue presets ([`Renderer::with_tissues`]); the region
+    /// is checked as [`ClipRegion::new`] checks it.
+    pub fn set_focus(&mut self, focus: Option<Focus>) -> Result<()> {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        let Some(f) = focus else {
+            self.focus = None;
+            return Ok(());
+        };
+        let ts = self.tissues.as_ref().ok_or_else(|| {
+            Error::value("focus", "focus+context needs a renderer with tissue presets (not a custom iso value or transfer function)")
+        })?;
+        let i = ts.tissues.iter().position(|t| t.name == f.tissue).ok_or_else(|| {
+            let names: Vec<&str> = ts.tissues.iter().map(|t| t.name).collect();
+            Error::value("focus tissue", format!("'{}' is not in this renderer's presets ({})", f.tissue, names.join(", ")))
+        })?;
+        let region = ClipRegion::new(f.region, self.volume.spacing())?;
+        // the same region keeps its stamp (a focus tissue switch alone redraws nothing twice)
+        let stamp = match &self.focus {
+            Some((r, _, s)) if *r == region => *s,
+            _ => NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+        };
+        self.focus = Some((region, i, stamp));
+        Ok(())
+    }
+
+    /// The focus region and the name of its tissue preset, if any.
+    pub fn focus(&self) -> Option<Focus> {
+        let (r, i, _) = self.focus.as_ref()?;
+        let ts = self.tissues.as_ref()?;
+        Some(Focus { region: r.region(), tissue: ts.tissues.get(*i)?.name.to_string() })
+    }
+
+    /// The focus tissue's index in the tissue set (when both exist).
+    fn focus_tissue(&self) -> Option<usize> {
+        self.focus.as_ref().filter(|_| self.tissues.is_some()).map(|f| f.1)
+    }
+
     /// The intermediate image of the last frame.
     pub fn intermediate(&self) -> &Intermediate {
         &self.inter
@@ -930,14 +998,16 @@ impl Renderer {
     /// tissue, mode and the sampler (pre- or post-classified, Deluxe P).
     fn rle_key(&self) -> ClassKey {
         let tissue = self.tissues.as_ref().map_or(0, |t| t.current as u64 + 1);
-        self.rle_enc_key() | (tissue << 2)
+        // (a pre-classified encoding holds the voxels the focus tissue shows too)
+        let focus = self.focus_tissue().map_or(0, |f| f as u64 + 1);
+        self.rle_enc_key() | (tissue << 2) | (focus << 12)
     }
 
     /// What a post-classified encoding depends on (the key without the
     /// tissue: it keeps the cells every tissue preset may show), and the lattice.
     fn rle_enc_key(&self) -> ClassKey {
         let bcc = (self.settings.lattice == Lattice::Bcc) as u64;
-        (self.generation << 10) | (bcc << 9) | ((self.settings.deluxe.post as u64) << 1) | (self.settings.mode == Mode::Blend) as u64
+        (self.generation << 20) | (bcc << 9) | ((self.settings.deluxe.post as u64) << 1) | (self.settings.mode == Mode::Blend) as u64
     }
 
     /// The classifier the pre-classified paths encode: the current mode's, with
@@ -1139,6 +1209,13 @@ impl Renderer {
             } else {
                 self.rle.reset(key, &cls, self.volume.spacing());
             }
+            // focus+context: the focus tissue's classification of the mode
+            let focus = match (&self.tissues, self.focus_tissue(), self.settings.mode) {
+                (Some(ts), Some(f), Mode::Iso) => Some(&ts.iso_cls[f]),
+                (Some(ts), Some(f), Mode::Blend) => Some(&ts.blend_cls[f]),
+                _ => None,
+            };
+            self.rle.set_focus(focus, self.volume.spacing());
         }
         if self.settings.method == Method::Rle {
             // (an encoding, or a pointer table over another axis's: see RleCache::ensure_axis)
@@ -1203,6 +1280,7 @@ impl Renderer {
             generation: self.generation,
             tissue: self.tissues.as_ref().map(|t| t.current),
             limiter: self.limiter.as_ref().map(|l| l.1),
+            focus: self.focus.as_ref().map(|f| (f.2, f.1)),
         };
         if let Some((k, stamp)) = self.last_frame {
             if k == key && out.stamp == stamp && out.width == camera.size[0] && out.height == camera.size[1] {
@@ -1216,6 +1294,9 @@ impl Renderer {
         }
         if bcc && self.limiter.is_some() {
             return Err(Error::value("settings", "the BCC grid (--grid bcc) does not take clip regions or geometry"));
+        }
+        if self.focus.is_some() {
+            self.check_focus()?;
         }
         // a perspective frame: the camera scaled by its field of view, and its views
         let persp = match self.projection.resolve(camera, dims, spacing)? {
@@ -1249,6 +1330,7 @@ impl Renderer {
         // the frame plan, from the projection's producer
         let mut plan = self.plan.take().unwrap_or_else(|| FramePlan::parallel(&f, spacing));
         let limits = plan.take_limits();
+        let focus = plan.take_focus();
         match &persp {
             // the BCC grid: the interleaved slices' factorization (the opacity
             // ratio relative to the volume's own spacing), sub-grid B's slices
@@ -1262,7 +1344,7 @@ impl Renderer {
             None => plan.set_parallel(&f, spacing),
             Some((_, pv)) => plan.set_perspective(pv, &f, spacing, NEAR_SLICES),
         }
-        if let Err(e) = self.finish_plan(&mut plan, limits) {
+        if let Err(e) = self.finish_plan(&mut plan, limits, focus) {
             self.plan = Some(plan);
             return Err(e);
         }
@@ -1294,7 +1376,7 @@ impl Renderer {
     /// square. With `--quality` the finer pitch wins: M never samples coarser
     /// than matched, a quality above it still refines. A grid past
     /// [`MAX_INTERMEDIATE_PIXELS`] is an error naming it.
-    fn finish_plan(&self, plan: &mut FramePlan, limits: Option<RayLimits>) -> Result<()> {
+    fn finish_plan(&self, plan: &mut FramePlan, limits: Option<RayLimits>, focus: Option<RayLimits>) -> Result<()> {
         plan.set_ray_opacity(self.settings.mode == Mode::Blend);
         let mut pitch = 1.0 / self.quality;
         if self.settings.deluxe.matched {
@@ -1318,6 +1400,26 @@ impl Renderer {
         plan.set_intermediate(self.settings.deluxe.intermediate);
         if let Some((l, _)) = &self.limiter {
             self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
+        }
+        // focus+context: each ray's slices inside the focus region (the clip
+        // region's analytic interval, checked on the samples)
+        if let Some((region, _, _)) = &self.focus {
+            self.pool.install(|| plan.apply_focus(region, focus.unwrap_or_default()));
+        }
+        Ok(())
+    }
+
+    /// The settings focus+context renders (an error names what it does not).
+    fn check_focus(&self) -> Result<()> {
+        let refuse = |what: &str| Err(Error::value("focus", format!("focus+context is not available with {what}")));
+        if self.tissues.is_none() {
+            return refuse("a custom iso value or transfer function (it needs the tissue presets)");
+        }
+        if self.settings.deluxe.intermediate {
+            return refuse("Deluxe I (intermediate slices: a midpoint sample between two slices has no one focus side)");
+        }
+        if self.settings.lattice == Lattice::Bcc {
+            return refuse("the BCC grid (--grid bcc)");
         }
         Ok(())
     }
@@ -1365,8 +1467,9 @@ impl Renderer {
                 }
                 let plan = &mut plans[i];
                 let limits = plan.take_limits();
+                let focus = plan.take_focus();
                 plan.set_perspective(pv, &f, spacing, NEAR_SLICES);
-                self.finish_plan(plan, limits)?;
+                self.finish_plan(plan, limits, focus)?;
                 let plan = &plans[i];
                 let owned = Owned { rays, pyramid: (pv.axis, pv.ascending) };
                 self.composite_plan(plan, &mut stats, |inter: &Intermediate| warp_owned(inter, plan, out, &owned))
@@ -1392,9 +1495,15 @@ impl Renderer {
     fn composite_plan(&mut self, plan: &FramePlan, stats: &mut FrameStats, then_warp: impl FnOnce(&Intermediate) + Send) -> Result<()> {
         let axis = plan.view.axis;
         let mode = self.settings.mode;
+        let focus = self.focus_tissue();
         if mode == Mode::Blend {
             match &mut self.tissues {
-                Some(ts) => ts.blend_cls[ts.current].set_sample_ratio(plan.opacity_ratio),
+                Some(ts) => {
+                    ts.blend_cls[ts.current].set_sample_ratio(plan.opacity_ratio);
+                    if let Some(f) = focus {
+                        ts.blend_cls[f].set_sample_ratio(plan.opacity_ratio);
+                    }
+                }
                 None => self.classifier.set_sample_ratio(plan.opacity_ratio),
             }
         }
@@ -1408,6 +1517,16 @@ impl Renderer {
             (Some(ts), Mode::Iso) => (&ts.iso_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
             (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
             (None, _) => (&self.classifier, self.iso, binary_matcher()),
+        };
+        // focus+context: the focus tissue's classifier and iso value; the walks
+        // visit the union of both tissues' codes, the lower threshold's matcher
+        // (thresholds ascend, tissue i is "code ≥ i + 1")
+        let (focus, matcher): (Option<(&Classifier, f32)>, &Matcher) = match (&self.tissues, focus) {
+            (Some(ts), Some(f)) => {
+                let fc = if mode == Mode::Iso { &ts.iso_cls[f] } else { &ts.blend_cls[f] };
+                (Some((fc, ts.thresholds[f])), &ts.matchers[f.min(ts.current)])
+            }
+            _ => (None, matcher),
         };
         let settings = self.settings;
         let (inter, masks, rle) = (&mut self.inter, &mut self.masks, &mut self.rle);
@@ -1443,7 +1562,7 @@ impl Renderer {
                     stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
-                    let ctx = ray_context(stack, cls, plan, iso, settings, normals[axis].as_ref(), shade);
+                    let ctx = ray_context(stack, cls, plan, iso, focus, settings, normals[axis].as_ref(), shade);
                     match &m.mask {
                         AnyMask::W32(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                         AnyMask::W64(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
@@ -1456,7 +1575,7 @@ impl Renderer {
                     stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
-                    let ctx = ray_context(stack, cls, plan, iso, settings, normals[axis].as_ref(), shade);
+                    let ctx = ray_context(stack, cls, plan, iso, focus, settings, normals[axis].as_ref(), shade);
                     render_brute(&ctx, rect, inter);
                     stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
                     rect
@@ -1641,16 +1760,22 @@ fn missing(what: &str, axis: usize) -> Error {
 /// The rays' context of a frame of `plan`: the classification, iso value and
 /// material, with table shading when the settings ask for it and the normal
 /// codes exist (the shade table brought up to date for the view).
+#[allow(clippy::too_many_arguments)]
 fn ray_context<'a>(
     stack: &'a SliceStack,
     cls: &'a Classifier,
     plan: &'a FramePlan,
     iso: f32,
+    focus: Option<(&'a Classifier, f32)>,
     settings: Settings,
     normals: Option<&'a NormalStack>,
     shade: &'a mut ShadeTable,
 ) -> RayContext<'a> {
-    let ctx = RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert).with_intermediate(plan.intermediate());
+    let mut ctx =
+        RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert).with_intermediate(plan.intermediate());
+    if let Some((fc, fiso)) = focus {
+        ctx = ctx.with_focus(fc, fiso);
+    }
     match (settings.normals, normals) {
         (Normals::Codes, Some(ns)) => {
             shade.update(headlight_object(&plan.view), settings.shading);

@@ -4,6 +4,7 @@
 # screenshots with ImageMagick's `import` and checks them:
 #   - the phantom is visible (the view area is not blank or uniform),
 #   - the view changed after the drag, after each tissue switch, after Space,
+#     after L (the focus+context lens),
 #   - S saved a PNG, a resize re-rendered at the new size,
 #   - an idle window uses no CPU (measured from /proc over a few seconds),
 #   - Q quits and the process exits with status 0,
@@ -205,6 +206,24 @@ check "the window re-rendered at 640x400" test "$(identify -format '%wx%h' "$OUT
 # 10. R resets the view
 n=$(presented)
 hold r
+wait_new '^presented ' "$n"
+sleep 1
+
+# 10b. L: a bone lens (focus+context) on the skin, under the mouse at the depth
+# of the volume centre; L again removes it
+hold 1
+wait_log '^presented .*tissue=skin' 60
+xdotool mousemove --window "$WID" 320 190
+sleep 1.5
+shot 10-skin
+n=$(presented)
+hold l
+wait_new '^presented ' "$n"
+sleep 1.5
+shot 11-lens
+check "L put a lens on the view (the frame changed)" differs 10-skin 11-lens
+n=$(presented)
+hold l
 wait_new '^presented ' "$n"
 sleep 1
 

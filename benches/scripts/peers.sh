@@ -12,6 +12,8 @@
 #   SIZES="256 512"      output sizes
 #   THREADS="1 N"        thread counts (N = all cores)
 #   ONLY=...             --only list for shearwarp's rows (default: every variant)
+#   DELUXE="S I"         Deluxe option sets every row is measured under, in one run
+#                        (default: none given, the matrix's own parallel Deluxe rows)
 #   PERSPECTIVE=40       a perspective field of view measured too ("" for none)
 #   ROUNDS=1 REPS=3 RANDOM_VIEWS=2 REF_STEP=0.1
 #   OUT=dir              output directory (default target/peers)
@@ -86,6 +88,7 @@ for v in $VOLUMES; do
             [ -n "${THR[$v]}" ] && args+=(--iso "${THR[$v]}")
             [ -n "$PERSPECTIVE" ] && args+=(--perspective "$PERSPECTIVE")
             [ -n "${ONLY:-}" ] && args+=(--only "$ONLY")
+            for d in ${DELUXE:-}; do args+=(--deluxe "$d"); done
             log "$v ${s}² $t thread(s)"
             "$SW" "${args[@]}" >"$base.md"
             grep -E "^- |^Model floor" "$base.md" | sed "s/^/$v ${s}² t$t: /" >&2 || true

@@ -140,12 +140,15 @@ pub struct BenchCmd {
     /// directory under the system's temporary directory).
     #[arg(long, requires = "peers")]
     pub peer_dir: Option<PathBuf>,
-    /// Shear-Warp Deluxe options (a comma-separated subset of I,P,M) applied
-    /// to every variant, whose names then end in `-deluxe-<LABEL>` (e.g.
-    /// `rle-deluxe-IP`). Without it the matrix already holds every option
-    /// combination of the RLE path and the raycast paths' I, M and IM.
-    #[arg(long, value_name = "LIST", value_parser = crate::app::cli::parse_deluxe)]
-    pub deluxe: Option<shearwarp::Deluxe>,
+    /// Shear-Warp Deluxe options (a comma-separated subset of I,P,M; `S` for
+    /// none) applied to every variant, whose names then end in
+    /// `-deluxe-<LABEL>` (e.g. `rle-deluxe-IP`). Repeat it to measure every
+    /// variant under each set in the same run (`--deluxe S --deluxe I`: the
+    /// plain rows and their I rows side by side). Without it the matrix
+    /// already holds every option combination of the RLE path and the
+    /// raycast paths' I, M and IM (parallel only).
+    #[arg(long, value_name = "LIST", value_parser = crate::app::cli::parse_deluxe, action = clap::ArgAction::Append)]
+    pub deluxe: Vec<shearwarp::Deluxe>,
     /// The sample lattice of every variant: `bcc` renders each variant on the
     /// body-centred cubic grid (names end in `-bcc`); without it the matrix
     /// holds the RLE path's BCC variants beside the cartesian ones.
@@ -245,23 +248,28 @@ pub fn deluxe_variants(base: Settings) -> Vec<Variant> {
 /// The option columns of the paper's Table 1 at 512² (after S).
 pub const PAPER_COLUMNS: [&str; 4] = ["I", "I,P", "I,M", "I,M,P"];
 
-/// `variants` with the benchmark's `--deluxe` and `--grid` applied to every
-/// one, their names suffixed `-deluxe-<LABEL>` and `-bcc`.
-pub fn with_options(variants: Vec<Variant>, deluxe: Option<Deluxe>, grid: Option<Lattice>) -> Vec<Variant> {
-    variants
-        .into_iter()
-        .map(|mut v| {
+/// `variants` with the benchmark's `--deluxe` sets and `--grid` applied to
+/// every one (each variant once per set, in the order given), their names
+/// suffixed `-deluxe-<LABEL>` and `-bcc`; a name met twice is kept once.
+pub fn with_options(variants: Vec<Variant>, deluxe: &[Deluxe], grid: Option<Lattice>) -> Vec<Variant> {
+    let sets: &[Deluxe] = if deluxe.is_empty() { &[Deluxe::default()] } else { deluxe };
+    let mut out: Vec<Variant> = vec![];
+    for &d in sets {
+        for mut v in variants.iter().cloned() {
             if let Some(g) = grid.filter(|&g| g != Lattice::Cartesian) {
                 v.settings.lattice = g;
                 v.name = format!("{}-{}", v.name, g.name());
             }
-            if let Some(d) = deluxe.filter(|d| !d.is_standard()) {
+            if !d.is_standard() {
                 v.settings.deluxe = d;
                 v.name = format!("{}-deluxe-{}", v.name, d.label());
             }
-            v
-        })
-        .collect()
+            if !out.iter().any(|o| o.name == v.name) {
+                out.push(v);
+            }
+        }
+    }
+    out
 }
 
 /// The variants that render `projection` (a perspective one): the RLE path
@@ -646,8 +654,8 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
             for p in &projections {
                 all.extend(perspective_variants(base, *p, &projection_suffix(p, projections.len())));
             }
-            let mut all = with_options(all, cmd.deluxe, cmd.grid);
-            if cmd.deluxe.is_some_and(|d| !d.is_standard()) || cmd.grid.is_some_and(|g| g != Lattice::Cartesian) {
+            let mut all = with_options(all, &cmd.deluxe, cmd.grid);
+            if cmd.deluxe.iter().any(|d| !d.is_standard()) || cmd.grid.is_some_and(|g| g != Lattice::Cartesian) {
                 // (the matrix's own Deluxe rows would repeat the options)
                 all.retain(|v| v.name.matches("-deluxe-").count() < 2 && v.name.matches("-bcc").count() < 2);
             }
@@ -918,7 +926,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
 /// most as wrong misses its time. Rows are compared within one projection
 /// (parallel rows with parallel, each perspective with its own).
 pub fn dominance(summary: &[Summary], mode: &str) -> Vec<String> {
-    let projection = |v: &str| v.split_once("-persp").map(|(_, r)| r.trim_start_matches("-q2").to_string());
+    let projection = |v: &str| v.split_once("-persp").map(|(_, r)| projection_key(r));
     let rows: Vec<&Summary> = summary.iter().filter(|x| x.mode == mode).collect();
     let mut out = vec![];
     for p in rows.iter().filter(|x| x.cold_shear_ms.is_nan()) {
@@ -950,6 +958,28 @@ pub fn dominance(summary: &[Summary], mode: &str) -> Vec<String> {
         out.push(format!("{head}: NOT MATCHED, no shearwarp row is as fast and as accurate: {}", why.join("; ")));
     }
     out
+}
+
+/// Which perspective a variant's name after `-persp` names: its projection
+/// suffix `-f<FOV>-d<D>` (empty for the single one), without the options
+/// that do not change the projection (`-q2`, `-bcc`, `-deluxe-<LABEL>`), so
+/// `binary-persp-q2-deluxe-I` meets `vtk-persp`.
+fn projection_key(rest: &str) -> String {
+    let mut key = String::new();
+    let mut parts = rest.split('-').skip(1).peekable();
+    while let Some(p) = parts.next() {
+        match p {
+            "q2" | "bcc" => {}
+            "deluxe" => {
+                parts.next();
+            }
+            _ => {
+                key.push('-');
+                key.push_str(p);
+            }
+        }
+    }
+    key
 }
 
 /// The suffix of a perspective variant's name when `n` projections are
@@ -1393,9 +1423,14 @@ mod tests {
         }
         assert!(v.iter().filter(|x| x.name.starts_with("rle-bcc")).all(|x| x.settings.lattice == shearwarp::Lattice::Bcc));
         // --deluxe / --grid apply to every variant, renamed
-        let w = with_options(vec![v[0].clone()], Some(Deluxe::parse("P,I").unwrap()), Some(shearwarp::Lattice::Bcc));
+        let w = with_options(vec![v[0].clone()], &[Deluxe::parse("P,I").unwrap()], Some(shearwarp::Lattice::Bcc));
         assert_eq!(w[0].name, format!("{}-bcc-deluxe-IP", v[0].name));
         assert!(w[0].settings.deluxe.intermediate && w[0].settings.deluxe.post && w[0].settings.lattice == shearwarp::Lattice::Bcc);
+        // a repeated --deluxe measures every variant under each set, S keeping the plain name
+        let w = with_options(vec![v[0].clone(), v[0].clone()], &[Deluxe::parse("S").unwrap(), Deluxe::parse("I").unwrap()], None);
+        let names: Vec<&str> = w.iter().map(|x| x.name.as_str()).collect();
+        assert_eq!(names, [v[0].name.clone(), format!("{}-deluxe-I", v[0].name)]);
+        assert!(!w[0].settings.deluxe.intermediate && w[1].settings.deluxe.intermediate);
         let fine: Vec<&str> = v.iter().filter(|x| x.quality == FINE_QUALITY).map(|x| x.name.as_str()).collect();
         assert_eq!(fine, ["binary-c1-u64-bitscan-q2", "rle-q2"]);
         assert!(v.iter().all(|x| x.quality == FINE_QUALITY || x.quality == 1.0));
@@ -1466,13 +1501,17 @@ mod tests {
             rec("volpack", 1.5, 0.05, true),
             rec("vtk", 50.0, 0.02, true),
             rec("vtk-persp", 1.0, 0.05, true),
+            rec("binary-persp-q2-f40-d2-deluxe-I", 3.0, 0.02, false),
+            rec("vtk-persp-f40-d2", 4.0, 0.025, true),
         ]);
         let d = dominance(&s, "blend");
-        assert_eq!(d.len(), 3);
+        assert_eq!(d.len(), 4);
         assert!(d[0].starts_with("volpack") && d[0].contains("matched or beaten by rle (1.000 ms"), "{}", d[0]);
         assert!(d[1].starts_with("vtk ") && d[1].contains("NOT MATCHED") && d[1].contains("binary, has +50 % RMSE"), "{}", d[1]);
         // the perspective peer meets only rle-persp, which is slower
         assert!(d[2].starts_with("vtk-persp") && d[2].contains("NOT MATCHED") && d[2].contains("rle-persp, takes +100 % time"), "{}", d[2]);
+        // options after the projection (q2, deluxe, bcc) do not hide a row from its peer
+        assert!(d[3].starts_with("vtk-persp-f40-d2") && d[3].contains("matched or beaten by binary-persp-q2-f40-d2-deluxe-I"), "{}", d[3]);
         assert!(dominance(&s, "iso").is_empty());
     }
 }

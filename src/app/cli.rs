@@ -560,6 +560,9 @@ impl RenderArgs {
             }
             r.set_transfer_function(tf);
         }
+        if self.scene.focus.is_some() && (self.opacity.is_some() || self.iso.is_some()) {
+            usage!("--focus classifies with the tissue presets (--tissue, --focus-tissue); it does not combine with --iso or --opacity");
+        }
         if let Some(iso) = self.iso {
             if !iso.is_finite() {
                 usage!("--iso must be a finite number");
@@ -570,6 +573,7 @@ impl RenderArgs {
                 r.set_iso(iso)?;
             }
         }
+        crate::app::scene::install_focus(&self.scene, &mut r)?;
         Ok((r, scene))
     }
 

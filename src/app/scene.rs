@@ -2,7 +2,8 @@
 //! (`--mesh FILE` placed with `--mesh-scale`, `--mesh-rotate`,
 //! `--mesh-translate`, in voxel indices or with `--mesh-world` in world
 //! millimetres from the volume centre), convex clip regions (`--clip-box`,
-//! `--clip-sphere`, `--clip-keep`) and the clip planes (`--clip-plane`).
+//! `--clip-sphere`, `--clip-mesh` placed as the meshes are, `--clip-keep
+//! inside|outside`) and the clip planes (`--clip-plane`).
 //!
 //! The clip regions and planes are one limiter set once; a mesh is drawn
 //! every frame at the output resolution (the library's rasterizer), its depth
@@ -19,12 +20,12 @@ use glam::{DAffine3, DMat3, DVec3, EulerRot};
 
 use shearwarp::composite::Mode;
 use shearwarp::geometry::{
-    Cull, GeometryImage, GeometryLimits, Material, Mesh, Projector, composite_iso_over_geometry, composite_over_geometry, load_mesh,
-    rasterize,
+    ConvexMesh, Cull, GeometryImage, GeometryLimits, Material, Mesh, MeshClip, Projector, composite_iso_over_geometry,
+    composite_over_geometry, load_mesh, rasterize,
 };
 use shearwarp::render::{FrameStats, Method, Renderer};
 use shearwarp::view::Camera;
-use shearwarp::view::clip::{ClipRegion, Limiters, Region};
+use shearwarp::view::clip::{self, ClipRegion, Limiters, Region};
 use shearwarp::view::plan::Limiter;
 use shearwarp::warp::Image;
 
@@ -71,9 +72,58 @@ pub struct SceneArgs {
     /// voxels of the smallest spacing (round in world space; see --clip-keep).
     #[arg(long, value_name = "X,Y,Z,R", value_parser = parse_sphere, allow_hyphen_values = true)]
     pub clip_sphere: Option<[f64; 4]>,
-    /// Which side of --clip-box / --clip-sphere is rendered.
+    /// A closed convex mesh (OBJ, STL or PLY) clipping the volume like
+    /// --clip-box (see --clip-keep), placed with the --mesh-scale,
+    /// --mesh-rotate, --mesh-translate and --mesh-world flags (as --mesh).
+    #[arg(long, value_name = "FILE")]
+    pub clip_mesh: Option<PathBuf>,
+    /// Which side of --clip-box / --clip-sphere / --clip-mesh is rendered
+    /// (outside: the region is cut out of the volume; one such region at most).
     #[arg(long, value_enum, default_value = "inside")]
     pub clip_keep: Keep,
+    /// Focus+context: inside this region the volume is classified by
+    /// --focus-tissue, outside by --tissue: `sphere:x,y,z,r` (centre in voxel
+    /// indices, radius in voxels of the smallest spacing) or
+    /// `box:x0,y0,z0,x1,y1,z1` (voxel indices).
+    #[arg(long, value_name = "sphere:X,Y,Z,R|box:X0,Y0,Z0,X1,Y1,Z1", value_parser = parse_focus, allow_hyphen_values = true)]
+    pub focus: Option<Region>,
+    /// The tissue preset inside --focus (a name as --tissue takes; default bone).
+    #[arg(long, value_name = "NAME")]
+    pub focus_tissue: Option<String>,
+}
+
+fn parse_focus(s: &str) -> std::result::Result<Region, String> {
+    let (kind, rest) = s.split_once(':').ok_or_else(|| format!("expected sphere:x,y,z,r or box:x0,y0,z0,x1,y1,z1, got '{s}'"))?;
+    match kind.trim() {
+        "sphere" => {
+            let v = parse_sphere(rest)?;
+            Ok(Region::Sphere { centre: [v[0], v[1], v[2]], radius: v[3] })
+        }
+        "box" => {
+            let b = parse_box(rest)?;
+            Ok(Region::Box { lo: [b[0], b[1], b[2]], hi: [b[3], b[4], b[5]] })
+        }
+        k => Err(format!("unknown focus region '{k}' (sphere:x,y,z,r or box:x0,y0,z0,x1,y1,z1)")),
+    }
+}
+
+/// The focus of `--focus` / `--focus-tissue` (None without --focus; an
+/// error for --focus-tissue alone).
+pub fn focus_of(args: &SceneArgs) -> Result<Option<shearwarp::render::Focus>> {
+    match (args.focus, &args.focus_tissue) {
+        (None, Some(_)) => Err(usage("--focus-tissue needs --focus (the region it classifies)".into())),
+        (None, None) => Ok(None),
+        (Some(region), t) => Ok(Some(shearwarp::render::Focus::new(region, t.as_deref().unwrap_or("bone")))),
+    }
+}
+
+/// Gives `r` the focus of `--focus` / `--focus-tissue`, if any (a bad
+/// region or tissue is a usage error).
+pub fn install_focus(args: &SceneArgs, r: &mut Renderer) -> Result<()> {
+    if let Some(f) = focus_of(args)? {
+        r.set_focus(Some(f)).map_err(|e| usage(format!("--focus: {e}")))?;
+    }
+    Ok(())
 }
 
 fn parse_numbers<const N: usize>(s: &str, what: &str) -> std::result::Result<[f64; N], String> {
@@ -121,6 +171,8 @@ pub struct Scene {
     material: Material,
     /// The clip planes and regions (None: none).
     clip: Option<Arc<dyn Limiter>>,
+    /// The convex clip mesh and the side it keeps (drawn every frame).
+    clip_mesh: Option<(ConvexMesh, clip::Keep)>,
     dims: [usize; 3],
     spacing: [f32; 3],
 }
@@ -146,14 +198,12 @@ impl Scene {
             (None, Some(s)) => Some(Region::Sphere { centre: [s[0], s[1], s[2]], radius: s[3] }),
             (None, None) => None,
         };
+        let keep = match args.clip_keep {
+            Keep::Inside => clip::Keep::Inside,
+            Keep::Outside => clip::Keep::Outside,
+        };
         if let Some(region) = region {
-            if args.clip_keep == Keep::Outside {
-                return Err(usage(
-                    "--clip-keep outside is not available yet: it needs two slice intervals per ray, and the frame plan's ray limits hold one (use --clip-keep inside, or --clip-plane for a half-space)"
-                        .into(),
-                ));
-            }
-            limiters.push(Arc::new(ClipRegion::new(region, spacing).map_err(|e| usage(format!("clip region: {e}")))?));
+            limiters.push(Arc::new(ClipRegion::new(region, spacing).map_err(|e| usage(format!("clip region: {e}")))?.keeping(keep)));
         }
         if !(args.mesh_scale.is_finite() && args.mesh_scale != 0.0) {
             return Err(usage(format!("--mesh-scale must be a finite number other than 0, got {}", args.mesh_scale)));
@@ -162,6 +212,20 @@ impl Scene {
             return Err(usage(format!("--mesh-color components must be in [0, 1], got {:?}", args.mesh_color)));
         }
         let place = placement(args, dims, spacing);
+        let clip_mesh = match &args.clip_mesh {
+            None => None,
+            Some(path) => {
+                let m = load_mesh(path).map_err(|e| usage(format!("--clip-mesh: {e}")))?;
+                let m = m.transformed(place).map_err(|e| usage(format!("--clip-mesh {}: {e}", path.display())))?;
+                Some((ConvexMesh::new(&m).map_err(|e| usage(format!("--clip-mesh {}: {e}", path.display())))?, keep))
+            }
+        };
+        if clip_mesh.is_some() && region.is_some() && keep == clip::Keep::Outside {
+            return Err(usage(
+                "--clip-keep outside with --clip-mesh and a --clip-box / --clip-sphere: a ray holds one hole, so at most one region may keep its outside"
+                    .into(),
+            ));
+        }
         let mut meshes = vec![];
         for path in &args.mesh {
             let m = load_mesh(path).map_err(|e| usage(e.to_string()))?;
@@ -170,10 +234,10 @@ impl Scene {
         let clip: Option<Arc<dyn Limiter>> = match limiters.len() {
             0 => None,
             1 => limiters.pop(),
-            _ => Some(Arc::new(Limiters(limiters))),
+            _ => Some(Arc::new(Limiters::new(limiters).map_err(|e| usage(e.to_string()))?)),
         };
         let material = Material { color: args.mesh_color.map(|c| c as f32), ..Material::default() };
-        Ok(Scene { meshes, material, clip, dims, spacing })
+        Ok(Scene { meshes, material, clip, clip_mesh, dims, spacing })
     }
 
     /// True when the scene has meshes (drawn every frame).
@@ -181,9 +245,10 @@ impl Scene {
         !self.meshes.is_empty()
     }
 
-    /// Gives `r` the clip planes and regions (the whole job when there are no meshes).
+    /// Gives `r` the clip planes and regions (the whole job when there are
+    /// no meshes and no clip mesh).
     pub fn install(&self, r: &mut Renderer) {
-        if self.clip.is_some() {
+        if self.clip.is_some() && self.clip_mesh.is_none() {
             r.set_limiter(self.clip.clone());
         }
     }
@@ -191,12 +256,22 @@ impl Scene {
     /// Renders one frame of `cam` into `img`: with meshes, draws them, stops
     /// the rays at them and composites the volume over them.
     pub fn render(&self, r: &mut Renderer, cam: &Camera, img: &mut Image) -> Result<(FrameStats, GeometryCost)> {
-        if self.meshes.is_empty() {
+        if self.meshes.is_empty() && self.clip_mesh.is_none() {
             return Ok((r.render(cam, img)?, GeometryCost::default()));
         }
         let mut cost = GeometryCost::default();
         let t = Instant::now();
         let proj = Projector::new(cam, &r.projection(), self.dims, self.spacing)?;
+        let mut limiters: Vec<Arc<dyn Limiter>> = self.clip.iter().cloned().collect();
+        // the clip mesh's front and back faces, drawn for this frame
+        if let Some((m, keep)) = &self.clip_mesh {
+            limiters.push(Arc::new(MeshClip::new(m, proj, *keep)?));
+        }
+        if self.meshes.is_empty() {
+            cost.raster_ms = t.elapsed().as_secs_f64() * 1e3;
+            r.set_limiter(Some(Arc::new(Limiters::new(limiters)?)));
+            return Ok((r.render(cam, img)?, cost));
+        }
         let mut geo = GeometryImage::new(cam.size[0], cam.size[1]);
         for m in &self.meshes {
             rasterize(m, &self.material, Cull::None, &proj, &mut geo)?;
@@ -206,10 +281,8 @@ impl Scene {
         let settings = r.settings();
         let crossing = settings.mode == Mode::Iso && matches!(settings.method, Method::Binary | Method::Brute);
         let geometry = Arc::new(GeometryLimits::new(proj, &geo).with_iso_crossing(crossing));
-        let limiter: Arc<dyn Limiter> = match &self.clip {
-            None => geometry.clone(),
-            Some(c) => Arc::new(Limiters(vec![c.clone(), geometry.clone()])),
-        };
+        limiters.push(geometry.clone());
+        let limiter: Arc<dyn Limiter> = if limiters.len() == 1 { geometry.clone() } else { Arc::new(Limiters::new(limiters)?) };
         r.set_limiter(Some(limiter));
         let st = r.render(cam, img)?;
         // the inverse warp's own cost, on this frame's plan(s)

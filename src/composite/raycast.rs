@@ -65,6 +65,12 @@ pub struct RayContext<'a> {
     /// the midpoint between each pair of slices too, every sample at the
     /// half-step opacity.
     half: bool,
+    /// Focus+context ([`RayContext::with_focus`]): the classification, iso
+    /// value and iso colour of the samples inside the plan's focus intervals
+    /// ([`FramePlan::focus_range`]); the context's own without a focus.
+    focus_cls: &'a Classifier,
+    focus_iso: f32,
+    focus_iso_rgb: [f32; 3],
 }
 
 /// What one ray produced.
@@ -220,7 +226,33 @@ impl<'a> RayContext<'a> {
             grad_s: f.grad_scale.map(|x| x as f32),
             normals: None,
             half: false,
+            focus_cls: classifier,
+            focus_iso: iso,
+            focus_iso_rgb: [iso_c.r, iso_c.g, iso_c.b],
         }
+    }
+
+    /// Focus+context (a sampler): a sample inside its ray's focus interval
+    /// ([`FramePlan::focus_range`]) is classified by `classifier` (blend) or
+    /// tested against `iso` and coloured by `classifier` at `iso` (iso mode);
+    /// the others by the context's own. The candidates a binary walk visits
+    /// must cover both (the union of the two tissues' codes).
+    pub fn with_focus(mut self, classifier: &'a Classifier, iso: f32) -> Self {
+        let c = classifier.classify(iso);
+        (self.focus_cls, self.focus_iso, self.focus_iso_rgb) = (classifier, iso, [c.r, c.g, c.b]);
+        self
+    }
+
+    /// The classifier of slice `k`'s sample on a ray with focus interval `foc`.
+    #[inline(always)]
+    fn cls_at(&self, k: usize, foc: [usize; 2]) -> &'a Classifier {
+        if foc[0] <= k && k <= foc[1] { self.focus_cls } else { self.classifier }
+    }
+
+    /// The iso value and iso colour of slice `k`'s sample on a ray with focus interval `foc`.
+    #[inline(always)]
+    fn iso_at(&self, k: usize, foc: [usize; 2]) -> (f32, [f32; 3]) {
+        if foc[0] <= k && k <= foc[1] { (self.focus_iso, self.focus_iso_rgb) } else { (self.iso, self.iso_rgb) }
     }
 
     /// Shear-Warp Deluxe I (`on`): each ray also samples the intermediate
@@ -337,12 +369,23 @@ impl<'a> RayContext<'a> {
     /// within the ray's slice range `[lo, hi]` (index order), which also bounds
     /// an iso hit's refinement.
     #[inline(always)]
-    pub fn trace<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
-        match (self.mode, self.half) {
-            (Mode::Blend, false) => self.trace_blend(v, ray, ks),
-            (Mode::Iso, false) => self.trace_iso(v, ray, ks, lo, hi),
-            (Mode::Blend, true) => self.trace_blend_half(v, ray, ks, hi),
-            (Mode::Iso, true) => self.trace_iso_half(v, ray, ks, lo, hi),
+    pub fn trace<V: Cells, R: Ray>(
+        &self,
+        v: &V,
+        ray: R,
+        ks: impl Iterator<Item = usize>,
+        lo: usize,
+        hi: usize,
+        foc: [usize; 2],
+    ) -> RayResult {
+        // (a ray without a focus interval runs the loops without the per-sample test)
+        match (self.mode, self.half, foc[0] <= foc[1]) {
+            (Mode::Blend, false, false) => self.trace_blend::<_, _, false>(v, ray, ks, foc),
+            (Mode::Blend, false, true) => self.trace_blend::<_, _, true>(v, ray, ks, foc),
+            (Mode::Iso, false, false) => self.trace_iso::<_, _, false>(v, ray, ks, lo, hi, foc),
+            (Mode::Iso, false, true) => self.trace_iso::<_, _, true>(v, ray, ks, lo, hi, foc),
+            (Mode::Blend, true, _) => self.trace_blend_half(v, ray, ks, hi),
+            (Mode::Iso, true, _) => self.trace_iso_half(v, ray, ks, lo, hi),
         }
     }
 
@@ -495,7 +538,7 @@ impl<'a> RayContext<'a> {
     }
 
     #[inline(always)]
-    fn trace_blend<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>) -> RayResult {
+    fn trace_blend<V: Cells, R: Ray, const F: bool>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, foc: [usize; 2]) -> RayResult {
         let mut acc = [0f32; 4];
         for k in ks {
             if terminated(acc[3], self.ert) {
@@ -505,26 +548,38 @@ impl<'a> RayContext<'a> {
                 continue;
             };
             let d = self.sample(v, ci, cj, k, wi, wj);
-            let alpha = self.classifier.alpha(d);
+            let cls = if F { self.cls_at(k, foc) } else { self.classifier };
+            let alpha = cls.alpha(d);
             if alpha <= 0.0 {
                 continue;
             }
             let alpha = ray.opacity(alpha);
-            let c = self.classifier.classify(d);
+            let c = cls.classify(d);
             composite(&mut acc, self.shade_sample(v, [c.r, c.g, c.b], ci, cj, k, wi, wj), alpha);
         }
         RayResult { rgba: acc, depth: f32::NAN }
     }
 
     #[inline(always)]
-    fn trace_iso<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
+    fn trace_iso<V: Cells, R: Ray, const F: bool>(
+        &self,
+        v: &V,
+        ray: R,
+        ks: impl Iterator<Item = usize>,
+        lo: usize,
+        hi: usize,
+        foc: [usize; 2],
+    ) -> RayResult {
         for k in ks {
             let Some((ci, cj, wi, wj)) = ray.locate(self, k) else {
                 continue;
             };
             let d = self.sample(v, ci, cj, k, wi, wj);
-            if d >= self.iso {
-                return self.iso_hit(v, ray, k, ci, cj, wi, wj, d, lo, hi);
+            // the iso value that applies where the sample is (focus or context)
+            let iso = if F { self.iso_at(k, foc).0 } else { self.iso };
+            if d >= iso {
+                let at = if F { self.iso_at(k, foc) } else { (self.iso, self.iso_rgb) };
+                return self.iso_hit(v, ray, k, ci, cj, wi, wj, d, lo, hi, at);
             }
         }
         MISS
@@ -552,13 +607,14 @@ impl<'a> RayContext<'a> {
         d: f32,
         lo: usize,
         hi: usize,
+        (iso, iso_rgb): (f32, [f32; 3]),
     ) -> RayResult {
-        // the sample before the hit, when it is below the iso value: the surface
-        // crosses between the two slices at fraction t
+        // the sample before the hit, when it is below the hit's iso value: the
+        // surface crosses between the two slices at fraction t
         let before = self.prev_slice(k, lo, hi).and_then(|kp| {
             let (pi, pj, pwi, pwj) = ray.locate(self, kp)?;
             let dp = self.sample(v, pi, pj, kp, pwi, pwj);
-            (dp < self.iso).then(|| (kp, ((self.iso - dp) / (d - dp)).clamp(0.0, 1.0), (pi, pj, pwi, pwj)))
+            (dp < iso).then(|| (kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), (pi, pj, pwi, pwj)))
         });
         let depth = before.map_or(k as f32, |(kp, t, _)| kp as f32 + (k as f32 - kp as f32) * t);
         let rgb = match self.normals {
@@ -569,7 +625,7 @@ impl<'a> RayContext<'a> {
                     let ep = entry(pi, pj, kp, pwi, pwj);
                     e = [0, 1].map(|a| ep[a] + (e[a] - ep[a]) * t);
                 }
-                apply_shade(self.iso_rgb, e)
+                apply_shade(iso_rgb, e)
             }
             None => {
                 let mut g = self.stack.gradient(ci, cj, k, wi, wj);
@@ -577,7 +633,7 @@ impl<'a> RayContext<'a> {
                     let gp = self.stack.gradient(pi, pj, kp, pwi, pwj);
                     g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
                 }
-                self.shading.shade(self.iso_rgb, headlight_ndl(g, self.grad_m, self.grad_s))
+                self.shading.shade(iso_rgb, headlight_ndl(g, self.grad_m, self.grad_s))
             }
         };
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
@@ -694,6 +750,63 @@ impl Ray for ScaledRay {
     #[inline(always)]
     fn half_opacity(&self, alpha: f32) -> f32 {
         if self.e == 1.0 { half_step_alpha(alpha) } else { correct_alpha(alpha, 0.5 * self.e) }
+    }
+}
+
+/// A ray less its hole `[h0, h1]` ([`FramePlan::ray_hole`]): its samples in
+/// the hole's slices, and the Deluxe I midpoints next to them, are outside
+/// the volume to the trace (skipped when blending, never an iso hit nor the
+/// sample an iso hit is refined against), so every traversal that traces
+/// rays honours the hole with the one trace loop.
+#[derive(Clone, Copy, Debug)]
+pub struct HoledRay<R> {
+    pub ray: R,
+    pub hole: [usize; 2],
+}
+
+impl<R: Ray> HoledRay<R> {
+    #[inline(always)]
+    fn in_hole(&self, k: usize) -> bool {
+        self.hole[0] <= k && k <= self.hole[1]
+    }
+}
+
+impl<R: Ray> Ray for HoledRay<R> {
+    #[inline(always)]
+    fn locate(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)> {
+        if self.in_hole(k) { None } else { self.ray.locate(ctx, k) }
+    }
+    #[inline(always)]
+    fn locate_mid(&self, ctx: &RayContext, k: usize) -> Option<(usize, usize, f32, f32)> {
+        if self.in_hole(k) || self.in_hole(k + 1) { None } else { self.ray.locate_mid(ctx, k) }
+    }
+    #[inline(always)]
+    fn opacity(&self, alpha: f32) -> f32 {
+        self.ray.opacity(alpha)
+    }
+    #[inline(always)]
+    fn half_opacity(&self, alpha: f32) -> f32 {
+        self.ray.half_opacity(alpha)
+    }
+}
+
+/// The candidates of `it` outside the hole `[h0, h1]` (a walk's candidates in
+/// the hole are never hits: the walk goes on past them).
+struct SkipHole<I> {
+    it: I,
+    hole: [usize; 2],
+}
+
+impl<I: Iterator<Item = usize>> Iterator for SkipHole<I> {
+    type Item = usize;
+    #[inline(always)]
+    fn next(&mut self) -> Option<usize> {
+        loop {
+            let k = self.it.next()?;
+            if k < self.hole[0] || k > self.hole[1] {
+                return Some(k);
+            }
+        }
     }
 }
 
@@ -887,8 +1000,9 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
         if ctx.mode == Mode::Iso
             && lo <= hi
             && first / len == b
+            && plan.ray_hole(p, self.q).is_none_or(|[h0, h1]| first < h0 || first > h1)
             && let Some((ci, cj, wi, wj)) = ray.locate(ctx, first)
-            && ctx.sample(v, ci, cj, first, wi, wj) >= ctx.iso
+            && ctx.sample(v, ci, cj, first, wi, wj) >= ctx.iso_at(first, plan.focus_range(p, self.q)).0
         {
             return (ray, Some((ColumnWalk::only(self.mask, self.occ, self.m, self.search, first), first)));
         }
@@ -966,14 +1080,19 @@ fn trace_ray<V: Cells, R: Ray, const LIMITED: bool>(
     q: usize,
     ks: impl Iterator<Item = usize>,
 ) -> RayResult {
+    let foc = ctx.plan.focus_range(p, q);
     if LIMITED {
         let [lo, hi] = ctx.plan.ray_range(p, q);
         if lo > hi {
             return MISS;
         }
-        ctx.trace(v, ray, Clip { it: ks, lo, hi, ascending: ctx.ascending }, lo, hi)
+        let ks = Clip { it: ks, lo, hi, ascending: ctx.ascending };
+        match ctx.plan.ray_hole(p, q) {
+            None => ctx.trace(v, ray, ks, lo, hi, foc),
+            Some(hole) => ctx.trace(v, HoledRay { ray, hole }, SkipHole { it: ks, hole }, lo, hi, foc),
+        }
     } else {
-        ctx.trace(v, ray, ks, 0, ctx.stack.n[2] - 1)
+        ctx.trace(v, ray, ks, 0, ctx.stack.n[2] - 1, foc)
     }
 }
 
@@ -1069,10 +1188,14 @@ fn brute_rows<V: Cells, R: Ray>(
             let p = p0 + dp;
             let [lo, hi] = ctx.plan.ray_range(p, q);
             let r = ray(p, q);
-            let res = match (lo <= hi, ctx.ascending) {
-                (false, _) => MISS,
-                (true, true) => ctx.trace(v, r, lo..=hi, lo, hi),
-                (true, false) => ctx.trace(v, r, (lo..=hi).rev(), lo, hi),
+            let foc = ctx.plan.focus_range(p, q);
+            let res = match (lo <= hi, ctx.ascending, ctx.plan.ray_hole(p, q)) {
+                (false, ..) => MISS,
+                (true, true, None) => ctx.trace(v, r, lo..=hi, lo, hi, foc),
+                (true, false, None) => ctx.trace(v, r, (lo..=hi).rev(), lo, hi, foc),
+                // every slice of the ray, the hole's too: its ray skips them
+                (true, true, Some(hole)) => ctx.trace(v, HoledRay { ray: r, hole }, lo..=hi, lo, hi, foc),
+                (true, false, Some(hole)) => ctx.trace(v, HoledRay { ray: r, hole }, (lo..=hi).rev(), lo, hi, foc),
             };
             *c = res.rgba;
             *d = res.depth;

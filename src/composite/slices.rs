@@ -19,7 +19,7 @@ use crate::composite::{Intermediate, composite_premultiplied, terminated};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::encode::rle::runs::{Cursor, INF};
 use crate::encode::rle::{PostTables, Preclass, RleVolume, RleVoxel, ViewTables, VoxelSource};
-use crate::view::plan::{FramePlan, MapKind, floor_i64};
+use crate::view::plan::{FramePlan, MapKind, RayLimits, floor_i64};
 
 /// What a sample is made of (a sampler of the one slice traversal): each
 /// voxel read becomes a 4-vector ([`Sampler::voxel`], [`Sampler::MISSING`]
@@ -192,6 +192,29 @@ fn box_sample(wi: &[f32], mut column: impl FnMut(usize) -> [f32; 4]) -> [f32; 4]
     smp
 }
 
+/// Focus+context: calls `run(x0, x1, in_focus)` for the maximal runs of
+/// pixels `x0 ..= x1` of `[lo, hi]` (pixel indices of `frow`, a row of the
+/// plan's focus intervals) whose sample of slice `k` is all inside or all
+/// outside the focus, in order. The one place the slice traversal reads the
+/// focus: each run is composited with the focus's or the context's sampler.
+#[inline]
+fn focus_runs(frow: &[[u32; 2]], k: u32, lo: i64, hi: i64, mut run: impl FnMut(i64, i64, bool)) {
+    let inside = |x: i64| {
+        let [a, b] = frow[x as usize];
+        a <= k && k <= b
+    };
+    let mut x = lo;
+    while x <= hi {
+        let f = inside(x);
+        let mut e = x;
+        while e < hi && inside(e + 1) == f {
+            e += 1;
+        }
+        run(x, e, f);
+        x = e + 1;
+    }
+}
+
 #[inline(always)]
 fn find(links: &mut [u32], x: usize) -> usize {
     if links[x] == 0 {
@@ -294,7 +317,11 @@ fn span<S: Sampler, const LIM: bool>(
         let n = (end - c1) as usize;
         let x0 = (ci as isize + off) as usize;
         let (p, l) = (&mut px[x0..x0 + n], &mut links[x0..x0 + n]);
-        let lm = Limits { row: if LIM { &lim.row[x0..x0 + n] } else { &[][..] }, k: lim.k };
+        let lm = Limits {
+            row: if LIM { &lim.row[x0..x0 + n] } else { &[][..] },
+            holes: if LIM && !lim.holes.is_empty() { &lim.holes[x0..x0 + n] } else { &[][..] },
+            k: lim.k,
+        };
         let bv = if bin { &bot.vox[bot.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let tv = if tin { &top.vox[top.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let (want, done) = match (bin, tin) {
@@ -305,7 +332,11 @@ fn span<S: Sampler, const LIM: bool>(
                 if !left.any {
                     return ci; // all four voxels transparent: back to run skipping
                 }
-                let lm1 = Limits { row: if LIM { &lm.row[..1] } else { &[][..] }, k: lm.k };
+                let lm1 = Limits {
+                    row: if LIM { &lm.row[..1] } else { &[][..] },
+                    holes: if LIM && !lm.holes.is_empty() { &lm.holes[..1] } else { &[][..] },
+                    k: lm.k,
+                };
                 (1, segment::<S, false, false, LIM>(&mut p[..1], &mut l[..1], &[], &[], &mut left, w, t, ert, lm1))
             }
         };
@@ -314,6 +345,19 @@ fn span<S: Sampler, const LIM: bool>(
             return ci; // an opaque pixel (back to the links), or the end
         }
     }
+}
+
+/// One row of a box-filtered slice ([`RleFrame::box_slice`]): slice `k`,
+/// intermediate row `q`, footprint `s`, the `nb` rows of the box (their
+/// cursors and weights) whose non-transparent columns end at `hi`.
+struct BoxRow<'w, 'c> {
+    k: usize,
+    q: usize,
+    s: f64,
+    nb: usize,
+    hi: i64,
+    curs: [Cursor<'c>; MAXW],
+    wj: &'w [f32; MAXW],
 }
 
 /// The left column of the next pixel: its two voxels' colours, and whether
@@ -325,15 +369,38 @@ struct Left {
 }
 
 /// The ray limits of a row's pixels and the slice being composited: with
-/// `LIM`, pixel `x` composites slice `k` only when `row[x] = [k0, k1]` holds it.
+/// `LIM`, pixel `x` composites slice `k` only when `row[x] = [k0, k1]` holds it
+/// and, when the plan has holes (`holes` not empty), `holes[x]` does not.
 #[derive(Clone, Copy)]
 struct Limits<'a> {
     row: &'a [[u32; 2]],
+    holes: &'a [[u32; 2]],
     k: u32,
 }
 
-impl Limits<'_> {
-    const NONE: Limits<'static> = Limits { row: &[], k: 0 };
+impl<'a> Limits<'a> {
+    const NONE: Limits<'static> = Limits { row: &[], holes: &[], k: 0 };
+
+    /// Slice `k`'s limits of intermediate row `q` over the rect's columns
+    /// `r.p0 ..= r.p1` (with the holes, when the limits have any).
+    #[inline(always)]
+    fn of(l: &'a RayLimits, q: usize, r: &Rect, k: usize) -> Self {
+        let holes = l.hole_row(q);
+        let holes = if holes.is_empty() { holes } else { &holes[r.p0..=r.p1] };
+        Limits { row: &l.row(q)[r.p0..=r.p1], holes, k: k as u32 }
+    }
+
+    /// Whether pixel `s` of the row composites the slice.
+    #[inline(always)]
+    fn keeps(&self, s: usize) -> bool {
+        let [k0, k1] = self.row[s];
+        k0 <= self.k
+            && self.k <= k1
+            && (self.holes.is_empty() || {
+                let [h0, h1] = self.holes[s];
+                !(h0 <= self.k && self.k <= h1)
+            })
+    }
 }
 
 /// Composites consecutive pixels `px` (their `links`) whose right columns are
@@ -367,10 +434,7 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
         }
         let rb = if B { t.voxel(bv[s]) } else { S::MISSING };
         let rt = if T { t.voxel(tv[s]) } else { S::MISSING };
-        let inside = !LIM || {
-            let [k0, k1] = lim.row[s];
-            k0 <= lim.k && lim.k <= k1
-        };
+        let inside = !LIM || lim.keeps(s);
         if inside {
             let acc = &mut px[s];
             composite_premultiplied(acc, t.finish(blend(lb, rb, lt, rt, w)));
@@ -402,6 +466,7 @@ fn clear_rows(px: &mut [[f32; 4]], depth: &mut [f32], gw: usize, r: &Rect) {
 pub fn render_rle<S: Sampler>(
     rle: &RleVolume,
     tables: &S,
+    focus: Option<&S>,
     plan: &FramePlan,
     ert: f32,
     rect: Option<Rect>,
@@ -419,7 +484,9 @@ pub fn render_rle<S: Sampler>(
     if links.len() < most {
         links.resize(most, 0);
     }
-    let fr = RleFrame { rle, tables, plan, pad: plan.grid.pad as isize, ert, r, gw, lw };
+    // focus+context: the focus's sampler where the plan has focus intervals
+    let focus = focus.filter(|_| plan.focus.is_some());
+    let fr = RleFrame { rle, tables, focus, plan, pad: plan.grid.pad as isize, ert, r, gw, lw };
     let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
     let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];
     let bands = px.par_chunks_mut(gw * BAND).zip(depth.par_chunks_mut(gw * BAND)).zip(links[..rows * lw].par_chunks_mut(lw * BAND));
@@ -430,6 +497,8 @@ pub fn render_rle<S: Sampler>(
 struct RleFrame<'a, S> {
     rle: &'a RleVolume,
     tables: &'a S,
+    /// Focus+context: the sampler of the samples inside the plan's focus intervals.
+    focus: Option<&'a S>,
     plan: &'a FramePlan,
     pad: isize,
     ert: f32,
@@ -440,7 +509,19 @@ struct RleFrame<'a, S> {
     lw: usize,
 }
 
+impl<S: Sampler> Clone for RleFrame<'_, S> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<S: Sampler> Copy for RleFrame<'_, S> {}
+
 impl<S: Sampler> RleFrame<'_, S> {
+    /// This frame with the focus's sampler in place of the context's (focus+context).
+    fn focused(&self) -> Self {
+        RleFrame { tables: self.focus.unwrap_or(self.tables), ..*self }
+    }
+
     /// Renders the band of intermediate rows from `q_first` (`px`, `depth` and
     /// `links` hold its rows): clears it, then composites every slice front to back.
     #[inline(never)]
@@ -510,12 +591,28 @@ impl<S: Sampler> RleFrame<'_, S> {
                 rle.prefetch_scanline(s + 2, first as usize, hi as usize);
                 let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
                 let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
-                match &self.plan.limits {
-                    None => {
+                match (&self.plan.limits, self.focus, &self.plan.focus) {
+                    // focus+context: the cells of each run of pixels in / out of
+                    // the focus with its sampler (the cursors afresh for each run)
+                    (limits, Some(ft), Some(fl)) => {
+                        let op = op as i64;
+                        focus_runs(fl.row(q_first + row), k as u32, first as i64 + op, hi as i64 + op, |x0, x1, f| {
+                            let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
+                            let (lo, hi, t) = ((x0 - op) as u32, (x1 - op) as u32, if f { ft } else { self.tables });
+                            match limits {
+                                None => composite_row::<S, false>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, Limits::NONE),
+                                Some(l) => {
+                                    let lim = Limits::of(l, q_first + row, r, k);
+                                    composite_row::<S, true>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, lim)
+                                }
+                            }
+                        })
+                    }
+                    (None, _, _) => {
                         composite_row::<S, false>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, Limits::NONE)
                     }
-                    Some(l) => {
-                        let lim = Limits { row: &l.row(q_first + row)[r.p0..=r.p1], k: k as u32 };
+                    (Some(l), _, _) => {
+                        let lim = Limits::of(l, q_first + row, r, k);
                         composite_row::<S, true>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, lim)
                     }
                 }
@@ -555,7 +652,6 @@ impl<S: Sampler> RleFrame<'_, S> {
         }
         let nrows = px.len() / gw;
         let p0 = r.p0 as i64;
-        let map = plan.axis_map(k, 0);
         for row in 0..nrows {
             let q = q_first + row;
             let (cj, wj) = plan.cell_of(k, 1, q);
@@ -577,6 +673,36 @@ impl<S: Sampler> RleFrame<'_, S> {
             }
             let lrow = &mut links[row * lw..(row + 1) * lw];
             let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
+            match (self.focus, &plan.focus) {
+                // focus+context: each run of pixels in / out of the focus with its sampler
+                (Some(_), Some(fl)) => focus_runs(fl.row(q), k as u32, x0, x1, |a, b, f| {
+                    let fr = if f { self.focused() } else { *self };
+                    fr.scaled_row(k, q, s, [a, b], [lo, hi], wj, prow, lrow);
+                }),
+                _ => self.scaled_row(k, q, s, [x0, x1], [lo, hi], wj, prow, lrow),
+            }
+        }
+    }
+
+    /// The pixels `x0 ..= x1` of row `q` of [`RleFrame::scaled_slice`]
+    /// (scanlines `s`, `s + 1`; cells `lo ..= hi` hold non-transparent voxels).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn scaled_row(
+        &self,
+        k: usize,
+        q: usize,
+        s: usize,
+        [x0, x1]: [i64; 2],
+        [_lo, hi]: [i64; 2],
+        wj: f32,
+        prow: &mut [[f32; 4]],
+        lrow: &mut [u32],
+    ) {
+        let (r, rle, plan) = (&self.r, self.rle, self.plan);
+        let p0 = r.p0 as i64;
+        let map = plan.axis_map(k, 0);
+        {
             let (mut cb, mut ct) = (rle.cursor(s), rle.cursor(s + 1));
             // the first column the cursors may still be asked for
             let mut next = 0u32;
@@ -665,7 +791,7 @@ impl<S: Sampler> RleFrame<'_, S> {
         let reach = plan.footprint_reach(k);
         let nrows = px.len() / gw;
         let p0 = r.p0 as i64;
-        let (mut wi, mut wj) = ([0f32; MAXW], [0f32; MAXW]);
+        let mut wj = [0f32; MAXW];
         for row in 0..nrows {
             let q = q_first + row;
             let (cj, _) = plan.cell_of(k, 1, q);
@@ -699,6 +825,28 @@ impl<S: Sampler> RleFrame<'_, S> {
             }
             let lrow = &mut links[row * lw..(row + 1) * lw];
             let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
+            let bx = BoxRow { k, q, s, nb, hi, curs, wj: &wj };
+            match (self.focus, &plan.focus) {
+                // focus+context: each run of pixels in / out of the focus with its sampler
+                (Some(_), Some(fl)) => focus_runs(fl.row(q), k as u32, x0, x1, |a, b, f| {
+                    let fr = if f { self.focused() } else { *self };
+                    fr.box_row(&bx, [a, b], prow, lrow);
+                }),
+                _ => self.box_row(&bx, [x0, x1], prow, lrow),
+            }
+        }
+    }
+
+    /// The pixels `x0 ..= x1` of one row of [`RleFrame::box_slice`].
+    #[inline(always)]
+    fn box_row(&self, bx: &BoxRow, [x0, x1]: [i64; 2], prow: &mut [[f32; 4]], lrow: &mut [u32]) {
+        let (r, rle, plan) = (&self.r, self.rle, self.plan);
+        let ni = rle.n[0];
+        let &BoxRow { k, q, s, nb, hi, curs, wj } = bx;
+        let mut curs = curs;
+        let p0 = r.p0 as i64;
+        let mut wi = [0f32; MAXW];
+        {
             // the box's columns ([`box_column`]: this row's weights over its
             // rows) in a ring at ring[c % RING]; columns come in increasing
             // order, each decoded and summed once per row of the intermediate
@@ -916,7 +1064,9 @@ impl<S: Sampler> RleFrame<'_, S> {
             None => true,
             Some(l) => {
                 let [k0, k1] = l.get(x as usize, q);
-                k0 as usize <= ks[0] && ks[1] <= k1 as usize
+                let [h0, h1] = l.hole(x as usize, q);
+                // (both slices kept: in the interval, and the hole not between or on them)
+                k0 as usize <= ks[0] && ks[1] <= k1 as usize && (h0 > h1 || (h1 as usize) < ks[0] || ks[1] < h0 as usize)
             }
         };
         if inside {
@@ -935,12 +1085,16 @@ impl<S: Sampler> RleFrame<'_, S> {
 /// slices), then every pixel of `rect` whose opacity is below `ert` composites
 /// its cell's sample; with the plan's intermediate samples (Deluxe I), the
 /// sample between the last slice and this one first. No runs, no links; same
-/// positions, weights, sampler and arithmetic.
+/// positions, weights, sampler and arithmetic. With `focus` (focus+context,
+/// `(its classification, its sampler)`) and the plan's focus intervals, a
+/// pixel whose slice-`k` sample is in its interval reads the voxels
+/// classified by the focus's (a second buffer).
 #[allow(clippy::too_many_arguments)]
 pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
     stack: &V,
     pre: &Preclass,
     tables: &S,
+    focus: Option<(&Preclass, &S)>,
     plan: &FramePlan,
     ert: f32,
     rect: Option<Rect>,
@@ -956,6 +1110,9 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
     px.par_chunks_mut(gw).zip(depth.par_chunks_mut(gw)).for_each(|(p, d)| clear_rows(p, d, gw, &r));
     let n = ni * nj;
     slice_buf.resize(2 * n, [0.0; 4]);
+    let focus = focus.filter(|_| plan.focus.is_some());
+    // the focus's voxels of the slice (a reference: allocated per frame)
+    let mut focus_buf = vec![[0f32; 4]; if focus.is_some() { n } else { 0 }];
     let mut prev: Option<usize> = None;
     for k in plan.front_to_back() {
         // slice k's voxels in half k % 2 of the buffer (the last slice's in the other)
@@ -964,6 +1121,14 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                 *c = tables.brute_voxel(pre, stack, i, j, k);
             }
         });
+        if let Some((fpre, ft)) = focus {
+            focus_buf.par_chunks_mut(ni).enumerate().for_each(|(j, row)| {
+                for (i, c) in row.iter_mut().enumerate() {
+                    *c = ft.brute_voxel(fpre, stack, i, j, k);
+                }
+            });
+        }
+        let fbuf = &focus_buf[..];
         let buf = &slice_buf[..];
         if let Some(kp) = prev.filter(|_| plan.intermediate()) {
             // the intermediate samples between slices kl and kl + 1
@@ -981,8 +1146,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                     if ci < 0 || ci > ni as i64 - 2 || terminated(acc[3], ert) {
                         continue;
                     }
-                    let [k0, k1] = plan.limits.as_ref().map_or([0, u32::MAX], |l| l.get(p, q));
-                    if (kl as u32) < k0 || kl as u32 + 1 > k1 {
+                    if plan.limits.as_ref().is_some_and(|l| !l.keeps(p, q, kl) || !l.keeps(p, q, kl + 1)) {
                         continue;
                     }
                     let b = ci as usize + ni * cj as usize;
@@ -1014,12 +1178,14 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                 if terminated(acc[3], ert) {
                     continue;
                 }
-                if let Some(l) = &plan.limits {
-                    let [k0, k1] = l.get(p, r.q0 + row);
-                    if (k as u32) < k0 || (k as u32) > k1 {
-                        continue;
-                    }
+                if plan.limits.as_ref().is_some_and(|l| !l.keeps(p, q, k)) {
+                    continue;
                 }
+                // focus+context: the sample inside the focus from the focus's voxels and sampler
+                let (buf, tables) = match focus {
+                    Some((_, ft)) if plan.in_focus(p, q, k) => (fbuf, ft),
+                    _ => (buf, tables),
+                };
                 let smp = if fp > 1.0 {
                     // the box footprint of a minified slice (as RleFrame::box_slice)
                     let mut wis = [0f32; MAXW];

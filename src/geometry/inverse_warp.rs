@@ -228,7 +228,8 @@ impl GeometryLimits {
 
     /// The nearest geometry depth over the output pixels whose centres lie in
     /// the box `[u0, u1] × [v0, v1]` (at least the nearest pixel's), `+∞` for none.
-    fn min_depth(&self, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
+    /// (Also read by [`super::clip_mesh`].)
+    pub(crate) fn min_depth(&self, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
         let [w, h] = self.size;
         let clampi = |x: f64, n: usize| x.clamp(0.0, n as f64 - 1.0) as usize;
         let (x0, x1) = (u0.ceil(), u1.floor());

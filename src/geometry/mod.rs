@@ -13,17 +13,22 @@
 //! - [`inverse_warp`]: that depth buffer as the frame plan's per-pixel ray
 //!   limits ([`GeometryLimits`], a [`crate::view::plan::Limiter`]: every
 //!   path stops at the geometry), and the final image of the volume over the
-//!   geometry's colour.
+//!   geometry's colour;
+//! - [`clip_mesh`]: a closed convex mesh as a clip region, its inside or
+//!   outside kept ([`MeshClip`], a [`crate::view::plan::Limiter`]: its front
+//!   and back faces' depth buffers through the inverse warp's gather).
 //!
 //! The depth buffer is in the reference renderer's depth units (world units
 //! along the view from the plane through the volume centre), so a pixel's
 //! geometry and volume depths compare directly.
 
+pub mod clip_mesh;
 pub mod inverse_warp;
 pub mod io;
 pub mod mesh;
 pub mod raster;
 
+pub use clip_mesh::{ConvexMesh, MeshClip};
 pub use inverse_warp::{GeometryLimits, composite_iso_over_geometry, composite_over_geometry};
 pub use io::load_mesh;
 pub use mesh::Mesh;

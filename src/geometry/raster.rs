@@ -132,6 +132,12 @@ impl Projector {
         }
     }
 
+    /// Perspective: the eye's distance from the volume centre (world units;
+    /// `w = D − e.z`). None in parallel.
+    pub fn eye_distance(&self) -> Option<f64> {
+        self.eye.map(|(d, _)| d)
+    }
+
     /// Output size.
     pub fn size(&self) -> [usize; 2] {
         self.size

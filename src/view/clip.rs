@@ -27,6 +27,14 @@
 //! meets a convex region in one interval, solved analytically and then
 //! checked on the samples themselves. [`Limiters`] applies several limiters
 //! in turn (each only narrows a ray's interval: the intersection).
+//!
+//! A region may keep its **outside** instead ([`Keep::Outside`],
+//! [`ClipRegion::keeping`]): the same interval of slices, solved and checked
+//! the same way, is then cut out of the ray as its *hole*
+//! ([`RayLimits`]: the ray composites `[k0, h0 − 1]` then `[h1 + 1, k1]`;
+//! [`crate::view::plan::cut_ray`]). A ray holds one hole, so a limiter set
+//! may hold one outside region at most ([`Limiters::new`] refuses more);
+//! planes and inside regions narrow the interval around it in any order.
 
 use std::sync::Arc;
 
@@ -34,7 +42,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::view::plan::{FramePlan, Limiter, MapKind, RayLimits};
+use crate::view::plan::{FramePlan, Limiter, MapKind, RayLimits, cut_ray};
 
 /// Most planes a [`ClipPlanes`] holds.
 pub const MAX_PLANES: usize = 6;
@@ -237,12 +245,23 @@ pub enum Region {
     Box { lo: [f64; 3], hi: [f64; 3] },
 }
 
-/// A convex clip region whose inside is kept (see the [module docs](self)):
-/// a [`Limiter`].
+/// Which side of a clip region is kept.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Keep {
+    /// The samples inside (boundary included).
+    #[default]
+    Inside,
+    /// The samples outside: the region is cut out of the volume.
+    Outside,
+}
+
+/// A convex clip region whose inside (or, [`ClipRegion::keeping`], outside)
+/// is kept (see the [module docs](self)): a [`Limiter`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClipRegion {
     region: Region,
     spacing: [f64; 3],
+    keep: Keep,
 }
 
 impl ClipRegion {
@@ -267,12 +286,29 @@ impl ClipRegion {
                 }
             }
         }
-        Ok(ClipRegion { region, spacing: spacing.map(|s| s as f64) })
+        Ok(ClipRegion { region, spacing: spacing.map(|s| s as f64), keep: Keep::Inside })
+    }
+
+    /// The same region keeping `keep` (default: inside).
+    pub fn keeping(mut self, keep: Keep) -> Self {
+        self.keep = keep;
+        self
     }
 
     /// The region.
     pub fn region(&self) -> Region {
         self.region
+    }
+
+    /// The side kept.
+    pub fn keep(&self) -> Keep {
+        self.keep
+    }
+
+    /// Whether voxel-index point `v` is kept: inside the region, or outside
+    /// it for [`Keep::Outside`].
+    pub fn keeps(&self, v: DVec3) -> bool {
+        self.contains(v) == (self.keep == Keep::Inside)
     }
 
     /// Whether voxel-index point `v` is inside (boundary included).
@@ -334,6 +370,40 @@ fn sample_voxel(plan: &FramePlan, k: usize, p: usize, q: usize) -> DVec3 {
     crate::view::unpermute(plan.view.perm, DVec3::new(plan.sample_at(k, 0, p), plan.sample_at(k, 1, q), k as f64))
 }
 
+impl ClipRegion {
+    /// The slices `[a, b]` (`a > b`: none) of `0 ..= last` whose samples of
+    /// pixel `(p, q)` lie inside the region.
+    fn inside_interval(&self, plan: &FramePlan, last: i64, p: usize, q: usize) -> [i64; 2] {
+        // the ray's samples are affine in k: o + k·d
+        let o = sample_voxel(plan, 0, p, q);
+        let d = if last > 0 { (sample_voxel(plan, last as usize, p, q) - o) / last as f64 } else { DVec3::ZERO };
+        let inside = |k: i64| self.contains(sample_voxel(plan, k as usize, p, q));
+        let [t0, t1] = self.line_interval(o, d);
+        // a one-sample margin for rounding (an interval empty by rounding
+        // alone is checked around where it closed)
+        let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t0.clamp(-1.0, last as f64 + 1.0), t0.clamp(-1.0, last as f64 + 1.0)) };
+        let edge = |t: f64| t.clamp(-2.0, last as f64 + 2.0);
+        let mut a = (edge(t0).floor() as i64 - 1).clamp(0, last);
+        let mut b = (edge(t1).ceil() as i64 + 1).clamp(0, last);
+        // the interval's ends checked on the samples themselves
+        while a <= b && !inside(a) {
+            a += 1;
+        }
+        while b >= a && !inside(b) {
+            b -= 1;
+        }
+        if a <= b {
+            while a > 0 && inside(a - 1) {
+                a -= 1;
+            }
+            while b < last && inside(b + 1) {
+                b += 1;
+            }
+        }
+        [a, b]
+    }
+}
+
 impl Limiter for ClipRegion {
     fn limit(&self, plan: &FramePlan, limits: &mut RayLimits) {
         let nk = plan.slices();
@@ -341,54 +411,62 @@ impl Limiter for ClipRegion {
             return;
         }
         let last = nk as i64 - 1;
-        limits.par_rows_mut().enumerate().for_each(|(q, row)| {
-            for (p, l) in row.iter_mut().enumerate() {
-                if l[0] > l[1] {
-                    continue;
-                }
-                // the ray's samples are affine in k: o + k·d
-                let o = sample_voxel(plan, 0, p, q);
-                let d = if last > 0 { (sample_voxel(plan, last as usize, p, q) - o) / last as f64 } else { DVec3::ZERO };
-                let inside = |k: i64| self.contains(sample_voxel(plan, k as usize, p, q));
-                let [t0, t1] = self.line_interval(o, d);
-                // a one-sample margin for rounding (an interval empty by rounding
-                // alone is checked around where it closed)
-                let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t0.clamp(-1.0, last as f64 + 1.0), t0.clamp(-1.0, last as f64 + 1.0)) };
-                let edge = |t: f64| t.clamp(-2.0, last as f64 + 2.0);
-                let mut a = (edge(t0).floor() as i64 - 1).clamp(0, last);
-                let mut b = (edge(t1).ceil() as i64 + 1).clamp(0, last);
-                // the interval's ends checked on the samples themselves
-                while a <= b && !inside(a) {
-                    a += 1;
-                }
-                while b >= a && !inside(b) {
-                    b -= 1;
-                }
-                if a <= b {
-                    while a > 0 && inside(a - 1) {
-                        a -= 1;
+        match self.keep {
+            Keep::Inside => limits.par_rows_mut().enumerate().for_each(|(q, row)| {
+                for (p, l) in row.iter_mut().enumerate() {
+                    if l[0] > l[1] {
+                        continue;
                     }
-                    while b < last && inside(b + 1) {
-                        b += 1;
-                    }
+                    let [a, b] = self.inside_interval(plan, last, p, q);
+                    let (lo, hi) = ((l[0] as i64).max(a), (l[1] as i64).min(b));
+                    *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
                 }
-                let (lo, hi) = ((l[0] as i64).max(a), (l[1] as i64).min(b));
-                *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
-            }
-        });
+            }),
+            Keep::Outside => limits.holes_rows_mut().enumerate().for_each(|(q, (row, holes))| {
+                for (p, (l, h)) in row.iter_mut().zip(holes.iter_mut()).enumerate() {
+                    if l[0] > l[1] {
+                        continue;
+                    }
+                    (*l, *h) = cut_ray(*l, *h, self.inside_interval(plan, last, p, q));
+                }
+            }),
+        }
+    }
+
+    fn holes(&self) -> usize {
+        (self.keep == Keep::Outside) as usize
     }
 }
 
-/// Several limiters applied in turn: each narrows the rays' intervals, so the
-/// result keeps the samples every one keeps.
+/// Several limiters applied in turn: each narrows the rays' intervals (or
+/// cuts their hole), so the result keeps the samples every one keeps.
 #[derive(Clone, Default)]
 pub struct Limiters(pub Vec<Arc<dyn Limiter>>);
+
+impl Limiters {
+    /// The limiters, checked: a ray holds one hole, so at most one of them
+    /// may keep the outside of a region ([`Limiter::holes`]).
+    pub fn new(limiters: Vec<Arc<dyn Limiter>>) -> Result<Self> {
+        let holes: usize = limiters.iter().map(|l| l.holes()).sum();
+        if holes > 1 {
+            return Err(Error::value(
+                "clip regions",
+                format!("{holes} regions keep their outside; a ray holds one hole, so at most one region may keep its outside"),
+            ));
+        }
+        Ok(Limiters(limiters))
+    }
+}
 
 impl Limiter for Limiters {
     fn limit(&self, plan: &FramePlan, limits: &mut RayLimits) {
         for l in &self.0 {
             l.limit(plan, limits);
         }
+    }
+
+    fn holes(&self) -> usize {
+        self.0.iter().map(|l| l.holes()).sum()
     }
 }
 
@@ -412,23 +490,99 @@ mod tests {
         out
     }
 
-    /// Asserts that `limiter`'s limits on `plan` keep exactly the samples `kept(k, p, q)` keeps.
+    /// Asserts that `limiter`'s limits on `plan` keep exactly the samples
+    /// `kept(k, p, q)` keeps: the interval less the hole, once normalized
+    /// (every hole strictly inside its interval).
     fn assert_limits_are(plan: &FramePlan, limiter: &dyn Limiter, kept: impl Fn(usize, usize, usize) -> bool, what: &str) -> usize {
         let mut l = RayLimits::open(plan.grid.size, plan.slices());
         limiter.limit(plan, &mut l);
+        l.normalize();
         let [w, h] = plan.grid.size;
         let mut n = 0;
         for q in 0..h {
             for p in 0..w {
                 let [a, b] = l.get(p, q);
+                let [h0, h1] = l.hole(p, q);
+                assert!(h0 > h1 || (a < h0 && h1 < b), "{what} pixel ({p}, {q}): hole {:?} not strictly inside {:?}", [h0, h1], [a, b]);
                 for k in 0..plan.slices() {
-                    let inside = a <= b && (a as usize..=b as usize).contains(&k);
-                    assert_eq!(inside, kept(k, p, q), "{what} pixel ({p}, {q}) slice {k}: {:?}", [a, b]);
+                    let inside = a <= b && (a as usize..=b as usize).contains(&k) && !(h0 as usize..=h1 as usize).contains(&k);
+                    assert_eq!(inside, l.keeps(p, q, k));
+                    assert_eq!(inside, kept(k, p, q), "{what} pixel ({p}, {q}) slice {k}: {:?} hole {:?}", [a, b], [h0, h1]);
                     n += inside as usize;
                 }
             }
         }
         n
+    }
+
+    #[test]
+    fn clip_region_outside_limits_are_exactly_the_samples_outside() {
+        let sp = [1.0f32, 0.8, 1.5];
+        let regions = [
+            Region::Sphere { centre: [7.0, 8.0, 5.0], radius: 4.5 },
+            Region::Sphere { centre: [0.0, 0.0, 0.0], radius: 6.0 },
+            Region::Sphere { centre: [70.0, 8.0, 5.0], radius: 2.0 },
+            Region::Box { lo: [2.5, 3.0, 1.2], hi: [9.0, 12.5, 8.0] },
+            Region::Box { lo: [-5.0, -5.0, -5.0], hi: [50.0, 50.0, 50.0] },
+            Region::Box { lo: [6.0, 0.0, 0.0], hi: [7.2, 17.0, 11.0] },
+        ];
+        let mut holes = 0;
+        for plan in plans() {
+            for r in regions {
+                let clip = ClipRegion::new(r, sp).unwrap().keeping(Keep::Outside);
+                assert_eq!(clip.holes(), 1);
+                let kept = assert_limits_are(&plan, &clip, |k, p, q| !clip.contains(sample_voxel(&plan, k, p, q)), &format!("{r:?}"));
+                let all = plan.grid.size[0] * plan.grid.size[1] * plan.slices();
+                assert_eq!(kept < all, !matches!(r, Region::Sphere { centre: [70.0, ..], .. }), "{r:?}");
+                let mut l = RayLimits::open(plan.grid.size, plan.slices());
+                clip.limit(&plan, &mut l);
+                l.normalize();
+                holes += l.has_holes() as usize;
+            }
+        }
+        assert!(holes > 8, "only {holes} frames cut holes");
+    }
+
+    /// Planes and inside regions (intervals) chained with an outside region
+    /// (a hole), in either order, keep the samples every one keeps.
+    #[test]
+    fn clip_chained_with_an_outside_region_keep_the_samples_every_one_keeps() {
+        let sp = [1.0f32, 0.8, 1.5];
+        let plane = ClipPlanes::new(&[ClipPlane::new([0.3, -0.5, 0.8], 1.3).unwrap()], sp).unwrap();
+        let ball = ClipRegion::new(Region::Sphere { centre: [7.0, 8.0, 5.0], radius: 6.0 }, sp).unwrap();
+        let hole = ClipRegion::new(Region::Box { lo: [4.5, 5.0, 2.2], hi: [9.0, 11.5, 7.0] }, sp).unwrap().keeping(Keep::Outside);
+        let chains: [Vec<Arc<dyn Limiter>>; 3] = [
+            vec![Arc::new(plane.clone()), Arc::new(ball.clone()), Arc::new(hole.clone())],
+            vec![Arc::new(hole.clone()), Arc::new(plane.clone()), Arc::new(ball.clone())],
+            vec![Arc::new(ball.clone()), Arc::new(hole.clone())],
+        ];
+        for plan in plans() {
+            for (i, chain) in chains.iter().enumerate() {
+                let both = Limiters::new(chain.clone()).unwrap();
+                let want = |k, p, q| {
+                    let v = sample_voxel(&plan, k, p, q);
+                    (i == 2 || sample_kept(&plane, &plan, k, p, q)) && ball.contains(v) && hole.keeps(v)
+                };
+                assert_limits_are(&plan, &both, want, &format!("chain {i}"));
+            }
+        }
+        // two outside regions: a ray holds one hole
+        let e = Limiters::new(vec![Arc::new(hole.clone()), Arc::new(hole.clone())]).err().unwrap().to_string();
+        assert!(e.contains("outside"), "{e}");
+    }
+
+    #[test]
+    fn clip_cut_ray_unions_and_normalizes_holes() {
+        use crate::view::plan::{NO_HOLE, cut_ray};
+        assert_eq!(cut_ray([0, 9], NO_HOLE, [3, 5]), ([0, 9], [3, 5]));
+        assert_eq!(cut_ray([0, 9], NO_HOLE, [-4, 2]), ([3, 9], NO_HOLE));
+        assert_eq!(cut_ray([0, 9], NO_HOLE, [7, 20]), ([0, 6], NO_HOLE));
+        assert_eq!(cut_ray([0, 9], NO_HOLE, [-1, 12]), (NO_HOLE, NO_HOLE));
+        assert_eq!(cut_ray([0, 9], [3, 5], [6, 7]), ([0, 9], [3, 7]));
+        assert_eq!(cut_ray([0, 9], [3, 5], [1, 4]), ([0, 9], [1, 5]));
+        assert_eq!(cut_ray([0, 9], [3, 5], [5, 9]), ([0, 2], NO_HOLE));
+        assert_eq!(cut_ray([0, 9], NO_HOLE, [12, 15]), ([0, 9], NO_HOLE));
+        assert_eq!(cut_ray(NO_HOLE, NO_HOLE, [2, 3]), (NO_HOLE, NO_HOLE));
     }
 
     #[test]

@@ -171,17 +171,130 @@ impl Warp {
 
 /// Per-pixel ray limits over the intermediate grid: pixel `(p, q)` composites
 /// only slices `k0 ..= k1` (slice indices, `k0 > k1` for none), whichever
-/// order the view walks them in.
+/// order the view walks them in, less an optional *hole* `h0 ..= h1` per
+/// pixel (a region whose outside is kept: [`crate::view::clip::ClipRegion`]
+/// with [`crate::view::clip::Keep::Outside`]): the ray composites
+/// `k0 ..= h0 − 1`, then `h1 + 1 ..= k1`.
+///
+/// Holes exist only once a limiter asks for them ([`RayLimits::holes_rows_mut`]);
+/// a plan without them ([`RayLimits::has_holes`] false) costs the traversals
+/// nothing. After the limiter, [`RayLimits::normalize`] (run by
+/// [`FramePlan::apply_limiter`]) leaves every hole strictly inside its
+/// interval (`k0 < h0 ≤ h1 < k1`) or none (`[1, 0]`): a hole touching an
+/// end of the interval narrows the interval instead, and when no pixel has a
+/// hole left the holes are dropped.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RayLimits {
     width: usize,
     limits: Vec<[u32; 2]>,
+    /// Per pixel, the hole `[h0, h1]` (`h0 > h1`: none); empty: no pixel has one.
+    holes: Vec<[u32; 2]>,
+}
+
+/// No hole (also: an empty interval).
+pub const NO_HOLE: [u32; 2] = [1, 0];
+
+/// Removes the slices `cut = [c0, c1]` (signed; `c0 > c1`: nothing) from a
+/// ray's kept set `[k0, k1] \ hole`, as one interval and one hole: where the
+/// cut meets an end of the interval the interval narrows, strictly inside it
+/// becomes (or joins, when they overlap or touch) the hole. Two disjoint holes
+/// cannot be held: the span between them is removed too (a limiter set with
+/// more than one outside region is refused before it gets here:
+/// [`Limiter::holes`]). Returns the new interval and hole.
+pub fn cut_ray(l: [u32; 2], hole: [u32; 2], cut: [i64; 2]) -> ([u32; 2], [u32; 2]) {
+    let (k0, k1) = (l[0] as i64, l[1] as i64);
+    if k0 > k1 {
+        return (NO_HOLE, NO_HOLE);
+    }
+    let (c0, c1) = (cut[0].max(k0), cut[1].min(k1));
+    if c0 > c1 {
+        return normalized(l, hole);
+    }
+    let (h0, h1) = (hole[0] as i64, hole[1] as i64);
+    let (n0, n1) = if h0 > h1 { (c0, c1) } else { (c0.min(h0), c1.max(h1)) };
+    normalized(l, [n0 as u32, n1 as u32])
+}
+
+/// `l` and `hole` with the hole clipped to the interval and moved into it
+/// where it touches an end (see [`RayLimits`]).
+#[inline]
+pub fn normalized(l: [u32; 2], hole: [u32; 2]) -> ([u32; 2], [u32; 2]) {
+    let (mut k0, mut k1) = (l[0] as i64, l[1] as i64);
+    if k0 > k1 {
+        return (NO_HOLE, NO_HOLE);
+    }
+    let (h0, h1) = ((hole[0] as i64).max(k0), (hole[1] as i64).min(k1));
+    if h0 > h1 {
+        return (l, NO_HOLE);
+    }
+    if h0 == k0 {
+        k0 = h1 + 1;
+    } else if h1 == k1 {
+        k1 = h0 - 1;
+    } else {
+        return (l, [h0 as u32, h1 as u32]);
+    }
+    if k0 > k1 { (NO_HOLE, NO_HOLE) } else { ([k0 as u32, k1 as u32], NO_HOLE) }
 }
 
 impl RayLimits {
     /// Limits for a grid, every pixel open over `0 ..= nk − 1`.
     pub fn open(grid: [usize; 2], nk: usize) -> Self {
-        RayLimits { width: grid[0], limits: vec![[0, nk.saturating_sub(1) as u32]; grid[0] * grid[1]] }
+        RayLimits { width: grid[0], limits: vec![[0, nk.saturating_sub(1) as u32]; grid[0] * grid[1]], holes: vec![] }
+    }
+
+    /// Whether some pixel may have a hole (see [`RayLimits`]).
+    #[inline(always)]
+    pub fn has_holes(&self) -> bool {
+        !self.holes.is_empty()
+    }
+
+    /// The hole `[h0, h1]` of pixel `(p, q)` ([`NO_HOLE`] for none).
+    #[inline(always)]
+    pub fn hole(&self, p: usize, q: usize) -> [u32; 2] {
+        if self.holes.is_empty() { NO_HOLE } else { self.holes[q * self.width + p] }
+    }
+
+    /// The holes of row `q`, by pixel (empty when there are none).
+    #[inline(always)]
+    pub fn hole_row(&self, q: usize) -> &[[u32; 2]] {
+        if self.holes.is_empty() { &[] } else { &self.holes[q * self.width..(q + 1) * self.width] }
+    }
+
+    /// Whether pixel `(p, q)` composites slice `k`: in its interval, not in its hole.
+    #[inline(always)]
+    pub fn keeps(&self, p: usize, q: usize, k: usize) -> bool {
+        let [k0, k1] = self.get(p, q);
+        let [h0, h1] = self.hole(p, q);
+        (k0 as usize) <= k && k <= k1 as usize && !((h0 as usize) <= k && k <= h1 as usize)
+    }
+
+    /// The rows of intervals and holes, mutable, as a parallel iterator (item
+    /// `q` is row `q`), for a [`Limiter`] that cuts holes (see [`cut_ray`]):
+    /// makes the holes (none yet) on first use.
+    pub fn holes_rows_mut(&mut self) -> impl rayon::iter::IndexedParallelIterator<Item = (&mut [[u32; 2]], &mut [[u32; 2]])> {
+        use rayon::prelude::*;
+        if self.holes.is_empty() {
+            self.holes.resize(self.limits.len(), NO_HOLE);
+        }
+        let w = self.width.max(1);
+        self.limits.par_chunks_mut(w).zip(self.holes.par_chunks_mut(w))
+    }
+
+    /// Leaves every hole strictly inside its interval or none (see
+    /// [`RayLimits`]), and drops the holes when no pixel has one.
+    pub fn normalize(&mut self) {
+        if self.holes.is_empty() {
+            return;
+        }
+        let mut any = false;
+        for (l, h) in self.limits.iter_mut().zip(self.holes.iter_mut()) {
+            (*l, *h) = normalized(*l, *h);
+            any |= h[0] <= h[1];
+        }
+        if !any {
+            self.holes.clear();
+        }
     }
 
     /// The limits `[k0, k1]` of pixel `(p, q)`.
@@ -213,9 +326,10 @@ impl RayLimits {
         self.width
     }
 
-    /// Reopens every pixel of a grid over `0 ..= nk − 1`, reusing the allocation.
+    /// Reopens every pixel of a grid over `0 ..= nk − 1` (no holes), reusing the allocation.
     pub fn reset(&mut self, grid: [usize; 2], nk: usize) {
         self.width = grid[0];
+        self.holes.clear();
         self.limits.clear();
         self.limits.resize(grid[0] * grid[1], [0, nk.saturating_sub(1) as u32]);
     }
@@ -226,6 +340,12 @@ impl RayLimits {
 /// `limits` (every pixel open when it is called) for the plan's grid and slices.
 pub trait Limiter: Send + Sync {
     fn limit(&self, plan: &FramePlan, limits: &mut RayLimits);
+    /// How many holes this limiter may cut in one ray (an outside region:
+    /// one); a ray holds one ([`RayLimits`]), so the renderer refuses a
+    /// limiter set with more.
+    fn holes(&self) -> usize {
+        0
+    }
 }
 
 impl<F: Fn(&FramePlan, &mut RayLimits) + Send + Sync> Limiter for F {
@@ -318,6 +438,11 @@ pub struct FramePlan {
     pub k_range: [usize; 2],
     /// Optional per-pixel limits within `k_range`.
     pub limits: Option<RayLimits>,
+    /// Optional per-pixel focus interval (focus+context): ray `(p, q)`'s
+    /// sample in slice `k` is classified by the focus classification iff `k`
+    /// lies in its interval `[f0, f1]` ([`FramePlan::in_focus`]), else by the
+    /// frame's own. Written by [`FramePlan::apply_focus`].
+    pub focus: Option<RayLimits>,
     /// Real sample spacing over the spacing opacities are defined at (the
     /// smallest voxel spacing): `α' = 1 − (1 − α)^ratio`. In a perspective
     /// plan each ray has its own spacing; this is the smallest of them (the
@@ -358,6 +483,7 @@ impl FramePlan {
             warp: Warp::default(),
             k_range: [0, 0],
             limits: None,
+            focus: None,
             opacity_ratio: 1.0,
             scaled: vec![],
             perspective: None,
@@ -402,6 +528,7 @@ impl FramePlan {
         };
         self.k_range = [0, f.n[2].saturating_sub(1)];
         self.limits = None;
+        self.focus = None;
         let min_sp = spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
         self.opacity_ratio = (f.sample_spacing / min_sp) as f32;
         self.scaled.clear();
@@ -542,6 +669,7 @@ impl FramePlan {
         let from_base = DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(-shift[0], -shift[1], 1.0));
         self.warp = Warp { forward: pv.warp.forward * to_base, inverse: from_base * pv.warp.inverse };
         self.limits = None;
+        self.focus = None;
         let min_sp = spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
         let p = pv.perm;
         let rays = PerspectiveRays {
@@ -592,6 +720,7 @@ impl FramePlan {
         let size = [0, 1].map(|a| new_pad + (hi[a] / pitch).ceil().max(0.0) as usize + 3);
         self.grid = Grid { size, pad: new_pad, pitch };
         self.limits = None;
+        self.focus = None;
         if !self.exponents.is_empty() {
             self.set_ray_opacity(true);
         }
@@ -830,12 +959,47 @@ impl FramePlan {
     pub fn apply_limiter(&mut self, limiter: &dyn Limiter, mut buf: RayLimits) {
         buf.reset(self.grid.size, self.slices());
         limiter.limit(self, &mut buf);
+        buf.normalize();
         self.limits = Some(buf);
     }
 
     /// Removes and returns the ray limits (their buffer, for reuse).
     pub fn take_limits(&mut self) -> Option<RayLimits> {
         self.limits.take()
+    }
+
+    /// Sets each ray's focus interval (focus+context): the slices whose
+    /// samples `region` keeps — any [`Limiter`] that narrows open limits to
+    /// a region's samples, e.g. [`crate::view::clip::ClipRegion`] — into
+    /// `buf` (reused across frames; taken back with [`FramePlan::take_focus`]).
+    pub fn apply_focus(&mut self, region: &dyn Limiter, mut buf: RayLimits) {
+        buf.reset(self.grid.size, self.slices());
+        region.limit(self, &mut buf);
+        self.focus = Some(buf);
+    }
+
+    /// Removes and returns the focus intervals (their buffer, for reuse).
+    pub fn take_focus(&mut self) -> Option<RayLimits> {
+        self.focus.take()
+    }
+
+    /// The focus interval `[f0, f1]` of ray `(p, q)` (empty, `f0 > f1`, without a focus region).
+    #[inline(always)]
+    pub fn focus_range(&self, p: usize, q: usize) -> [usize; 2] {
+        match &self.focus {
+            Some(f) => {
+                let [a, b] = f.get(p, q);
+                [a as usize, b as usize]
+            }
+            None => [1, 0],
+        }
+    }
+
+    /// Whether ray `(p, q)`'s sample in slice `k` lies in the focus region.
+    #[inline(always)]
+    pub fn in_focus(&self, p: usize, q: usize, k: usize) -> bool {
+        let [a, b] = self.focus_range(p, q);
+        a <= k && k <= b
     }
 
     /// Number of slices.
@@ -860,6 +1024,26 @@ impl FramePlan {
             }
             None => [a, b],
         }
+    }
+
+    /// The hole `[h0, h1]` of ray `(p, q)` (index order, strictly inside its
+    /// [`FramePlan::ray_range`]), if it has one.
+    #[inline(always)]
+    pub fn ray_hole(&self, p: usize, q: usize) -> Option<[usize; 2]> {
+        match &self.limits {
+            Some(l) if l.has_holes() => {
+                let [h0, h1] = l.hole(p, q);
+                (h0 <= h1).then_some([h0 as usize, h1 as usize])
+            }
+            _ => None,
+        }
+    }
+
+    /// Whether ray `(p, q)` composites slice `k` (its range, less its hole).
+    #[inline(always)]
+    pub fn ray_keeps(&self, p: usize, q: usize, k: usize) -> bool {
+        let [a, b] = self.k_range;
+        a <= k && k <= b && self.limits.as_ref().is_none_or(|l| l.keeps(p, q, k))
     }
 
     /// Slice indices front to back over `k_range`.

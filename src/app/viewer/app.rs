@@ -27,7 +27,7 @@ use super::ViewCmd;
 use super::bench::{Bench, Info, Marks, Phase, Sample};
 use super::overlay::{self, Canvas, Controls, Hit};
 use super::state::{
-    Adaptive, Class, Display, Drag, HELP, Hud, Input, Key, Kind, Meter, Outcome, Request, Start, State, TissueInfo, button_labels,
+    Adaptive, Class, Display, Drag, HELP, Hud, Input, Key, Kind, Lens, Meter, Outcome, Request, Start, State, TissueInfo, button_labels,
 };
 use super::worker::{Frame, Renderers, Reply, Worker};
 use crate::app::cli::Usage;
@@ -68,6 +68,20 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let sorted = preview.tissue_list();
     let class = initial_class(&cmd.render.tissue, cmd.render.iso, &sorted)?;
     let mut blend = Renderers::new(vol, &tissues, Settings { mode: Mode::Blend, ..settings })?;
+    // --focus / --focus-tissue: the lens's tissue, and a lens to start with (a sphere)
+    let lens = match crate::app::scene::focus_of(sc)? {
+        None => None,
+        Some(f) => {
+            for r in [&mut preview, &mut blend] {
+                r.set_focus_tissue(&f.tissue).map_err(|e| anyhow::Error::new(Usage(format!("--focus-tissue: {e}"))))?;
+            }
+            let shearwarp::view::clip::Region::Sphere { centre, radius } = f.region else {
+                return Err(anyhow::Error::new(Usage("the viewer's lens is a sphere: give --focus sphere:x,y,z,r".into())));
+            };
+            let unit = spacing.iter().fold(f32::INFINITY, |a, &b| a.min(b)) as f64;
+            Some(Lens { centre: [0, 1, 2].map(|a| (centre[a] - (d[a] as f64 - 1.0) / 2.0) * spacing[a] as f64), radius: radius * unit })
+        }
+    };
     // --perspective: both displays (a fixed eye distance; no fly-in yet)
     let projection = cmd.render.projection()?;
     preview.set_projection(projection)?;
@@ -119,6 +133,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
             a
         },
         diagonal_mm: (0..3).map(|a| ((d[a].max(1) - 1) as f64 * spacing[a] as f64).powi(2)).sum::<f64>().sqrt(),
+        lens,
     });
     let mut app = App {
         state,
@@ -186,6 +201,9 @@ fn map_key(key: &WKey, repeat: bool) -> Option<Key> {
             "r" | "R" => Key::Reset,
             "p" | "P" => Key::ToggleProjection,
             "c" | "C" => Key::ToggleClip,
+            "l" | "L" => Key::ToggleLens,
+            "," | "<" => Key::LensSmaller,
+            "." | ">" => Key::LensBigger,
             "s" | "S" => Key::Save,
             "q" | "Q" => Key::Quit,
             d => match d.parse::<usize>() {

@@ -77,9 +77,19 @@ pub struct Spec {
     /// The interactive clip plane (C key): the half-space `normal · w ≤ offset`
     /// in world millimetres from the volume centre, beside any `--clip-plane`.
     pub clip: Option<Plane>,
+    /// The lens (L key, `--focus`): focus+context in a ball that follows the mouse.
+    pub lens: Option<Lens>,
     /// A still view (no drag under way): the worker renders it with matched
     /// sampling (Deluxe M) where the zoom magnifies.
     pub still: bool,
+}
+
+/// The viewer's lens: a ball in world millimetres from the volume centre
+/// inside which the focus tissue (`--focus-tissue`) classifies the volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lens {
+    pub centre: [f64; 3],
+    pub radius: f64,
 }
 
 /// A clip plane in world millimetres from the volume centre: the side kept is
@@ -219,6 +229,12 @@ pub enum Key {
     /// C: a clip plane through the volume's centre facing the viewer (the
     /// half nearer the viewer removed), or off again.
     ToggleClip,
+    /// L: the lens on (centred under the mouse at the depth of the volume
+    /// centre, following it) or off.
+    ToggleLens,
+    /// `,` / `.`: the lens smaller / larger.
+    LensSmaller,
+    LensBigger,
     /// R: back to the starting view.
     Reset,
     /// S: save the current view as PNG.
@@ -271,6 +287,8 @@ pub struct Start {
     /// The volume's bounding diagonal in millimetres (how far a drag moves
     /// the clip plane: the window's smaller side is one diagonal).
     pub diagonal_mm: f64,
+    /// The starting lens (`--focus sphere:...`), if any.
+    pub lens: Option<Lens>,
 }
 
 /// A drag in progress.
@@ -307,6 +325,9 @@ pub struct State {
     pub adaptive: Adaptive,
     /// The interactive clip plane, if on.
     pub clip: Option<Plane>,
+    /// The lens, if on, and the radius it gets when turned on.
+    pub lens: Option<Lens>,
+    lens_radius: f64,
     pub diagonal_mm: f64,
     /// Bumped by every change of the picture.
     pub seq: u64,
@@ -340,6 +361,8 @@ impl State {
             },
             adaptive: s.adaptive,
             clip: None,
+            lens: s.lens,
+            lens_radius: s.lens.map_or(0.3 * s.diagonal_mm.max(1.0), |l| l.radius),
             diagonal_mm: if s.diagonal_mm.is_finite() && s.diagonal_mm > 0.0 { s.diagonal_mm } else { 1.0 },
             seq: 1,
             cursor: (0.0, 0.0),
@@ -360,6 +383,7 @@ impl State {
             projection: self.projection,
             quality,
             clip: self.clip,
+            lens: self.lens,
             still: self.drag.is_none(),
         }
     }
@@ -417,6 +441,22 @@ impl State {
     /// Whether a blended frame has been requested and not yet arrived.
     pub fn blend_pending(&self) -> bool {
         self.blend_posted.is_some()
+    }
+
+    /// The world point (mm from the volume centre) under window pixel `(x,
+    /// y)` at the depth of the volume centre (for either projection: a
+    /// perspective view's scale at that depth is its resolved zoom).
+    pub fn world_under(&self, x: f64, y: f64) -> [f64; 3] {
+        let [w, h] = self.size;
+        let zoom = match self.projection {
+            Projection::Perspective { fov_deg, eye_distance } => {
+                h as f64 / 2.0 / (fov_deg.to_radians() / 2.0).tan() / (eye_distance * self.diagonal_mm)
+            }
+            Projection::Parallel => self.zoom.unwrap_or(w.min(h) as f64 / self.diagonal_mm),
+        };
+        // image u = (W − 1)/2 + zoom·e.x, v = (H − 1)/2 − zoom·e.y; e = R·w
+        let e = glam::DVec3::new((x - (w as f64 - 1.0) / 2.0) / zoom, -(y - (h as f64 - 1.0) / 2.0) / zoom, 0.0);
+        (self.rotation.transpose() * e).to_array()
     }
 
     fn changed(&mut self) -> Outcome {
@@ -493,7 +533,18 @@ impl State {
                         let t = self.layout.slider_fraction(x);
                         self.set_class(Class::Custom(self.iso_at(t)))
                     }
-                    None => Outcome::Nothing,
+                    // the lens follows the mouse over the view
+                    None => match self.lens {
+                        Some(l) if matches!(self.layout.hit(x, y), Hit::View) => {
+                            let centre = self.world_under(x, y);
+                            if centre == l.centre || centre.iter().any(|c| !c.is_finite()) {
+                                return Outcome::Nothing;
+                            }
+                            self.lens = Some(Lens { centre, ..l });
+                            self.changed()
+                        }
+                        _ => Outcome::Nothing,
+                    },
                 }
             }
             Input::Release => {
@@ -559,6 +610,24 @@ impl State {
                         }
                     };
                     self.changed()
+                }
+                Key::ToggleLens => {
+                    self.lens = match self.lens {
+                        Some(_) => None,
+                        None => Some(Lens { centre: self.world_under(self.cursor.0, self.cursor.1), radius: self.lens_radius }),
+                    };
+                    self.changed()
+                }
+                Key::LensSmaller | Key::LensBigger => {
+                    let f = if k == Key::LensBigger { 1.15 } else { 1.0 / 1.15 };
+                    self.lens_radius = (self.lens_radius * f).clamp(0.01 * self.diagonal_mm, self.diagonal_mm);
+                    match self.lens {
+                        Some(l) => {
+                            self.lens = Some(Lens { radius: self.lens_radius, ..l });
+                            self.changed()
+                        }
+                        None => Outcome::Nothing,
+                    }
                 }
                 Key::ToggleProjection => {
                     self.projection = if self.projection.is_perspective() { Projection::Parallel } else { self.perspective };
@@ -739,6 +808,12 @@ impl State {
         if let Some(c) = self.clip {
             l.push(format!("clip plane {:+.1} mm from the centre (right-drag moves it, C removes it)", c.offset));
         }
+        if let Some(lens) = self.lens {
+            l.push(match self.class {
+                Class::Tissue(_) => format!("lens r {:.1} mm (follows the mouse; , . size, L removes it)", lens.radius),
+                Class::Custom(_) => "lens: needs a tissue preset (keys 1-9)".into(),
+            });
+        }
         if hud.background {
             l.push("building the other axes in the background ...".into());
         }
@@ -758,7 +833,7 @@ pub fn short(v: f32) -> String {
 }
 
 /// The key help line.
-pub const HELP: &str = "drag rotate 1-4 tissue [ ] iso +- cell spc blend P persp wheel fly C clip (right-drag) R S Q";
+pub const HELP: &str = "drag rotate 1-4 tissue L lens , . [ ] iso +- cell spc blend P persp wheel fly C clip (right-drag) R S Q";
 
 /// The eye distances (volume diagonals) the mouse wheel keeps to.
 pub const MIN_EYE_DISTANCE: f64 = 0.05;
@@ -784,7 +859,28 @@ mod tests {
             projection: Projection::Parallel,
             adaptive: Adaptive::new(None, 1.0),
             diagonal_mm: 200.0,
+            lens: None,
         })
+    }
+
+    /// L puts a lens under the mouse at the volume centre's depth; it
+    /// follows the mouse, `,` / `.` size it, L removes it.
+    #[test]
+    fn lens_key_places_a_lens_that_follows_the_mouse() {
+        let mut s = start();
+        s.handle(Input::Move { x: 255.5, y: 100.0 });
+        assert_eq!(s.handle(Input::Key(Key::ToggleLens)), Outcome::Redraw);
+        let l = s.spec().lens.expect("a lens");
+        // 512 px for a 200 mm diagonal: 155.5 px above the centre is +60.7 mm in eye y = world y
+        assert!(l.centre[0].abs() < 1e-9 && (l.centre[1] - 155.5 * 200.0 / 512.0).abs() < 1e-9 && l.centre[2].abs() < 1e-9, "{l:?}");
+        let seq = s.seq;
+        assert_eq!(s.handle(Input::Move { x: 300.0, y: 100.0 }), Outcome::Redraw);
+        assert!(s.seq > seq && s.spec().lens.unwrap().centre[0] > 0.0);
+        assert_eq!(s.handle(Input::Key(Key::LensBigger)), Outcome::Redraw);
+        assert!(s.spec().lens.unwrap().radius > l.radius);
+        assert_eq!(s.handle(Input::Key(Key::ToggleLens)), Outcome::Redraw);
+        assert_eq!(s.spec().lens, None);
+        assert_eq!(s.handle(Input::Move { x: 10.0, y: 10.0 }), Outcome::Nothing, "no lens: a move changes nothing");
     }
 
     /// P toggles the projection; the wheel flies a perspective eye in and out

@@ -16,13 +16,13 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::Instant;
 
-use super::state::{Class, Kind, Plane, Spec};
+use super::state::{Class, Kind, Lens, Plane, Spec};
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
-use shearwarp::render::{Deluxe, Footprint, FrameStats, Renderer, Settings};
+use shearwarp::render::{Deluxe, Focus, Footprint, FrameStats, Renderer, Settings};
 use shearwarp::view::Projection;
-use shearwarp::view::clip::{ClipPlane, ClipPlanes};
+use shearwarp::view::clip::{ClipPlane, ClipPlanes, Region};
 use shearwarp::warp::{Canvas, Image8, Texel};
 
 /// A finished frame.
@@ -88,6 +88,11 @@ pub struct Renderers {
     /// The interactive plane the limiter was last built with.
     interactive: Option<Plane>,
     spacing: [f32; 3],
+    dims: [usize; 3],
+    /// The lens's tissue preset (`--focus-tissue`; default bone, else the
+    /// densest preset) and the lens the tissue renderer has now.
+    focus_tissue: String,
+    lens: Option<Lens>,
 }
 
 impl Renderers {
@@ -95,8 +100,10 @@ impl Renderers {
     /// rendering in `settings.mode`.
     pub fn new(volume: Volume, tissues: &[Tissue], settings: Settings) -> shearwarp::Result<Self> {
         let hi = volume.value_range().1;
-        let spacing = volume.spacing();
+        let (spacing, dims) = (volume.spacing(), volume.dims());
         let mut r = Renderer::with_tissues(volume, tissues, settings)?;
+        let names: Vec<&str> = r.tissues().map(|(t, _)| t.iter().map(|t| t.name).collect()).unwrap_or_default();
+        let focus_tissue = if names.contains(&"bone") { "bone" } else { names.last().copied().unwrap_or("bone") }.to_string();
         r.set_memory_budget(crate::app::budget());
         Ok(Renderers {
             tissues: r,
@@ -110,7 +117,31 @@ impl Renderers {
             planes: vec![],
             interactive: None,
             spacing,
+            dims,
+            focus_tissue,
+            lens: None,
         })
+    }
+
+    /// The lens's tissue preset (a name of the tissue set; an error otherwise).
+    pub fn set_focus_tissue(&mut self, name: &str) -> shearwarp::Result<()> {
+        let names: Vec<&str> = self.tissues.tissues().map(|(t, _)| t.iter().map(|t| t.name).collect()).unwrap_or_default();
+        if !names.contains(&name) {
+            return Err(shearwarp::Error::value(
+                "focus tissue",
+                format!("'{name}' is not in this volume's presets ({})", names.join(", ")),
+            ));
+        }
+        self.focus_tissue = name.to_string();
+        Ok(())
+    }
+
+    /// The lens as the library's focus region: its ball in voxel indices
+    /// (radius in units of the smallest spacing).
+    fn lens_focus(&self, lens: Lens) -> Focus {
+        let unit = self.spacing.iter().fold(f32::INFINITY, |a, &b| a.min(b)) as f64;
+        let centre = [0, 1, 2].map(|a| lens.centre[a] / self.spacing[a] as f64 + (self.dims[a] as f64 - 1.0) / 2.0);
+        Focus::new(Region::Sphere { centre, radius: lens.radius / unit }, self.focus_tissue.clone())
     }
 
     /// Sets the projection of every renderer (a perspective one renders only
@@ -219,6 +250,11 @@ impl Renderers {
         if spec.clip != self.interactive {
             self.interactive = spec.clip;
             self.build_limiter();
+        }
+        if spec.lens != self.lens {
+            let focus = spec.lens.map(|l| self.lens_focus(l));
+            self.tissues.set_focus(focus)?;
+            self.lens = spec.lens;
         }
         let q = spec.quality;
         let r = self.select(spec.class, spec.cell)?;
@@ -426,6 +462,7 @@ mod tests {
                 projection: Projection::Parallel,
                 quality: 1.0,
                 clip: None,
+                lens: None,
                 still: true,
             },
         )
@@ -476,6 +513,7 @@ mod tests {
                 projection: Projection::Parallel,
                 quality: 1.0,
                 clip: None,
+                lens: None,
                 still: true,
             };
             let mut par = Image::new(64, 48);
@@ -511,6 +549,7 @@ mod tests {
                 projection: Projection::Parallel,
                 quality: 1.0,
                 clip: None,
+                lens: None,
                 still: true,
             };
             let mut whole = Image::new(64, 48);
@@ -549,6 +588,7 @@ mod tests {
                 projection: Projection::Parallel,
                 quality: 1.0,
                 clip: None,
+                lens: None,
                 still: true,
             };
             let half = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], 0.0).unwrap()], sp).unwrap();

@@ -140,6 +140,12 @@ pub struct RleCache {
     encoded: usize,
     tables: ViewTables,
     post_tables: Option<Box<PostTables>>,
+    /// Focus+context: the focus's classification (same density range as the
+    /// context's, so the same nodes) and its per-view tables
+    /// ([`RleCache::set_focus`]).
+    focus: Option<Preclass>,
+    focus_tables: ViewTables,
+    focus_post_tables: Option<Box<PostTables>>,
     links: Vec<u32>,
     slice_buf: Vec<[f32; 4]>,
 }
@@ -179,6 +185,31 @@ impl RleCache {
             self.encoded = 0;
         }
         self.post_tables.get_or_insert_with(Default::default);
+    }
+
+    /// Focus+context: classifies the samples inside a plan's focus intervals
+    /// by `focus` (None: no focus), for a volume with voxel `spacing`. Call it
+    /// right after [`RleCache::reset`] / [`RleCache::reset_post`]: a
+    /// pre-classified encoding made after it stores every voxel either
+    /// classification shows ([`Preclass::keep_visible_under`]), so the owner
+    /// must key the pre-classified encodings by the focus as well; the
+    /// post-classified encoding keeps the union of its `visible` presets
+    /// already, so a focus among them needs no re-encoding.
+    pub fn set_focus(&mut self, focus: Option<&Classifier>, spacing: [f32; 3]) {
+        self.focus = focus.map(|c| Preclass::new(c, spacing));
+        if let (Some(f), Some(pre)) = (focus, &mut self.pre)
+            && self.post.is_none()
+        {
+            pre.keep_visible_under(f);
+        }
+        if self.focus.is_some() && self.post.is_some() {
+            self.focus_post_tables.get_or_insert_with(Default::default);
+        }
+    }
+
+    /// The focus's classification, if any ([`RleCache::set_focus`]).
+    pub fn focus(&self) -> Option<&Preclass> {
+        self.focus.as_ref()
     }
 
     /// True when the encodings are post-classified ones (Deluxe P).
@@ -261,11 +292,18 @@ impl RleCache {
 
     /// Brings the per-view tables up to date (see [`ViewTables::update`]).
     pub fn prepare_view(&mut self, plan: &FramePlan, ratio: f32, shading: Shading) -> bool {
-        match (&self.pre, &mut self.post_tables) {
-            (Some(pre), Some(pt)) if self.post.is_some() => pt.update(pre, ratio, headlight_object(&plan.view), shading),
-            (Some(pre), _) => self.tables.update(pre, ratio, headlight_object(&plan.view), shading),
+        let light = headlight_object(&plan.view);
+        let focus = match (&self.focus, &mut self.focus_post_tables) {
+            (Some(f), Some(pt)) if self.post.is_some() => pt.update(f, ratio, light, shading),
+            (Some(f), _) => self.focus_tables.update(f, ratio, light, shading),
             (None, _) => false,
-        }
+        };
+        focus
+            | match (&self.pre, &mut self.post_tables) {
+                (Some(pre), Some(pt)) if self.post.is_some() => pt.update(pre, ratio, headlight_object(&plan.view), shading),
+                (Some(pre), _) => self.tables.update(pre, ratio, headlight_object(&plan.view), shading),
+                (None, _) => false,
+            }
     }
 
     /// The rectangle [`RleCache::render`] writes for view `f` (None if the axis
@@ -282,9 +320,16 @@ impl RleCache {
     /// Composites view `f` from the encoding of its axis (see [`render_rle`]);
     /// an axis that is not encoded (under the plan's permutation) renders transparent.
     pub fn render(&mut self, plan: &FramePlan, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
+        let focused = self.focus.is_some();
         match (self.axes[plan.view.axis].as_ref().filter(|e| e.perm == plan.view.perm), &self.post_tables) {
-            (Some(rle), Some(pt)) if self.post.is_some() => render_rle(rle, pt.as_ref(), plan, ert, rect, &mut self.links, out),
-            (Some(rle), _) => render_rle(rle, &self.tables, plan, ert, rect, &mut self.links, out),
+            (Some(rle), Some(pt)) if self.post.is_some() => {
+                let ft = self.focus_post_tables.as_deref().filter(|_| focused);
+                render_rle(rle, pt.as_ref(), ft, plan, ert, rect, &mut self.links, out)
+            }
+            (Some(rle), _) => {
+                let ft = Some(&self.focus_tables).filter(|_| focused);
+                render_rle(rle, &self.tables, ft, plan, ert, rect, &mut self.links, out)
+            }
             (None, _) => out.seal(None),
         }
     }
@@ -301,9 +346,13 @@ impl RleCache {
     ) {
         match (&self.pre, &self.post_tables) {
             (Some(pre), Some(pt)) if self.post.is_some() => {
-                render_brute_preclassified(stack, pre, pt.as_ref(), plan, ert, rect, &mut self.slice_buf, out)
+                let focus = self.focus.as_ref().zip(self.focus_post_tables.as_deref());
+                render_brute_preclassified(stack, pre, pt.as_ref(), focus, plan, ert, rect, &mut self.slice_buf, out)
             }
-            (Some(pre), _) => render_brute_preclassified(stack, pre, &self.tables, plan, ert, rect, &mut self.slice_buf, out),
+            (Some(pre), _) => {
+                let focus = self.focus.as_ref().map(|f| (f, &self.focus_tables));
+                render_brute_preclassified(stack, pre, &self.tables, focus, plan, ert, rect, &mut self.slice_buf, out)
+            }
             (None, _) => out.seal(None),
         }
     }

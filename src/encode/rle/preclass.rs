@@ -72,6 +72,9 @@ pub struct Preclass {
     pub(crate) ln_clear: Vec<f32>,
     /// Colour of each node.
     pub(crate) rgb: Vec<[f32; 3]>,
+    /// Whether a voxel of each node is stored (non-transparent here, or in
+    /// a focus's classification: [`Preclass::keep_visible_under`]).
+    keep: Vec<bool>,
     /// `1 / spacing` per object axis (voxel-space gradient → object space).
     inv_spacing: [f32; 3],
 }
@@ -86,6 +89,7 @@ impl Preclass {
             alpha: nodes.iter().map(|n| n.a).collect(),
             ln_clear: nodes.iter().map(|n| (1.0 - n.a).ln()).collect(),
             rgb: nodes.iter().map(|n| [n.r, n.g, n.b]).collect(),
+            keep: nodes.iter().map(|n| n.a > 0.0).collect(),
             inv_spacing: spacing.map(|s| 1.0 / s),
         }
     }
@@ -95,11 +99,22 @@ impl Preclass {
         &self.cls
     }
 
-    /// Voxel `(i, j, k)` of `stack`, or `None` when it is transparent.
+    /// Focus+context: also stores (classifies as `Some`) the voxels `other`
+    /// shows, so one encoding holds every voxel either classification needs;
+    /// a voxel transparent here still shades to exact zeros. `other` must have
+    /// this classifier's density range (the same nodes).
+    pub fn keep_visible_under(&mut self, other: &Classifier) {
+        for (i, k) in self.keep.iter_mut().enumerate() {
+            *k |= other.raw_node(i).a > 0.0;
+        }
+    }
+
+    /// Voxel `(i, j, k)` of `stack`, or `None` when it is not stored
+    /// (transparent, and under a focus transparent there too).
     #[inline]
     pub fn classify_voxel<S: VoxelSource + ?Sized>(&self, stack: &S, i: usize, j: usize, k: usize) -> Option<RleVoxel> {
         let node = self.cls.nearest_node(stack.slices().at(i, j, k));
-        if !(self.alpha[node] > 0.0) {
+        if !self.keep[node] {
             return None;
         }
         Some(RleVoxel { class: node as u16, normal: stack.normal(i, j, k, self.inv_spacing) })

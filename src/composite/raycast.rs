@@ -1226,14 +1226,22 @@ pub fn volume_rect(plan: &FramePlan, cells: [usize; 2]) -> Option<Rect> {
     }
     plan.front_to_back().next()?;
     // the pixels whose samples fall in the cells of the slices composited
+    // (a slice whose cells no pixel of the grid samples adds none; a plan
+    // whose slices all fall off its grid — a pyramid of a split perspective
+    // frame can — has no rect)
     let span = |a: usize| {
-        let xs = || plan.front_to_back().map(move |k| plan.pixels_of_cells(k, a, 0, cells[a] as i64 - 1));
-        let lo = xs().map(|x| x[0]).min().unwrap_or(0).max(0) as usize;
-        let hi = xs().map(|x| x[1]).max().unwrap_or(0).max(0) as usize;
-        (lo, hi.min(grid[a] - 1))
+        let xs = || {
+            plan.front_to_back()
+                .map(move |k| plan.pixels_of_cells(k, a, 0, cells[a] as i64 - 1))
+                .map(|[x0, x1]| [x0.max(0), x1.min(grid[a] as i64 - 1)])
+                .filter(|[x0, x1]| x0 <= x1)
+        };
+        let lo = xs().map(|x| x[0]).min()?;
+        let hi = xs().map(|x| x[1]).max()?;
+        Some((lo as usize, hi as usize))
     };
-    let (p0, p1) = span(0);
-    let (q0, q1) = span(1);
+    let (p0, p1) = span(0)?;
+    let (q0, q1) = span(1)?;
     Some(Rect { p0, p1, q0, q1 })
 }
 

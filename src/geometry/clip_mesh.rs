@@ -44,8 +44,8 @@ use super::inverse_warp::GeometryLimits;
 use super::mesh::Mesh;
 use super::raster::{Cull, GeometryImage, Material, Projector, rasterize};
 use crate::error::{Error, Result};
-use crate::view::clip::Keep;
-use crate::view::plan::{FramePlan, Limiter, RayLimits, cut_ray};
+use crate::view::clip::{Keep, ends_on_samples, limit_convex};
+use crate::view::plan::{FramePlan, Limiter, RayLimits};
 use crate::view::unpermute;
 
 /// A closed convex mesh (voxel-index coordinates), welded and wound outward.
@@ -236,54 +236,13 @@ impl MeshClip {
             (ta.min(tb), ta.max(tb))
         };
         // a one-sample margin for rounding, then the ends checked on the samples
-        let edge = |t: f64| if t.is_nan() { 0.0 } else { t.clamp(-2.0, last as f64 + 2.0) };
-        let mut a = (edge(t0).floor() as i64 - 1).clamp(0, last);
-        let mut b = (edge(t1).ceil() as i64 + 1).clamp(0, last);
-        while a <= b && !inside(a) {
-            a += 1;
-        }
-        while b >= a && !inside(b) {
-            b -= 1;
-        }
-        if a <= b {
-            while a > 0 && inside(a - 1) {
-                a -= 1;
-            }
-            while b < last && inside(b + 1) {
-                b += 1;
-            }
-        }
-        [a, b]
+        ends_on_samples(t0, t1, last, inside)
     }
 }
 
 impl Limiter for MeshClip {
     fn limit(&self, plan: &FramePlan, limits: &mut RayLimits) {
-        let nk = plan.slices();
-        if nk == 0 {
-            return;
-        }
-        let last = nk as i64 - 1;
-        match self.keep {
-            Keep::Inside => limits.par_rows_mut().enumerate().for_each(|(q, row)| {
-                for (p, l) in row.iter_mut().enumerate() {
-                    if l[0] > l[1] {
-                        continue;
-                    }
-                    let [a, b] = self.inside_interval(plan, last, p, q);
-                    let (lo, hi) = ((l[0] as i64).max(a), (l[1] as i64).min(b));
-                    *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
-                }
-            }),
-            Keep::Outside => limits.holes_rows_mut().enumerate().for_each(|(q, (row, holes))| {
-                for (p, (l, h)) in row.iter_mut().zip(holes.iter_mut()).enumerate() {
-                    if l[0] > l[1] {
-                        continue;
-                    }
-                    (*l, *h) = cut_ray(*l, *h, self.inside_interval(plan, last, p, q));
-                }
-            }),
-        }
+        limit_convex(self.keep, plan, limits, |last, p, q| self.inside_interval(plan, last, p, q));
     }
 
     fn holes(&self) -> usize {

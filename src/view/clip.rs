@@ -382,55 +382,76 @@ impl ClipRegion {
         // a one-sample margin for rounding (an interval empty by rounding
         // alone is checked around where it closed)
         let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t0.clamp(-1.0, last as f64 + 1.0), t0.clamp(-1.0, last as f64 + 1.0)) };
-        let edge = |t: f64| t.clamp(-2.0, last as f64 + 2.0);
-        let mut a = (edge(t0).floor() as i64 - 1).clamp(0, last);
-        let mut b = (edge(t1).ceil() as i64 + 1).clamp(0, last);
-        // the interval's ends checked on the samples themselves
-        while a <= b && !inside(a) {
-            a += 1;
+        ends_on_samples(t0, t1, last, inside)
+    }
+}
+
+/// The slices `[a, b]` (`a > b`: none) of `0 ..= last` inside a convex region
+/// whose ray interval was solved as `[t0, t1]` (fractional slices; NaN reads
+/// as 0): the solved ends widened by a one-sample margin for rounding, then
+/// moved onto the samples themselves by `inside(k)` (a ray meets a convex
+/// region in one interval, so walking in from both ends finds it).
+pub(crate) fn ends_on_samples(t0: f64, t1: f64, last: i64, inside: impl Fn(i64) -> bool) -> [i64; 2] {
+    let edge = |t: f64| if t.is_nan() { 0.0 } else { t.clamp(-2.0, last as f64 + 2.0) };
+    let mut a = (edge(t0).floor() as i64 - 1).clamp(0, last);
+    let mut b = (edge(t1).ceil() as i64 + 1).clamp(0, last);
+    while a <= b && !inside(a) {
+        a += 1;
+    }
+    while b >= a && !inside(b) {
+        b -= 1;
+    }
+    if a <= b {
+        while a > 0 && inside(a - 1) {
+            a -= 1;
         }
-        while b >= a && !inside(b) {
-            b -= 1;
+        while b < last && inside(b + 1) {
+            b += 1;
         }
-        if a <= b {
-            while a > 0 && inside(a - 1) {
-                a -= 1;
+    }
+    [a, b]
+}
+
+/// A convex region's limits: every open ray of `limits` keeps the slices of
+/// `inside_interval(last, p, q)` (`Keep::Inside`: the intersection) or loses
+/// them (`Keep::Outside`: the hole, [`cut_ray`]). Shared by [`ClipRegion`]
+/// and the convex clip mesh.
+pub(crate) fn limit_convex(
+    keep: Keep,
+    plan: &FramePlan,
+    limits: &mut RayLimits,
+    inside_interval: impl Fn(i64, usize, usize) -> [i64; 2] + Sync,
+) {
+    let nk = plan.slices();
+    if nk == 0 {
+        return;
+    }
+    let last = nk as i64 - 1;
+    match keep {
+        Keep::Inside => limits.par_rows_mut().enumerate().for_each(|(q, row)| {
+            for (p, l) in row.iter_mut().enumerate() {
+                if l[0] > l[1] {
+                    continue;
+                }
+                let [a, b] = inside_interval(last, p, q);
+                let (lo, hi) = ((l[0] as i64).max(a), (l[1] as i64).min(b));
+                *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
             }
-            while b < last && inside(b + 1) {
-                b += 1;
+        }),
+        Keep::Outside => limits.holes_rows_mut().enumerate().for_each(|(q, (row, holes))| {
+            for (p, (l, h)) in row.iter_mut().zip(holes.iter_mut()).enumerate() {
+                if l[0] > l[1] {
+                    continue;
+                }
+                (*l, *h) = cut_ray(*l, *h, inside_interval(last, p, q));
             }
-        }
-        [a, b]
+        }),
     }
 }
 
 impl Limiter for ClipRegion {
     fn limit(&self, plan: &FramePlan, limits: &mut RayLimits) {
-        let nk = plan.slices();
-        if nk == 0 {
-            return;
-        }
-        let last = nk as i64 - 1;
-        match self.keep {
-            Keep::Inside => limits.par_rows_mut().enumerate().for_each(|(q, row)| {
-                for (p, l) in row.iter_mut().enumerate() {
-                    if l[0] > l[1] {
-                        continue;
-                    }
-                    let [a, b] = self.inside_interval(plan, last, p, q);
-                    let (lo, hi) = ((l[0] as i64).max(a), (l[1] as i64).min(b));
-                    *l = if lo > hi { [1, 0] } else { [lo as u32, hi as u32] };
-                }
-            }),
-            Keep::Outside => limits.holes_rows_mut().enumerate().for_each(|(q, (row, holes))| {
-                for (p, (l, h)) in row.iter_mut().zip(holes.iter_mut()).enumerate() {
-                    if l[0] > l[1] {
-                        continue;
-                    }
-                    (*l, *h) = cut_ray(*l, *h, self.inside_interval(plan, last, p, q));
-                }
-            }),
-        }
+        limit_convex(self.keep, plan, limits, |last, p, q| self.inside_interval(plan, last, p, q));
     }
 
     fn holes(&self) -> usize {

@@ -265,21 +265,24 @@ proptest! {
     }
 }
 
+/// Every method in parallel projection, and the RLE paths in perspective
+/// (`(fov, eye distance)`): the cases of the keep-all / keep-nothing tests.
+const EVERY_PATH: [(Method, Option<(f64, f64)>); 6] = [
+    (Method::Binary, None),
+    (Method::Brute, None),
+    (Method::Rle, None),
+    (Method::BruteRle, None),
+    (Method::Rle, Some((40.0, 1.5))),
+    (Method::BruteRle, Some((40.0, 1.5))),
+];
+
 #[test]
 fn clip_keeping_everything_changes_nothing_and_keeping_nothing_leaves_nothing() {
     let vol = volume([19, 21, 17], 4);
     let all = [ClipPlane::new([0.3, -0.8, 0.5], 1e6).unwrap(), ClipPlane::new([0.0, 0.0, 1.0], 1e3).unwrap()];
     let none = [ClipPlane::new([0.0, 0.0, 1.0], 1e3).unwrap(), ClipPlane::new([-0.7, 0.1, 0.2], -1e3).unwrap()];
-    let cases: [(Method, Option<(f64, f64)>); 6] = [
-        (Method::Binary, None),
-        (Method::Brute, None),
-        (Method::Rle, None),
-        (Method::BruteRle, None),
-        (Method::Rle, Some((40.0, 1.5))),
-        (Method::BruteRle, Some((40.0, 1.5))),
-    ];
     for rot in views() {
-        for (method, persp) in cases {
+        for (method, persp) in EVERY_PATH {
             for mode in [Mode::Iso, Mode::Blend] {
                 let s = settings(method, mode, 0.95);
                 let open = try_frame(&vol, s, rot, None, persp, 48).unwrap();
@@ -620,16 +623,8 @@ fn clip_outside_everything_leaves_nothing_and_outside_nothing_changes_nothing() 
     let all: Arc<dyn Limiter> = Arc::new(ClipRegion::new(Region::Box { lo: [-2.0; 3], hi: [30.0; 3] }, sp).unwrap().keeping(Keep::Outside));
     let none: Arc<dyn Limiter> =
         Arc::new(ClipRegion::new(Region::Box { lo: [25.0; 3], hi: [30.0; 3] }, sp).unwrap().keeping(Keep::Outside));
-    let cases: [(Method, Option<(f64, f64)>); 6] = [
-        (Method::Binary, None),
-        (Method::Brute, None),
-        (Method::Rle, None),
-        (Method::BruteRle, None),
-        (Method::Rle, Some((40.0, 1.5))),
-        (Method::BruteRle, Some((40.0, 1.5))),
-    ];
     for rot in views() {
-        for (method, persp) in cases {
+        for (method, persp) in EVERY_PATH {
             for mode in [Mode::Iso, Mode::Blend] {
                 let s = settings(method, mode, 0.95);
                 let open = try_frame_with(&vol, s, rot, None, persp, 48).unwrap();

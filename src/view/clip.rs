@@ -536,17 +536,20 @@ mod tests {
         n
     }
 
+    /// Spheres and boxes inside, across, around and off the test plans' volume.
+    const REGIONS: [Region; 6] = [
+        Region::Sphere { centre: [7.0, 8.0, 5.0], radius: 4.5 },
+        Region::Sphere { centre: [0.0, 0.0, 0.0], radius: 6.0 },
+        Region::Sphere { centre: [70.0, 8.0, 5.0], radius: 2.0 },
+        Region::Box { lo: [2.5, 3.0, 1.2], hi: [9.0, 12.5, 8.0] },
+        Region::Box { lo: [-5.0, -5.0, -5.0], hi: [50.0, 50.0, 50.0] },
+        Region::Box { lo: [6.0, 0.0, 0.0], hi: [7.2, 17.0, 11.0] },
+    ];
+
     #[test]
     fn clip_region_outside_limits_are_exactly_the_samples_outside() {
         let sp = [1.0f32, 0.8, 1.5];
-        let regions = [
-            Region::Sphere { centre: [7.0, 8.0, 5.0], radius: 4.5 },
-            Region::Sphere { centre: [0.0, 0.0, 0.0], radius: 6.0 },
-            Region::Sphere { centre: [70.0, 8.0, 5.0], radius: 2.0 },
-            Region::Box { lo: [2.5, 3.0, 1.2], hi: [9.0, 12.5, 8.0] },
-            Region::Box { lo: [-5.0, -5.0, -5.0], hi: [50.0, 50.0, 50.0] },
-            Region::Box { lo: [6.0, 0.0, 0.0], hi: [7.2, 17.0, 11.0] },
-        ];
+        let regions = REGIONS;
         let mut holes = 0;
         for plan in plans() {
             for r in regions {
@@ -627,14 +630,7 @@ mod tests {
     #[test]
     fn clip_region_limits_are_exactly_the_samples_inside() {
         let sp = [1.0f32, 0.8, 1.5];
-        let regions = [
-            Region::Sphere { centre: [7.0, 8.0, 5.0], radius: 4.5 },
-            Region::Sphere { centre: [0.0, 0.0, 0.0], radius: 6.0 },
-            Region::Sphere { centre: [70.0, 8.0, 5.0], radius: 2.0 },
-            Region::Box { lo: [2.5, 3.0, 1.2], hi: [9.0, 12.5, 8.0] },
-            Region::Box { lo: [-5.0, -5.0, -5.0], hi: [50.0, 50.0, 50.0] },
-            Region::Box { lo: [6.0, 0.0, 0.0], hi: [7.2, 17.0, 11.0] },
-        ];
+        let regions = REGIONS;
         for plan in plans() {
             for r in regions {
                 let clip = ClipRegion::new(r, sp).unwrap();

@@ -430,6 +430,25 @@ impl Focus {
     }
 }
 
+/// The region of focus+context: a fixed clip region
+/// ([`Renderer::set_focus`]) or a producer of focus intervals set per frame
+/// ([`Renderer::set_focus_limiter`], e.g. a convex mesh's
+/// [`crate::geometry::MeshClip`] drawn with the frame's camera).
+#[derive(Clone)]
+enum FocusShape {
+    Region(ClipRegion),
+    Limiter(std::sync::Arc<dyn Limiter>),
+}
+
+impl FocusShape {
+    fn limiter(&self) -> &dyn Limiter {
+        match self {
+            FocusShape::Region(r) => r,
+            FocusShape::Limiter(l) => l.as_ref(),
+        }
+    }
+}
+
 /// Tissue presets sharing one threshold-coded mask.
 struct TissueSet {
     tissues: Vec<Tissue>,
@@ -454,6 +473,12 @@ struct FrameKey {
     tissue: Option<usize>,
     limiter: Option<u64>,
     focus: Option<(u64, usize)>,
+}
+
+/// A new focus region's stamp (part of [`FrameKey`]).
+fn next_focus_stamp() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 static NEXT_STAMP: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
@@ -493,7 +518,7 @@ pub struct Renderer {
     limiter: Option<(std::sync::Arc<dyn Limiter>, u64)>,
     /// Focus+context: the region, the focus tissue's index in the tissue
     /// set, and a counter bumped when the region changes.
-    focus: Option<(ClipRegion, usize, u64)>,
+    focus: Option<(FocusShape, usize, u64)>,
     inter: Intermediate,
     /// The inputs and stamp of the last frame written.
     last_frame: Option<(FrameKey, u64)>,
@@ -775,31 +800,58 @@ impl Renderer {
     /// renderer with tissue presets ([`Renderer::with_tissues`]); the region
     /// is checked as [`ClipRegion::new`] checks it.
     pub fn set_focus(&mut self, focus: Option<Focus>) -> Result<()> {
-        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
         let Some(f) = focus else {
             self.focus = None;
             return Ok(());
         };
-        let ts = self.tissues.as_ref().ok_or_else(|| {
-            Error::value("focus", "focus+context needs a renderer with tissue presets (not a custom iso value or transfer function)")
-        })?;
-        let i = ts.tissues.iter().position(|t| t.name == f.tissue).ok_or_else(|| {
-            let names: Vec<&str> = ts.tissues.iter().map(|t| t.name).collect();
-            Error::value("focus tissue", format!("'{}' is not in this renderer's presets ({})", f.tissue, names.join(", ")))
-        })?;
+        let i = self.focus_tissue_index(&f.tissue)?;
         let region = ClipRegion::new(f.region, self.volume.spacing())?;
         // the same region keeps its stamp (a focus tissue switch alone redraws nothing twice)
         let stamp = match &self.focus {
-            Some((r, _, s)) if *r == region => *s,
-            _ => NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+            Some((FocusShape::Region(r), _, s)) if *r == region => *s,
+            _ => next_focus_stamp(),
         };
-        self.focus = Some((region, i, stamp));
+        self.focus = Some((FocusShape::Region(region), i, stamp));
         Ok(())
     }
 
-    /// The focus region and the name of its tissue preset, if any.
+    /// Focus+context in a region given as a producer of focus intervals
+    /// (for example a convex mesh's [`crate::geometry::MeshClip`] keeping its
+    /// inside, drawn with each frame's camera and set again per frame): as
+    /// [`Renderer::set_focus`], the samples each ray's interval
+    /// ([`FramePlan::apply_focus`]) holds are classified by tissue preset
+    /// `tissue`. The same `Arc` set again keeps the frame's key (nothing is
+    /// redrawn for a tissue switch); a limiter that cuts holes (an outside
+    /// region) is refused: a focus is one interval per ray.
+    pub fn set_focus_limiter(&mut self, limiter: std::sync::Arc<dyn Limiter>, tissue: &str) -> Result<()> {
+        let i = self.focus_tissue_index(tissue)?;
+        if limiter.holes() > 0 {
+            return Err(Error::value("focus", "a focus region is one interval per ray: a limiter keeping an outside is not one"));
+        }
+        let stamp = match &self.focus {
+            Some((FocusShape::Limiter(l), _, s)) if std::sync::Arc::ptr_eq(l, &limiter) => *s,
+            _ => next_focus_stamp(),
+        };
+        self.focus = Some((FocusShape::Limiter(limiter), i, stamp));
+        Ok(())
+    }
+
+    /// The index of focus tissue `name` in the tissue set (an error without
+    /// presets or for a name not among them).
+    fn focus_tissue_index(&self, name: &str) -> Result<usize> {
+        let ts = self.tissues.as_ref().ok_or_else(|| {
+            Error::value("focus", "focus+context needs a renderer with tissue presets (not a custom iso value or transfer function)")
+        })?;
+        ts.tissues.iter().position(|t| t.name == name).ok_or_else(|| {
+            let names: Vec<&str> = ts.tissues.iter().map(|t| t.name).collect();
+            Error::value("focus tissue", format!("'{name}' is not in this renderer's presets ({})", names.join(", ")))
+        })
+    }
+
+    /// The focus region and the name of its tissue preset, if any (`None`
+    /// too for a focus set by [`Renderer::set_focus_limiter`]).
     pub fn focus(&self) -> Option<Focus> {
-        let (r, i, _) = self.focus.as_ref()?;
+        let (FocusShape::Region(r), i, _) = self.focus.as_ref()? else { return None };
         let ts = self.tissues.as_ref()?;
         Some(Focus { region: r.region(), tissue: ts.tissues.get(*i)?.name.to_string() })
     }
@@ -1403,8 +1455,8 @@ impl Renderer {
         }
         // focus+context: each ray's slices inside the focus region (the clip
         // region's analytic interval, checked on the samples)
-        if let Some((region, _, _)) = &self.focus {
-            self.pool.install(|| plan.apply_focus(region, focus.unwrap_or_default()));
+        if let Some((shape, _, _)) = &self.focus {
+            self.pool.install(|| plan.apply_focus(shape.limiter(), focus.unwrap_or_default()));
         }
         Ok(())
     }

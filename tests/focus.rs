@@ -363,3 +363,198 @@ fn focus_cli_renders_and_refuses_bad_input() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+// ---- a convex mesh as the focus region (`Renderer::set_focus_limiter`, `--focus mesh:FILE`)
+
+/// The boxes the mesh focus tests use, over the nested shells (each holds
+/// skin and bone).
+fn focus_boxes() -> [Region; 2] {
+    let c = (N as f64 - 1.0) / 2.0;
+    [
+        Region::Box { lo: [c - 12.3, c - 6.0, c - 2.0], hi: [c + 5.5, c + 10.2, c + 21.0] },
+        Region::Box { lo: [3.0, 8.5, 3.0], hi: [30.0, 25.0, 22.2] },
+    ]
+}
+
+/// The convex mesh of box `region` (a cuboid).
+fn box_mesh(region: Region) -> shearwarp::geometry::ConvexMesh {
+    let Region::Box { lo, hi } = region else { unreachable!() };
+    let m = shearwarp::geometry::Mesh::cuboid(DVec3::from_array(lo), DVec3::from_array(hi)).unwrap();
+    shearwarp::geometry::ConvexMesh::new(&m).unwrap()
+}
+
+/// One frame of `rot` with the focus in `mesh` (tissue `tissue`), its faces
+/// drawn with the frame's camera as `--focus mesh:` does.
+fn mesh_frame(r: &mut Renderer, mesh: &shearwarp::geometry::ConvexMesh, tissue: &str, rot: DMat3, size: usize) -> Image {
+    use shearwarp::geometry::{MeshClip, Projector};
+    let cam = Camera::new(rot, [size, size]);
+    let proj = Projector::new(&cam, &r.projection(), [N; 3], [1.0; 3]).unwrap();
+    let clip = MeshClip::new(mesh, proj, shearwarp::view::clip::Keep::Inside).unwrap();
+    r.set_focus_limiter(std::sync::Arc::new(clip), tissue).unwrap();
+    let mut img = Image::new(size, size);
+    r.render(&cam, &mut img).unwrap();
+    img
+}
+
+/// A box-shaped mesh as the focus picks the same tissue as the analytic box
+/// (`--focus box:`): skin outside, bone inside, binary iso in both
+/// projections; per intermediate pixel off the box's silhouette (two pixels:
+/// rays whose analytic focus interval is at most two slices long or whose
+/// neighbour's is empty where theirs is not, or the reverse), both miss or
+/// both hit within 0.5 voxel (the skin and the bone surface are seven voxels
+/// apart, so a pixel showing the other tissue is far off) on at least 98 %.
+#[test]
+fn focus_mesh_picks_the_tissue_of_the_analytic_box() {
+    let (mut pixels, mut same) = (0usize, 0usize);
+    for persp in [false, true] {
+        for region in focus_boxes() {
+            let mesh = box_mesh(region);
+            for rot in views() {
+                let mut rb = renderer(Method::Binary, Mode::Iso, Deluxe::STANDARD, persp, "skin", Some(Focus::new(region, "bone")));
+                let mut rm = renderer(Method::Binary, Mode::Iso, Deluxe::STANDARD, persp, "skin", None);
+                frame(&mut rb, rot, 96);
+                mesh_frame(&mut rm, &mesh, "bone", rot, 96);
+                let plan = rb.last_plan().unwrap();
+                let fb = plan.focus.as_ref().unwrap();
+                let (ib, im) = (rb.intermediate(), rm.intermediate());
+                let [w, h] = plan.grid.size;
+                let len = |p: usize, q: usize| {
+                    let [a, b] = fb.get(p, q);
+                    if a > b { 0 } else { b - a + 1 }
+                };
+                for q in 0..h {
+                    for p in 0..w {
+                        // (a ray off the output image: the faces were not drawn there)
+                        let [a, b] = plan.intermediate_to_sheared(p as f64, q as f64);
+                        let Some([u, v]) = plan.warp.to_output(a, b) else { continue };
+                        if !(0.0..=95.0).contains(&u) || !(0.0..=95.0).contains(&v) {
+                            continue;
+                        }
+                        let n = len(p, q);
+                        let silhouette = (1..=2).contains(&n)
+                            || (-2i64..=2).any(|dq| {
+                                (-2i64..=2).any(|dp| {
+                                    let (x, y) = (p as i64 + dp, q as i64 + dq);
+                                    x >= 0 && y >= 0 && x < w as i64 && y < h as i64 && (len(x as usize, y as usize) == 0) != (n == 0)
+                                })
+                            });
+                        if silhouette {
+                            continue;
+                        }
+                        let (db, dm) = (ib.depth_at(p, q) as f64, im.depth_at(p, q) as f64);
+                        let step = (sample(plan, 1, p, q) - sample(plan, 0, p, q)).length();
+                        pixels += 1;
+                        same += match (db.is_finite(), dm.is_finite()) {
+                            (false, false) => 1,
+                            (true, true) => ((db - dm).abs() * step <= 0.5) as usize,
+                            _ => 0,
+                        };
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("{same} of {pixels} pixels pick the same tissue");
+    assert!(pixels > 20_000 && same as f64 >= 0.98 * pixels as f64, "{same} of {pixels} pixels pick the same tissue");
+}
+
+/// Accelerated equals brute force bit for bit with a mesh focus (binary vs
+/// brute, rle vs brute-rle, pre- and post-classified; iso and blend; both
+/// projections; early ray termination off).
+#[test]
+fn focus_mesh_accelerated_equals_brute_force() {
+    let p = Deluxe { post: true, ..Deluxe::STANDARD };
+    let pairs = [
+        (Method::Binary, Method::Brute, Deluxe::STANDARD),
+        (Method::Rle, Method::BruteRle, Deluxe::STANDARD),
+        (Method::Rle, Method::BruteRle, p),
+    ];
+    let mut differ_from_plain = 0;
+    for (i, region) in focus_boxes().into_iter().enumerate() {
+        let mesh = box_mesh(region);
+        let (context, focus) = if i == 0 { ("skin", "bone") } else { ("bone", "skin") };
+        for rot in [views()[2], views()[3]] {
+            for (fast, brute, deluxe) in pairs {
+                for mode in [Mode::Iso, Mode::Blend] {
+                    for persp in [false, true] {
+                        let a = mesh_frame(&mut renderer(fast, mode, deluxe, persp, context, None), &mesh, focus, rot, 64);
+                        let b = mesh_frame(&mut renderer(brute, mode, deluxe, persp, context, None), &mesh, focus, rot, 64);
+                        assert!(bits(&a) == bits(&b), "{fast:?} {deluxe:?} {mode:?} persp {persp} {region:?} {context}/{focus}");
+                        let plain = frame(&mut renderer(fast, mode, deluxe, persp, context, None), rot, 64);
+                        differ_from_plain += (bits(&a) != bits(&plain)) as usize;
+                    }
+                }
+            }
+        }
+    }
+    assert!(differ_from_plain >= 36, "only {differ_from_plain} of 48 frames show the focus");
+}
+
+/// A mesh focus with the context's own tissue renders the plain frame bit
+/// for bit (every method, iso and blend, both projections).
+#[test]
+fn focus_mesh_with_the_context_tissue_equals_the_plain_render() {
+    let mesh = box_mesh(focus_boxes()[0]);
+    for (method, deluxe) in methods() {
+        for mode in [Mode::Iso, Mode::Blend] {
+            for persp in [false, true] {
+                for tissue in ["skin", "bone"] {
+                    let mut plain = renderer(method, mode, deluxe, persp, tissue, None);
+                    let mut focus = renderer(method, mode, deluxe, persp, tissue, None);
+                    for rot in views() {
+                        let (a, b) = (frame(&mut plain, rot, 64), mesh_frame(&mut focus, &mesh, tissue, rot, 64));
+                        assert!(
+                            bits(&a) == bits(&b),
+                            "{method:?} {deluxe:?} {mode:?} persp {persp} {tissue} {rot:?}: the focus changed the frame"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `--focus mesh:FILE` on the command line: a closed convex mesh renders
+/// (the same mesh placed by the --mesh-* flags as --focus box: of its box
+/// differs from the plain frame); an open, a non-convex or a missing mesh
+/// is a usage error (exit 2), and so is a mesh focus in the viewer.
+#[test]
+fn focus_mesh_on_the_command_line_and_an_open_mesh_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = shearwarp::geometry::Mesh::cuboid(DVec3::splat(-0.5), DVec3::splat(0.5)).unwrap();
+    let obj = |name: &str, v: &[DVec3], t: &[[u32; 3]]| {
+        let mut s = String::new();
+        for p in v {
+            s += &format!("v {} {} {}\n", p.x, p.y, p.z);
+        }
+        for f in t {
+            s += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, s).unwrap();
+        format!("mesh:{}", path.display())
+    };
+    let cube = obj("cube.obj", &m.vertices, &m.triangles);
+    let open = obj("open.obj", &m.vertices, &m.triangles[..10]);
+    let mut dented = m.vertices.clone();
+    dented[7] = DVec3::splat(0.2);
+    let dent = obj("dent.obj", &dented, &m.triangles);
+    let run = |extra: &[&str], name: &str| {
+        let o = dir.path().join(name);
+        Command::cargo_bin("shearwarp")
+            .unwrap()
+            .args(["render", "--phantom-dims", "40,40,36", "--size", "64", "--quiet", "--tissue", "skin", "-o"])
+            .arg(&o)
+            .args(extra)
+            .assert()
+    };
+    run(&[], "plain.png").success();
+    run(&["--focus", &cube, "--focus-tissue", "bone", "--mesh-scale", "16", "--mesh-translate", "20,22,26"], "mesh.png").success();
+    let px = |n: &str| image::open(dir.path().join(n)).unwrap().to_rgb8().into_raw();
+    assert_ne!(px("plain.png"), px("mesh.png"));
+    run(&["--focus", &open], "x.png").failure().code(2).stderr(predicate::str::contains("not closed"));
+    run(&["--focus", &dent, "--mesh-scale", "10"], "x.png").failure().code(2).stderr(predicate::str::contains("not convex"));
+    run(&["--focus", "mesh:/nonexistent/x.obj"], "x.png").failure().code(2).stderr(predicate::str::contains("panicked").not());
+    run(&["--focus", &cube, "--focus-tissue", "enamel"], "x.png").failure().code(2).stderr(predicate::str::contains("enamel"));
+    run(&["--focus", &cube, "--iso", "100"], "x.png").failure().code(2);
+}

@@ -83,45 +83,71 @@ pub struct SceneArgs {
     pub clip_keep: Keep,
     /// Focus+context: inside this region the volume is classified by
     /// --focus-tissue, outside by --tissue: `sphere:x,y,z,r` (centre in voxel
-    /// indices, radius in voxels of the smallest spacing) or
-    /// `box:x0,y0,z0,x1,y1,z1` (voxel indices).
-    #[arg(long, value_name = "sphere:X,Y,Z,R|box:X0,Y0,Z0,X1,Y1,Z1", value_parser = parse_focus, allow_hyphen_values = true)]
-    pub focus: Option<Region>,
+    /// indices, radius in voxels of the smallest spacing),
+    /// `box:x0,y0,z0,x1,y1,z1` (voxel indices) or `mesh:FILE` (a closed
+    /// convex OBJ, STL or PLY mesh placed with the --mesh-scale,
+    /// --mesh-rotate, --mesh-translate and --mesh-world flags, as --clip-mesh).
+    #[arg(long, value_name = "sphere:X,Y,Z,R|box:X0,Y0,Z0,X1,Y1,Z1|mesh:FILE", value_parser = parse_focus, allow_hyphen_values = true)]
+    pub focus: Option<FocusArg>,
     /// The tissue preset inside --focus (a name as --tissue takes; default bone).
     #[arg(long, value_name = "NAME")]
     pub focus_tissue: Option<String>,
 }
 
-fn parse_focus(s: &str) -> std::result::Result<Region, String> {
-    let (kind, rest) = s.split_once(':').ok_or_else(|| format!("expected sphere:x,y,z,r or box:x0,y0,z0,x1,y1,z1, got '{s}'"))?;
+/// The region of `--focus`: an analytic one or a convex mesh's file.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FocusArg {
+    Region(Region),
+    Mesh(PathBuf),
+}
+
+fn parse_focus(s: &str) -> std::result::Result<FocusArg, String> {
+    const KINDS: &str = "sphere:x,y,z,r, box:x0,y0,z0,x1,y1,z1 or mesh:FILE";
+    let (kind, rest) = s.split_once(':').ok_or_else(|| format!("expected {KINDS}, got '{s}'"))?;
     match kind.trim() {
         "sphere" => {
             let v = parse_sphere(rest)?;
-            Ok(Region::Sphere { centre: [v[0], v[1], v[2]], radius: v[3] })
+            Ok(FocusArg::Region(Region::Sphere { centre: [v[0], v[1], v[2]], radius: v[3] }))
         }
         "box" => {
             let b = parse_box(rest)?;
-            Ok(Region::Box { lo: [b[0], b[1], b[2]], hi: [b[3], b[4], b[5]] })
+            Ok(FocusArg::Region(Region::Box { lo: [b[0], b[1], b[2]], hi: [b[3], b[4], b[5]] }))
         }
-        k => Err(format!("unknown focus region '{k}' (sphere:x,y,z,r or box:x0,y0,z0,x1,y1,z1)")),
+        "mesh" if !rest.is_empty() => Ok(FocusArg::Mesh(PathBuf::from(rest))),
+        "mesh" => Err("mesh: needs a file (mesh:FILE)".into()),
+        k => Err(format!("unknown focus region '{k}' ({KINDS})")),
     }
 }
 
-/// The focus of `--focus` / `--focus-tissue` (None without --focus; an
-/// error for --focus-tissue alone).
-pub fn focus_of(args: &SceneArgs) -> Result<Option<shearwarp::render::Focus>> {
-    match (args.focus, &args.focus_tissue) {
+/// The region and tissue of `--focus` / `--focus-tissue` (None without
+/// --focus; an error for --focus-tissue alone).
+pub fn focus_of(args: &SceneArgs) -> Result<Option<(FocusArg, String)>> {
+    match (&args.focus, &args.focus_tissue) {
         (None, Some(_)) => Err(usage("--focus-tissue needs --focus (the region it classifies)".into())),
         (None, None) => Ok(None),
-        (Some(region), t) => Ok(Some(shearwarp::render::Focus::new(region, t.as_deref().unwrap_or("bone")))),
+        (Some(region), t) => Ok(Some((region.clone(), t.as_deref().unwrap_or("bone").to_string()))),
     }
 }
 
 /// Gives `r` the focus of `--focus` / `--focus-tissue`, if any (a bad
-/// region or tissue is a usage error).
+/// region or tissue is a usage error). A mesh focus is set per frame by
+/// [`Scene::render`] (its faces drawn with each frame's camera); here its
+/// tissue is checked.
 pub fn install_focus(args: &SceneArgs, r: &mut Renderer) -> Result<()> {
-    if let Some(f) = focus_of(args)? {
-        r.set_focus(Some(f)).map_err(|e| usage(format!("--focus: {e}")))?;
+    match focus_of(args)? {
+        None => {}
+        Some((FocusArg::Region(region), t)) => {
+            r.set_focus(Some(shearwarp::render::Focus::new(region, t))).map_err(|e| usage(format!("--focus: {e}")))?;
+        }
+        Some((FocusArg::Mesh(_), t)) => {
+            // until the first frame draws the mesh, a focus holding no sample
+            // (the focus tissue known before anything is built)
+            let none = |plan: &shearwarp::view::plan::FramePlan, l: &mut shearwarp::view::plan::RayLimits| {
+                let [w, h] = plan.grid.size;
+                (0..h).for_each(|q| (0..w).for_each(|p| l.set(p, q, [1, 0])));
+            };
+            r.set_focus_limiter(Arc::new(none), &t).map_err(|e| usage(format!("--focus-tissue: {e}")))?;
+        }
     }
     Ok(())
 }
@@ -173,6 +199,11 @@ pub struct Scene {
     clip: Option<Arc<dyn Limiter>>,
     /// The convex clip mesh and the side it keeps (drawn every frame).
     clip_mesh: Option<(ConvexMesh, clip::Keep)>,
+    /// The convex focus mesh (`--focus mesh:FILE`) and its tissue, and its
+    /// faces as drawn for the last camera (a frame of the same camera, e.g.
+    /// after a tissue switch, draws nothing again).
+    focus_mesh: Option<(ConvexMesh, String)>,
+    focus_drawn: std::sync::Mutex<Option<(Camera, shearwarp::view::Projection, Arc<dyn Limiter>)>>,
     dims: [usize; 3],
     spacing: [f32; 3],
 }
@@ -226,6 +257,15 @@ impl Scene {
                     .into(),
             ));
         }
+        let focus_mesh = match focus_of(args)? {
+            Some((FocusArg::Mesh(path), tissue)) => {
+                let what = |e: &dyn std::fmt::Display| usage(format!("--focus mesh:{}: {e}", path.display()));
+                let m = load_mesh(&path).map_err(|e| what(&e))?;
+                let m = m.transformed(place).map_err(|e| what(&e))?;
+                Some((ConvexMesh::new(&m).map_err(|e| what(&e))?, tissue))
+            }
+            _ => None,
+        };
         let mut meshes = vec![];
         for path in &args.mesh {
             let m = load_mesh(path).map_err(|e| usage(e.to_string()))?;
@@ -237,7 +277,7 @@ impl Scene {
             _ => Some(Arc::new(Limiters::new(limiters).map_err(|e| usage(e.to_string()))?)),
         };
         let material = Material { color: args.mesh_color.map(|c| c as f32), ..Material::default() };
-        Ok(Scene { meshes, material, clip, clip_mesh, dims, spacing })
+        Ok(Scene { meshes, material, clip, clip_mesh, focus_mesh, focus_drawn: Default::default(), dims, spacing })
     }
 
     /// True when the scene has meshes (drawn every frame).
@@ -256,6 +296,21 @@ impl Scene {
     /// Renders one frame of `cam` into `img`: with meshes, draws them, stops
     /// the rays at them and composites the volume over them.
     pub fn render(&self, r: &mut Renderer, cam: &Camera, img: &mut Image) -> Result<(FrameStats, GeometryCost)> {
+        if let Some((m, tissue)) = &self.focus_mesh {
+            // the focus mesh's front and back faces, drawn for this camera (once per camera)
+            let projection = r.projection();
+            let mut drawn = self.focus_drawn.lock().unwrap_or_else(|e| e.into_inner());
+            let limiter = match &*drawn {
+                Some((c, p, l)) if c == cam && *p == projection => l.clone(),
+                _ => {
+                    let proj = Projector::new(cam, &projection, self.dims, self.spacing)?;
+                    let l: Arc<dyn Limiter> = Arc::new(MeshClip::new(m, proj, clip::Keep::Inside)?);
+                    *drawn = Some((*cam, projection, l.clone()));
+                    l
+                }
+            };
+            r.set_focus_limiter(limiter, tissue)?;
+        }
         if self.meshes.is_empty() && self.clip_mesh.is_none() {
             return Ok((r.render(cam, img)?, GeometryCost::default()));
         }

@@ -71,11 +71,11 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     // --focus / --focus-tissue: the lens's tissue, and a lens to start with (a sphere)
     let lens = match crate::app::scene::focus_of(sc)? {
         None => None,
-        Some(f) => {
+        Some((region, tissue)) => {
             for r in [&mut preview, &mut blend] {
-                r.set_focus_tissue(&f.tissue).map_err(|e| anyhow::Error::new(Usage(format!("--focus-tissue: {e}"))))?;
+                r.set_focus_tissue(&tissue).map_err(|e| anyhow::Error::new(Usage(format!("--focus-tissue: {e}"))))?;
             }
-            let shearwarp::view::clip::Region::Sphere { centre, radius } = f.region else {
+            let crate::app::scene::FocusArg::Region(shearwarp::view::clip::Region::Sphere { centre, radius }) = region else {
                 return Err(anyhow::Error::new(Usage("the viewer's lens is a sphere: give --focus sphere:x,y,z,r".into())));
             };
             let unit = spacing.iter().fold(f32::INFINITY, |a, &b| a.min(b)) as f64;

@@ -1467,9 +1467,6 @@ impl Renderer {
         if self.tissues.is_none() {
             return refuse("a custom iso value or transfer function (it needs the tissue presets)");
         }
-        if self.settings.deluxe.intermediate {
-            return refuse("Deluxe I (intermediate slices: a midpoint sample between two slices has no one focus side)");
-        }
         if self.settings.lattice == Lattice::Bcc {
             return refuse("the BCC grid (--grid bcc)");
         }

@@ -14,7 +14,14 @@
 //! - Switching the context or the focus tissue rebuilds no mask (binary) and
 //!   no encoding (rle with Deluxe P).
 //! - Bad input is an error: an unknown focus tissue, a bad region, a renderer
-//!   without presets, Deluxe I; on the command line exit 2.
+//!   without presets, the BCC grid; on the command line exit 2.
+//! - A convex mesh as the focus region (`focus_mesh`): the tissue of the
+//!   analytic box of the same shape on ≥ 98 % of the pixels off its
+//!   silhouette, accelerated equals brute force, equal tissues give the plain
+//!   frame, an open or dented mesh is an error.
+//! - Deluxe I with a focus (`focus_deluxe_i`; a midpoint between slices `k`
+//!   and `k + 1` is in the focus iff both slices are): equal tissues give the
+//!   plain I frame, accelerated equals brute force, the bone lens holds.
 
 mod common;
 
@@ -216,12 +223,17 @@ fn crossing(o: DVec3, d: DVec3, centre: DVec3, radius: f64) -> Option<[f64; 2]> 
 
 #[test]
 fn focus_bone_lens_shows_bone_inside_and_skin_outside() {
+    bone_lens_shows_bone_inside_and_skin_outside(Deluxe::STANDARD);
+}
+
+/// The analytic bone lens (see [`focus_bone_lens_shows_bone_inside_and_skin_outside`]) with `deluxe`.
+fn bone_lens_shows_bone_inside_and_skin_outside(deluxe: Deluxe) {
     let c = DVec3::splat((N as f64 - 1.0) / 2.0);
     let Region::Sphere { centre, radius } = lens() else { unreachable!() };
     let lc = DVec3::from_array(centre);
     for method in [Method::Binary, Method::Brute] {
         for rot in [DMat3::IDENTITY, DMat3::from_rotation_y(20f64.to_radians())] {
-            let mut r = renderer(method, Mode::Iso, Deluxe::STANDARD, false, "skin", Some(Focus::new(lens(), "bone")));
+            let mut r = renderer(method, Mode::Iso, deluxe, false, "skin", Some(Focus::new(lens(), "bone")));
             frame(&mut r, rot, 96);
             let plan = r.last_plan().unwrap().clone();
             let inter = r.intermediate();
@@ -309,12 +321,13 @@ fn bad_focus_is_an_error() {
     let tf = TransferFunction::ramp(40.0, 180.0, 0.7, [0.9, 0.7, 0.5]);
     let mut one = Renderer::new(shells(), &tf, Settings::default()).unwrap();
     assert!(one.set_focus(Some(Focus::new(lens(), "bone"))).is_err());
-    // Deluxe I: refused at the frame, with a message naming it
-    let i = Deluxe { intermediate: true, ..Deluxe::STANDARD };
-    let mut r = renderer(Method::Binary, Mode::Iso, i, false, "skin", Some(Focus::new(lens(), "bone")));
+    // the BCC grid: refused at the frame, with a message naming it
+    let s = Settings { method: Method::Rle, lattice: shearwarp::Lattice::Bcc, threads: 2, ..Settings::default() };
+    let mut r = Renderer::with_tissues(shells(), &tissues(), s).unwrap();
+    r.set_focus(Some(Focus::new(lens(), "bone"))).unwrap();
     let mut img = Image::new(32, 32);
     let e = r.render(&Camera::new(DMat3::IDENTITY, [32, 32]), &mut img).unwrap_err();
-    assert!(e.to_string().contains("Deluxe I"), "{e}");
+    assert!(e.to_string().contains("BCC"), "{e}");
 }
 
 #[test]
@@ -350,7 +363,7 @@ fn focus_cli_renders_and_refuses_bad_input() {
         vec!["--focus", "sphere:1,2,3,4", "--focus-tissue", "enamel"],
         vec!["--focus-tissue", "bone"],
         vec!["--focus", "sphere:1,2,3,4", "--iso", "100"],
-        vec!["--focus", "sphere:1,2,3,4", "--deluxe", "I"],
+        vec!["--focus", "sphere:1,2,3,4", "--grid", "bcc", "--method", "rle"],
     ] {
         Command::cargo_bin("shearwarp")
             .unwrap()
@@ -557,4 +570,99 @@ fn focus_mesh_on_the_command_line_and_an_open_mesh_is_an_error() {
     run(&["--focus", "mesh:/nonexistent/x.obj"], "x.png").failure().code(2).stderr(predicate::str::contains("panicked").not());
     run(&["--focus", &cube, "--focus-tissue", "enamel"], "x.png").failure().code(2).stderr(predicate::str::contains("enamel"));
     run(&["--focus", &cube, "--iso", "100"], "x.png").failure().code(2);
+}
+
+// ---- Deluxe I with a focus: a midpoint between slices k and k + 1 takes the
+// focus iff both slices' samples do
+
+/// Every (method, Deluxe) pair with intermediate slices (I, and I with P on the RLE paths).
+fn methods_i() -> Vec<(Method, Deluxe)> {
+    let i = Deluxe { intermediate: true, ..Deluxe::STANDARD };
+    let ip = Deluxe { post: true, ..i };
+    vec![(Method::Binary, i), (Method::Brute, i), (Method::Rle, i), (Method::BruteRle, i), (Method::Rle, ip), (Method::BruteRle, ip)]
+}
+
+#[test]
+fn focus_deluxe_i_with_the_context_tissue_equals_the_plain_render() {
+    for (method, deluxe) in methods_i() {
+        for mode in [Mode::Iso, Mode::Blend] {
+            for persp in [false, true] {
+                for tissue in ["skin", "bone"] {
+                    for region in [lens(), focus_boxes()[1]] {
+                        let mut plain = renderer(method, mode, deluxe, persp, tissue, None);
+                        let mut focus = renderer(method, mode, deluxe, persp, tissue, Some(Focus::new(region, tissue)));
+                        for rot in views() {
+                            let (a, b) = (frame(&mut plain, rot, 64), frame(&mut focus, rot, 64));
+                            assert!(
+                                bits(&a) == bits(&b),
+                                "{method:?} {deluxe:?} {mode:?} persp {persp} {tissue} {region:?} {rot:?}: the focus changed the frame"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn focus_deluxe_i_accelerated_equals_brute_force() {
+    let mut rnd = uniform(29);
+    let c = (N as f64 - 1.0) / 2.0;
+    let i = Deluxe { intermediate: true, ..Deluxe::STANDARD };
+    let ip = Deluxe { post: true, ..i };
+    let pairs = [(Method::Binary, Method::Brute, i), (Method::Rle, Method::BruteRle, i), (Method::Rle, Method::BruteRle, ip)];
+    let (mut frames, mut differ_from_plain) = (0, 0);
+    for case in 0..6 {
+        let rot = DMat3::from_euler(EulerRot::XYZ, rnd() * 6.3, rnd() * 6.3, rnd() * 6.3);
+        let region = if case % 2 == 0 {
+            Region::Sphere {
+                centre: [c + 10.0 * (rnd() - 0.5), c + 10.0 * (rnd() - 0.5), c + 20.0 * (rnd() - 0.5)],
+                radius: 4.0 + 8.0 * rnd(),
+            }
+        } else {
+            let lo = [rnd() * 20.0, rnd() * 20.0, rnd() * 20.0];
+            Region::Box { lo, hi: [lo[0] + 5.0 + 15.0 * rnd(), lo[1] + 5.0 + 15.0 * rnd(), lo[2] + 5.0 + 15.0 * rnd()] }
+        };
+        let (context, focus) = if case % 3 == 2 { ("bone", "skin") } else { ("skin", "bone") };
+        for (fast, brute, deluxe) in pairs {
+            for mode in [Mode::Iso, Mode::Blend] {
+                for persp in [false, true] {
+                    let f = Some(Focus::new(region, focus));
+                    let a = frame(&mut renderer(fast, mode, deluxe, persp, context, f.clone()), rot, 64);
+                    let b = frame(&mut renderer(brute, mode, deluxe, persp, context, f), rot, 64);
+                    assert!(bits(&a) == bits(&b), "case {case} {fast:?} {deluxe:?} {mode:?} persp {persp} {region:?} {context}/{focus}");
+                    let plain = frame(&mut renderer(fast, mode, deluxe, persp, context, None), rot, 64);
+                    frames += 1;
+                    differ_from_plain += (bits(&a) != bits(&plain)) as usize;
+                }
+            }
+        }
+    }
+    // the focus shows: most of these frames differ from the plain ones
+    assert!(differ_from_plain * 2 >= frames, "only {differ_from_plain} of {frames} frames show the focus");
+}
+
+/// The analytic bone lens of the nested shells with Deluxe I: the same
+/// tolerance (0.5 voxel) as without it.
+#[test]
+fn focus_deluxe_i_bone_lens_shows_bone_inside_and_skin_outside() {
+    bone_lens_shows_bone_inside_and_skin_outside(Deluxe { intermediate: true, ..Deluxe::STANDARD });
+}
+
+/// Deluxe I with a mesh focus: accelerated equals brute force (binary and rle, iso and blend).
+#[test]
+fn focus_deluxe_i_mesh_accelerated_equals_brute_force() {
+    let i = Deluxe { intermediate: true, ..Deluxe::STANDARD };
+    let mesh = box_mesh(focus_boxes()[0]);
+    for (fast, brute) in [(Method::Binary, Method::Brute), (Method::Rle, Method::BruteRle)] {
+        for mode in [Mode::Iso, Mode::Blend] {
+            for persp in [false, true] {
+                let rot = views()[3];
+                let a = mesh_frame(&mut renderer(fast, mode, i, persp, "skin", None), &mesh, "bone", rot, 64);
+                let b = mesh_frame(&mut renderer(brute, mode, i, persp, "skin", None), &mesh, "bone", rot, 64);
+                assert!(bits(&a) == bits(&b), "{fast:?} {mode:?} persp {persp}");
+            }
+        }
+    }
 }

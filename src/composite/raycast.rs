@@ -249,6 +249,17 @@ impl<'a> RayContext<'a> {
         if foc[0] <= k && k <= foc[1] { self.focus_cls } else { self.classifier }
     }
 
+    /// Whether the Deluxe I sample `(k, mid)` lies in the focus interval
+    /// `foc`: slice `k`'s iff `k` does, the midpoint between slices `k` and
+    /// `k + 1` iff both do (so the focus's samples span the same depths
+    /// `[f0, f1]` with or without Deluxe I, and a midpoint is never focus
+    /// next to a context slice sample it interpolates; the RLE paths take the
+    /// same rule, [`FramePlan::in_focus_mid`]).
+    #[inline(always)]
+    fn in_focus_pt(k: usize, mid: bool, foc: [usize; 2]) -> bool {
+        foc[0] <= k && k + mid as usize <= foc[1]
+    }
+
     /// The iso value and iso colour of slice `k`'s sample on a ray with focus interval `foc`.
     #[inline(always)]
     fn iso_at(&self, k: usize, foc: [usize; 2]) -> (f32, [f32; 3]) {
@@ -384,8 +395,10 @@ impl<'a> RayContext<'a> {
             (Mode::Blend, false, true) => self.trace_blend::<_, _, true>(v, ray, ks, foc),
             (Mode::Iso, false, false) => self.trace_iso::<_, _, false>(v, ray, ks, lo, hi, foc),
             (Mode::Iso, false, true) => self.trace_iso::<_, _, true>(v, ray, ks, lo, hi, foc),
-            (Mode::Blend, true, _) => self.trace_blend_half(v, ray, ks, hi),
-            (Mode::Iso, true, _) => self.trace_iso_half(v, ray, ks, lo, hi),
+            (Mode::Blend, true, false) => self.trace_blend_half::<_, _, false>(v, ray, ks, hi, foc),
+            (Mode::Blend, true, true) => self.trace_blend_half::<_, _, true>(v, ray, ks, hi, foc),
+            (Mode::Iso, true, false) => self.trace_iso_half::<_, _, false>(v, ray, ks, lo, hi, foc),
+            (Mode::Iso, true, true) => self.trace_iso_half::<_, _, true>(v, ray, ks, lo, hi, foc),
         }
     }
 
@@ -435,17 +448,17 @@ impl<'a> RayContext<'a> {
     }
 
     /// Composites the Deluxe I sample `(k, mid)` of `ray` into `acc` at the
-    /// half-step opacity.
+    /// half-step opacity, classified by `cls`.
     #[inline(always)]
-    fn blend_pt<V: Cells, R: Ray>(&self, v: &V, ray: R, k: usize, mid: bool, acc: &mut [f32; 4]) {
+    fn blend_pt<V: Cells, R: Ray>(&self, v: &V, ray: R, k: usize, mid: bool, cls: &Classifier, acc: &mut [f32; 4]) {
         let Some(p) = self.locate_pt(ray, k, mid) else { return };
         let d = self.density_pt(v, p);
-        let alpha = self.classifier.alpha(d);
+        let alpha = cls.alpha(d);
         if alpha <= 0.0 {
             return;
         }
         let alpha = ray.half_opacity(alpha);
-        let c = self.classifier.classify(d);
+        let c = cls.classify(d);
         let rgb = [c.r, c.g, c.b];
         let rgb = match self.normals {
             Some((_, table)) => apply_shade(rgb, self.entry_pt(v, table, p)),
@@ -456,9 +469,17 @@ impl<'a> RayContext<'a> {
 
     /// [`RayContext::trace_blend`] with Deluxe I: each candidate slice `k`
     /// brings its own sample and the midpoint after it in index order (when
-    /// `k + 1 ≤ hi`), composited in walking order.
+    /// `k + 1 ≤ hi`), composited in walking order; (`F`) a sample in the
+    /// focus ([`RayContext::in_focus_pt`]) by the focus's classification.
     #[inline(always)]
-    fn trace_blend_half<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, hi: usize) -> RayResult {
+    fn trace_blend_half<V: Cells, R: Ray, const F: bool>(
+        &self,
+        v: &V,
+        ray: R,
+        ks: impl Iterator<Item = usize>,
+        hi: usize,
+        foc: [usize; 2],
+    ) -> RayResult {
         let mut acc = [0f32; 4];
         'ray: for k in ks {
             let order = if self.ascending { [(k, false), (k, true)] } else { [(k, true), (k, false)] };
@@ -469,16 +490,25 @@ impl<'a> RayContext<'a> {
                 if terminated(acc[3], self.ert) {
                     break 'ray;
                 }
-                self.blend_pt(v, ray, k, mid, &mut acc);
+                let cls = if F && Self::in_focus_pt(k, mid, foc) { self.focus_cls } else { self.classifier };
+                self.blend_pt(v, ray, k, mid, cls, &mut acc);
             }
         }
         RayResult { rgba: acc, depth: f32::NAN }
     }
 
     /// [`RayContext::trace_iso`] with Deluxe I: the first sample, slice or
-    /// midpoint, at or above the iso value.
+    /// midpoint, at or above the iso value where it lies (focus or context, `F`).
     #[inline(always)]
-    fn trace_iso_half<V: Cells, R: Ray>(&self, v: &V, ray: R, ks: impl Iterator<Item = usize>, lo: usize, hi: usize) -> RayResult {
+    fn trace_iso_half<V: Cells, R: Ray, const F: bool>(
+        &self,
+        v: &V,
+        ray: R,
+        ks: impl Iterator<Item = usize>,
+        lo: usize,
+        hi: usize,
+        foc: [usize; 2],
+    ) -> RayResult {
         for k in ks {
             let order = if self.ascending { [(k, false), (k, true)] } else { [(k, true), (k, false)] };
             for (k, mid) in order {
@@ -487,8 +517,9 @@ impl<'a> RayContext<'a> {
                 }
                 let Some(p) = self.locate_pt(ray, k, mid) else { continue };
                 let d = self.density_pt(v, p);
-                if d >= self.iso {
-                    return self.iso_hit_half(v, ray, p, d, lo, hi);
+                let at = if F && Self::in_focus_pt(k, mid, foc) { (self.focus_iso, self.focus_iso_rgb) } else { (self.iso, self.iso_rgb) };
+                if d >= at.0 {
+                    return self.iso_hit_half(v, ray, p, d, lo, hi, at);
                 }
             }
         }
@@ -507,13 +538,24 @@ impl<'a> RayContext<'a> {
     }
 
     /// [`RayContext::iso_hit`] with Deluxe I: the hit refined against the
-    /// sample before it (a slice or a midpoint, half a slice away).
+    /// sample before it (a slice or a midpoint, half a slice away), against
+    /// the hit's iso value and in its iso colour (`(iso, iso_rgb)`).
+    #[allow(clippy::too_many_arguments)]
     #[inline(never)]
-    fn iso_hit_half<V: Cells, R: Ray>(&self, v: &V, ray: R, p: Pt, d: f32, lo: usize, hi: usize) -> RayResult {
+    fn iso_hit_half<V: Cells, R: Ray>(
+        &self,
+        v: &V,
+        ray: R,
+        p: Pt,
+        d: f32,
+        lo: usize,
+        hi: usize,
+        (iso, iso_rgb): (f32, [f32; 3]),
+    ) -> RayResult {
         let before = self.prev_pt(p.k, p.mid, lo, hi).and_then(|(kp, mp)| {
             let pp = self.locate_pt(ray, kp, mp)?;
             let dp = self.density_pt(v, pp);
-            (dp < self.iso).then(|| (pp, ((self.iso - dp) / (d - dp)).clamp(0.0, 1.0)))
+            (dp < iso).then(|| (pp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0)))
         });
         let depth = before.map_or(p.depth(), |(pp, t)| pp.depth() + (p.depth() - pp.depth()) * t);
         let rgb = match self.normals {
@@ -523,7 +565,7 @@ impl<'a> RayContext<'a> {
                     let ep = self.entry_pt(v, table, pp);
                     e = [0, 1].map(|a| ep[a] + (e[a] - ep[a]) * t);
                 }
-                apply_shade(self.iso_rgb, e)
+                apply_shade(iso_rgb, e)
             }
             None => {
                 let mut g = self.gradient_pt(p);
@@ -531,7 +573,7 @@ impl<'a> RayContext<'a> {
                     let gp = self.gradient_pt(pp);
                     g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
                 }
-                self.shading.shade(self.iso_rgb, headlight_ndl(g, self.grad_m, self.grad_s))
+                self.shading.shade(iso_rgb, headlight_ndl(g, self.grad_m, self.grad_s))
             }
         };
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }

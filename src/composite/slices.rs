@@ -194,14 +194,16 @@ fn box_sample(wi: &[f32], mut column: impl FnMut(usize) -> [f32; 4]) -> [f32; 4]
 
 /// Focus+context: calls `run(x0, x1, in_focus)` for the maximal runs of
 /// pixels `x0 ..= x1` of `[lo, hi]` (pixel indices of `frow`, a row of the
-/// plan's focus intervals) whose sample of slice `k` is all inside or all
-/// outside the focus, in order. The one place the slice traversal reads the
-/// focus: each run is composited with the focus's or the context's sampler.
+/// plan's focus intervals) whose sample between slices `k0` and `k1` (`[k,
+/// k]`: slice `k`'s; `[k, k + 1]`: Deluxe I's midpoint, in the focus iff both
+/// slices are, as [`FramePlan::in_focus_mid`]) is all inside or all outside
+/// the focus, in order. The one place the slice traversal reads the focus:
+/// each run is composited with the focus's or the context's sampler.
 #[inline]
-fn focus_runs(frow: &[[u32; 2]], k: u32, lo: i64, hi: i64, mut run: impl FnMut(i64, i64, bool)) {
+fn focus_runs(frow: &[[u32; 2]], [k0, k1]: [u32; 2], lo: i64, hi: i64, mut run: impl FnMut(i64, i64, bool)) {
     let inside = |x: i64| {
         let [a, b] = frow[x as usize];
-        a <= k && k <= b
+        a <= k0 && k1 <= b
     };
     let mut x = lo;
     while x <= hi {
@@ -596,7 +598,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                     // the focus with its sampler (the cursors afresh for each run)
                     (limits, Some(ft), Some(fl)) => {
                         let op = op as i64;
-                        focus_runs(fl.row(q_first + row), k as u32, first as i64 + op, hi as i64 + op, |x0, x1, f| {
+                        focus_runs(fl.row(q_first + row), [k as u32; 2], first as i64 + op, hi as i64 + op, |x0, x1, f| {
                             let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
                             let (lo, hi, t) = ((x0 - op) as u32, (x1 - op) as u32, if f { ft } else { self.tables });
                             match limits {
@@ -675,7 +677,7 @@ impl<S: Sampler> RleFrame<'_, S> {
             let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
             match (self.focus, &plan.focus) {
                 // focus+context: each run of pixels in / out of the focus with its sampler
-                (Some(_), Some(fl)) => focus_runs(fl.row(q), k as u32, x0, x1, |a, b, f| {
+                (Some(_), Some(fl)) => focus_runs(fl.row(q), [k as u32; 2], x0, x1, |a, b, f| {
                     let fr = if f { self.focused() } else { *self };
                     fr.scaled_row(k, q, s, [a, b], [lo, hi], wj, prow, lrow);
                 }),
@@ -828,7 +830,7 @@ impl<S: Sampler> RleFrame<'_, S> {
             let bx = BoxRow { k, q, s, nb, hi, curs, wj: &wj };
             match (self.focus, &plan.focus) {
                 // focus+context: each run of pixels in / out of the focus with its sampler
-                (Some(_), Some(fl)) => focus_runs(fl.row(q), k as u32, x0, x1, |a, b, f| {
+                (Some(_), Some(fl)) => focus_runs(fl.row(q), [k as u32; 2], x0, x1, |a, b, f| {
                     let fr = if f { self.focused() } else { *self };
                     fr.box_row(&bx, [a, b], prow, lrow);
                 }),
@@ -953,6 +955,26 @@ impl<S: Sampler> RleFrame<'_, S> {
             }
             let lrow = &mut links[row * lw..(row + 1) * lw];
             let prow = &mut px[row * gw + r.p0..row * gw + r.p1 + 1];
+            match (self.focus, &plan.focus) {
+                // focus+context: each run of pixels whose midpoint is in / out of the focus with its sampler
+                (Some(_), Some(fl)) => focus_runs(fl.row(q), [k as u32, k as u32 + 1], x0, x1, |a, b, f| {
+                    let fr = if f { self.focused() } else { *self };
+                    fr.mid_row(k, q, scan, [a, b], hi, wj, prow, lrow);
+                }),
+                _ => self.mid_row(k, q, scan, [x0, x1], hi, wj, prow, lrow),
+            }
+        }
+    }
+
+    /// The pixels `x0 ..= x1` of row `q` of [`RleFrame::mid_slice`]
+    /// (scanlines `scan`: slice `k`'s two under the row, then slice `k +
+    /// 1`'s; no cell past `hi` holds a non-transparent voxel).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn mid_row(&self, k: usize, q: usize, scan: [usize; 4], [x0, x1]: [i64; 2], hi: i64, wj: f32, prow: &mut [[f32; 4]], lrow: &mut [u32]) {
+        let (rle, imap) = (self.rle, self.plan.mid_map(k, 0));
+        let p0 = self.r.p0 as i64;
+        {
             let mut cur = scan.map(|s| rle.cursor(s));
             // the first column the cursors may still be asked for
             let mut next = 0u32;
@@ -1088,7 +1110,8 @@ impl<S: Sampler> RleFrame<'_, S> {
 /// positions, weights, sampler and arithmetic. With `focus` (focus+context,
 /// `(its classification, its sampler)`) and the plan's focus intervals, a
 /// pixel whose slice-`k` sample is in its interval reads the voxels
-/// classified by the focus's (a second buffer).
+/// classified by the focus's (a second buffer of two slices), and so does
+/// a Deluxe I midpoint whose two slices both are ([`FramePlan::in_focus_mid`]).
 #[allow(clippy::too_many_arguments)]
 pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
     stack: &V,
@@ -1111,8 +1134,8 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
     let n = ni * nj;
     slice_buf.resize(2 * n, [0.0; 4]);
     let focus = focus.filter(|_| plan.focus.is_some());
-    // the focus's voxels of the slice (a reference: allocated per frame)
-    let mut focus_buf = vec![[0f32; 4]; if focus.is_some() { n } else { 0 }];
+    // the focus's voxels of the slice and the last (a reference: allocated per frame)
+    let mut focus_buf = vec![[0f32; 4]; if focus.is_some() { 2 * n } else { 0 }];
     let mut prev: Option<usize> = None;
     for k in plan.front_to_back() {
         // slice k's voxels in half k % 2 of the buffer (the last slice's in the other)
@@ -1122,7 +1145,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
             }
         });
         if let Some((fpre, ft)) = focus {
-            focus_buf.par_chunks_mut(ni).enumerate().for_each(|(j, row)| {
+            focus_buf[(k % 2) * n..][..n].par_chunks_mut(ni).enumerate().for_each(|(j, row)| {
                 for (i, c) in row.iter_mut().enumerate() {
                     *c = ft.brute_voxel(fpre, stack, i, j, k);
                 }
@@ -1133,7 +1156,11 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
         if let Some(kp) = prev.filter(|_| plan.intermediate()) {
             // the intermediate samples between slices kl and kl + 1
             let kl = kp.min(k);
-            let (lo, hi) = (&buf[(kl % 2) * n..][..n], &buf[((kl + 1) % 2) * n..][..n]);
+            fn halves(b: &[[f32; 4]], kl: usize, n: usize) -> (&[[f32; 4]], &[[f32; 4]]) {
+                (&b[(kl % 2) * n..][..n], &b[((kl + 1) % 2) * n..][..n])
+            }
+            let (lo, hi) = halves(buf, kl, n);
+            let flohi = if focus.is_some() { Some(halves(fbuf, kl, n)) } else { None };
             let (imap, jmap) = (plan.mid_map(kl, 0), plan.mid_map(kl, 1));
             px.par_chunks_mut(gw).enumerate().for_each(|(row, prow)| {
                 let q = r.q0 + row;
@@ -1149,6 +1176,11 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                     if plan.limits.as_ref().is_some_and(|l| !l.keeps(p, q, kl) || !l.keeps(p, q, kl + 1)) {
                         continue;
                     }
+                    // focus+context: a midpoint whose two slices are in the focus from the focus's voxels and sampler
+                    let ((lo, hi), tables) = match (focus, flohi) {
+                        (Some((_, ft)), Some(f)) if plan.in_focus_mid(p, q, kl) => (f, ft),
+                        _ => ((lo, hi), tables),
+                    };
                     let b = ci as usize + ni * cj as usize;
                     let w = cell_weights(wi, wj);
                     let smp = mid(
@@ -1161,6 +1193,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
         }
         prev = Some(k);
         let buf = &buf[(k % 2) * n..][..n];
+        let fbuf = if focus.is_some() { &fbuf[(k % 2) * n..][..n] } else { fbuf };
         let fp = if S::BOX { plan.footprint(k) } else { 1.0 };
         px.par_chunks_mut(gw).enumerate().for_each(|(row, prow)| {
             let q = r.q0 + row;

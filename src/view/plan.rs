@@ -1002,6 +1002,15 @@ impl FramePlan {
         a <= k && k <= b
     }
 
+    /// Whether ray `(p, q)`'s Deluxe I sample at the midpoint between slices
+    /// `k` and `k + 1` lies in the focus region: iff both slices' samples do
+    /// (the focus spans the same depths with or without Deluxe I).
+    #[inline(always)]
+    pub fn in_focus_mid(&self, p: usize, q: usize, k: usize) -> bool {
+        let [a, b] = self.focus_range(p, q);
+        a <= k && k < b
+    }
+
     /// Number of slices.
     pub fn slices(&self) -> usize {
         self.maps.len()

@@ -191,6 +191,9 @@ fn usage(msg: String) -> anyhow::Error {
     anyhow::Error::new(Usage(msg))
 }
 
+/// A focus mesh's faces drawn for one camera and projection (its limiter).
+type DrawnFocus = (Camera, shearwarp::view::Projection, Arc<dyn Limiter>);
+
 /// The geometry and clip regions of a run, for a volume of `dims` voxels with `spacing`.
 pub struct Scene {
     meshes: Vec<Mesh>,
@@ -203,7 +206,7 @@ pub struct Scene {
     /// faces as drawn for the last camera (a frame of the same camera, e.g.
     /// after a tissue switch, draws nothing again).
     focus_mesh: Option<(ConvexMesh, String)>,
-    focus_drawn: std::sync::Mutex<Option<(Camera, shearwarp::view::Projection, Arc<dyn Limiter>)>>,
+    focus_drawn: std::sync::Mutex<Option<DrawnFocus>>,
     dims: [usize; 3],
     spacing: [f32; 3],
 }

@@ -280,13 +280,20 @@ impl Renderers {
     /// the still blend frame is where the iso preview put it. Not the lens
     /// frame's own hit: inside the lens the focus tissue shows, so that hit
     /// lies deeper and the lens would walk away from the skin frame by
-    /// frame. The context frame is rendered once per view (camera, tissue,
+    /// frame. The lens moves with the mouse only: while the mouse stays (a
+    /// rotation, a size or tissue change) it keeps its place in the volume,
+    /// as before. The context frame is rendered once per view (camera, tissue,
     /// projection, quality, clip) and its hits kept, so a mouse move costs one
-    /// frame, as before. Only on the raycaster (`--method binary` / `brute`,
+    /// frame, as before, the first after a rotation two. Only on the raycaster (`--method binary` / `brute`,
     /// where a focus or mode switch rebuilds nothing); with the RLE paths and
     /// a custom iso value the lens stays at the volume centre's depth.
     pub fn lens_on_surface(&mut self, spec: &Spec, l: Lens) -> shearwarp::Result<Lens> {
         let Some([x, y]) = l.at else { return Ok(l) };
+        // the mouse has not moved since the lens was placed (a rotation, a
+        // size or tissue change): it stays where it is in the volume
+        if let Some(prev) = self.lens.filter(|p| p.at == l.at) {
+            return Ok(Lens { centre: prev.centre, ..l });
+        }
         let raycast = matches!(self.tissues.settings().method, Method::Binary | Method::Brute);
         if !raycast || !matches!(spec.class, Class::Tissue(_)) {
             return Ok(l);

@@ -32,6 +32,7 @@ use crate::encode::rle::{ClassKey, RleCache};
 use crate::error::{Error, Result};
 use crate::memory::Memory;
 use crate::view::clip::{ClipRegion, Region};
+use crate::view::perspective::RayDirections;
 use crate::view::plan::{FramePlan, Grid, Limiter, MapKind, RayLimits};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::{Canvas, Owned, Texel, clear_for_pyramids, warp, warp_owned};
@@ -512,6 +513,13 @@ pub struct Renderer {
     pyramid_plans: Vec<FramePlan>,
     pyramid_count: usize,
     last_split: bool,
+    /// Each pyramid's intermediate iso depth of the last split frame (only
+    /// `depth`, `size` and `valid` are used; kept when [`Renderer::set_keep_depths`]
+    /// is on, in iso mode), and the output pixels' rays that say which
+    /// pyramid owns a pixel.
+    pyramid_depths: Vec<Intermediate>,
+    keep_depths: bool,
+    last_rays: Option<RayDirections>,
     /// The perspective views of the last frame (a buffer reused).
     views: Vec<PerspectiveView>,
     /// The producer of per-pixel ray limits, if any, and a counter bumped when it changes.
@@ -562,6 +570,9 @@ impl Renderer {
             pyramid_plans: vec![],
             pyramid_count: 0,
             last_split: false,
+            pyramid_depths: vec![],
+            keep_depths: false,
+            last_rays: None,
             views: vec![],
             limiter: None,
             focus: None,
@@ -879,6 +890,46 @@ impl Renderer {
     /// perspective frame (the pyramid owning the image centre first).
     pub fn last_plans(&self) -> &[FramePlan] {
         if self.last_split { &self.pyramid_plans[..self.pyramid_count] } else { self.plan.as_slice() }
+    }
+
+    /// Keeps (`on`) the intermediate iso depth of every pyramid of a split
+    /// perspective frame after it is warped (a copy of the depth plane per
+    /// pyramid, iso mode only), for [`Renderer::last_depth_at`]: the
+    /// volume's hit under an output pixel of any frame
+    /// ([`crate::geometry::volume_hit`]). Off by default (a frame that is not
+    /// split reads the intermediate image itself and costs nothing either way).
+    pub fn set_keep_depths(&mut self, on: bool) {
+        self.keep_depths = on;
+    }
+
+    /// The index in [`Renderer::last_plans`] of the plan whose image holds
+    /// output pixel `(u, v)` of the last frame: the one plan, or the pyramid
+    /// that owns the pixel's ray ([`crate::view::perspective::ray_owner`]) in a
+    /// split frame (`None`: no plan, or no pyramid of the frame owns it).
+    pub fn last_owner(&self, u: f64, v: f64) -> Option<usize> {
+        let plans = self.last_plans();
+        match (self.last_split, &self.last_rays) {
+            (true, Some(rays)) => {
+                let owner = rays.owner(u, v);
+                plans.iter().position(|p| (p.view.axis, p.view.ascending) == owner)
+            }
+            (true, None) => None,
+            (false, _) => (!plans.is_empty()).then_some(0),
+        }
+    }
+
+    /// The iso depth (fractional slice index, NaN where none) at intermediate
+    /// pixel `(p, q)` of plan `i` of [`Renderer::last_plans`]: the
+    /// intermediate image's own for a frame that is not split, the kept copy
+    /// for a pyramid of a split one (NaN unless [`Renderer::set_keep_depths`]
+    /// was on for that frame), NaN when the image does not match the plan.
+    pub fn last_depth_at(&self, i: usize, p: usize, q: usize) -> f32 {
+        let Some(plan) = self.last_plans().get(i) else { return f32::NAN };
+        let d = if self.last_split { self.pyramid_depths.get(i) } else { Some(&self.inter) };
+        match d {
+            Some(d) if d.size == plan.grid.size && d.depth.len() == d.size[0] * d.size[1] => d.depth_at(p, q),
+            _ => f32::NAN,
+        }
     }
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
@@ -1503,8 +1554,19 @@ impl Renderer {
         clear_for_pyramids(out, camera.size[0], camera.size[1]);
         stats.warp_ms = t.elapsed().as_secs_f64() * 1e3;
         self.last_split = true;
+        self.last_rays = Some(rays);
         self.pyramid_count = 0;
         let mut plans = std::mem::take(&mut self.pyramid_plans);
+        // each pyramid's iso depth, kept past the next pyramid's composite (geometry's depth test, the lens)
+        let keep = self.keep_depths && self.settings.mode == Mode::Iso;
+        let mut depths = std::mem::take(&mut self.pyramid_depths);
+        if keep && depths.len() < views.len() {
+            depths.resize_with(views.len(), Intermediate::default);
+        }
+        for d in depths.iter_mut() {
+            // (a pyramid not kept this frame reads as no hit)
+            d.valid = None;
+        }
         let mut result = Ok(());
         for (i, pv) in views.iter().enumerate() {
             let step = (|| -> Result<()> {
@@ -1521,7 +1583,16 @@ impl Renderer {
                 self.finish_plan(plan, limits, focus)?;
                 let plan = &plans[i];
                 let owned = Owned { rays, pyramid: (pv.axis, pv.ascending) };
-                self.composite_plan(plan, &mut stats, |inter: &Intermediate| warp_owned(inter, plan, out, &owned))
+                let kept = if keep { depths.get_mut(i) } else { None };
+                self.composite_plan(plan, &mut stats, |inter: &Intermediate| {
+                    warp_owned(inter, plan, out, &owned);
+                    if let Some(k) = kept {
+                        k.size = inter.size;
+                        k.valid = inter.valid;
+                        k.depth.clear();
+                        k.depth.extend_from_slice(&inter.depth);
+                    }
+                })
             })();
             if step.is_err() {
                 result = step;
@@ -1531,6 +1602,7 @@ impl Renderer {
         // (plans past this frame's pyramids are kept, with their arrays, for later frames)
         self.pyramid_count = views.len().min(plans.len());
         self.pyramid_plans = plans;
+        self.pyramid_depths = depths;
         result.map(|_| stats)
     }
 

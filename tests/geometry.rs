@@ -189,3 +189,173 @@ fn geometry_mesh_on_the_command_line() {
         .code(2)
         .stderr(predicate::str::contains("--mesh-scale"));
 }
+
+/// The first `t ≥ 0` where `o + t·d` enters the closed cylinder `(a, b, r)`
+/// (side or caps), if any.
+fn cylinder_hit(o: DVec3, d: DVec3, a: DVec3, b: DVec3, r: f64) -> Option<f64> {
+    let w = (b - a).normalize();
+    let len = (b - a).length();
+    let mut best: Option<f64> = None;
+    let mut take = |t: f64| {
+        if t >= 0.0 {
+            best = Some(best.map_or(t, |x: f64| x.min(t)))
+        }
+    };
+    // side: |(p − a) − ((p − a)·w) w| = r
+    let (oa, dp) = (o - a, d - w * d.dot(w));
+    let op = oa - w * oa.dot(w);
+    let (qa, qb, qc) = (dp.dot(dp), 2.0 * dp.dot(op), op.dot(op) - r * r);
+    let disc = qb * qb - 4.0 * qa * qc;
+    if qa > 0.0 && disc >= 0.0 {
+        for t in [(-qb - disc.sqrt()) / (2.0 * qa), (-qb + disc.sqrt()) / (2.0 * qa)] {
+            let s = (o + t * d - a).dot(w);
+            if (0.0..=len).contains(&s) {
+                take(t);
+            }
+        }
+    }
+    // caps
+    for (c, n) in [(a, -w), (b, w)] {
+        let den = d.dot(n);
+        if den != 0.0 {
+            let t = (c - o).dot(n) / den;
+            if (o + t * d - c).length() <= r {
+                take(t);
+            }
+        }
+    }
+    best
+}
+
+/// The needle through the sphere phantom in a perspective frame split into
+/// Lacroute's pyramids (the eye beside the ball, inside the volume's box, a
+/// 90° field of view: `last_plans().len() > 1`), binary and brute iso with the
+/// crossing slice kept and the pyramids' depths kept
+/// (`Renderer::set_keep_depths`): the depth test of
+/// `composite_iso_over_geometry` reads each pixel's hit through the pyramid
+/// that owns it (`geometry::volume_hit`), so the visible surface is the
+/// nearer of the analytic sphere and the analytic cylinder within half a
+/// voxel (¾ where the needle pierces the sphere), at the pixels away from
+/// the needle's outline where the unlimited iso depth is itself that
+/// accurate — the tolerances, exclusions and share of the single-plan test
+/// (`inverse_warp_needle_through_the_sphere_is_the_nearer_surface`). The
+/// needle hides the volume wherever the volume's hit is at or behind it.
+/// Binary equals brute force: the images before and after the depth test,
+/// bit for bit, and the hits.
+#[test]
+fn geometry_split_frame_needle_through_the_sphere_is_the_nearer_surface() {
+    use shearwarp::accuracy::reference::Rays;
+    use shearwarp::data::phantom::{SPHERE_ISO, sphere, sphere_geometry};
+    use shearwarp::geometry::{composite_iso_over_geometry, volume_hit};
+    use shearwarp::render::{Renderer, Settings};
+    use shearwarp::view::{NamedView, rotate_eye};
+    use shearwarp::warp::Image;
+    let dims = [48, 48, 48];
+    let vol = sphere(dims).unwrap();
+    let (c, radius) = sphere_geometry(dims);
+    let c = DVec3::from_array(c);
+    let size = 128;
+    let cam = Camera::new(rotate_eye(rotate_eye(NamedView::Anterior.rotation(), 1, 25.0), 0, 15.0), [size, size]);
+    // the needle across the ball, and a second one leaving its front face 30° off the view
+    // (where it pierces the surface the sphere lies less than a slice behind it: the depth test decides)
+    let (toward_eye, ex) = (cam.rotation.transpose() * DVec3::Z, cam.rotation.transpose() * DVec3::X);
+    let dir = toward_eye * 30f64.to_radians().cos() + ex * 30f64.to_radians().sin();
+    let needles = [(c + DVec3::new(-30.0, -6.0, -4.0), c + DVec3::new(30.0, 8.0, 5.0), 3.5), (c - dir * 8.0, c + dir * 26.0, 3.5)];
+    let mut needle = Mesh::cylinder(needles[0].0, needles[0].1, needles[0].2, 64).unwrap();
+    let second = Mesh::cylinder(needles[1].0, needles[1].1, needles[1].2, 64).unwrap();
+    let n = needle.vertices.len() as u32;
+    needle.vertices.extend(second.vertices);
+    needle.triangles.extend(second.triangles.iter().map(|t| t.map(|i| i + n)));
+    let projection = Projection::perspective(90.0, 0.45).unwrap();
+    let proj = Projector::new(&cam, &projection, dims, [1.0; 3]).unwrap();
+    let mut geo = GeometryImage::new(size, size);
+    rasterize(&needle, &Material::default(), Cull::Back, &proj, &mut geo).unwrap();
+    let rays = Rays::with_projection(&cam, &projection, dims, [1.0; 3]).unwrap();
+    let depths = |r: &Renderer| -> Vec<f64> {
+        (0..size * size).map(|i| volume_hit(r, (i % size) as f64, (i / size) as f64).map_or(f64::NAN, |at| rays.depth_of(at))).collect()
+    };
+    let mut frames = vec![];
+    for method in [Method::Binary, Method::Brute] {
+        let settings = Settings { method, mode: Mode::Iso, threads: 2, ..Settings::default() };
+        let tf = TransferFunction::threshold(SPHERE_ISO, [1.0; 3]);
+        let mut r = Renderer::new(vol.clone(), &tf, settings).unwrap();
+        r.set_iso(SPHERE_ISO).unwrap();
+        r.set_projection(projection).unwrap();
+        r.set_keep_depths(true);
+        let mut img = Image::new(size, size);
+        r.render(&cam, &mut img).unwrap();
+        assert!(r.last_plans().len() > 1, "{method:?}: the frame splits into pyramids ({})", r.last_plans().len());
+        let plain = depths(&r);
+        let gl = GeometryLimits::new(proj, &geo).with_iso_crossing(true);
+        r.set_limiter(Some(Arc::new(gl.clone())));
+        r.render(&cam, &mut img).unwrap();
+        let vdepth = depths(&r);
+        let mut fin = img.clone();
+        composite_iso_over_geometry(&mut fin, &geo, &r, &gl);
+        let mut hidden = 0;
+        for (i, (&vd, &gd)) in vdepth.iter().zip(&geo.depth).enumerate() {
+            if gd.is_finite() && vd >= gd {
+                assert_eq!(fin.data[i], geo.color[i], "{method:?}: pixel {i}: the needle hides the volume behind it");
+                hidden += 1;
+            }
+        }
+        // the depth test decides somewhere: composed without it, those pixels differ
+        let mut untested = img.clone();
+        composite_over_geometry(&mut untested, &geo);
+        assert!(hidden > 10 && fin != untested, "{method:?}: {hidden} pixels where the needle hides the volume");
+        let (mut checked, mut needle_px) = (0, 0);
+        for y in 0..size {
+            for x in 0..size {
+                let i = y * size + x;
+                let covered = |x: i64, y: i64| {
+                    geo.depth[(y.clamp(0, size as i64 - 1) as usize) * size + x.clamp(0, size as i64 - 1) as usize].is_finite()
+                };
+                let here = covered(x as i64, y as i64);
+                if (-2..=2).any(|dy| (-2..=2).any(|dx| covered(x as i64 + dx, y as i64 + dy) != here)) {
+                    continue;
+                }
+                let (o, d) = rays.ray(x as f64, y as f64);
+                let oc = o - c;
+                let (a, b, cc) = (d.dot(d), oc.dot(d), oc.dot(oc) - radius * radius);
+                let ts = if b * b - a * cc >= 0.0 { Some((-b - (b * b - a * cc).sqrt()) / a).filter(|&t| t >= 0.0) } else { None };
+                let tn = needles.iter().filter_map(|&(na, nb, nr)| cylinder_hit(o, d, na, nb, nr)).reduce(f64::min);
+                let sphere_depth = ts.map(|t| rays.depth_of(o + t * d));
+                let own_ok = match (sphere_depth, plain[i].is_nan()) {
+                    (Some(s), false) => (plain[i] - s).abs() <= 0.5,
+                    (None, true) => true,
+                    _ => false,
+                };
+                if !own_ok {
+                    continue;
+                }
+                let truth = [ts, tn].into_iter().flatten().map(|t| rays.depth_of(o + t * d)).fold(f64::INFINITY, f64::min);
+                let seen = if vdepth[i].is_nan() { geo.depth[i] } else { vdepth[i].min(geo.depth[i]) };
+                if truth.is_infinite() {
+                    assert!(seen.is_infinite(), "{method:?} ({x}, {y}): {seen} where nothing is");
+                    continue;
+                }
+                checked += 1;
+                needle_px += here as usize;
+                let pierce = matches!((sphere_depth, tn.map(|t| rays.depth_of(o + t * d))), (Some(a), Some(b)) if (a - b).abs() < 0.25);
+                let tol = if pierce { 0.75 } else { 0.5 };
+                assert!(
+                    (seen - truth).abs() <= tol,
+                    "{method:?} ({x}, {y}): seen {seen} (volume {}, needle {}), truth {truth} (sphere {sphere_depth:?}, needle {:?})",
+                    vdepth[i],
+                    geo.depth[i],
+                    tn.map(|t| rays.depth_of(o + t * d))
+                );
+            }
+        }
+        eprintln!("{method:?}: {} pyramids, {checked} pixels checked, {needle_px} on the needle, {hidden} hidden", r.last_plans().len());
+        // without the kept depths the split frame is composed without the test (the old behaviour)
+        r.set_keep_depths(false);
+        let mut old = Image::new(size, size);
+        r.render(&cam, &mut old).unwrap();
+        composite_iso_over_geometry(&mut old, &geo, &r, &gl);
+        assert!(old == untested, "{method:?}: no depths kept, no depth test");
+        assert!(checked > 1000 && needle_px > 100, "{method:?}: {checked} pixels checked, {needle_px} on the needle");
+        frames.push((bits(&img), bits(&fin), vdepth.iter().map(|d| d.to_bits()).collect::<Vec<_>>()));
+    }
+    assert!(frames[0] == frames[1], "binary equals brute force in the split frame (images, final images, hits)");
+}

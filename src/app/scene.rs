@@ -342,6 +342,8 @@ impl Scene {
         limiters.push(geometry.clone());
         let limiter: Arc<dyn Limiter> = if limiters.len() == 1 { geometry.clone() } else { Arc::new(Limiters::new(limiters)?) };
         r.set_limiter(Some(limiter));
+        // (a split perspective frame keeps each pyramid's iso depth for the depth test)
+        r.set_keep_depths(crossing);
         let st = r.render(cam, img)?;
         // the inverse warp's own cost, on this frame's plan(s)
         let t = Instant::now();

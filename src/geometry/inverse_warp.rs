@@ -262,7 +262,7 @@ impl GeometryLimits {
 
 /// The voxel position of pixel `(p, q)`'s sample in slice `k` (fractional `k`
 /// on the ray's line).
-fn sample_voxel(plan: &FramePlan, k: usize, p: usize, q: usize) -> DVec3 {
+pub(super) fn sample_voxel(plan: &FramePlan, k: usize, p: usize, q: usize) -> DVec3 {
     unpermute(plan.view.perm, DVec3::new(plan.sample_at(k, 0, p), plan.sample_at(k, 1, q), k as f64))
 }
 
@@ -392,29 +392,23 @@ pub fn composite_over_geometry(image: &mut Image, geometry: &GeometryImage) {
 
 /// The final image of an iso frame whose rays kept the crossing slice
 /// ([`GeometryLimits::with_iso_crossing`]): at each output pixel the
-/// geometry covers, the volume's iso depth (its intermediate depth, the
-/// warp's bilinear weights over the hits, as [`crate::accuracy::reference::fast_path_depth`]
-/// reads it) is compared with the geometry's: a hit at or behind the
-/// geometry is hidden (the pixel is the geometry's colour), one in front is
-/// composed over it as in [`composite_over_geometry`]. Elsewhere the volume
-/// is over the geometry as there. A frame split into pyramids (a
-/// perspective eye beside the volume) has no single intermediate image: it is
-/// composed without the depth test.
+/// geometry covers, the volume's iso hit under it ([`super::volume_hit`]:
+/// the warp's bilinear weights over the intermediate hits) is compared with
+/// the geometry's depth: a hit at or behind the geometry is hidden (the pixel
+/// is the geometry's colour), one in front is composed over it as in
+/// [`composite_over_geometry`]. Elsewhere the volume is over the geometry as
+/// there. A perspective frame split into pyramids is tested the same way,
+/// each pixel against the pyramid that owns it, when the renderer kept the
+/// pyramids' depths ([`crate::render::Renderer::set_keep_depths`]; without,
+/// its pixels are composed without the test).
 pub fn composite_iso_over_geometry(
     image: &mut Image,
     geometry: &GeometryImage,
     renderer: &crate::render::Renderer,
     limits: &GeometryLimits,
 ) {
-    let plans = renderer.last_plans();
-    let inter = renderer.intermediate();
-    let [Some(plan)] = [plans.first().filter(|p| plans.len() == 1 && inter.size == p.grid.size)] else {
-        composite_over_geometry(image, geometry);
-        return;
-    };
     assert_eq!((image.width, image.height), (geometry.width, geometry.height), "image sizes");
     let w = image.width;
-    let (nk, [gw, gh]) = (plan.slices(), plan.grid.size);
     let proj = &limits.projector;
     image.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(v, row)| {
         for (u, px) in row.iter_mut().enumerate() {
@@ -423,32 +417,7 @@ pub fn composite_iso_over_geometry(
             if !gd.is_finite() {
                 continue;
             }
-            // the volume's hit under this output pixel: the mean position of
-            // the neighbouring intermediate pixels' hits, by warp weight
-            let hidden = plan.output_to_intermediate(u as f64, v as f64).is_some_and(|[p, q]| {
-                let (x0, y0) = (p.floor(), q.floor());
-                let (fx, fy) = (p - x0, q - y0);
-                let (mut wsum, mut at) = (0.0, DVec3::ZERO);
-                for (dx, dy, wt) in
-                    [(0.0, 0.0, (1.0 - fx) * (1.0 - fy)), (1.0, 0.0, fx * (1.0 - fy)), (0.0, 1.0, (1.0 - fx) * fy), (1.0, 1.0, fx * fy)]
-                {
-                    let (x, y) = (x0 + dx, y0 + dy);
-                    if x < 0.0 || y < 0.0 || x >= gw as f64 || y >= gh as f64 || wt <= 0.0 {
-                        continue;
-                    }
-                    let k = inter.depth_at(x as usize, y as usize) as f64;
-                    if !k.is_finite() || nk == 0 {
-                        continue;
-                    }
-                    // the sample positions are affine in k: between the slices around k
-                    let k0 = (k.floor() as usize).min(nk - 1);
-                    let k1 = (k0 + 1).min(nk - 1);
-                    let (a, b) = (sample_voxel(plan, k0, x as usize, y as usize), sample_voxel(plan, k1, x as usize, y as usize));
-                    wsum += wt;
-                    at += wt * (a + (b - a) * (k - k0 as f64));
-                }
-                wsum >= 0.5 && -proj.eye_space(at / wsum).z >= gd
-            });
+            let hidden = super::volume_hit(renderer, u as f64, v as f64).is_some_and(|at| -proj.eye_space(at).z >= gd);
             if hidden {
                 *px = g;
             } else {

@@ -16,19 +16,24 @@
 //!   geometry's colour;
 //! - [`clip_mesh`]: a closed convex mesh as a clip region, its inside or
 //!   outside kept ([`MeshClip`], a [`crate::view::plan::Limiter`]: its front
-//!   and back faces' depth buffers through the inverse warp's gather).
+//!   and back faces' depth buffers through the inverse warp's gather);
+//! - [`hit`]: the volume's iso hit under an output pixel of the last frame,
+//!   plain or split into pyramids ([`volume_hit`]: the depth test of the
+//!   final image and the viewer's lens).
 //!
 //! The depth buffer is in the reference renderer's depth units (world units
 //! along the view from the plane through the volume centre), so a pixel's
 //! geometry and volume depths compare directly.
 
 pub mod clip_mesh;
+pub mod hit;
 pub mod inverse_warp;
 pub mod io;
 pub mod mesh;
 pub mod raster;
 
 pub use clip_mesh::{ConvexMesh, MeshClip};
+pub use hit::volume_hit;
 pub use inverse_warp::{GeometryLimits, composite_iso_over_geometry, composite_over_geometry};
 pub use io::load_mesh;
 pub use mesh::Mesh;

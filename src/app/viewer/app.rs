@@ -79,7 +79,11 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
                 return Err(anyhow::Error::new(Usage("the viewer's lens is a sphere: give --focus sphere:x,y,z,r".into())));
             };
             let unit = spacing.iter().fold(f32::INFINITY, |a, &b| a.min(b)) as f64;
-            Some(Lens { centre: [0, 1, 2].map(|a| (centre[a] - (d[a] as f64 - 1.0) / 2.0) * spacing[a] as f64), radius: radius * unit })
+            Some(Lens {
+                centre: [0, 1, 2].map(|a| (centre[a] - (d[a] as f64 - 1.0) / 2.0) * spacing[a] as f64),
+                radius: radius * unit,
+                at: None,
+            })
         }
     };
     // --perspective: both displays (a fixed eye distance; no fly-in yet)

@@ -88,8 +88,14 @@ pub struct Spec {
 /// inside which the focus tissue (`--focus-tissue`) classifies the volume.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lens {
+    /// The centre the lens falls back on: at the volume centre's depth under
+    /// the mouse, or `--focus`'s.
     pub centre: [f64; 3],
     pub radius: f64,
+    /// The output pixel under the mouse the lens follows (None: `--focus`'s
+    /// fixed lens): the worker centres the lens on the first visible surface
+    /// there, `centre` where the ray meets none.
+    pub at: Option<[f64; 2]>,
 }
 
 /// A clip plane in world millimetres from the volume centre: the side kept is
@@ -229,8 +235,8 @@ pub enum Key {
     /// C: a clip plane through the volume's centre facing the viewer (the
     /// half nearer the viewer removed), or off again.
     ToggleClip,
-    /// L: the lens on (centred under the mouse at the depth of the volume
-    /// centre, following it) or off.
+    /// L: the lens on (centred on the first visible surface under the mouse,
+    /// following it; at the volume centre's depth where the ray meets none) or off.
     ToggleLens,
     /// `,` / `.`: the lens smaller / larger.
     LensSmaller,
@@ -540,7 +546,7 @@ impl State {
                             if centre == l.centre || centre.iter().any(|c| !c.is_finite()) {
                                 return Outcome::Nothing;
                             }
-                            self.lens = Some(Lens { centre, ..l });
+                            self.lens = Some(Lens { centre, at: Some([x, y]), ..l });
                             self.changed()
                         }
                         _ => Outcome::Nothing,
@@ -614,7 +620,11 @@ impl State {
                 Key::ToggleLens => {
                     self.lens = match self.lens {
                         Some(_) => None,
-                        None => Some(Lens { centre: self.world_under(self.cursor.0, self.cursor.1), radius: self.lens_radius }),
+                        None => Some(Lens {
+                            centre: self.world_under(self.cursor.0, self.cursor.1),
+                            radius: self.lens_radius,
+                            at: Some([self.cursor.0, self.cursor.1]),
+                        }),
                     };
                     self.changed()
                 }
@@ -863,8 +873,9 @@ mod tests {
         })
     }
 
-    /// L puts a lens under the mouse at the volume centre's depth; it
-    /// follows the mouse, `,` / `.` size it, L removes it.
+    /// L puts a lens under the mouse (its fallback centre at the volume
+    /// centre's depth, the pixel for the worker's surface); it follows the
+    /// mouse, `,` / `.` size it, L removes it.
     #[test]
     fn lens_key_places_a_lens_that_follows_the_mouse() {
         let mut s = start();

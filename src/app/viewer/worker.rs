@@ -17,10 +17,12 @@ use std::thread::JoinHandle;
 use std::time::Instant;
 
 use super::state::{Class, Kind, Lens, Plane, Spec};
+use rayon::prelude::*;
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
-use shearwarp::render::{Deluxe, Focus, Footprint, FrameStats, Renderer, Settings};
+use shearwarp::geometry::volume_hit;
+use shearwarp::render::{Deluxe, Focus, Footprint, FrameStats, Method, Renderer, Settings};
 use shearwarp::view::Projection;
 use shearwarp::view::clip::{ClipPlane, ClipPlanes, Region};
 use shearwarp::warp::{Canvas, Image8, Texel};
@@ -93,6 +95,10 @@ pub struct Renderers {
     /// densest preset) and the lens the tissue renderer has now.
     focus_tissue: String,
     lens: Option<Lens>,
+    /// The lens's surface: the iso hits (voxel indices, NaN where none) of
+    /// every output pixel of the context frame (no lens, iso at the tissue's
+    /// threshold) of a spec (its `seq` and `lens` cleared).
+    surface: Option<(Spec, Vec<[f64; 3]>)>,
 }
 
 impl Renderers {
@@ -120,6 +126,7 @@ impl Renderers {
             dims,
             focus_tissue,
             lens: None,
+            surface: None,
         })
     }
 
@@ -242,19 +249,101 @@ impl Renderers {
         Ok(r)
     }
 
-    /// Renders `spec` into `img`.
+    /// Renders `spec` into `img` (its lens on the surface under the mouse:
+    /// [`Renderers::lens_on_surface`]).
     pub fn render<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats> {
+        let lens = match spec.lens {
+            Some(l) => Some(self.lens_on_surface(spec, l)?),
+            None => None,
+        };
+        self.set_lens(lens)?;
+        self.render_spec(spec, img)
+    }
+
+    fn set_lens(&mut self, lens: Option<Lens>) -> shearwarp::Result<()> {
+        if lens != self.lens {
+            let focus = lens.map(|l| self.lens_focus(l));
+            self.tissues.set_focus(focus)?;
+            self.lens = lens;
+        }
+        Ok(())
+    }
+
+    /// The lens `l` of `spec` centred on the first visible surface under
+    /// the mouse (`l.at`): the iso hit of the context frame (`spec` without
+    /// the lens, in iso mode: the tissue's threshold) under that output pixel
+    /// ([`shearwarp::geometry::volume_hit`], the depth test's lookup; a
+    /// perspective frame split into pyramids keeps their depths for it), and
+    /// `l` as it is (the volume centre's depth) where the ray meets no
+    /// surface. The blend display takes the same iso depth of the tissue's
+    /// threshold: its traversal records no per-ray depth, and so the lens of
+    /// the still blend frame is where the iso preview put it. Not the lens
+    /// frame's own hit: inside the lens the focus tissue shows, so that hit
+    /// lies deeper and the lens would walk away from the skin frame by
+    /// frame. The lens moves with the mouse only: while the mouse stays (a
+    /// rotation, a size or tissue change) it keeps its place in the volume,
+    /// as before. The context frame is rendered once per view (camera, tissue,
+    /// projection, quality, clip) and its hits kept, so a mouse move costs one
+    /// frame, as before, the first after a rotation two. Only on the raycaster (`--method binary` / `brute`,
+    /// where a focus or mode switch rebuilds nothing); with the RLE paths and
+    /// a custom iso value the lens stays at the volume centre's depth.
+    pub fn lens_on_surface(&mut self, spec: &Spec, l: Lens) -> shearwarp::Result<Lens> {
+        let Some([x, y]) = l.at else { return Ok(l) };
+        // the mouse has not moved since the lens was placed (a rotation, a
+        // size or tissue change): it stays where it is in the volume
+        if let Some(prev) = self.lens.filter(|p| p.at == l.at) {
+            return Ok(Lens { centre: prev.centre, ..l });
+        }
+        let raycast = matches!(self.tissues.settings().method, Method::Binary | Method::Brute);
+        if !raycast || !matches!(spec.class, Class::Tissue(_)) {
+            return Ok(l);
+        }
+        let key = Spec { seq: 0, lens: None, ..*spec };
+        if self.surface.as_ref().is_none_or(|(k, _)| *k != key) {
+            self.surface = None;
+            self.set_lens(None)?;
+            let mode = self.mode;
+            let settings = self.tissues.settings();
+            self.tissues.set_settings(Settings { mode: Mode::Iso, ..settings })?;
+            self.mode = Mode::Iso;
+            self.tissues.set_keep_depths(true);
+            let [w, h] = spec.camera.size;
+            let mut scratch = Image8::new(w, h);
+            let done = self.render_spec(&key, &mut scratch);
+            let r = &self.tissues;
+            let hits: Vec<[f64; 3]> = (0..w * h)
+                .into_par_iter()
+                .map(|i| volume_hit(r, (i % w) as f64, (i / w) as f64).map_or([f64::NAN; 3], |v| v.to_array()))
+                .collect();
+            self.mode = mode;
+            self.tissues.set_keep_depths(false);
+            self.tissues.set_settings(Settings { mode, ..self.tissues.settings() })?;
+            done?;
+            self.surface = Some((key, hits));
+        }
+        let (_, hits) = self.surface.as_ref().expect("made above");
+        let [w, h] = spec.camera.size;
+        let (u, v) = (x.round(), y.round());
+        if u < 0.0 || v < 0.0 || u >= w as f64 || v >= h as f64 {
+            return Ok(l);
+        }
+        let p = hits[v as usize * w + u as usize];
+        if p.iter().any(|c| !c.is_finite()) {
+            return Ok(l);
+        }
+        // voxel indices to world millimetres from the volume centre (lens_focus's inverse)
+        let centre = [0, 1, 2].map(|a| (p[a] - (self.dims[a] as f64 - 1.0) / 2.0) * self.spacing[a] as f64);
+        Ok(Lens { centre, ..l })
+    }
+
+    /// Renders `spec` into `img` with the lens the renderers have now.
+    fn render_spec<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats> {
         if spec.projection != self.projection {
             self.set_projection(spec.projection)?;
         }
         if spec.clip != self.interactive {
             self.interactive = spec.clip;
             self.build_limiter();
-        }
-        if spec.lens != self.lens {
-            let focus = spec.lens.map(|l| self.lens_focus(l));
-            self.tissues.set_focus(focus)?;
-            self.lens = spec.lens;
         }
         let q = spec.quality;
         let r = self.select(spec.class, spec.cell)?;
@@ -475,6 +564,72 @@ mod tests {
                 Reply::Failed { error, .. } => panic!("{error}"),
                 Reply::Busy { .. } | Reply::Prefetched { .. } => {}
             }
+        }
+    }
+
+    /// The lens under the mouse is centred on the first visible surface
+    /// (the iso hit of the context frame at the tissue's threshold): over the
+    /// sphere phantom, on the analytic iso surface of the tissue's threshold
+    /// (the phantom's density is 100 + 25·(R − r)) within a voxel and within
+    /// a voxel of the pixel's ray, on the eye's side; off the ball, at the
+    /// fallback centre given. The iso preview and the blend display put it at
+    /// the same place; parallel, and a perspective frame split into pyramids.
+    #[test]
+    fn lens_centre_is_on_the_surface_under_the_mouse() {
+        use shearwarp::accuracy::reference::Rays;
+        use shearwarp::data::phantom::{sphere, sphere_geometry};
+        let dims = [40, 40, 40];
+        let vol = sphere(dims).unwrap();
+        let (c, radius) = sphere_geometry(dims);
+        let c = glam::DVec3::from_array(c);
+        let tissues = presets::tissues_for(&vol);
+        let t = tissues[0].threshold as f64;
+        assert!(t > 0.0 && t < 200.0, "the tissue's iso surface is in the ramp ({t})");
+        let surface = radius + (100.0 - t) / 25.0;
+        let rot = shearwarp::view::rotate_eye(shearwarp::view::NamedView::Anterior.rotation(), 1, 20.0);
+        let cam = Camera { rotation: rot, zoom: None, size: [64, 48] };
+        let fallback = Lens { centre: [1.0, 2.0, 3.0], radius: 10.0, at: None };
+        for projection in [Projection::Parallel, Projection::perspective(90.0, 0.45).unwrap()] {
+            let mut centres = vec![];
+            for mode in [Mode::Iso, Mode::Blend] {
+                let mut r = Renderers::new(vol.clone(), &tissues, Settings { mode, threads: 1, ..Settings::default() }).unwrap();
+                let spec = Spec {
+                    seq: 1,
+                    camera: cam,
+                    class: Class::Tissue(0),
+                    cell: 1,
+                    projection,
+                    quality: 1.0,
+                    clip: None,
+                    lens: None,
+                    still: true,
+                };
+                let rays = Rays::with_projection(&cam, &projection, dims, [1.0; 3]).unwrap();
+                let toward_eye = rot.transpose() * glam::DVec3::Z;
+                let mut img = Image::new(64, 48);
+                for at in [[32.0, 24.0], [40.0, 20.0], [25.0, 30.0]] {
+                    let l = Lens { at: Some(at), ..fallback };
+                    let got = r.lens_on_surface(&Spec { lens: Some(l), ..spec }, l).unwrap();
+                    let p = glam::DVec3::from_array([0, 1, 2].map(|a| got.centre[a] + (dims[a] as f64 - 1.0) / 2.0));
+                    let what = format!("{projection:?} {mode:?} at {at:?}: {p}");
+                    assert!(((p - c).length() - surface).abs() <= 1.0, "{what}: {} from the centre, surface {surface}", (p - c).length());
+                    let (o, d) = rays.ray(at[0], at[1]);
+                    assert!((p - o).cross(d).length() / d.length() <= 1.0, "{what}: off the pixel's ray");
+                    assert!((p - c).dot(toward_eye) > 0.0, "{what}: on the far side");
+                    centres.push(got.centre);
+                    // the frame renders with it (a lens that follows the mouse)
+                    r.render(&Spec { lens: Some(l), ..spec }, &mut img).unwrap();
+                }
+                if projection.is_perspective() {
+                    assert!(r.select(Class::Tissue(0), 1).unwrap().last_plans().len() > 1, "the frame splits");
+                }
+                // off the ball: the fallback
+                let l = Lens { at: Some([1.0, 1.0]), ..fallback };
+                assert_eq!(r.lens_on_surface(&Spec { lens: Some(l), ..spec }, l).unwrap(), l, "{projection:?} {mode:?}: off the ball");
+                let l = Lens { at: None, ..fallback };
+                assert_eq!(r.lens_on_surface(&Spec { lens: Some(l), ..spec }, l).unwrap(), l, "a --focus lens stays");
+            }
+            assert_eq!(centres[..3], centres[3..], "{projection:?}: the preview and the blend display agree");
         }
     }
 

@@ -828,6 +828,12 @@ impl Renderer {
     pub fn last_plans(&self) -> &[FramePlan] {
         if self.last_split { &self.pyramid_plans[..self.pyramid_count] } else { self.plan.as_slice() }
     }
+
+    /// Runs `f` on the renderer's thread pool (where its frames' limiters
+    /// run: to time one as a frame does).
+    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        self.pool.install(f)
+    }
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
         self.masks.iter().flatten().map(|m| m.mask.bytes()).sum()

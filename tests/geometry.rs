@@ -124,7 +124,7 @@ fn geometry_mesh_in_front_behind_and_inside_the_volume() {
                 composite_over_geometry(&mut img, &geo);
                 let ctx = format!("{name} {projection:?} {method:?}");
                 for (i, (&v, &p)) in vol_img.data.iter().zip(&plain.data).enumerate() {
-                    let covered = geo.depth[i].is_finite();
+                    let covered = geo.depth()[i].is_finite();
                     match name {
                         "front" if covered => {
                             assert_eq!(v, [0.0; 4], "{ctx}: pixel {i}: the volume behind the plate composites nothing");

@@ -931,6 +931,13 @@ impl Renderer {
             _ => f32::NAN,
         }
     }
+
+    /// Runs `f` on the renderer's thread pool (where its frames' limiters
+    /// run: to time one as a frame does).
+    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        self.pool.install(f)
+    }
+
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
         self.masks.iter().flatten().map(|m| m.mask.bytes()).sum()

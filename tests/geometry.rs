@@ -124,7 +124,7 @@ fn geometry_mesh_in_front_behind_and_inside_the_volume() {
                 composite_over_geometry(&mut img, &geo);
                 let ctx = format!("{name} {projection:?} {method:?}");
                 for (i, (&v, &p)) in vol_img.data.iter().zip(&plain.data).enumerate() {
-                    let covered = geo.depth[i].is_finite();
+                    let covered = geo.depth()[i].is_finite();
                     match name {
                         "front" if covered => {
                             assert_eq!(v, [0.0; 4], "{ctx}: pixel {i}: the volume behind the plate composites nothing");
@@ -293,7 +293,7 @@ fn geometry_split_frame_needle_through_the_sphere_is_the_nearer_surface() {
         let mut fin = img.clone();
         composite_iso_over_geometry(&mut fin, &geo, &r, &gl);
         let mut hidden = 0;
-        for (i, (&vd, &gd)) in vdepth.iter().zip(&geo.depth).enumerate() {
+        for (i, (&vd, &gd)) in vdepth.iter().zip(geo.depth()).enumerate() {
             if gd.is_finite() && vd >= gd {
                 assert_eq!(fin.data[i], geo.color[i], "{method:?}: pixel {i}: the needle hides the volume behind it");
                 hidden += 1;
@@ -308,7 +308,7 @@ fn geometry_split_frame_needle_through_the_sphere_is_the_nearer_surface() {
             for x in 0..size {
                 let i = y * size + x;
                 let covered = |x: i64, y: i64| {
-                    geo.depth[(y.clamp(0, size as i64 - 1) as usize) * size + x.clamp(0, size as i64 - 1) as usize].is_finite()
+                    geo.depth()[(y.clamp(0, size as i64 - 1) as usize) * size + x.clamp(0, size as i64 - 1) as usize].is_finite()
                 };
                 let here = covered(x as i64, y as i64);
                 if (-2..=2).any(|dy| (-2..=2).any(|dx| covered(x as i64 + dx, y as i64 + dy) != here)) {
@@ -329,7 +329,7 @@ fn geometry_split_frame_needle_through_the_sphere_is_the_nearer_surface() {
                     continue;
                 }
                 let truth = [ts, tn].into_iter().flatten().map(|t| rays.depth_of(o + t * d)).fold(f64::INFINITY, f64::min);
-                let seen = if vdepth[i].is_nan() { geo.depth[i] } else { vdepth[i].min(geo.depth[i]) };
+                let seen = if vdepth[i].is_nan() { geo.depth()[i] } else { vdepth[i].min(geo.depth()[i]) };
                 if truth.is_infinite() {
                     assert!(seen.is_infinite(), "{method:?} ({x}, {y}): {seen} where nothing is");
                     continue;
@@ -342,7 +342,7 @@ fn geometry_split_frame_needle_through_the_sphere_is_the_nearer_surface() {
                     (seen - truth).abs() <= tol,
                     "{method:?} ({x}, {y}): seen {seen} (volume {}, needle {}), truth {truth} (sphere {sphere_depth:?}, needle {:?})",
                     vdepth[i],
-                    geo.depth[i],
+                    geo.depth()[i],
                     tn.map(|t| rays.depth_of(o + t * d))
                 );
             }

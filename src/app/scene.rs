@@ -338,20 +338,25 @@ impl Scene {
         // iso on the raycaster: keep the crossing slice and depth-test the hits at composition
         let settings = r.settings();
         let crossing = settings.mode == Mode::Iso && matches!(settings.method, Method::Binary | Method::Brute);
+        let t = Instant::now();
         let geometry = Arc::new(GeometryLimits::new(proj, &geo).with_iso_crossing(crossing));
+        let make_ms = t.elapsed().as_secs_f64() * 1e3;
         limiters.push(geometry.clone());
         let limiter: Arc<dyn Limiter> = if limiters.len() == 1 { geometry.clone() } else { Arc::new(Limiters::new(limiters)?) };
         r.set_limiter(Some(limiter));
         // (a split perspective frame keeps each pyramid's iso depth for the depth test)
         r.set_keep_depths(crossing);
         let st = r.render(cam, img)?;
-        // the inverse warp's own cost, on this frame's plan(s)
+        // the inverse warp's own cost, on this frame's plan(s): reading the
+        // depth buffer, then the limiter run once more (its buffers made first)
+        let mut bufs: Vec<_> = r.last_plans().iter().map(|p| shearwarp::view::plan::RayLimits::open(p.grid.size, p.slices())).collect();
         let t = Instant::now();
-        for plan in r.last_plans() {
-            let mut l = shearwarp::view::plan::RayLimits::open(plan.grid.size, plan.slices());
-            geometry.limit(plan, &mut l);
-        }
-        cost.inverse_warp_ms = t.elapsed().as_secs_f64() * 1e3;
+        r.install(|| {
+            for (plan, l) in r.last_plans().iter().zip(&mut bufs) {
+                geometry.limit(plan, l);
+            }
+        });
+        cost.inverse_warp_ms = make_ms + t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         if crossing {
             composite_iso_over_geometry(img, &geo, r, &geometry);

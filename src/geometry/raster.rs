@@ -50,19 +50,43 @@ impl Default for Material {
 
 /// A colour and depth buffer at the output resolution: `color` is opaque
 /// (`α = 1`) where a triangle covers the pixel centre, `[0; 4]` elsewhere;
-/// `depth` the nearest surface's depth, `+∞` where none.
+/// [`GeometryImage::depth`] the nearest surface's depth, `+∞` where none.
+///
+/// The depth is written only by [`rasterize`], which also keeps each row's
+/// covered span ([`GeometryImage::row_span`]): the inverse warp reads the
+/// covered pixels without scanning the whole buffer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GeometryImage {
     pub width: usize,
     pub height: usize,
     pub color: Vec<[f32; 4]>,
-    pub depth: Vec<f64>,
+    pub(crate) depth: Vec<f64>,
+    /// Per row, the first and last covered pixel (`[1, 0]`: none).
+    spans: Vec<[u32; 2]>,
 }
 
 impl GeometryImage {
     /// An empty buffer.
     pub fn new(width: usize, height: usize) -> Self {
-        GeometryImage { width, height, color: vec![[0.0; 4]; width * height], depth: vec![f64::INFINITY; width * height] }
+        GeometryImage {
+            width,
+            height,
+            color: vec![[0.0; 4]; width * height],
+            depth: vec![f64::INFINITY; width * height],
+            spans: vec![[1, 0]; height],
+        }
+    }
+
+    /// The depth buffer, row-major (`+∞` where no triangle covers a pixel centre).
+    pub fn depth(&self) -> &[f64] {
+        &self.depth
+    }
+
+    /// Row `y`'s covered pixels lie in `x0 ..= x1` (None: the row has none).
+    #[inline]
+    pub fn row_span(&self, y: usize) -> Option<[usize; 2]> {
+        let [a, b] = self.spans[y];
+        (a <= b).then_some([a as usize, b as usize])
     }
 
     /// Fraction of pixels covered.
@@ -253,7 +277,27 @@ fn fill(out: &mut GeometryImage, v: [(f64, f64, f64, f64); 3], cull: Cull, color
         return;
     }
     for y in y0 as usize..=y1 as usize {
-        for x in x0 as usize..=x1 as usize {
+        // the row's pixels inside every edge, solved on the edges' lines and
+        // widened by a pixel (a long thin triangle's box is mostly outside
+        // it); the exact test below decides each pixel of that range
+        let (mut lo, mut hi) = (x0, x1);
+        for &(a, b) in &edges {
+            let dy = b.1 - a.1;
+            if dy != 0.0 {
+                let at = a.0 + (b.0 - a.0) * (y as f64 - a.1) / dy;
+                // inside lies where −dy·(x − at) > 0
+                if dy < 0.0 {
+                    lo = lo.max((at - 1.0).floor());
+                } else {
+                    hi = hi.min((at + 1.0).ceil());
+                }
+            }
+        }
+        if !(lo <= hi) {
+            continue;
+        }
+        let (mut first, mut last) = (u32::MAX, 0u32);
+        for x in lo as usize..=hi as usize {
             let q = (x as f64, y as f64);
             let b = edges.map(|(a, c)| edge(a, c, q));
             if !(0..3).all(|i| b[i] > 0.0 || (b[i] == 0.0 && tl[i])) {
@@ -267,7 +311,13 @@ fn fill(out: &mut GeometryImage, v: [(f64, f64, f64, f64); 3], cull: Cull, color
             if depth < out.depth[i] {
                 out.depth[i] = depth;
                 out.color[i] = color;
+                first = first.min(x as u32);
+                last = x as u32;
             }
+        }
+        if first <= last {
+            let s = &mut out.spans[y];
+            *s = if s[0] > s[1] { [first, last] } else { [s[0].min(first), s[1].max(last)] };
         }
     }
 }
@@ -279,6 +329,29 @@ mod tests {
 
     fn projector(size: usize, rot: DMat3, projection: Projection) -> Projector {
         Projector::new(&Camera::new(rot, [size, size]), &projection, [64, 64, 64], [1.0; 3]).unwrap()
+    }
+
+    /// The rows' covered spans kept while rasterizing are exactly the first
+    /// and last covered pixel of each row (what the inverse warp reads
+    /// instead of the whole buffer).
+    #[test]
+    fn row_spans_are_the_covered_pixels() {
+        let rot = rotate_eye(NamedView::Anterior.rotation(), 1, 37.0);
+        for projection in [Projection::Parallel, Projection::perspective(40.0, 2.0).unwrap()] {
+            let p = projector(96, rot, projection);
+            let mut img = GeometryImage::new(96, 96);
+            let a = Mesh::cylinder(DVec3::new(2.0, 5.0, 3.0), DVec3::new(60.0, 50.0, 40.0), 1.5, 16).unwrap();
+            let b = Mesh::sphere(DVec3::new(45.0, 20.0, 30.0), 9.0, 64).unwrap();
+            for m in [&a, &b] {
+                rasterize(m, &Material::default(), Cull::None, &p, &mut img).unwrap();
+            }
+            for y in 0..96 {
+                let row = &img.depth()[y * 96..(y + 1) * 96];
+                let want = row.iter().position(|d| d.is_finite()).map(|x0| [x0, row.iter().rposition(|d| d.is_finite()).unwrap()]);
+                assert_eq!(img.row_span(y), want, "{projection:?} row {y}");
+            }
+            assert!(img.coverage() > 0.002, "{projection:?}: something drawn ({})", img.coverage());
+        }
     }
 
     /// A sphere's rasterized depth is the analytic depth of the nearer

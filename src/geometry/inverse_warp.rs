@@ -213,17 +213,39 @@ fn reach_of(plan: &FramePlan, [x0, y0, x1, y1]: [usize; 4]) -> Option<[usize; 4]
     Some([clampi(lo[0].floor() - 1.0, w), clampi(lo[1].floor() - 1.0, h), clampi(hi[0].ceil() + 1.0, w), clampi(hi[1].ceil() + 1.0, h)])
 }
 
-/// `x.floor()` without the library call (the default x86-64 target has no
-/// rounding instruction): exact for every finite `|x| < 2⁵²`, the library
-/// otherwise.
+/// `⌊x⌋` as an integer, for pixel positions (clamped to ±2³⁰ first: far
+/// outside any image; NaN gives 0). Exact, and no library call (the default
+/// x86-64 target has no rounding instruction).
+#[inline(always)]
+fn floor_i(x: f64) -> i32 {
+    let x = max(min(x, 1073741824.0), -1073741824.0);
+    let t = x as i32;
+    if t as f64 > x { t - 1 } else { t }
+}
+
+/// `⌈x⌉` as an integer, as [`floor_i`].
+#[inline(always)]
+fn ceil_i(x: f64) -> i32 {
+    -floor_i(-x)
+}
+
+/// `x` rounded half away from zero, as an integer, as [`floor_i`].
+#[inline(always)]
+fn round_i(x: f64) -> i32 {
+    if x >= 0.0 { floor_i(x + 0.5) } else { -floor_i(-x + 0.5) }
+}
+
+/// `x.floor()` for a slice position (`|x|` below 2⁵²), as [`floor_i`].
 #[inline(always)]
 fn floor(x: f64) -> f64 {
-    if x.abs() < 4.5e15 {
-        let t = x as i64 as f64;
-        if t > x { t - 1.0 } else { t }
-    } else {
-        x.floor()
-    }
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
+}
+
+/// `x.ceil()`, as [`floor`].
+#[inline(always)]
+fn ceil(x: f64) -> f64 {
+    -floor(-x)
 }
 
 /// The smaller of `a` and `b` (no NaN handling: the depths and positions
@@ -239,58 +261,29 @@ fn max(a: f64, b: f64) -> f64 {
     if b > a { b } else { a }
 }
 
-/// `x` clamped to the indices `0 ..= n − 1` (`n ≥ 1`; NaN gives 0).
-#[inline(always)]
-fn clampi(x: f64, n: usize) -> usize {
-    if x >= (n - 1) as f64 {
-        n - 1
-    } else if x > 0.0 {
-        x as usize
-    } else {
-        0
-    }
-}
-
-/// `x.ceil()`, as [`floor`].
-#[inline(always)]
-fn ceil(x: f64) -> f64 {
-    -floor(-x)
-}
-
-/// `x.round()` (half away from zero), as [`floor`].
-#[inline(always)]
-fn round(x: f64) -> f64 {
-    if x >= 0.0 { floor(x + 0.5) } else { -floor(-x + 0.5) }
-}
-
 impl GeometryLimits {
     /// The nearest geometry depth over the output pixels whose centres lie in
     /// the box `[u0, u1] × [v0, v1]` (at least the nearest pixel's), `+∞` for none.
     /// (Also read by [`super::clip_mesh`].)
     #[inline]
     pub(crate) fn min_depth(&self, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
-        let [w, h] = self.size;
-        let (x0, x1) = (ceil(u0), floor(u1));
-        let (y0, y1) = (ceil(v0), floor(v1));
+        let [w, h] = self.size.map(|n| n.min(i32::MAX as usize) as i32);
+        let (mut x0, mut x1) = (ceil_i(u0), floor_i(u1));
+        let (mut y0, mut y1) = (ceil_i(v0), floor_i(v1));
         // a footprint smaller than a pixel takes the pixel nearest its centre
-        let (x0, x1) = if x0 > x1 {
-            let c = round((u0 + u1) / 2.0);
-            (c, c)
-        } else {
-            (x0, x1)
-        };
-        let (y0, y1) = if y0 > y1 {
-            let c = round((v0 + v1) / 2.0);
-            (c, c)
-        } else {
-            (y0, y1)
-        };
-        if x1 < 0.0 || y1 < 0.0 || x0 > w as f64 - 1.0 || y0 > h as f64 - 1.0 {
+        if x0 > x1 {
+            (x0, x1) = (round_i((u0 + u1) / 2.0), round_i((u0 + u1) / 2.0));
+        }
+        if y0 > y1 {
+            (y0, y1) = (round_i((v0 + v1) / 2.0), round_i((v0 + v1) / 2.0));
+        }
+        if x1 < 0 || y1 < 0 || x0 > w - 1 || y0 > h - 1 {
             return f64::INFINITY;
         }
-        let (x0, x1) = (clampi(x0, w) as u32, clampi(x1, w) as u32);
+        let (x0, x1) = (x0.max(0) as u32, x1.min(w - 1) as u32);
+        let (y0, y1) = (y0.max(0) as usize, y1.min(h - 1) as usize);
         let mut d = f64::INFINITY;
-        for &([a, b], off) in &self.rows[clampi(y0, h)..=clampi(y1, h)] {
+        for &([a, b], off) in &self.rows[y0..=y1] {
             let (s, e) = (x0.max(a), x1.min(b));
             if s <= e {
                 let seg = &self.packed[off + (s - a) as usize..=off + (e - a) as usize];
@@ -316,6 +309,9 @@ pub(super) fn sample_voxel(plan: &FramePlan, k: usize, p: usize, q: usize) -> DV
 /// affine in the slice index, so slice `k`'s depth is `d₀ + k·(d_last − d₀)/last`.
 struct Gather {
     to_out: DMat3,
+    /// An affine warp (a parallel frame): the footprint box's half extents,
+    /// the same about every pixel's centre.
+    affine: Option<[f64; 2]>,
     half_p: DVec3,
     half_q: DVec3,
     first: [f64; 3],
@@ -330,12 +326,14 @@ impl Gather {
             DMat3::from_cols(DVec3::new(pitch, 0.0, 0.0), DVec3::new(0.0, pitch, 0.0), DVec3::new(-pad * pitch, -pad * pitch, 1.0));
         let to_out = plan.warp.forward * to_sheared;
         let last = plan.slices().saturating_sub(1);
-        let affine = |k: usize| {
+        let depths = |k: usize| {
             let depth = |p: usize, q: usize| -proj.eye_space(sample_voxel(plan, k, p, q)).z;
             let c = depth(0, 0);
             [c, depth(1, 0) - c, depth(0, 1) - c]
         };
-        Gather { to_out, half_p: to_out.x_axis * 0.5, half_q: to_out.y_axis * 0.5, first: affine(0), last_depth: affine(last), last }
+        let (half_p, half_q) = (to_out.x_axis * 0.5, to_out.y_axis * 0.5);
+        let affine = (to_out.row(2) == DVec3::Z).then(|| [half_p.x.abs() + half_q.x.abs(), half_p.y.abs() + half_q.y.abs()]);
+        Gather { to_out, affine, half_p, half_q, first: depths(0), last_depth: depths(last), last }
     }
 }
 
@@ -351,18 +349,20 @@ impl GeometryLimits {
         // bounding box in the output image)
         let (pf, qf) = (p as f64, q as f64);
         let c = g.to_out * DVec3::new(pf, qf, 1.0);
-        let (mut u0, mut u1, mut v0, mut v1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-        for h in [c - g.half_p - g.half_q, c + g.half_p - g.half_q, c + g.half_p + g.half_q, c - g.half_p + g.half_q] {
-            let (u, v) = if h.z == 1.0 {
-                (h.x, h.y)
-            } else if h.z > 0.0 {
-                (h.x / h.z, h.y / h.z)
-            } else {
-                return;
-            };
-            (u0, u1, v0, v1) = (min(u0, u), max(u1, u), min(v0, v), max(v1, v));
-        }
-        let d = self.min_depth(u0, u1, v0, v1);
+        let d = if let Some([ex, ey]) = g.affine {
+            // a parallel frame: the same box about every centre
+            self.min_depth(c.x - ex, c.x + ex, c.y - ey, c.y + ey)
+        } else {
+            let (mut u0, mut u1, mut v0, mut v1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+            for h in [c - g.half_p - g.half_q, c + g.half_p - g.half_q, c + g.half_p + g.half_q, c - g.half_p + g.half_q] {
+                if !(h.z > 0.0) {
+                    return;
+                }
+                let (u, v) = (h.x / h.z, h.y / h.z);
+                (u0, u1, v0, v1) = (min(u0, u), max(u1, u), min(v0, v), max(v1, v));
+            }
+            self.min_depth(u0, u1, v0, v1)
+        };
         if !d.is_finite() {
             return;
         }

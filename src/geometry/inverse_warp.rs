@@ -198,17 +198,34 @@ fn reach_of(plan: &FramePlan, [x0, y0, x1, y1]: [usize; 4]) -> Option<[usize; 4]
     if !(hx.is_finite() && hy.is_finite()) {
         return all;
     }
-    let Some(outer) = back(1.25 * hx + 1.0, 1.25 * hy + 1.0) else { return all };
+    // An affine warp (a parallel frame) gives every pixel the same box, of
+    // half extents (hx, hy) about its centre (the gather's), and a box under
+    // a pixel takes the pixel nearest its centre: the centres that can reach
+    // the rectangle lie within max(hx, ½) of it, and the quad is exact up to
+    // rounding (a millionth of a pixel more). A projective warp's footprint
+    // varies over the quad: a quarter more and a pixel for safety.
+    let affine = plan.warp.forward.row(2) == DVec3::Z;
+    let (ex, ey) = if affine { (hx.max(0.5) + 1e-6, hy.max(0.5) + 1e-6) } else { (1.25 * hx + 1.0, 1.25 * hy + 1.0) };
+    let Some(outer) = back(ex, ey) else { return all };
     let mut lo = [f64::INFINITY; 2];
     let mut hi = [f64::NEG_INFINITY; 2];
     for [p, q] in outer {
         lo = [lo[0].min(p), lo[1].min(q)];
         hi = [hi[0].max(p), hi[1].max(q)];
     }
-    // the pixels whose centres lie in the quad's bounding box, one more for rounding
+    // the pixels whose centres lie in the quad's bounding box, one more for rounding (projective)
     let clampi = |x: f64, n: usize| x.clamp(0.0, n as f64 - 1.0) as usize;
     if hi[0] < -1.0 || hi[1] < -1.0 || lo[0] > w as f64 || lo[1] > h as f64 {
         return None;
+    }
+    if affine {
+        // (the pixels whose centres lie in the quad's bounding box)
+        return Some([
+            clampi((lo[0] - 1e-6).ceil(), w),
+            clampi((lo[1] - 1e-6).ceil(), h),
+            clampi((hi[0] + 1e-6).floor(), w),
+            clampi((hi[1] + 1e-6).floor(), h),
+        ]);
     }
     Some([clampi(lo[0].floor() - 1.0, w), clampi(lo[1].floor() - 1.0, h), clampi(hi[0].ceil() + 1.0, w), clampi(hi[1].ceil() + 1.0, h)])
 }

@@ -59,7 +59,7 @@ fn geometry_accelerated_equals_brute_force() {
                 // the final image: the volume over the geometry, opaque where the geometry is
                 let mut out = binary.clone();
                 composite_over_geometry(&mut out, &geo);
-                for (o, (v, g)) in out.data.iter().zip(binary.data.iter().zip(&geo.color)) {
+                for (o, (v, g)) in out.data.iter().zip(binary.data.iter().zip(geo.color())) {
                     if g[3] == 1.0 {
                         assert!((o[3] - 1.0).abs() < 1e-6, "{what}: not opaque over the geometry");
                     } else {
@@ -128,7 +128,7 @@ fn geometry_mesh_in_front_behind_and_inside_the_volume() {
                     match name {
                         "front" if covered => {
                             assert_eq!(v, [0.0; 4], "{ctx}: pixel {i}: the volume behind the plate composites nothing");
-                            assert_eq!(img.data[i], geo.color[i], "{ctx}: pixel {i} is the plate");
+                            assert_eq!(img.data[i], geo.color()[i], "{ctx}: pixel {i} is the plate");
                         }
                         "behind" | "inside" => {
                             assert_eq!(v, p, "{ctx}: pixel {i}: the volume in front of the mesh is the plain render");
@@ -295,7 +295,7 @@ fn geometry_split_frame_needle_through_the_sphere_is_the_nearer_surface() {
         let mut hidden = 0;
         for (i, (&vd, &gd)) in vdepth.iter().zip(geo.depth()).enumerate() {
             if gd.is_finite() && vd >= gd {
-                assert_eq!(fin.data[i], geo.color[i], "{method:?}: pixel {i}: the needle hides the volume behind it");
+                assert_eq!(fin.data[i], geo.color()[i], "{method:?}: pixel {i}: the needle hides the volume behind it");
                 hidden += 1;
             }
         }

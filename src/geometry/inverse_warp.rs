@@ -477,10 +477,17 @@ impl Limiter for GeometryLimits {
 /// its coverage) over the geometry's colour, `out = vol + (1 − α_vol)·geometry`.
 pub fn composite_over_geometry(image: &mut Image, geometry: &GeometryImage) {
     assert_eq!((image.width, image.height), (geometry.width, geometry.height), "image sizes");
-    for (px, g) in image.data.iter_mut().zip(&geometry.color) {
-        let t = 1.0 - px[3].clamp(0.0, 1.0);
-        for c in 0..4 {
-            px[c] += t * g[c];
+    // (only the rows' covered spans: the geometry's colour is 0 elsewhere,
+    // and its untouched pages are never read)
+    let w = image.width;
+    for y in 0..image.height {
+        let Some([x0, x1]) = geometry.row_span(y) else { continue };
+        let (a, b) = (y * w + x0, y * w + x1);
+        for (px, g) in image.data[a..=b].iter_mut().zip(&geometry.color[a..=b]) {
+            let t = 1.0 - px[3].clamp(0.0, 1.0);
+            for c in 0..4 {
+                px[c] += t * g[c];
+            }
         }
     }
 }

@@ -48,18 +48,18 @@ impl Default for Material {
     }
 }
 
-/// A colour and depth buffer at the output resolution: `color` is opaque
+/// A colour and depth buffer at the output resolution: the colour is opaque
 /// (`α = 1`) where a triangle covers the pixel centre, `[0; 4]` elsewhere;
 /// [`GeometryImage::depth`] the nearest surface's depth, `+∞` where none.
 ///
-/// The depth is written only by [`rasterize`], which also keeps each row's
+/// Colour and depth are written only by [`rasterize`], which also keeps each row's
 /// covered span ([`GeometryImage::row_span`]): the inverse warp reads the
 /// covered pixels without scanning the whole buffer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GeometryImage {
     pub width: usize,
     pub height: usize,
-    pub color: Vec<[f32; 4]>,
+    pub(crate) color: Vec<[f32; 4]>,
     pub(crate) depth: Vec<f64>,
     /// Per row, the first and last covered pixel (`[1, 0]`: none).
     spans: Vec<[u32; 2]>,
@@ -75,6 +75,11 @@ impl GeometryImage {
             depth: vec![f64::INFINITY; width * height],
             spans: vec![[1, 0]; height],
         }
+    }
+
+    /// The colour buffer, row-major (premultiplied, `[0; 4]` where no triangle covers a pixel centre).
+    pub fn color(&self) -> &[[f32; 4]] {
+        &self.color
     }
 
     /// The depth buffer, row-major (`+∞` where no triangle covers a pixel centre).

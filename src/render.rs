@@ -938,6 +938,16 @@ impl Renderer {
         self.pool.install(f)
     }
 
+    /// Runs limiter `l` on `plan` as a frame does: on the renderer's thread
+    /// pool when it asks for it ([`Limiter::parallel`]), else on this thread.
+    pub fn run_limiter(&self, l: &dyn Limiter, plan: &FramePlan, limits: &mut RayLimits) {
+        if l.parallel(plan) {
+            self.pool.install(|| l.limit(plan, limits));
+        } else {
+            l.limit(plan, limits);
+        }
+    }
+
     /// Bytes of the packed masks that exist now.
     pub fn mask_bytes(&self) -> usize {
         self.masks.iter().flatten().map(|m| m.mask.bytes()).sum()
@@ -1509,7 +1519,11 @@ impl Renderer {
         plan.set_box_footprint(self.settings.footprint == Footprint::Box);
         plan.set_intermediate(self.settings.deluxe.intermediate);
         if let Some((l, _)) = &self.limiter {
-            self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
+            if l.parallel(plan) {
+                self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
+            } else {
+                plan.apply_limiter(l.as_ref(), limits.unwrap_or_default());
+            }
         }
         // focus+context: each ray's slices inside the focus region (the clip
         // region's analytic interval, checked on the samples)

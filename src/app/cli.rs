@@ -859,6 +859,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let pb = progress(frames as u64, cmd.render.quiet || cmd.json, "rotating");
     let mut img = Image::new(cam0.size[0], cam0.size[1]);
     let mut all: Vec<FrameStats> = Vec::with_capacity(frames);
+    let mut costs: Vec<crate::app::scene::GeometryCost> = Vec::with_capacity(frames);
     let loop_start = std::time::Instant::now();
     let mut frames_wall_ms = 0.0;
     for f in 0..frames {
@@ -877,7 +878,8 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             switch_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
         let t = std::time::Instant::now();
-        let (st, _) = scene.render(&mut r, &cam, &mut img)?;
+        let (st, cost) = scene.render(&mut r, &cam, &mut img)?;
+        costs.push(cost);
         let wall = t.elapsed().as_secs_f64() * 1e3;
         frames_wall_ms += wall;
         if switched {
@@ -952,6 +954,16 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         j["deluxe"] = r.settings().deluxe.label().into();
         j["grid"] = r.settings().lattice.name().into();
         j["rle_reuse"] = r.settings().rle_reuse.into();
+        if scene.has_meshes() {
+            // the geometry's own cost per frame, beside the volume's frame (medians
+            // over the turn: warm, as a user rotating the scene sees them)
+            let g = |f: fn(&crate::app::scene::GeometryCost) -> f64| median(&mut costs.iter().map(f).collect::<Vec<_>>());
+            let mut share: Vec<f64> = costs.iter().zip(&all).map(|(c, s)| c.inverse_warp_ms / s.frame_ms()).collect();
+            j["geometry"] = serde_json::json!({
+                "raster_ms_median": g(|c| c.raster_ms), "inverse_warp_ms_median": g(|c| c.inverse_warp_ms),
+                "composite_ms_median": g(|c| c.composite_ms), "inverse_warp_share_median": median(&mut share),
+            });
+        }
         say!("{j}");
     } else {
         say!(

@@ -207,6 +207,9 @@ pub struct Scene {
     /// after a tissue switch, draws nothing again).
     focus_mesh: Option<(ConvexMesh, String)>,
     focus_drawn: std::sync::Mutex<Option<DrawnFocus>>,
+    /// The meshes' colour and depth buffer, kept from frame to frame (cleared
+    /// where the last frame drew, not reallocated).
+    drawn: std::sync::Mutex<Option<GeometryImage>>,
     dims: [usize; 3],
     spacing: [f32; 3],
 }
@@ -280,7 +283,17 @@ impl Scene {
             _ => Some(Arc::new(Limiters::new(limiters).map_err(|e| usage(e.to_string()))?)),
         };
         let material = Material { color: args.mesh_color.map(|c| c as f32), ..Material::default() };
-        Ok(Scene { meshes, material, clip, clip_mesh, focus_mesh, focus_drawn: Default::default(), dims, spacing })
+        Ok(Scene {
+            meshes,
+            material,
+            clip,
+            clip_mesh,
+            focus_mesh,
+            focus_drawn: Default::default(),
+            drawn: Default::default(),
+            dims,
+            spacing,
+        })
     }
 
     /// True when the scene has meshes (drawn every frame).
@@ -330,16 +343,18 @@ impl Scene {
             r.set_limiter(Some(Arc::new(Limiters::new(limiters)?)));
             return Ok((r.render(cam, img)?, cost));
         }
-        let mut geo = GeometryImage::new(cam.size[0], cam.size[1]);
+        let mut kept = self.drawn.lock().unwrap_or_else(|e| e.into_inner());
+        let geo = kept.get_or_insert_with(|| GeometryImage::new(cam.size[0], cam.size[1]));
+        geo.clear(cam.size[0], cam.size[1]);
         for m in &self.meshes {
-            rasterize(m, &self.material, Cull::None, &proj, &mut geo)?;
+            rasterize(m, &self.material, Cull::None, &proj, geo)?;
         }
         cost.raster_ms = t.elapsed().as_secs_f64() * 1e3;
         // iso on the raycaster: keep the crossing slice and depth-test the hits at composition
         let settings = r.settings();
         let crossing = settings.mode == Mode::Iso && matches!(settings.method, Method::Binary | Method::Brute);
         let t = Instant::now();
-        let geometry = Arc::new(GeometryLimits::new(proj, &geo).with_iso_crossing(crossing));
+        let geometry = Arc::new(GeometryLimits::new(proj, geo).with_iso_crossing(crossing));
         let make_ms = t.elapsed().as_secs_f64() * 1e3;
         limiters.push(geometry.clone());
         let limiter: Arc<dyn Limiter> = if limiters.len() == 1 { geometry.clone() } else { Arc::new(Limiters::new(limiters)?) };
@@ -351,17 +366,15 @@ impl Scene {
         // depth buffer, then the limiter run once more (its buffers made first)
         let mut bufs: Vec<_> = r.last_plans().iter().map(|p| shearwarp::view::plan::RayLimits::open(p.grid.size, p.slices())).collect();
         let t = Instant::now();
-        r.install(|| {
-            for (plan, l) in r.last_plans().iter().zip(&mut bufs) {
-                geometry.limit(plan, l);
-            }
-        });
+        for (plan, l) in r.last_plans().iter().zip(&mut bufs) {
+            r.run_limiter(geometry.as_ref(), plan, l);
+        }
         cost.inverse_warp_ms = make_ms + t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         if crossing {
-            composite_iso_over_geometry(img, &geo, r, &geometry);
+            composite_iso_over_geometry(img, geo, r, &geometry);
         } else {
-            composite_over_geometry(img, &geo);
+            composite_over_geometry(img, geo);
         }
         cost.composite_ms = t.elapsed().as_secs_f64() * 1e3;
         Ok((st, cost))

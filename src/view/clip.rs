@@ -489,6 +489,10 @@ impl Limiter for Limiters {
     fn holes(&self) -> usize {
         self.0.iter().map(|l| l.holes()).sum()
     }
+
+    fn parallel(&self, plan: &FramePlan) -> bool {
+        self.0.iter().any(|l| l.parallel(plan))
+    }
 }
 
 #[cfg(test)]

@@ -314,6 +314,12 @@ impl RayLimits {
         &self.limits[q * self.width..(q + 1) * self.width]
     }
 
+    /// The limits of row `q`, by pixel, to change.
+    #[inline(always)]
+    pub fn row_mut(&mut self, q: usize) -> &mut [[u32; 2]] {
+        &mut self.limits[q * self.width..(q + 1) * self.width]
+    }
+
     /// The rows, mutable, as a parallel iterator (item `q` is row `q`), for a
     /// [`Limiter`] that writes rows on several threads.
     pub fn par_rows_mut(&mut self) -> rayon::slice::ChunksMut<'_, [u32; 2]> {
@@ -345,6 +351,13 @@ pub trait Limiter: Send + Sync {
     /// limiter set with more.
     fn holes(&self) -> usize {
         0
+    }
+    /// Whether this limiter's work on `plan` is worth the renderer's thread
+    /// pool (the default); one that answers no is run on the calling thread
+    /// (a needle's few thousand pixels cost less than waking the pool), and
+    /// must then not use rayon itself.
+    fn parallel(&self, _plan: &FramePlan) -> bool {
+        true
     }
 }
 

@@ -328,6 +328,8 @@ impl ClipRegion {
     /// in each slice the region's bounding box widened by a voxel, mapped
     /// to pixels through the slice's sample map (affine in the pixel) and
     /// widened by a pixel; the whole grid where a map is degenerate.
+    /// (The negated comparisons read a NaN bound as no ray.)
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn grid_bounds(&self, plan: &FramePlan) -> Option<[usize; 4]> {
         let (nk, [gw, gh]) = (plan.slices(), plan.grid.size);
         if nk == 0 || gw == 0 || gh == 0 {

@@ -918,6 +918,18 @@ impl Renderer {
         }
     }
 
+    /// The output pixels' rays of the last frame if it was split into
+    /// pyramids (which pyramid owns a pixel: [`Renderer::last_owner`]).
+    pub fn last_rays(&self) -> Option<RayDirections> {
+        self.last_rays.filter(|_| self.last_split)
+    }
+
+    /// The image whose depth plane [`Renderer::last_depth_at`] reads for plan
+    /// `i` (only its `size`, `valid` and `depth`), if any.
+    pub(crate) fn last_depth_image(&self, i: usize) -> Option<&Intermediate> {
+        if self.last_split { self.pyramid_depths.get(i) } else { Some(&self.inter) }
+    }
+
     /// The iso depth (fractional slice index, NaN where none) at intermediate
     /// pixel `(p, q)` of plan `i` of [`Renderer::last_plans`]: the
     /// intermediate image's own for a frame that is not split, the kept copy

@@ -9,7 +9,10 @@
 use glam::DVec3;
 
 use super::inverse_warp::sample_voxel;
+use crate::composite::Intermediate;
 use crate::render::Renderer;
+use crate::view::perspective::RayDirections;
+use crate::view::plan::FramePlan;
 
 /// The volume's iso hit (voxel indices) under output pixel `(u, v)` of the
 /// renderer's last frame (iso mode): the mean position of the neighbouring
@@ -20,7 +23,11 @@ use crate::render::Renderer;
 /// the pixel, or where the depth of a split frame's pyramid was not kept.
 pub fn volume_hit(renderer: &Renderer, u: f64, v: f64) -> Option<DVec3> {
     let i = renderer.last_owner(u, v)?;
-    let plan = &renderer.last_plans()[i];
+    hit_in(&renderer.last_plans()[i], |p, q| renderer.last_depth_at(i, p, q), u, v)
+}
+
+/// [`volume_hit`] in plan `plan`, whose intermediate iso depth `depth_at` reads.
+fn hit_in(plan: &FramePlan, depth_at: impl Fn(usize, usize) -> f32, u: f64, v: f64) -> Option<DVec3> {
     let (nk, [gw, gh]) = (plan.slices(), plan.grid.size);
     if nk == 0 {
         return None;
@@ -35,7 +42,7 @@ pub fn volume_hit(renderer: &Renderer, u: f64, v: f64) -> Option<DVec3> {
         if x < 0.0 || y < 0.0 || x >= gw as f64 || y >= gh as f64 || wt <= 0.0 {
             continue;
         }
-        let k = renderer.last_depth_at(i, x as usize, y as usize) as f64;
+        let k = depth_at(x as usize, y as usize) as f64;
         if !k.is_finite() {
             continue;
         }
@@ -47,4 +54,58 @@ pub fn volume_hit(renderer: &Renderer, u: f64, v: f64) -> Option<DVec3> {
         at += wt * (a + (b - a) * (k - k0 as f64));
     }
     (wsum >= 0.5).then(|| at / wsum)
+}
+
+/// The iso hits of one frame kept past the renderer's later frames: its
+/// plans (without their ray limits and focus intervals) and intermediate
+/// iso depths, and a split frame's rays, copied from the renderer after the
+/// frame ([`KeptHits::of`]). [`KeptHits::at`] is [`volume_hit`] of that
+/// frame, bit for bit, computed when asked (the viewer's lens: the one pixel
+/// under the mouse, for every move over the same view).
+#[derive(Clone, Debug, Default)]
+pub struct KeptHits {
+    plans: Vec<FramePlan>,
+    /// Per plan, the depth plane (`size`, `valid` and `depth` only).
+    depths: Vec<Intermediate>,
+    /// The output pixels' rays of a split frame (which pyramid owns a pixel).
+    rays: Option<RayDirections>,
+}
+
+impl KeptHits {
+    /// The hits of `renderer`'s last frame (iso mode; a split perspective
+    /// frame's pyramids only where [`Renderer::set_keep_depths`] was on).
+    pub fn of(renderer: &Renderer) -> Self {
+        let plans: Vec<FramePlan> = renderer
+            .last_plans()
+            .iter()
+            .map(|p| {
+                let mut p = p.clone();
+                p.limits = None;
+                p.focus = None;
+                p
+            })
+            .collect();
+        let depths = (0..plans.len())
+            .map(|i| match renderer.last_depth_image(i) {
+                Some(d) => Intermediate { size: d.size, valid: d.valid, depth: d.depth.clone(), ..Default::default() },
+                None => Intermediate::default(),
+            })
+            .collect();
+        KeptHits { plans, depths, rays: renderer.last_rays() }
+    }
+
+    /// The iso hit (voxel indices) under output pixel `(u, v)` of the kept
+    /// frame, as [`volume_hit`] gave it right after that frame.
+    pub fn at(&self, u: f64, v: f64) -> Option<DVec3> {
+        let i = match self.rays {
+            Some(rays) => {
+                let owner = rays.owner(u, v);
+                self.plans.iter().position(|p| (p.view.axis, p.view.ascending) == owner)?
+            }
+            None => (!self.plans.is_empty()).then_some(0)?,
+        };
+        let (plan, d) = (&self.plans[i], &self.depths[i]);
+        let matches = d.size == plan.grid.size && d.depth.len() == d.size[0] * d.size[1];
+        hit_in(plan, |p, q| if matches { d.depth_at(p, q) } else { f32::NAN }, u, v)
+    }
 }

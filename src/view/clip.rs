@@ -323,6 +323,66 @@ impl ClipRegion {
         }
     }
 
+    /// The intermediate pixels `[p0, p1] × [q0, q1]` (inclusive) outside
+    /// which no ray has a sample inside the region (`None`: no ray has one):
+    /// in each slice the region's bounding box widened by a voxel, mapped
+    /// to pixels through the slice's sample map (affine in the pixel) and
+    /// widened by a pixel; the whole grid where a map is degenerate.
+    /// (The negated comparisons read a NaN bound as no ray.)
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    fn grid_bounds(&self, plan: &FramePlan) -> Option<[usize; 4]> {
+        let (nk, [gw, gh]) = (plan.slices(), plan.grid.size);
+        if nk == 0 || gw == 0 || gh == 0 {
+            return None;
+        }
+        let (lo, hi) = match self.region {
+            Region::Sphere { centre, radius } => {
+                let unit = self.spacing.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+                let e: [f64; 3] = std::array::from_fn(|a| radius * unit / self.spacing[a]);
+                (std::array::from_fn(|a| centre[a] - e[a]), std::array::from_fn(|a| centre[a] + e[a]))
+            }
+            Region::Box { lo, hi } => (lo, hi),
+        };
+        let (lo, hi): ([f64; 3], [f64; 3]) = (lo.map(|x| x - 1.0), hi.map(|x| x + 1.0));
+        let perm = plan.view.perm;
+        let k0 = lo[perm[2]].ceil().max(0.0);
+        let k1 = hi[perm[2]].floor().min((nk - 1) as f64);
+        if !(k0 <= k1) {
+            return None;
+        }
+        let mut r = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+        for k in k0 as usize..=k1 as usize {
+            for axis in 0..2 {
+                let a0 = plan.sample_at(k, axis, 0);
+                let s = plan.sample_at(k, axis, 1) - a0;
+                if !(s > 0.0 && s.is_finite() && a0.is_finite()) {
+                    return Some([0, gw - 1, 0, gh - 1]);
+                }
+                let (x0, x1) = ((lo[perm[axis]] - a0) / s, (hi[perm[axis]] - a0) / s);
+                r[2 * axis] = r[2 * axis].min(x0);
+                r[2 * axis + 1] = r[2 * axis + 1].max(x1);
+            }
+        }
+        let (p0, p1) = ((r[0].floor() - 1.0).max(0.0), (r[1].ceil() + 1.0).min((gw - 1) as f64));
+        let (q0, q1) = ((r[2].floor() - 1.0).max(0.0), (r[3].ceil() + 1.0).min((gh - 1) as f64));
+        if !(p0 <= p1 && q0 <= q1) {
+            return None;
+        }
+        Some([p0 as usize, p1 as usize, q0 as usize, q1 as usize])
+    }
+
+    /// Whether the line `o + t·d` passes the ball of `radius` (in units of
+    /// the smallest spacing) farther than 10⁻⁶ of a unit (plus the same
+    /// fraction of the radius) away at its closest point `t`, the closest
+    /// approach [`ClipRegion::line_interval`] returns for a line missing it.
+    fn line_misses_ball(&self, o: DVec3, d: DVec3, t: f64, radius: f64) -> bool {
+        let Region::Sphere { centre, .. } = self.region else { return false };
+        let unit = self.spacing.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+        let x = o + t * d;
+        let e = DVec3::from_array([0, 1, 2].map(|a| (x[a] - centre[a]) * self.spacing[a] / unit));
+        t.is_finite() && e.length() > radius * (1.0 + 1e-6) + 1e-6
+    }
+
     /// The real interval `[t0, t1]` of `t` with `o + t·d` inside (empty: `t0 > t1`).
     fn line_interval(&self, o: DVec3, d: DVec3) -> [f64; 2] {
         match self.region {
@@ -379,6 +439,16 @@ impl ClipRegion {
         let d = if last > 0 { (sample_voxel(plan, last as usize, p, q) - o) / last as f64 } else { DVec3::ZERO };
         let inside = |k: i64| self.contains(sample_voxel(plan, k as usize, p, q));
         let [t0, t1] = self.line_interval(o, d);
+        if let Region::Sphere { radius, .. } = self.region
+            && t0 == t1
+            && self.line_misses_ball(o, d, t0, radius)
+        {
+            // a line clearly outside the ball (a lens's focus: most rays of
+            // the frame) has no sample inside it: the samples lie on the
+            // line up to rounding, far below the margin, so the checks on
+            // the samples below would find none
+            return [1, 0];
+        }
         // a one-sample margin for rounding (an interval empty by rounding
         // alone is checked around where it closed)
         let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t0.clamp(-1.0, last as f64 + 1.0), t0.clamp(-1.0, last as f64 + 1.0)) };
@@ -451,7 +521,12 @@ pub(crate) fn limit_convex(
 
 impl Limiter for ClipRegion {
     fn limit(&self, plan: &FramePlan, limits: &mut RayLimits) {
-        limit_convex(self.keep, plan, limits, |last, p, q| self.inside_interval(plan, last, p, q));
+        // the rays outside the region's grid bounds have no sample inside it
+        // (the checks would find none): a region small on a large grid (a
+        // lens on a matched-sampling still frame) costs its own rays only
+        let b = self.grid_bounds(plan);
+        let near = |p: usize, q: usize| b.is_some_and(|[p0, p1, q0, q1]| p0 <= p && p <= p1 && q0 <= q && q <= q1);
+        limit_convex(self.keep, plan, limits, |last, p, q| if near(p, q) { self.inside_interval(plan, last, p, q) } else { [1, 0] });
     }
 
     fn holes(&self) -> usize {

@@ -17,11 +17,10 @@ use std::thread::JoinHandle;
 use std::time::Instant;
 
 use super::state::{Class, Kind, Lens, Plane, Spec};
-use rayon::prelude::*;
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
-use shearwarp::geometry::volume_hit;
+use shearwarp::geometry::hit::KeptHits;
 use shearwarp::render::{Deluxe, Focus, Footprint, FrameStats, Method, Renderer, Settings};
 use shearwarp::view::Projection;
 use shearwarp::view::clip::{ClipPlane, ClipPlanes, Region};
@@ -95,10 +94,10 @@ pub struct Renderers {
     /// densest preset) and the lens the tissue renderer has now.
     focus_tissue: String,
     lens: Option<Lens>,
-    /// The lens's surface: the iso hits (voxel indices, NaN where none) of
-    /// every output pixel of the context frame (no lens, iso at the tissue's
-    /// threshold) of a spec (its `seq` and `lens` cleared).
-    surface: Option<(Spec, Vec<[f64; 3]>)>,
+    /// The lens's surface: the context frame (no lens, iso at the tissue's
+    /// threshold) of a spec (its `seq` and `lens` cleared), its plans and
+    /// depths kept for the iso hit under the mouse, computed per move.
+    surface: Option<(Spec, KeptHits)>,
 }
 
 impl Renderers {
@@ -283,8 +282,10 @@ impl Renderers {
     /// frame. The lens moves with the mouse only: while the mouse stays (a
     /// rotation, a size or tissue change) it keeps its place in the volume,
     /// as before. The context frame is rendered once per view (camera, tissue,
-    /// projection, quality, clip) and its hits kept, so a mouse move costs one
-    /// frame, as before, the first after a rotation two. Only on the raycaster (`--method binary` / `brute`,
+    /// projection, quality, clip) and its plans and depths kept
+    /// ([`KeptHits`]): each move computes the hit of its one pixel, so a
+    /// mouse move over the same view costs one frame, the first after a
+    /// rotation two (the context and the lens frame). Only on the raycaster (`--method binary` / `brute`,
     /// where a focus or mode switch rebuilds nothing); with the RLE paths and
     /// a custom iso value the lens stays at the volume centre's depth.
     pub fn lens_on_surface(&mut self, spec: &Spec, l: Lens) -> shearwarp::Result<Lens> {
@@ -310,11 +311,8 @@ impl Renderers {
             let [w, h] = spec.camera.size;
             let mut scratch = Image8::new(w, h);
             let done = self.render_spec(&key, &mut scratch);
-            let r = &self.tissues;
-            let hits: Vec<[f64; 3]> = (0..w * h)
-                .into_par_iter()
-                .map(|i| volume_hit(r, (i % w) as f64, (i / w) as f64).map_or([f64::NAN; 3], |v| v.to_array()))
-                .collect();
+            // the frame's plans and depths, for this move and the next ones over the same view
+            let hits = KeptHits::of(&self.tissues);
             self.mode = mode;
             self.tissues.set_keep_depths(false);
             self.tissues.set_settings(Settings { mode, ..self.tissues.settings() })?;
@@ -327,10 +325,7 @@ impl Renderers {
         if u < 0.0 || v < 0.0 || u >= w as f64 || v >= h as f64 {
             return Ok(l);
         }
-        let p = hits[v as usize * w + u as usize];
-        if p.iter().any(|c| !c.is_finite()) {
-            return Ok(l);
-        }
+        let Some(p) = hits.at(u, v).map(|v| v.to_array()).filter(|p| p.iter().all(|c| c.is_finite())) else { return Ok(l) };
         // voxel indices to world millimetres from the volume centre (lens_focus's inverse)
         let centre = [0, 1, 2].map(|a| (p[a] - (self.dims[a] as f64 - 1.0) / 2.0) * self.spacing[a] as f64);
         Ok(Lens { centre, ..l })
@@ -633,6 +628,47 @@ mod tests {
         }
     }
 
+    /// The context frame's kept hits ([`KeptHits`], what the lens reads
+    /// under the mouse) are [`volume_hit`] of that frame bit for bit, after
+    /// the renderer has rendered another frame (the lens frame, its own
+    /// depths); parallel, and a perspective frame split into pyramids.
+    #[test]
+    fn lens_kept_hits_are_the_volume_hit_of_the_context_frame() {
+        use shearwarp::geometry::volume_hit;
+        let vol = Phantom::Head.build([40, 40, 36]).unwrap();
+        let tissues = presets::tissues_for(&vol);
+        let rot = shearwarp::view::rotate_eye(shearwarp::view::NamedView::Anterior.rotation(), 1, 25.0);
+        let cam = Camera { rotation: rot, zoom: None, size: [64, 48] };
+        for projection in [Projection::Parallel, Projection::perspective(90.0, 0.45).unwrap()] {
+            let mut r =
+                Renderer::with_tissues(vol.clone(), &tissues, Settings { mode: Mode::Iso, threads: 1, ..Settings::default() }).unwrap();
+            r.set_projection(projection).unwrap();
+            r.set_keep_depths(true);
+            let mut img = Image::new(64, 48);
+            r.render(&cam, &mut img).unwrap();
+            let want: Vec<Option<glam::DVec3>> = (0..64 * 48).map(|i| volume_hit(&r, (i % 64) as f64, (i / 64) as f64)).collect();
+            let n = want.iter().filter(|h| h.is_some()).count();
+            assert!(n > 100, "{projection:?}: the head is hit ({n} pixels)");
+            let kept = KeptHits::of(&r);
+            // another frame (another view) over the renderer's own plans and depths
+            r.set_keep_depths(false);
+            let other = Camera { rotation: shearwarp::view::rotate_eye(rot, 0, 30.0), ..cam };
+            r.render(&other, &mut img).unwrap();
+            for (i, w) in want.iter().enumerate() {
+                let (u, v) = ((i % 64) as f64, (i / 64) as f64);
+                let got = kept.at(u, v);
+                assert_eq!(
+                    got.map(|g| g.to_array().map(f64::to_bits)),
+                    w.map(|g| g.to_array().map(f64::to_bits)),
+                    "{projection:?} pixel {u} {v}"
+                );
+            }
+            if projection.is_perspective() {
+                assert!(r.last_plans().len() > 1, "the frame splits");
+            }
+        }
+    }
+
     /// A still view that magnifies renders with matched sampling (Deluxe M:
     /// 4 samples per voxel at a zoom of 4), a drag's frame without it, and a
     /// still view that does not magnify at one sample per voxel.
@@ -850,5 +886,128 @@ mod tests {
         assert!(f.pixels.iter().any(|&p| p != 0));
         w.cancel();
         w.stop();
+    }
+}
+
+/// Timing harness of the lens (ignored: slow; run with `--ignored --nocapture`).
+#[cfg(test)]
+mod lens_timing {
+    use std::time::Instant;
+
+    use super::*;
+    use shearwarp::data::phantom::Phantom;
+    use shearwarp::view::Camera;
+
+    fn ms(t: Instant) -> f64 {
+        t.elapsed().as_secs_f64() * 1e3
+    }
+
+    fn median(v: &[f64]) -> f64 {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    }
+
+    /// The viewer's lens frame against the plain frame, the same view and
+    /// size (512²; tissue skin, focus bone): per round, a plain frame of a
+    /// new view, the first mouse move over that view (lens on), a second
+    /// move over it, and a rotation with the lens on (the mouse still); each
+    /// frame's wall time and the renderer's own (shear + composite + warp),
+    /// and the focus limiter alone on the lens frame's plan. The chest CT
+    /// needs `SHEARWARP_DATA`; the head phantom always runs (`LENS_VOLS`
+    /// picks, `LENS_STILL=0` renders drag frames, `LENS_ROUNDS` rounds,
+    /// `LENS_RADIUS` millimetres; the viewer's L starts at 0.3 of the diagonal).
+    #[test]
+    #[ignore]
+    fn lens_frame_time_against_the_plain_frame() {
+        let pick = std::env::var("LENS_VOLS").unwrap_or_else(|_| "chest,head".into());
+        let mut vols = vec![];
+        if let (Ok(dir), true) = (std::env::var("SHEARWARP_DATA"), pick.contains("chest")) {
+            let p = std::path::Path::new(&dir).join("chest-ct-lung1.nrrd");
+            vols.push(("chest", shearwarp::data::io::load(&p, &Default::default()).unwrap()));
+        }
+        if pick.contains("head") {
+            vols.push(("head", Phantom::Head.build(Phantom::Head.default_dims()).unwrap()));
+        }
+        let rounds: usize = std::env::var("LENS_ROUNDS").ok().and_then(|s| s.parse().ok()).unwrap_or(5);
+        let still = std::env::var("LENS_STILL").map_or(true, |s| s != "0");
+        for (name, vol) in vols {
+            let tissues = presets::tissues_for(&vol);
+            for mode in [Mode::Iso, Mode::Blend] {
+                let mut r = Renderers::new(vol.clone(), &tissues, Settings { mode, ..Settings::default() }).unwrap();
+                let skin = r.tissue_list().iter().position(|t| t.name == "skin").unwrap_or(0);
+                let base = shearwarp::view::NamedView::Anterior.rotation();
+                let cam = |deg: f64| Camera { rotation: shearwarp::view::rotate_eye(base, 1, deg), zoom: None, size: [512, 512] };
+                let spec = Spec {
+                    seq: 1,
+                    camera: cam(0.0),
+                    class: Class::Tissue(skin),
+                    cell: 1,
+                    projection: shearwarp::view::Projection::Parallel,
+                    quality: 1.0,
+                    clip: None,
+                    lens: None,
+                    still,
+                };
+                let radius = std::env::var("LENS_RADIUS").ok().and_then(|s| s.parse().ok()).unwrap_or(40.0);
+                let lens = Lens { centre: [0.0; 3], radius, at: None };
+                let bone = r.tissue_list().iter().position(|t| t.name == "bone").unwrap_or(0);
+                let mut img = Image8::new(512, 512);
+                r.render(&spec, &mut img).unwrap();
+                // [wall, renderer] per kind of frame: plain, first move, next move, rotation
+                let mut t = [[vec![], vec![]], [vec![], vec![]], [vec![], vec![]], [vec![], vec![]], [vec![], vec![]]];
+                let mut limiter = vec![];
+                let mut frame = |r: &mut Renderers, s: &Spec, i: usize, t: &mut [[Vec<f64>; 2]; 5]| {
+                    let t0 = Instant::now();
+                    let st = r.render(s, &mut img).unwrap();
+                    assert!(!st.skipped);
+                    t[i][0].push(ms(t0));
+                    t[i][1].push(st.frame_ms());
+                };
+                for i in 0..rounds {
+                    let s = Spec { camera: cam(10.0 + 3.0 * i as f64), ..spec };
+                    frame(&mut r, &s, 0, &mut t);
+                    let at = |k: f64| Some([256.0 + 7.0 * k + i as f64, 200.0 + 3.0 * k]);
+                    let l = Lens { at: at(0.0), ..lens };
+                    frame(&mut r, &Spec { lens: Some(l), ..s }, 1, &mut t);
+                    let l = Lens { at: at(1.0), ..lens };
+                    frame(&mut r, &Spec { lens: Some(l), ..s }, 2, &mut t);
+                    let s2 = Spec { camera: cam(11.5 + 3.0 * i as f64), ..s };
+                    frame(&mut r, &Spec { lens: Some(l), ..s2 }, 3, &mut t);
+                    // the focus limiter alone on the lens frame's plan
+                    let focus = r.lens_focus(r.lens.unwrap());
+                    let region = shearwarp::view::clip::ClipRegion::new(focus.region, vol.spacing()).unwrap();
+                    let rr = r.select(Class::Tissue(skin), 1).unwrap();
+                    let mut plan = rr.last_plan().unwrap().clone();
+                    if i == 0 {
+                        eprintln!("  the lens frame's grid {:?}, {} slices, {:?}", plan.grid.size, plan.slices(), plan.kind);
+                    }
+                    let t0 = Instant::now();
+                    rr.install(|| plan.apply_focus(&region, Default::default()));
+                    limiter.push(ms(t0));
+                    // the lens off again (the next plain frame), and the focus tissue's own frame
+                    r.set_lens(None).unwrap();
+                    frame(&mut r, &Spec { class: Class::Tissue(bone), ..s2 }, 4, &mut t);
+                }
+                let m = |i: usize, j: usize| median(&t[i][j]);
+                let p = m(0, 0);
+                eprintln!(
+                    "lens timing {name} {mode:?} 512² still {still}, medians of {rounds}, wall (renderer's shear+composite+warp) ms: plain {p:.1} ({:.1}), first move over a view {:.1} ({:.1}) {:.2}×, next move {:.1} ({:.1}) {:.2}×, rotation with the lens {:.1} ({:.1}) {:.2}×; the focus limiter alone {:.1}; a plain frame of the focus tissue {:.1} ({:.1})",
+                    m(0, 1),
+                    m(1, 0),
+                    m(1, 1),
+                    m(1, 0) / p,
+                    m(2, 0),
+                    m(2, 1),
+                    m(2, 0) / p,
+                    m(3, 0),
+                    m(3, 1),
+                    m(3, 0) / p,
+                    median(&limiter),
+                    m(4, 0),
+                    m(4, 1),
+                );
+            }
+        }
     }
 }

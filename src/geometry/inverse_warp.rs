@@ -464,8 +464,8 @@ struct Gather {
     /// A parallel frame: the depth step from slice to slice, the same on
     /// every ray, and its inverse.
     step: Option<[f64; 2]>,
-    /// A parallel frame whose footprint boxes are taller than wide: read
-    /// the depths by columns.
+    /// A parallel frame whose footprint boxes are at least twice as tall as
+    /// wide: read the depths by columns.
     tall: bool,
 }
 
@@ -486,7 +486,9 @@ impl Gather {
         let (first, last_depth) = (depths(0), depths(last));
         let dk = (last_depth[0] - first[0]) / last as f64;
         let step = (affine.is_some() && last > 0 && dk != 0.0 && dk.is_finite()).then_some([dk, 1.0 / dk]);
-        let tall = affine.is_some_and(|[ex, ey]| ey > ex);
+        // (at least twice as many rows as columns: the columns' copy costs a
+        // pass over the covered pixels, which a square box does not repay)
+        let tall = affine.is_some_and(|[ex, ey]| (2.0 * ey).floor() + 1.0 >= 2.0 * ((2.0 * ex).floor() + 1.0));
         Gather { to_out, affine, half_p, half_q, first, last_depth, last, step, tall }
     }
 }

@@ -953,11 +953,12 @@ impl Renderer {
     /// Runs limiter `l` on `plan` as a frame does: on the renderer's thread
     /// pool when it asks for it ([`Limiter::parallel`]), else on this thread.
     pub fn run_limiter(&self, l: &dyn Limiter, plan: &FramePlan, limits: &mut RayLimits) {
-        if l.parallel(plan) {
-            self.pool.install(|| l.limit(plan, limits));
-        } else {
-            l.limit(plan, limits);
-        }
+        self.install_if(l.parallel(plan), || l.limit(plan, limits));
+    }
+
+    /// Runs `f` on the renderer's thread pool if `on`, else on this thread.
+    fn install_if<R: Send>(&self, on: bool, f: impl FnOnce() -> R + Send) -> R {
+        if on { self.pool.install(f) } else { f() }
     }
 
     /// Bytes of the packed masks that exist now.
@@ -1531,11 +1532,7 @@ impl Renderer {
         plan.set_box_footprint(self.settings.footprint == Footprint::Box);
         plan.set_intermediate(self.settings.deluxe.intermediate);
         if let Some((l, _)) = &self.limiter {
-            if l.parallel(plan) {
-                self.pool.install(|| plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
-            } else {
-                plan.apply_limiter(l.as_ref(), limits.unwrap_or_default());
-            }
+            self.install_if(l.parallel(plan), || plan.apply_limiter(l.as_ref(), limits.unwrap_or_default()));
         }
         // focus+context: each ray's slices inside the focus region (the clip
         // region's analytic interval, checked on the samples)

@@ -218,6 +218,29 @@ fn reach_of(plan: &FramePlan, rect: [usize; 4]) -> Option<[usize; 4]> {
     reach_with(plan, rect, None)
 }
 
+/// How far (output pixels, along x and y) the footprint of intermediate pixel
+/// `(p, q)` reaches from its centre's image (None: behind the eye).
+fn footprint_half(plan: &FramePlan, p: f64, q: f64) -> Option<[f64; 2]> {
+    let at = |dp: f64, dq: f64| {
+        let [a, b] = plan.intermediate_to_sheared(p + dp, q + dq);
+        plan.warp.to_output(a, b)
+    };
+    let (o, a, b) = (at(0.0, 0.0)?, at(1.0, 0.0)?, at(0.0, 1.0)?);
+    Some([((a[0] - o[0]).abs() + (b[0] - o[0]).abs()) / 2.0, ((a[1] - o[1]).abs() + (b[1] - o[1]).abs()) / 2.0])
+}
+
+/// The margin a rectangle is widened by before it is mapped back, for
+/// footprints reaching `(hx, hy)`. An affine warp (a parallel frame) gives
+/// every pixel the same box, of half extents (hx, hy) about its centre (the
+/// gather's), and a box under a pixel takes the pixel nearest its centre:
+/// the centres that can reach the rectangle lie within max(hx, ½) of it, and
+/// the quad is exact up to rounding (a millionth of a pixel more). A
+/// projective warp's footprint varies over the quad: a quarter more and a
+/// pixel for safety.
+fn margin_of([hx, hy]: [f64; 2], affine: bool) -> [f64; 2] {
+    if affine { [hx.max(0.5) + 1e-6, hy.max(0.5) + 1e-6] } else { [1.25 * hx + 1.0, 1.25 * hy + 1.0] }
+}
+
 /// The margin [`reach_of`] widens a rectangle by in a parallel frame (an
 /// affine warp: the same for every rectangle, so measured once per plan), or
 /// None (a projective warp, or a degenerate one).
@@ -225,14 +248,8 @@ fn affine_margin(plan: &FramePlan) -> Option<[f64; 2]> {
     if plan.warp.forward.row(2) != DVec3::Z {
         return None;
     }
-    let at = |dp: f64, dq: f64| {
-        let [a, b] = plan.intermediate_to_sheared(dp, dq);
-        plan.warp.to_output(a, b)
-    };
-    let (o, a, b) = (at(0.0, 0.0)?, at(1.0, 0.0)?, at(0.0, 1.0)?);
-    let hx = ((a[0] - o[0]).abs() + (b[0] - o[0]).abs()) / 2.0;
-    let hy = ((a[1] - o[1]).abs() + (b[1] - o[1]).abs()) / 2.0;
-    (hx.is_finite() && hy.is_finite()).then_some([hx.max(0.5) + 1e-6, hy.max(0.5) + 1e-6])
+    let h = footprint_half(plan, 0.0, 0.0)?;
+    h.iter().all(|x| x.is_finite()).then(|| margin_of(h, true))
 }
 
 /// [`reach_of`], with the affine margin given ([`affine_margin`]) or measured.
@@ -250,53 +267,29 @@ fn reach_with(plan: &FramePlan, [x0, y0, x1, y1]: [usize; 4], margin: Option<[f6
         let c = [(u0, v0), (u1, v0), (u0, v1), (u1, v1)].map(|(u, v)| plan.output_to_intermediate(u, v));
         c.iter().all(|x| x.is_some_and(|x| x.iter().all(|c| c.is_finite()))).then(|| c.map(Option::unwrap))
     };
-    let clampi = |x: f64, n: usize| x.clamp(0.0, n as f64 - 1.0) as usize;
-    if let Some([ex, ey]) = margin {
+    let ([ex, ey], affine) = match margin {
         // (a parallel frame: the margin is known)
-        let Some(outer) = back(ex, ey) else { return all };
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for [p, q] in outer {
-            (lo, hi) = ([lo[0].min(p), lo[1].min(q)], [hi[0].max(p), hi[1].max(q)]);
+        Some(m) => (m, true),
+        None => {
+            // an intermediate pixel's footprint (its square through the warp)
+            // reaches (hx, hy) output pixels from its centre's image, and the
+            // box takes the output pixel nearest it (half a pixel more): the
+            // pixels that can reach the rectangle have their centres' images
+            // in it widened by that much. Measured at the corners (the
+            // largest footprint of a projective warp is at one of them).
+            let Some(inner) = back(0.0, 0.0) else { return all };
+            let (mut hx, mut hy) = (0.0f64, 0.0f64);
+            for [p, q] in inner {
+                let Some([a, b]) = footprint_half(plan, p, q) else { return all };
+                (hx, hy) = (hx.max(a), hy.max(b));
+            }
+            if !(hx.is_finite() && hy.is_finite()) {
+                return all;
+            }
+            let affine = plan.warp.forward.row(2) == DVec3::Z;
+            (margin_of([hx, hy], affine), affine)
         }
-        if hi[0] < -1.0 || hi[1] < -1.0 || lo[0] > w as f64 || lo[1] > h as f64 {
-            return None;
-        }
-        return Some([
-            clampi((lo[0] - 1e-6).ceil(), w),
-            clampi((lo[1] - 1e-6).ceil(), h),
-            clampi((hi[0] + 1e-6).floor(), w),
-            clampi((hi[1] + 1e-6).floor(), h),
-        ]);
-    }
-    let Some(inner) = back(0.0, 0.0) else { return all };
-    // an intermediate pixel's footprint (its square through the warp)
-    // reaches (hx, hy) output pixels from its centre's image, and the box
-    // takes the output pixel nearest it (half a pixel more): the pixels
-    // that can reach the rectangle have their centres' images in it
-    // widened by that much. Measured at the corners (the largest
-    // footprint of a projective warp is at one of them), a quarter more
-    // and a pixel for safety.
-    let (mut hx, mut hy) = (0.0f64, 0.0f64);
-    for [p, q] in inner {
-        let at = |dp: f64, dq: f64| {
-            let [a, b] = plan.intermediate_to_sheared(p + dp, q + dq);
-            plan.warp.to_output(a, b)
-        };
-        let (Some(o), Some(a), Some(b)) = (at(0.0, 0.0), at(1.0, 0.0), at(0.0, 1.0)) else { return all };
-        hx = hx.max(((a[0] - o[0]).abs() + (b[0] - o[0]).abs()) / 2.0);
-        hy = hy.max(((a[1] - o[1]).abs() + (b[1] - o[1]).abs()) / 2.0);
-    }
-    if !(hx.is_finite() && hy.is_finite()) {
-        return all;
-    }
-    // An affine warp (a parallel frame) gives every pixel the same box, of
-    // half extents (hx, hy) about its centre (the gather's), and a box under
-    // a pixel takes the pixel nearest its centre: the centres that can reach
-    // the rectangle lie within max(hx, ½) of it, and the quad is exact up to
-    // rounding (a millionth of a pixel more). A projective warp's footprint
-    // varies over the quad: a quarter more and a pixel for safety.
-    let affine = plan.warp.forward.row(2) == DVec3::Z;
-    let (ex, ey) = if affine { (hx.max(0.5) + 1e-6, hy.max(0.5) + 1e-6) } else { (1.25 * hx + 1.0, 1.25 * hy + 1.0) };
+    };
     let Some(outer) = back(ex, ey) else { return all };
     let mut lo = [f64::INFINITY; 2];
     let mut hi = [f64::NEG_INFINITY; 2];
@@ -308,6 +301,7 @@ fn reach_with(plan: &FramePlan, [x0, y0, x1, y1]: [usize; 4], margin: Option<[f6
     if hi[0] < -1.0 || hi[1] < -1.0 || lo[0] > w as f64 || lo[1] > h as f64 {
         return None;
     }
+    let clampi = |x: f64, n: usize| x.clamp(0.0, n as f64 - 1.0) as usize;
     if affine {
         // (the pixels whose centres lie in the quad's bounding box)
         return Some([

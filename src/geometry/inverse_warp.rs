@@ -21,9 +21,11 @@
 //! by the footprint's reach, measured at its corners) to mark the
 //! intermediate pixels that can see it, and only those gather. The gather of
 //! one pixel is a handful of operations: its footprint's corners from one
-//! 3×3 map of intermediate pixels (no division in a parallel frame), the
-//! minimum over packed row segments, and its samples' depth from two affine
-//! functions of the pixel set up once per frame. The limits are those of
+//! 3×3 map of intermediate pixels (in a parallel frame, the same box about
+//! every centre, in fixed point: its pixel range is two shifts per axis,
+//! exact whichever way the pixel is reached), the minimum over packed row
+//! segments, and its samples' depth from two affine functions of the pixel
+//! set up once per frame and per row. The limits are those of
 //! the gather over every pixel, bit for bit (tested, isotropic and
 //! chest-CT-like voxels, both projections). A needle costs what it covers.
 //!
@@ -380,7 +382,14 @@ impl GeometryLimits {
     /// (Also read by [`super::clip_mesh`].)
     #[inline(always)]
     pub(crate) fn min_depth(&self, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
-        let Some(([x0, x1], [y0, y1])) = self.footprint(u0, u1, v0, v1) else { return f64::INFINITY };
+        let Some((xs, ys)) = self.footprint(u0, u1, v0, v1) else { return f64::INFINITY };
+        self.min_over(xs, ys)
+    }
+
+    /// The nearest geometry depth over the output pixels `[x0, x1] × [y0, y1]`
+    /// (inclusive, inside the image), `+∞` for none.
+    #[inline(always)]
+    fn min_over(&self, [x0, x1]: [u32; 2], [y0, y1]: [u32; 2]) -> f64 {
         let mut d = f64::INFINITY;
         for y in y0 as usize..y1 as usize + 1 {
             d = self.depths.fold(y, x0, x1, d);
@@ -388,16 +397,23 @@ impl GeometryLimits {
         d
     }
 
-    /// [`GeometryLimits::min_depth`] read column by column (the same value:
-    /// fewer, longer folds for a box taller than wide).
+    /// [`GeometryLimits::min_over`] read column by column from `cols`
+    /// ([`GeometryLimits::columns`]; the same value: fewer, longer folds for a
+    /// box taller than wide).
     #[inline(always)]
-    fn min_depth_by_columns(&self, cols: &Rows, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
-        let Some(([x0, x1], [y0, y1])) = self.footprint(u0, u1, v0, v1) else { return f64::INFINITY };
+    fn min_over_columns(cols: &Rows, [x0, x1]: [u32; 2], [y0, y1]: [u32; 2]) -> f64 {
         let mut d = f64::INFINITY;
         for x in x0 as usize..x1 as usize + 1 {
             d = cols.fold(x, y0, y1, d);
         }
         d
+    }
+
+    /// [`GeometryLimits::min_depth`] read column by column (the same value).
+    #[cfg(test)]
+    fn min_depth_by_columns(&self, cols: &Rows, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
+        let Some((xs, ys)) = self.footprint(u0, u1, v0, v1) else { return f64::INFINITY };
+        Self::min_over_columns(cols, xs, ys)
     }
 
     /// The depths column by column (made on first use: only a parallel frame
@@ -448,11 +464,14 @@ pub(super) fn sample_voxel(plan: &FramePlan, k: usize, p: usize, q: usize) -> DV
 /// position is affine in the pixel for a fixed slice in both projections,
 /// and the depth affine in the position). Along a ray, the samples are
 /// affine in the slice index, so slice `k`'s depth is `d₀ + k·(d_last − d₀)/last`.
-struct Gather {
+struct Gather<'a> {
     to_out: DMat3,
     /// An affine warp (a parallel frame): the footprint box's half extents,
     /// the same about every pixel's centre.
     affine: Option<[f64; 2]>,
+    /// An affine warp in fixed point (the usual case: every position of the
+    /// frame well inside its range).
+    fixed: Option<Fixed>,
     half_p: DVec3,
     half_q: DVec3,
     first: [f64; 3],
@@ -462,76 +481,162 @@ struct Gather {
     /// every ray, and its inverse.
     step: Option<[f64; 2]>,
     /// A parallel frame whose footprint boxes are at least twice as tall as
-    /// wide: read the depths by columns.
-    tall: bool,
+    /// wide: the depths by columns, read instead of the rows.
+    cols: Option<&'a Rows>,
 }
 
-impl Gather {
-    fn new(plan: &FramePlan, proj: &Projector) -> Self {
+/// One in [`Fixed`]'s units: 2⁻³² output pixel.
+const FIXED_ONE: i64 = 1 << 32;
+
+/// An affine frame's footprint boxes in fixed point (2⁻³² output pixel):
+/// the centre of pixel `(p, q)` is `x[0] + x[1]·p + x[2]·q` (and `y`), the
+/// box's half extents `e`. Integer arithmetic is exact, so a pixel's box is
+/// the same however it is reached (row by row, or pixel by pixel), and its
+/// pixel range is two shifts, with no float-to-integer conversion (a fifth
+/// of the gather's instructions in the float version).
+struct Fixed {
+    x: [i64; 3],
+    y: [i64; 3],
+    e: [i64; 2],
+}
+
+impl Fixed {
+    /// None when a position of the `grid` could leave the range kept exact
+    /// (|x| < 2⁶¹: a billion output pixels), or the warp is not finite.
+    fn new(to_out: &DMat3, [ex, ey]: [f64; 2], grid: [usize; 2]) -> Option<Fixed> {
+        let fix = |v: f64| {
+            let s = (v * FIXED_ONE as f64).round();
+            (s.abs() < 2f64.powi(60)).then_some(s as i64)
+        };
+        let x = [fix(to_out.z_axis.x)?, fix(to_out.x_axis.x)?, fix(to_out.y_axis.x)?];
+        let y = [fix(to_out.z_axis.y)?, fix(to_out.x_axis.y)?, fix(to_out.y_axis.y)?];
+        let e = [fix(ex)?, fix(ey)?];
+        let reach = |c: [i64; 3], e: i64| {
+            c[0].unsigned_abs() as f64
+                + c[1].unsigned_abs() as f64 * grid[0] as f64
+                + c[2].unsigned_abs() as f64 * grid[1] as f64
+                + e as f64
+        };
+        (reach(x, e[0]) < 2f64.powi(61) && reach(y, e[1]) < 2f64.powi(61)).then_some(Fixed { x, y, e })
+    }
+}
+
+/// The output pixels `[a, b]` (inclusive, of `0 .. n`) whose centres lie
+/// within `e` of `c` (fixed point), or the pixel nearest `c` when the box
+/// holds none (None: none in the image).
+#[inline(always)]
+fn fixed_span(c: i64, e: i64, n: i64) -> Option<[u32; 2]> {
+    let (mut a, mut b) = ((c - e + (FIXED_ONE - 1)) >> 32, (c + e) >> 32);
+    if a > b {
+        a = (c + FIXED_ONE / 2) >> 32;
+        b = a;
+    }
+    if b < 0 || a >= n {
+        return None;
+    }
+    Some([a.max(0) as u32, b.min(n - 1) as u32])
+}
+
+/// What the gather of one row `q` of intermediate pixels shares.
+struct RowAt {
+    /// The output point of pixel `(0, q)` (a projective warp).
+    c: DVec3,
+    /// Its fixed-point position (an affine one).
+    fixed: [i64; 2],
+    /// The first and last slice's depths at pixel `(0, q)`.
+    d: [f64; 2],
+}
+
+impl<'a> Gather<'a> {
+    fn new(plan: &FramePlan, gl: &'a GeometryLimits) -> Self {
         let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
         let to_sheared =
             DMat3::from_cols(DVec3::new(pitch, 0.0, 0.0), DVec3::new(0.0, pitch, 0.0), DVec3::new(-pad * pitch, -pad * pitch, 1.0));
         let to_out = plan.warp.forward * to_sheared;
         let last = plan.slices().saturating_sub(1);
         let depths = |k: usize| {
-            let depth = |p: usize, q: usize| -proj.eye_space(sample_voxel(plan, k, p, q)).z;
+            let depth = |p: usize, q: usize| -gl.projector.eye_space(sample_voxel(plan, k, p, q)).z;
             let c = depth(0, 0);
             [c, depth(1, 0) - c, depth(0, 1) - c]
         };
         let (half_p, half_q) = (to_out.x_axis * 0.5, to_out.y_axis * 0.5);
         let affine = (to_out.row(2) == DVec3::Z).then(|| [half_p.x.abs() + half_q.x.abs(), half_p.y.abs() + half_q.y.abs()]);
+        let fixed = affine.and_then(|e| Fixed::new(&to_out, e, plan.grid.size));
         let (first, last_depth) = (depths(0), depths(last));
         let dk = (last_depth[0] - first[0]) / last as f64;
         let step = (affine.is_some() && last > 0 && dk != 0.0 && dk.is_finite()).then_some([dk, 1.0 / dk]);
         // (at least twice as many rows as columns: the columns' copy costs a
         // pass over the covered pixels, which a square box does not repay)
         let tall = affine.is_some_and(|[ex, ey]| (2.0 * ey).floor() + 1.0 >= 2.0 * ((2.0 * ex).floor() + 1.0));
-        Gather { to_out, affine, half_p, half_q, first, last_depth, last, step, tall }
+        let cols = tall.then(|| gl.columns());
+        Gather { to_out, affine, fixed, half_p, half_q, first, last_depth, last, step, cols }
+    }
+
+    /// What row `q`'s pixels share.
+    #[inline(always)]
+    fn row(&self, q: usize) -> RowAt {
+        let qf = q as f64;
+        let qi = q as i64;
+        let fixed = self.fixed.as_ref().map_or([0; 2], |f| [f.x[0] + f.x[2] * qi, f.y[0] + f.y[2] * qi]);
+        RowAt {
+            c: self.to_out.y_axis * qf + self.to_out.z_axis,
+            fixed,
+            d: [self.first[0] + self.first[2] * qf, self.last_depth[0] + self.last_depth[2] * qf],
+        }
     }
 }
 
 impl GeometryLimits {
-    /// Narrows pixel `(p, q)`'s limits `l` to the slices in front of the
-    /// nearest geometry depth over its footprint (the gather of one pixel).
-    #[inline]
-    fn limit_pixel(&self, g: &Gather, p: usize, q: usize, l: &mut [u32; 2]) {
+    /// Narrows the limits `l` of pixel `(p, q)` (`r`: row `q`) to the slices in
+    /// front of the nearest geometry depth over its footprint (the gather of
+    /// one pixel).
+    #[inline(always)]
+    fn limit_at(&self, g: &Gather, r: &RowAt, p: usize, l: &mut [u32; 2]) {
         if l[0] > l[1] {
             return;
         }
         // the footprint: the pixel's square through the warp (its corners'
         // bounding box in the output image)
-        let (pf, qf) = (p as f64, q as f64);
-        let c = g.to_out * DVec3::new(pf, qf, 1.0);
-        let d = if let Some([ex, ey]) = g.affine {
-            // a parallel frame: the same box about every centre
-            if g.tall {
-                self.min_depth_by_columns(self.columns(), c.x - ex, c.x + ex, c.y - ey, c.y + ey)
-            } else {
-                self.min_depth(c.x - ex, c.x + ex, c.y - ey, c.y + ey)
+        let pf = p as f64;
+        let d = if let Some(f) = &g.fixed {
+            // a parallel frame: the same box about every centre, in fixed point
+            let pi = p as i64;
+            let [w, h] = self.size_i;
+            let Some(xs) = fixed_span(r.fixed[0] + f.x[1] * pi, f.e[0], w as i64) else { return };
+            let Some(ys) = fixed_span(r.fixed[1] + f.y[1] * pi, f.e[1], h as i64) else { return };
+            match g.cols {
+                Some(cols) => Self::min_over_columns(cols, xs, ys),
+                None => self.min_over(xs, ys),
             }
         } else {
-            let (mut u0, mut u1, mut v0, mut v1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-            for h in [c - g.half_p - g.half_q, c + g.half_p - g.half_q, c + g.half_p + g.half_q, c - g.half_p + g.half_q] {
-                if !(h.z > 0.0) {
-                    return;
+            let c = r.c + g.to_out.x_axis * pf;
+            if let Some([ex, ey]) = g.affine {
+                // (an affine frame too far out for the fixed point)
+                self.min_depth(c.x - ex, c.x + ex, c.y - ey, c.y + ey)
+            } else {
+                let (mut u0, mut u1, mut v0, mut v1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+                for h in [c - g.half_p - g.half_q, c + g.half_p - g.half_q, c + g.half_p + g.half_q, c - g.half_p + g.half_q] {
+                    if !(h.z > 0.0) {
+                        return;
+                    }
+                    let (u, v) = (h.x / h.z, h.y / h.z);
+                    (u0, u1, v0, v1) = (min(u0, u), max(u1, u), min(v0, v), max(v1, v));
                 }
-                let (u, v) = (h.x / h.z, h.y / h.z);
-                (u0, u1, v0, v1) = (min(u0, u), max(u1, u), min(v0, v), max(v1, v));
+                self.min_depth(u0, u1, v0, v1)
             }
-            self.min_depth(u0, u1, v0, v1)
         };
         if !d.is_finite() {
             return;
         }
         // the samples' depth is affine in k: keep those strictly in front of d
         let last = g.last;
-        let d0 = g.first[0] + g.first[1] * pf + g.first[2] * qf;
+        let d0 = r.d[0] + g.first[1] * pf;
         // the depth step from slice to slice (in a parallel frame the same on
         // every ray, and the crossing a product; else a quotient per ray)
         let [dk, inv] = match g.step {
             Some(s) => s,
             None if last > 0 => {
-                let d1 = g.last_depth[0] + g.last_depth[1] * pf + g.last_depth[2] * qf;
+                let d1 = r.d[1] + g.last_depth[1] * pf;
                 [(d1 - d0) / last as f64, f64::NAN]
             }
             None => [0.0, f64::NAN],
@@ -651,19 +756,23 @@ impl Limiter for GeometryLimits {
         if plan.slices() == 0 || plan.grid.pixels() == 0 || self.bounds.is_none() {
             return;
         }
-        let g = Gather::new(plan, &self.projector);
+        let g = Gather::new(plan, self);
         if !self.cull {
             // the reference: every pixel gathers
             let Some([p0, q0, p1, q1]) = self.reach(plan) else { return };
             limits.par_rows_mut().enumerate().skip(q0).take(q1 + 1 - q0).for_each(|(q, row)| {
+                let r = g.row(q);
                 for (p, l) in row.iter_mut().enumerate().skip(p0).take(p1 + 1 - p0) {
-                    self.limit_pixel(&g, p, q, l);
+                    self.limit_at(&g, &r, p, l);
                 }
             });
             return;
         }
         let marks = self.marks(plan);
-        let gather_row = |q: usize, row: &mut [[u32; 2]]| marks.each(q, |p| self.limit_pixel(&g, p, q, &mut row[p]));
+        let gather_row = |q: usize, row: &mut [[u32; 2]]| {
+            let r = g.row(q);
+            marks.each(q, |p| self.limit_at(&g, &r, p, &mut row[p]))
+        };
         if !self.parallel(plan) {
             for q in 0..plan.grid.size[1] {
                 if marks.rows[q][0] <= marks.rows[q][1] {
@@ -828,6 +937,40 @@ mod tests {
             n += 1;
         }
         assert!(finite * 10 > n, "only {finite} of {n} boxes met geometry");
+    }
+
+    /// The fixed-point box of an affine frame takes the output pixels the
+    /// float box takes ([`GeometryLimits::footprint`]): random centres and
+    /// half extents, sub-pixel to wide, inside and across the image's edges
+    /// (away from a pixel edge by more than the fixed point's 2⁻³²).
+    #[test]
+    fn inverse_warp_fixed_boxes_take_the_float_boxes_pixels() {
+        let gl = GeometryLimits::new(
+            Projector::new(&Camera::new(DMat3::IDENTITY, [97, 61]), &Projection::Parallel, [8, 8, 8], [1.0; 3]).unwrap(),
+            &GeometryImage::new(97, 61),
+        );
+        let mut seed = 0x2545f4914f6cdd1du64;
+        let mut rnd = |lo: f64, hi: f64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let near_edge = |x: f64| (x - x.round()).abs() < 1e-6;
+        let fix = |x: f64| (x * FIXED_ONE as f64).round() as i64;
+        let (mut n, mut some) = (0, 0);
+        while n < 50_000 {
+            let (u, v, ex, ey) = (rnd(-6.0, 104.0), rnd(-6.0, 68.0), rnd(0.0, 3.0), rnd(0.0, 5.0));
+            if [u - ex, u + ex, u + 0.5, v - ey, v + ey, v + 0.5].into_iter().any(near_edge) {
+                continue;
+            }
+            let float = gl.footprint(u - ex, u + ex, v - ey, v + ey);
+            let fixed = fixed_span(fix(u), fix(ex), 97).zip(fixed_span(fix(v), fix(ey), 61));
+            assert_eq!(fixed, float, "box at ({u}, {v}) ± ({ex}, {ey})");
+            some += fixed.is_some() as usize;
+            n += 1;
+        }
+        assert!(some * 10 > n * 7, "only {some} of {n} boxes in the image");
     }
 
     #[test]
@@ -1214,6 +1357,10 @@ mod tests {
             let needle = Mesh::cylinder(a, b, radius, 32).unwrap();
             let cam = Camera::new(NamedView::Anterior.rotation(), [512, 512]);
             for projection in [Projection::Parallel, Projection::perspective(40.0, 2.0).unwrap()] {
+                // (IW_ONLY=text: only the cases whose "name projection" holds it)
+                if std::env::var("IW_ONLY").is_ok_and(|o| !format!("{name} {projection:?}").contains(&o)) {
+                    continue;
+                }
                 let plan = match projection.resolve(&cam, dims, sp).unwrap() {
                     None => FramePlan::parallel(&Factorization::new(&cam, dims, sp).unwrap(), sp),
                     Some((pc, d)) => {
@@ -1250,11 +1397,12 @@ mod tests {
                     l.reset(plan.grid.size, plan.slices());
                     let t = std::time::Instant::now();
                     let [p0, q0, p1, q1] = gl.reach(&plan).unwrap();
-                    let g = Gather::new(&plan, &gl.projector);
+                    let g = Gather::new(&plan, &gl);
                     for q in q0..=q1 {
+                        let r = g.row(q);
                         for p in p0..=p1 {
                             let mut x = l.get(p, q);
-                            gl.limit_pixel(&g, p, q, &mut x);
+                            gl.limit_at(&g, &r, p, &mut x);
                             l.set(p, q, x);
                         }
                     }

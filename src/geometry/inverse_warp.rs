@@ -651,7 +651,7 @@ impl GeometryLimits {
         } else {
             let keep = |k: i64| d0 + dk * (k as f64) < d;
             let ks = if g.step.is_some() { (d - d0) * inv } else { (d - d0) / dk };
-            let ks = ks.clamp(0.0, last as f64);
+            let ks = max(0.0, min(ks, last as f64));
             // `keep` is monotone in k and `ks` lies within rounding (far less
             // than a slice) of where it changes: one step corrects it. (Straight
             // code: the searching loops this replaces were vectorized 16 slices
@@ -1414,6 +1414,14 @@ mod tests {
                 };
                 let (tn, tg, tm, tk) = (med(&mut t_new), med(&mut t_gather), med(&mut t_make), med(&mut t_marks));
                 let marked = gl_marked(&GeometryLimits::new(proj, &geo), &plan);
+                let open = RayLimits::open(plan.grid.size, plan.slices());
+                let mut cut = RayLimits::open(plan.grid.size, plan.slices());
+                GeometryLimits::new(proj, &geo).limit(&plan, &mut cut);
+                let changed = (0..plan.grid.size[1])
+                    .flat_map(|q| (0..plan.grid.size[0]).map(move |p| (p, q)))
+                    .filter(|&(p, q)| cut.get(p, q) != open.get(p, q))
+                    .count();
+                println!("{name} {projection:?}: {changed} of {marked} marked pixels limited");
                 println!(
                     "{name} {projection:?}: grid {:?}, covered {:.1} %, marked {marked}; GeometryLimits::new {tm:.3} ms; rectangle gather {tg:.3} ms ({:.2} ns/output px); the limiter (one thread) {tn:.3} ms ({:.2} ns/output px, {:.0} ns/marked px), of which marks {tk:.3} ms",
                     plan.grid.size,

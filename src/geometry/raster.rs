@@ -226,8 +226,32 @@ fn clip_near(p: &Projector, tri: [Vert; 3], out: &mut Vec<Vert>) {
 /// values at every pixel (no pixel on both sides, none on neither).
 #[inline]
 fn edge(a: (f64, f64), b: (f64, f64), p: (f64, f64)) -> f64 {
-    let f = |a: (f64, f64), b: (f64, f64)| (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0);
-    if (a.0, a.1) <= (b.0, b.1) { f(a, b) } else { -f(b, a) }
+    Edge::new(a, b).at(p)
+}
+
+/// [`edge`] with what does not depend on the pixel set up once: the smaller
+/// end, the edge's extent from it, and the sign (the same operations in the
+/// same order: the same value, bit for bit).
+#[derive(Clone, Copy)]
+struct Edge {
+    from: (f64, f64),
+    d: (f64, f64),
+    flip: bool,
+}
+
+impl Edge {
+    #[inline(always)]
+    fn new(a: (f64, f64), b: (f64, f64)) -> Edge {
+        let flip = (a.0, a.1) > (b.0, b.1);
+        let (a, b) = if flip { (b, a) } else { (a, b) };
+        Edge { from: a, d: (b.0 - a.0, b.1 - a.1), flip }
+    }
+
+    #[inline(always)]
+    fn at(&self, p: (f64, f64)) -> f64 {
+        let f = self.d.0 * (p.1 - self.from.1) - self.d.1 * (p.0 - self.from.0);
+        if self.flip { -f } else { f }
+    }
 }
 
 /// Draws `mesh` (voxel coordinates) into `out` with `material`, keeping the
@@ -263,14 +287,32 @@ pub fn rasterize(mesh: &Mesh, material: &Material, cull: Cull, proj: &Projector,
         let color = [c[0], c[1], c[2], 1.0];
         let s: Vec<(f64, f64, f64, f64)> = poly.iter().map(|&e| proj.project(e)).collect();
         for i in 1..s.len() - 1 {
-            fill(out, [s[0], s[i], s[i + 1]], cull, color);
+            fill::<true>(out, [s[0], s[i], s[i + 1]], cull, color);
         }
     }
     Ok(())
 }
 
-/// Fills one screen triangle (each vertex `(u, v, depth, 1/w)`).
-fn fill(out: &mut GeometryImage, v: [(f64, f64, f64, f64); 3], cull: Cull, color: [f32; 4]) {
+/// `⌊x⌋` for `|x|` well inside the `i64` range (a clamped pixel position),
+/// without a library call (the default x86-64 target has no rounding
+/// instruction).
+#[inline(always)]
+fn floor_small(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
+}
+
+/// `⌈x⌉`, as [`floor_small`].
+#[inline(always)]
+fn ceil_small(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t < x { t + 1.0 } else { t }
+}
+
+/// Fills one screen triangle (each vertex `(u, v, depth, 1/w)`); `NARROW`:
+/// each row's pixels only between the edges' lines (false: every pixel of
+/// the bounding box, the reference the narrowing is tested against).
+fn fill<const NARROW: bool>(out: &mut GeometryImage, v: [(f64, f64, f64, f64); 3], cull: Cull, color: [f32; 4]) {
     let p = v.map(|x| (x.0, x.1));
     let area = edge(p[0], p[1], p[2]);
     if !(area.is_finite() && area != 0.0) {
@@ -299,30 +341,54 @@ fn fill(out: &mut GeometryImage, v: [(f64, f64, f64, f64); 3], cull: Cull, color
     if !(x0 <= x1 && y0 <= y1) {
         return;
     }
+    // each edge's line as x = ax + slope·(y − ay), for the rows' ranges: the
+    // edges bounding the rows on the left (going up) and on the right, with
+    // a tolerance far above the rounding of the line or of the exact edge
+    // test below, which decides each pixel of the range (none: an edge that
+    // cannot narrow it, horizontal or out of range)
+    let (mut left, mut right) = ([(0.0f64, 0.0f64, 0.0f64, 0.0f64); 3], [(0.0f64, 0.0f64, 0.0f64, 0.0f64); 3]);
+    let (mut nl, mut nr) = (0, 0);
+    for &(a, b) in &edges {
+        let dy = b.1 - a.1;
+        if dy == 0.0 {
+            continue;
+        }
+        let slope = (b.0 - a.0) / dy;
+        let reach = slope.abs() * (y0 - a.1).abs().max((y1 - a.1).abs());
+        let tol = 1e-9 * (1.0 + a.0.abs() + reach);
+        if !(slope.is_finite() && tol.is_finite()) {
+            continue;
+        }
+        // inside lies where −dy·(x − at) > 0
+        if dy < 0.0 {
+            left[nl] = (a.0, a.1, slope, tol);
+            nl += 1;
+        } else {
+            right[nr] = (a.0, a.1, slope, tol);
+            nr += 1;
+        }
+    }
+    let e = edges.map(|(a, b)| Edge::new(a, b));
     for y in y0 as usize..=y1 as usize {
-        // the row's pixels inside every edge, solved on the edges' lines and
-        // widened by a pixel (a long thin triangle's box is mostly outside
-        // it); the exact test below decides each pixel of that range
+        // the row's pixels inside every edge, solved on the edges' lines (a
+        // long thin triangle's box is mostly outside it); bounds kept within
+        // [x0 − 1, x1 + 1], whole numbers by an exact conversion
+        let yf = y as f64;
         let (mut lo, mut hi) = (x0, x1);
-        for &(a, b) in &edges {
-            let dy = b.1 - a.1;
-            if dy != 0.0 {
-                let at = a.0 + (b.0 - a.0) * (y as f64 - a.1) / dy;
-                // inside lies where −dy·(x − at) > 0
-                if dy < 0.0 {
-                    lo = lo.max((at - 1.0).floor());
-                } else {
-                    hi = hi.min((at + 1.0).ceil());
-                }
-            }
+        let (nl, nr) = if NARROW { (nl, nr) } else { (0, 0) };
+        for &(ax, ay, slope, tol) in &left[..nl] {
+            lo = lo.max(ceil_small((ax + slope * (yf - ay) - tol).clamp(x0 - 1.0, x1 + 1.0)));
+        }
+        for &(ax, ay, slope, tol) in &right[..nr] {
+            hi = hi.min(floor_small((ax + slope * (yf - ay) + tol).clamp(x0 - 1.0, x1 + 1.0)));
         }
         if !(lo <= hi) {
             continue;
         }
         let (mut first, mut last) = (u32::MAX, 0u32);
         for x in lo as usize..=hi as usize {
-            let q = (x as f64, y as f64);
-            let b = edges.map(|(a, c)| edge(a, c, q));
+            let q = (x as f64, yf);
+            let b = e.map(|e| e.at(q));
             if !(0..3).all(|i| b[i] > 0.0 || (b[i] == 0.0 && tl[i])) {
                 continue;
             }
@@ -375,6 +441,44 @@ mod tests {
             }
             assert!(img.coverage() > 0.002, "{projection:?}: something drawn ({})", img.coverage());
         }
+    }
+
+    /// Each row's range solved on the edges' lines loses no pixel: random
+    /// triangles (long and thin, tiny, huge, partly off screen, either
+    /// orientation) drawn row range by row range equal the same triangles
+    /// with every pixel of their boxes tested, bit for bit.
+    #[test]
+    fn raster_row_ranges_equal_the_whole_box() {
+        let mut seed = 0x853c49e6748fea9bu64;
+        let mut rnd = |lo: f64, hi: f64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (w, h) = (61, 47);
+        let mut drawn = 0;
+        for round in 0..400 {
+            let (mut a, mut b) = (GeometryImage::new(w, h), GeometryImage::new(w, h));
+            for _ in 0..6 {
+                let scale = [1.5, 20.0, 80.0, 1e6][round % 4];
+                let c = (rnd(-10.0, 70.0), rnd(-10.0, 55.0));
+                let mut v = [(0.0, 0.0, 0.0, 0.0); 3];
+                for x in &mut v {
+                    *x = (c.0 + rnd(-scale, scale), c.1 + rnd(-scale, scale) * [1.0, 0.05][round % 2], rnd(1.0, 9.0), rnd(0.2, 1.0));
+                }
+                if round % 5 == 0 {
+                    // (a long thin sliver along a random direction)
+                    v[2] = (v[1].0 + rnd(-0.3, 0.3), v[1].1 + rnd(-0.3, 0.3), v[2].2, v[2].3);
+                }
+                fill::<true>(&mut a, v, Cull::None, [1.0; 4]);
+                fill::<false>(&mut b, v, Cull::None, [1.0; 4]);
+            }
+            assert!(a.depth().iter().zip(b.depth()).all(|(x, y)| x.to_bits() == y.to_bits()), "round {round}");
+            assert_eq!(a.spans, b.spans, "round {round}");
+            drawn += a.depth().iter().filter(|d| d.is_finite()).count();
+        }
+        assert!(drawn > 100_000, "only {drawn} pixels drawn");
     }
 
     /// A sphere's rasterized depth is the analytic depth of the nearer

@@ -353,23 +353,24 @@ impl Scene {
         // iso on the raycaster: keep the crossing slice and depth-test the hits at composition
         let settings = r.settings();
         let crossing = settings.mode == Mode::Iso && matches!(settings.method, Method::Binary | Method::Brute);
-        let t = Instant::now();
         let geometry = Arc::new(GeometryLimits::new(proj, geo).with_iso_crossing(crossing));
-        let make_ms = t.elapsed().as_secs_f64() * 1e3;
         limiters.push(geometry.clone());
         let limiter: Arc<dyn Limiter> = if limiters.len() == 1 { geometry.clone() } else { Arc::new(Limiters::new(limiters)?) };
         r.set_limiter(Some(limiter));
         // (a split perspective frame keeps each pyramid's iso depth for the depth test)
         r.set_keep_depths(crossing);
         let st = r.render(cam, img)?;
-        // the inverse warp's own cost, on this frame's plan(s): reading the
-        // depth buffer, then the limiter run once more (its buffers made first)
+        // the inverse warp's own cost, on this frame's plan(s), measured once
+        // more from the start: reading the depth buffer, then the limiter (its
+        // output buffers made first; anything it makes on first use, such as
+        // a column copy of the depths, made again)
         let mut bufs: Vec<_> = r.last_plans().iter().map(|p| shearwarp::view::plan::RayLimits::open(p.grid.size, p.slices())).collect();
         let t = Instant::now();
+        let again = GeometryLimits::new(proj, geo).with_iso_crossing(crossing);
         for (plan, l) in r.last_plans().iter().zip(&mut bufs) {
-            r.run_limiter(geometry.as_ref(), plan, l);
+            r.run_limiter(&again, plan, l);
         }
-        cost.inverse_warp_ms = make_ms + t.elapsed().as_secs_f64() * 1e3;
+        cost.inverse_warp_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         if crossing {
             composite_iso_over_geometry(img, geo, r, &geometry);

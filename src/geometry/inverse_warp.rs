@@ -121,7 +121,9 @@ impl GeometryLimits {
         let mut covered = vec![false; tw];
         let mut runs = vec![];
         let mut tiles = 0;
-        let mut depths = Rows { rows: vec![([1u32, 0u32], 0usize); h], packed: vec![] };
+        // (sized once: growing it by the rows would copy it again and again)
+        let n: usize = (0..h).filter_map(|y| geometry.row_span(y)).map(|[x0, x1]| x1 + 1 - x0).sum();
+        let mut depths = Rows { rows: vec![([1u32, 0u32], 0usize); h], packed: Vec::with_capacity(n) };
         // (the tile row's covered tiles lie in t_lo .. t_hi)
         let (mut t_lo, mut t_hi) = (0, 0);
         for ty in 0..h.div_ceil(TILE) {
@@ -417,13 +419,14 @@ impl GeometryLimits {
     }
 
     /// The depths column by column (made on first use: only a parallel frame
-    /// whose footprints are taller than wide reads them).
-    fn columns(&self) -> &Rows {
+    /// whose footprints are taller than wide reads them; `par`: the copy in
+    /// stripes of columns on the current thread pool).
+    fn columns(&self, par: bool) -> &Rows {
         self.cols.get_or_init(|| {
             let [w, h] = self.size;
-            let rows = &self.depths.rows;
+            let rows = &self.depths.rows[..h];
             let (mut lo, mut hi) = (vec![u32::MAX; w], vec![0u32; w]);
-            for (y, &([a, b], _)) in rows.iter().enumerate().take(h) {
+            for (y, &([a, b], _)) in rows.iter().enumerate() {
                 for x in a as usize..(b as usize + 1).min(w) {
                     (lo[x], hi[x]) = (lo[x].min(y as u32), hi[x].max(y as u32));
                 }
@@ -437,14 +440,36 @@ impl GeometryLimits {
                 }
             }
             let mut packed = vec![f64::INFINITY; n];
-            for (y, &([a, b], off)) in rows.iter().enumerate().take(h) {
-                if a > b {
-                    continue;
+            // columns xs.start .. xs.end into `out` (their values from `base` on)
+            let copy = |xs: std::ops::Range<usize>, base: usize, out: &mut [f64]| {
+                for (y, &([a, b], off)) in rows.iter().enumerate() {
+                    let (a, b) = (a as usize, (b as usize + 1).min(w));
+                    let (s, e) = (a.max(xs.start), b.min(xs.end));
+                    if s >= e {
+                        continue;
+                    }
+                    for (&([l, _], o), &v) in lines[s..e].iter().zip(&self.depths.packed[off + s - a..]) {
+                        out[o - base + y - l as usize] = v;
+                    }
                 }
-                let (a, b) = (a as usize, (b as usize).min(w - 1));
-                for (&([l, _], o), &v) in lines[a..=b].iter().zip(&self.depths.packed[off..]) {
-                    packed[o + y - l as usize] = v;
+            };
+            if !par || w < 64 {
+                copy(0..w, 0, &mut packed);
+            } else {
+                // (stripes of columns own disjoint parts of `packed`: a
+                // column's values follow the previous column's)
+                let stripes = 8;
+                let mut parts = Vec::with_capacity(stripes);
+                let mut rest: &mut [f64] = &mut packed;
+                let mut at = 0;
+                for i in 0..stripes {
+                    let xs = i * w / stripes..(i + 1) * w / stripes;
+                    let end = if xs.end == w { n } else { lines[xs.end..].iter().find(|l| l.0[0] <= l.0[1]).map_or(n, |l| l.1) };
+                    let (part, tail) = rest.split_at_mut(end - at);
+                    parts.push((xs, at, part));
+                    (rest, at) = (tail, end);
                 }
+                parts.into_par_iter().for_each(|(xs, base, out)| copy(xs, base, out));
             }
             Rows { rows: lines, packed }
         })
@@ -548,7 +573,8 @@ struct RowAt {
 }
 
 impl<'a> Gather<'a> {
-    fn new(plan: &FramePlan, gl: &'a GeometryLimits) -> Self {
+    /// (`par`: set up on the current thread pool)
+    fn new(plan: &FramePlan, gl: &'a GeometryLimits, par: bool) -> Self {
         let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
         let to_sheared =
             DMat3::from_cols(DVec3::new(pitch, 0.0, 0.0), DVec3::new(0.0, pitch, 0.0), DVec3::new(-pad * pitch, -pad * pitch, 1.0));
@@ -568,7 +594,7 @@ impl<'a> Gather<'a> {
         // (at least twice as many rows as columns: the columns' copy costs a
         // pass over the covered pixels, which a square box does not repay)
         let tall = affine.is_some_and(|[ex, ey]| (2.0 * ey).floor() + 1.0 >= 2.0 * ((2.0 * ex).floor() + 1.0));
-        let cols = tall.then(|| gl.columns());
+        let cols = tall.then(|| gl.columns(par));
         Gather { to_out, affine, fixed, half_p, half_q, first, last_depth, last, step, cols }
     }
 
@@ -756,8 +782,8 @@ impl Limiter for GeometryLimits {
         if plan.slices() == 0 || plan.grid.pixels() == 0 || self.bounds.is_none() {
             return;
         }
-        let g = Gather::new(plan, self);
         if !self.cull {
+            let g = Gather::new(plan, self, true);
             // the reference: every pixel gathers
             let Some([p0, q0, p1, q1]) = self.reach(plan) else { return };
             limits.par_rows_mut().enumerate().skip(q0).take(q1 + 1 - q0).for_each(|(q, row)| {
@@ -768,12 +794,18 @@ impl Limiter for GeometryLimits {
             });
             return;
         }
-        let marks = self.marks(plan);
+        let par = self.parallel(plan);
+        // (the gather's set-up, with any column copy, beside the marks)
+        let (g, marks) = if par {
+            rayon::join(|| Gather::new(plan, self, true), || self.marks(plan))
+        } else {
+            (Gather::new(plan, self, false), self.marks(plan))
+        };
         let gather_row = |q: usize, row: &mut [[u32; 2]]| {
             let r = g.row(q);
             marks.each(q, |p| self.limit_at(&g, &r, p, &mut row[p]))
         };
-        if !self.parallel(plan) {
+        if !par {
             for q in 0..plan.grid.size[1] {
                 if marks.rows[q][0] <= marks.rows[q][1] {
                     gather_row(q, limits.row_mut(q));
@@ -895,7 +927,8 @@ mod tests {
     /// rectangle gives exactly the limits of visiting every pixel (a small
     /// needle, a plate across the image, nothing on screen, a mesh partly
     /// behind a perspective eye), and for a small mesh visits far fewer.
-    /// The column copy of the depths gives the row layout's minimum over
+    /// The column copy of the depths (made whole or in stripes of columns in
+    /// parallel, the same copy) gives the row layout's minimum over
     /// every box (random boxes, sub-pixel to wide, inside and across the
     /// image's edges, over a needle and a plate with gaps between them).
     #[test]
@@ -912,7 +945,14 @@ mod tests {
             rasterize(&mesh, &Material::default(), Cull::None, &proj, &mut geo).unwrap();
         }
         let gl = GeometryLimits::new(proj, &geo);
-        let cols = gl.columns();
+        let cols = gl.columns(false);
+        // the copy in stripes of columns (on a pool of 3) is the same copy
+        let striped = GeometryLimits::new(proj, &geo);
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+        let striped = pool.install(|| striped.columns(true));
+        assert_eq!(striped.rows, cols.rows);
+        assert!(striped.packed.iter().zip(&cols.packed).all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert_eq!(striped.packed.len(), cols.packed.len());
         let mut seed = 0x9e3779b97f4a7c15u64;
         let mut rnd = |lo: f64, hi: f64| {
             seed ^= seed << 13;
@@ -1397,7 +1437,7 @@ mod tests {
                     l.reset(plan.grid.size, plan.slices());
                     let t = std::time::Instant::now();
                     let [p0, q0, p1, q1] = gl.reach(&plan).unwrap();
-                    let g = Gather::new(&plan, &gl);
+                    let g = Gather::new(&plan, &gl, false);
                     for q in q0..=q1 {
                         let r = g.row(q);
                         for p in p0..=p1 {

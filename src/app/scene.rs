@@ -62,6 +62,13 @@ pub struct SceneArgs {
     /// along the volume's x, y, z axes (default: voxel indices).
     #[arg(long)]
     pub mesh_world: bool,
+    /// A needle: a closed cylinder from (x0,y0,z0) to (x1,y1,z1) in voxel
+    /// indices, of radius r in voxels of the smallest spacing (round in world
+    /// space, as --clip-sphere); with --mesh-world, ends and radius in world
+    /// millimetres from the volume centre. Drawn like --mesh (repeatable;
+    /// not moved by --mesh-scale / --mesh-rotate / --mesh-translate).
+    #[arg(long, value_name = "X0,Y0,Z0,X1,Y1,Z1,R", value_parser = parse_needle, allow_hyphen_values = true)]
+    pub needle: Vec<[f64; 7]>,
     /// Mesh colour R,G,B in [0, 1].
     #[arg(long, value_name = "R,G,B", value_parser = parse_triple_f64, default_value = "0.85,0.75,0.3")]
     pub mesh_color: [f64; 3],
@@ -179,6 +186,31 @@ fn parse_box(s: &str) -> std::result::Result<[f64; 6], String> {
     Ok(b)
 }
 
+fn parse_needle(s: &str) -> std::result::Result<[f64; 7], String> {
+    let v = parse_numbers::<7>(s, "x0,y0,z0,x1,y1,z1,r")?;
+    if v[6] <= 0.0 {
+        return Err(format!("the radius must be > 0, got '{s}'"));
+    }
+    if v[..3] == v[3..6] {
+        return Err(format!("the needle's two ends must differ, got '{s}'"));
+    }
+    Ok(v)
+}
+
+/// The cylinder of `--needle` in voxel indices: built in world units (round
+/// there) and mapped back by the spacing. `world`: the ends and radius are
+/// millimetres from the volume centre; else voxel indices, the radius in
+/// voxels of the smallest spacing.
+fn needle_mesh(n: [f64; 7], world: bool, dims: [usize; 3], spacing: [f32; 3]) -> shearwarp::Result<Mesh> {
+    let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
+    let (a, b) = (DVec3::new(n[0], n[1], n[2]), DVec3::new(n[3], n[4], n[5]));
+    let centre = (DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64) - 1.0) / 2.0;
+    // (millimetres from the volume centre)
+    let (a, b, r) = if world { (a, b, n[6]) } else { ((a - centre) * sp, (b - centre) * sp, n[6] * sp.min_element()) };
+    let to_voxels = DAffine3::from_translation(centre) * DAffine3::from_scale(1.0 / sp);
+    Mesh::cylinder(a, b, r, 32)?.transformed(to_voxels)
+}
+
 fn parse_sphere(s: &str) -> std::result::Result<[f64; 4], String> {
     let v = parse_numbers::<4>(s, "x,y,z,r")?;
     if v[3] <= 0.0 {
@@ -273,6 +305,9 @@ impl Scene {
             _ => None,
         };
         let mut meshes = vec![];
+        for n in &args.needle {
+            meshes.push(needle_mesh(*n, args.mesh_world, dims, spacing).map_err(|e| usage(format!("--needle: {e}")))?);
+        }
         for path in &args.mesh {
             let m = load_mesh(path).map_err(|e| usage(e.to_string()))?;
             meshes.push(m.transformed(place).map_err(|e| usage(format!("{}: {e}", path.display())))?);

@@ -23,11 +23,71 @@ use crate::view::plan::FramePlan;
 /// the pixel, or where the depth of a split frame's pyramid was not kept.
 pub fn volume_hit(renderer: &Renderer, u: f64, v: f64) -> Option<DVec3> {
     let i = renderer.last_owner(u, v)?;
-    hit_in(&renderer.last_plans()[i], |p, q| renderer.last_depth_at(i, p, q), u, v)
+    let plan = &renderer.last_plans()[i];
+    hit_in(plan, |p, q| renderer.last_depth_at(i, p, q), u, v, |x, y, k| position_at(plan, x, y, k))
 }
 
-/// [`volume_hit`] in plan `plan`, whose intermediate iso depth `depth_at` reads.
-fn hit_in(plan: &FramePlan, depth_at: impl Fn(usize, usize) -> f32, u: f64, v: f64) -> Option<DVec3> {
+/// The voxel position where intermediate pixel `(x, y)`'s ray meets its
+/// fractional slice `k` (the sample positions are affine in k: between the
+/// slices around k).
+fn position_at(plan: &FramePlan, x: usize, y: usize, k: f64) -> DVec3 {
+    let nk = plan.slices();
+    let k0 = (k.floor() as usize).min(nk - 1);
+    let k1 = (k0 + 1).min(nk - 1);
+    let (a, b) = (sample_voxel(plan, k0, x, y), sample_voxel(plan, k1, x, y));
+    a + (b - a) * (k - k0 as f64)
+}
+
+/// [`volume_hit`]'s eye depth (`−z` in a projector's eye space) for a run of
+/// output pixels of one frame: each plan's first and last slice depths set
+/// up once ([`super::inverse_warp::slice_depth`]), and a pixel's hit depth
+/// the same weighted mean of its neighbours' hits (the depth is affine in
+/// the position: the depth of the mean position, up to rounding) with no
+/// sample position per pixel.
+pub(crate) struct HitDepths {
+    /// Per plan: the first and last slice's depth functions and the last slice.
+    plans: Vec<([f64; 3], [f64; 3], usize)>,
+}
+
+impl HitDepths {
+    pub(crate) fn new(renderer: &Renderer, proj: &super::Projector) -> Self {
+        let plans = renderer
+            .last_plans()
+            .iter()
+            .map(|plan| {
+                let last = plan.slices().saturating_sub(1);
+                (super::inverse_warp::slice_depth(plan, proj, 0), super::inverse_warp::slice_depth(plan, proj, last), last)
+            })
+            .collect();
+        HitDepths { plans }
+    }
+
+    /// The eye depth of [`volume_hit`] at output pixel `(u, v)` of `renderer`'s
+    /// last frame (the frame these depths were set up for).
+    pub(crate) fn at(&self, renderer: &Renderer, u: f64, v: f64) -> Option<f64> {
+        let i = renderer.last_owner(u, v)?;
+        let (f, l, last) = self.plans[i];
+        let depth = |x: usize, y: usize, k: f64| {
+            let (xf, yf) = (x as f64, y as f64);
+            let d0 = f[0] + f[1] * xf + f[2] * yf;
+            if last == 0 {
+                return d0;
+            }
+            // (past the last slice, the last slice's sample, as position_at)
+            let k = k.min(last as f64);
+            d0 + (l[0] + l[1] * xf + l[2] * yf - d0) * (k / last as f64)
+        };
+        hit_in(&renderer.last_plans()[i], |p, q| renderer.last_depth_at(i, p, q), u, v, depth)
+    }
+}
+
+/// [`volume_hit`] in plan `plan`, whose intermediate iso depth `depth_at`
+/// reads: the weighted mean of `value(x, y, k)` (a position, or a depth)
+/// over the neighbouring pixels' hits.
+fn hit_in<T>(plan: &FramePlan, depth_at: impl Fn(usize, usize) -> f32, u: f64, v: f64, value: impl Fn(usize, usize, f64) -> T) -> Option<T>
+where
+    T: Copy + Default + std::ops::Add<Output = T> + std::ops::Mul<f64, Output = T> + std::ops::Div<f64, Output = T>,
+{
     let (nk, [gw, gh]) = (plan.slices(), plan.grid.size);
     if nk == 0 {
         return None;
@@ -35,7 +95,7 @@ fn hit_in(plan: &FramePlan, depth_at: impl Fn(usize, usize) -> f32, u: f64, v: f
     let [p, q] = plan.output_to_intermediate(u, v)?;
     let (x0, y0) = (p.floor(), q.floor());
     let (fx, fy) = (p - x0, q - y0);
-    let (mut wsum, mut at) = (0.0, DVec3::ZERO);
+    let (mut wsum, mut at) = (0.0, T::default());
     for (dx, dy, wt) in [(0.0, 0.0, (1.0 - fx) * (1.0 - fy)), (1.0, 0.0, fx * (1.0 - fy)), (0.0, 1.0, (1.0 - fx) * fy), (1.0, 1.0, fx * fy)]
     {
         let (x, y) = (x0 + dx, y0 + dy);
@@ -46,12 +106,8 @@ fn hit_in(plan: &FramePlan, depth_at: impl Fn(usize, usize) -> f32, u: f64, v: f
         if !k.is_finite() {
             continue;
         }
-        // the sample positions are affine in k: between the slices around k
-        let k0 = (k.floor() as usize).min(nk - 1);
-        let k1 = (k0 + 1).min(nk - 1);
-        let (a, b) = (sample_voxel(plan, k0, x as usize, y as usize), sample_voxel(plan, k1, x as usize, y as usize));
         wsum += wt;
-        at += wt * (a + (b - a) * (k - k0 as f64));
+        at = at + value(x as usize, y as usize, k) * wt;
     }
     (wsum >= 0.5).then(|| at / wsum)
 }
@@ -106,6 +162,6 @@ impl KeptHits {
         };
         let (plan, d) = (&self.plans[i], &self.depths[i]);
         let matches = d.size == plan.grid.size && d.depth.len() == d.size[0] * d.size[1];
-        hit_in(plan, |p, q| if matches { d.depth_at(p, q) } else { f32::NAN }, u, v)
+        hit_in(plan, |p, q| if matches { d.depth_at(p, q) } else { f32::NAN }, u, v, |x, y, k| position_at(plan, x, y, k))
     }
 }

@@ -482,6 +482,16 @@ pub(super) fn sample_voxel(plan: &FramePlan, k: usize, p: usize, q: usize) -> DV
     unpermute(plan.view.perm, DVec3::new(plan.sample_at(k, 0, p), plan.sample_at(k, 1, q), k as f64))
 }
 
+/// The eye depth (`−z` in `proj`'s eye space) of slice `k`'s samples as an
+/// affine function `c + c_p·p + c_q·q` of the intermediate pixel `(p, q)`
+/// (a sample's voxel position is affine in the pixel for a fixed slice in
+/// both projections, and the depth affine in the position).
+pub(super) fn slice_depth(plan: &FramePlan, proj: &Projector, k: usize) -> [f64; 3] {
+    let depth = |p: usize, q: usize| -proj.eye_space(sample_voxel(plan, k, p, q)).z;
+    let c = depth(0, 0);
+    [c, depth(1, 0) - c, depth(0, 1) - c]
+}
+
 /// What the gather of one frame reads, set once per plan: intermediate pixel
 /// `(p, q, 1)` → homogeneous output point (`to_out`, and its half-pixel steps
 /// along p and q), and the eye depth of the first and last slice's samples
@@ -580,11 +590,7 @@ impl<'a> Gather<'a> {
             DMat3::from_cols(DVec3::new(pitch, 0.0, 0.0), DVec3::new(0.0, pitch, 0.0), DVec3::new(-pad * pitch, -pad * pitch, 1.0));
         let to_out = plan.warp.forward * to_sheared;
         let last = plan.slices().saturating_sub(1);
-        let depths = |k: usize| {
-            let depth = |p: usize, q: usize| -gl.projector.eye_space(sample_voxel(plan, k, p, q)).z;
-            let c = depth(0, 0);
-            [c, depth(1, 0) - c, depth(0, 1) - c]
-        };
+        let depths = |k: usize| slice_depth(plan, &gl.projector, k);
         let (half_p, half_q) = (to_out.x_axis * 0.5, to_out.y_axis * 0.5);
         let affine = (to_out.row(2) == DVec3::Z).then(|| [half_p.x.abs() + half_q.x.abs(), half_p.y.abs() + half_q.y.abs()]);
         let fixed = affine.and_then(|e| Fixed::new(&to_out, e, plan.grid.size));
@@ -838,9 +844,11 @@ pub fn composite_over_geometry(image: &mut Image, geometry: &GeometryImage) {
 
 /// The final image of an iso frame whose rays kept the crossing slice
 /// ([`GeometryLimits::with_iso_crossing`]): at each output pixel the
-/// geometry covers, the volume's iso hit under it ([`super::volume_hit`]:
-/// the warp's bilinear weights over the intermediate hits) is compared with
-/// the geometry's depth: a hit at or behind the geometry is hidden (the pixel
+/// geometry covers, the eye depth of the volume's iso hit under it (that of
+/// [`super::volume_hit`]'s position: the warp's bilinear weights over the
+/// intermediate hits, here from each plan's slice depths set up once, with
+/// no sample position per pixel; equal up to rounding, tested) is compared
+/// with the geometry's depth: a hit at or behind the geometry is hidden (the pixel
 /// is the geometry's colour), one in front is composed over it as in
 /// [`composite_over_geometry`]. Elsewhere the volume is over the geometry as
 /// there. A perspective frame split into pyramids is tested the same way,
@@ -855,7 +863,9 @@ pub fn composite_iso_over_geometry(
 ) {
     assert_eq!((image.width, image.height), (geometry.width, geometry.height), "image sizes");
     let w = image.width;
-    let proj = &limits.projector;
+    // the eye depth of the volume's hit, from each plan's slice depths (no
+    // sample positions per pixel)
+    let hits = super::hit::HitDepths::new(renderer, &limits.projector);
     // (only the rows' covered spans, as composite_over_geometry)
     image.data.par_chunks_mut(w.max(1)).enumerate().for_each(|(v, row)| {
         let Some([x0, x1]) = geometry.row_span(v) else { return };
@@ -865,7 +875,7 @@ pub fn composite_iso_over_geometry(
             if !gd.is_finite() {
                 continue;
             }
-            let hidden = super::volume_hit(renderer, u as f64, v as f64).is_some_and(|at| -proj.eye_space(at).z >= gd);
+            let hidden = hits.at(renderer, u as f64, v as f64).is_some_and(|d| d >= gd);
             if hidden {
                 *px = g;
             } else {
@@ -1186,6 +1196,50 @@ mod tests {
     /// is the depth test of [`composite_iso_over_geometry`] (where the needle
     /// pierces the sphere, within a quarter voxel of each other, ¾ voxel: the
     /// warp's depth there is the mean of the neighbouring hits that survive).
+    /// The depth test's hit depths from each plan's slice depths equal the
+    /// eye depth of the volume's hit position ([`super::super::volume_hit`])
+    /// at every output pixel, up to rounding: parallel, perspective, and a
+    /// perspective frame split into pyramids (the eye close to the volume).
+    #[test]
+    fn inverse_warp_hit_depths_are_the_hits_eye_depths() {
+        let dims = [40, 40, 40];
+        let vol = sphere(dims).unwrap();
+        let size = 96;
+        let cam = Camera::new(rotate_eye(rotate_eye(NamedView::Anterior.rotation(), 1, 35.0), 0, 20.0), [size, size]);
+        let mut split_seen = false;
+        for projection in [Projection::Parallel, Projection::perspective(40.0, 2.0).unwrap(), Projection::perspective(90.0, 0.7).unwrap()] {
+            let settings = Settings { method: Method::Binary, mode: Mode::Iso, threads: 1, ..Settings::default() };
+            let tf = crate::classify::TransferFunction::threshold(SPHERE_ISO, [1.0; 3]);
+            let mut r = Renderer::new(vol.clone(), &tf, settings).unwrap();
+            r.set_iso(SPHERE_ISO).unwrap();
+            r.set_projection(projection).unwrap();
+            r.set_keep_depths(true);
+            let mut img = Image::new(size, size);
+            r.render(&cam, &mut img).unwrap();
+            split_seen |= r.last_plans().len() > 1;
+            let proj = Projector::new(&cam, &projection, dims, [1.0; 3]).unwrap();
+            let hits = crate::geometry::hit::HitDepths::new(&r, &proj);
+            let mut some = 0;
+            for y in 0..size {
+                for x in 0..size {
+                    let (u, v) = (x as f64, y as f64);
+                    let want = crate::geometry::volume_hit(&r, u, v).map(|at| -proj.eye_space(at).z);
+                    let got = hits.at(&r, u, v);
+                    match (want, got) {
+                        (None, None) => {}
+                        (Some(a), Some(b)) => {
+                            assert!((a - b).abs() <= 1e-9 * (1.0 + a.abs()), "{projection:?} ({x}, {y}): {a} against {b}");
+                            some += 1;
+                        }
+                        _ => panic!("{projection:?} ({x}, {y}): {want:?} against {got:?}"),
+                    }
+                }
+            }
+            assert!(some > 300, "{projection:?}: only {some} hits");
+        }
+        assert!(split_seen, "no frame was split into pyramids");
+    }
+
     /// Where no geometry falls in a pixel's footprint the volume is
     /// untouched, bit for bit. The final image of the scene is the needle's
     /// colour where its depth test hides the volume.

@@ -44,29 +44,36 @@ fn position_at(plan: &FramePlan, x: usize, y: usize, k: f64) -> DVec3 {
 /// the same weighted mean of its neighbours' hits (the depth is affine in
 /// the position: the depth of the mean position, up to rounding) with no
 /// sample position per pixel.
-pub(crate) struct HitDepths {
-    /// Per plan: the first and last slice's depth functions and the last slice.
-    plans: Vec<([f64; 3], [f64; 3], usize)>,
+pub(crate) struct HitDepths<'r> {
+    renderer: &'r Renderer,
+    /// Per plan: the plan, its depth plane (None: not kept, or not of the
+    /// plan's grid: no hit), the first and last slice's depth functions and
+    /// the last slice — looked up once per frame, not per pixel.
+    plans: Vec<(&'r FramePlan, Option<&'r Intermediate>, [f64; 3], [f64; 3], usize)>,
 }
 
-impl HitDepths {
-    pub(crate) fn new(renderer: &Renderer, proj: &super::Projector) -> Self {
+impl<'r> HitDepths<'r> {
+    pub(crate) fn new(renderer: &'r Renderer, proj: &super::Projector) -> Self {
         let plans = renderer
             .last_plans()
             .iter()
-            .map(|plan| {
+            .enumerate()
+            .map(|(i, plan)| {
                 let last = plan.slices().saturating_sub(1);
-                (super::inverse_warp::slice_depth(plan, proj, 0), super::inverse_warp::slice_depth(plan, proj, last), last)
+                // (as Renderer::last_depth_at reads it)
+                let d = renderer.last_depth_image(i).filter(|d| d.size == plan.grid.size && d.depth.len() == d.size[0] * d.size[1]);
+                (plan, d, super::inverse_warp::slice_depth(plan, proj, 0), super::inverse_warp::slice_depth(plan, proj, last), last)
             })
             .collect();
-        HitDepths { plans }
+        HitDepths { renderer, plans }
     }
 
-    /// The eye depth of [`volume_hit`] at output pixel `(u, v)` of `renderer`'s
-    /// last frame (the frame these depths were set up for).
-    pub(crate) fn at(&self, renderer: &Renderer, u: f64, v: f64) -> Option<f64> {
-        let i = renderer.last_owner(u, v)?;
-        let (f, l, last) = self.plans[i];
+    /// The eye depth of [`volume_hit`] at output pixel `(u, v)` of the
+    /// renderer's last frame (the frame these depths were set up for).
+    pub(crate) fn at(&self, u: f64, v: f64) -> Option<f64> {
+        let i = self.renderer.last_owner(u, v)?;
+        let (plan, d, f, l, last) = self.plans[i];
+        let d = d?;
         let depth = |x: usize, y: usize, k: f64| {
             let (xf, yf) = (x as f64, y as f64);
             let d0 = f[0] + f[1] * xf + f[2] * yf;
@@ -77,7 +84,7 @@ impl HitDepths {
             let k = k.min(last as f64);
             d0 + (l[0] + l[1] * xf + l[2] * yf - d0) * (k / last as f64)
         };
-        hit_in(&renderer.last_plans()[i], |p, q| renderer.last_depth_at(i, p, q), u, v, depth)
+        hit_in(plan, |p, q| d.depth_at(p, q), u, v, depth)
     }
 }
 

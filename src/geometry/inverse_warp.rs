@@ -89,8 +89,6 @@ pub struct GeometryLimits {
     /// The depths of each output row's covered span (a needle copies what it
     /// covers, not the whole buffer).
     depths: Rows,
-    /// The same depths column by column, made when first read.
-    cols: std::sync::OnceLock<Rows>,
     size: [usize; 2],
     /// `size` as numbers (for the footprint's bounds, per pixel).
     size_f: [f64; 2],
@@ -169,7 +167,6 @@ impl GeometryLimits {
         GeometryLimits {
             projector,
             depths,
-            cols: Default::default(),
             size: [w, h],
             size_f: size_i.map(f64::from),
             size_i,
@@ -399,81 +396,81 @@ impl GeometryLimits {
         d
     }
 
-    /// [`GeometryLimits::min_over`] read column by column from `cols`
-    /// ([`GeometryLimits::columns`]; the same value: fewer, longer folds for a
-    /// box taller than wide).
+    /// [`GeometryLimits::min_over`] with `table` (the minima over `k`
+    /// consecutive rows, [`GeometryLimits::row_minima`]) where the box holds
+    /// `k ..= 2k` rows: two row folds, whatever its height (the rows' union,
+    /// so the same value); else the rows themselves.
     #[inline(always)]
-    fn min_over_columns(cols: &Rows, [x0, x1]: [u32; 2], [y0, y1]: [u32; 2]) -> f64 {
-        let mut d = f64::INFINITY;
-        for x in x0 as usize..x1 as usize + 1 {
-            d = cols.fold(x, y0, y1, d);
+    fn min_over_with(&self, table: Option<&(Rows, u32)>, [x0, x1]: [u32; 2], [y0, y1]: [u32; 2]) -> f64 {
+        match table {
+            Some((t, k)) if y1 + 1 - y0 >= *k && y1 + 1 - y0 <= 2 * k => {
+                let d = t.fold(y0 as usize, x0, x1, f64::INFINITY);
+                t.fold((y1 + 1 - k) as usize, x0, x1, d)
+            }
+            _ => self.min_over([x0, x1], [y0, y1]),
         }
-        d
     }
 
-    /// [`GeometryLimits::min_depth`] read column by column (the same value).
+    /// [`GeometryLimits::min_depth`] read through `table` (the same value).
     #[cfg(test)]
-    fn min_depth_by_columns(&self, cols: &Rows, u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
+    fn min_depth_with(&self, table: &(Rows, u32), u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
         let Some((xs, ys)) = self.footprint(u0, u1, v0, v1) else { return f64::INFINITY };
-        Self::min_over_columns(cols, xs, ys)
+        self.min_over_with(Some(table), xs, ys)
     }
 
-    /// The depths column by column (made on first use: only a parallel frame
-    /// whose footprints are taller than wide reads them; `par`: the copy in
-    /// stripes of columns on the current thread pool).
-    fn columns(&self, par: bool) -> &Rows {
-        self.cols.get_or_init(|| {
-            let [w, h] = self.size;
-            let rows = &self.depths.rows[..h];
-            let (mut lo, mut hi) = (vec![u32::MAX; w], vec![0u32; w]);
-            for (y, &([a, b], _)) in rows.iter().enumerate() {
-                for x in a as usize..(b as usize + 1).min(w) {
-                    (lo[x], hi[x]) = (lo[x].min(y as u32), hi[x].max(y as u32));
-                }
-            }
-            let mut lines = vec![([1u32, 0u32], 0usize); w];
-            let mut n = 0;
-            for x in 0..w {
-                if lo[x] <= hi[x] {
-                    lines[x] = ([lo[x], hi[x]], n);
-                    n += (hi[x] - lo[x]) as usize + 1;
-                }
-            }
-            let mut packed = vec![f64::INFINITY; n];
-            // columns xs.start .. xs.end into `out` (their values from `base` on)
-            let copy = |xs: std::ops::Range<usize>, base: usize, out: &mut [f64]| {
-                for (y, &([a, b], off)) in rows.iter().enumerate() {
-                    let (a, b) = (a as usize, (b as usize + 1).min(w));
-                    let (s, e) = (a.max(xs.start), b.min(xs.end));
-                    if s >= e {
-                        continue;
-                    }
-                    for (&([l, _], o), &v) in lines[s..e].iter().zip(&self.depths.packed[off + s - a..]) {
-                        out[o - base + y - l as usize] = v;
-                    }
-                }
-            };
-            if !par || w < 64 {
-                copy(0..w, 0, &mut packed);
-            } else {
-                // (stripes of columns own disjoint parts of `packed`: a
-                // column's values follow the previous column's)
-                let stripes = 8;
-                let mut parts = Vec::with_capacity(stripes);
-                let mut rest: &mut [f64] = &mut packed;
-                let mut at = 0;
-                for i in 0..stripes {
-                    let xs = i * w / stripes..(i + 1) * w / stripes;
-                    let end = if xs.end == w { n } else { lines[xs.end..].iter().find(|l| l.0[0] <= l.0[1]).map_or(n, |l| l.1) };
-                    let (part, tail) = rest.split_at_mut(end - at);
-                    parts.push((xs, at, part));
-                    (rest, at) = (tail, end);
-                }
-                parts.into_par_iter().for_each(|(xs, base, out)| copy(xs, base, out));
-            }
-            Rows { rows: lines, packed }
-        })
+    /// The minima over `k` consecutive output rows (`k` a power of two):
+    /// line `y` holds, over the union of their spans, the smallest depth of
+    /// rows `y .. y + k` (those in the image), so that a box of `k ..= 2k`
+    /// rows is the minimum of two lines (a sparse table's one level, by
+    /// doubling: log₂ k passes over the covered pixels, row-contiguous).
+    fn row_minima(&self, k: u32) -> Rows {
+        let h = self.size[1];
+        let mut t = std::borrow::Cow::Borrowed(&self.depths);
+        let mut s = 1;
+        while s < k as usize {
+            t = std::borrow::Cow::Owned(double_rows(&t, s, h));
+            s *= 2;
+        }
+        t.into_owned()
     }
+}
+
+/// One doubling of [`GeometryLimits::row_minima`]: line `y` of the result is
+/// the minimum of lines `y` and `y + s` of `prev` (of `h`; past it, none),
+/// over the union of their spans (`+∞` in a gap between them).
+fn double_rows(prev: &Rows, s: usize, h: usize) -> Rows {
+    const NONE: ([u32; 2], usize) = ([1, 0], 0);
+    let mut rows = Vec::with_capacity(h);
+    let mut packed = Vec::with_capacity(prev.packed.len() + prev.packed.len() / 4);
+    let seg = |([x0, x1], off): ([u32; 2], usize)| &prev.packed[off..off + (x1 - x0) as usize + 1];
+    for y in 0..h {
+        let a = prev.rows[y];
+        let b = if y + s < h { prev.rows[y + s] } else { NONE };
+        let off = packed.len();
+        match (a.0[0] <= a.0[1], b.0[0] <= b.0[1]) {
+            (false, false) => rows.push((NONE.0, off)),
+            (true, false) => {
+                rows.push((a.0, off));
+                packed.extend_from_slice(seg(a));
+            }
+            (false, true) => {
+                rows.push((b.0, off));
+                packed.extend_from_slice(seg(b));
+            }
+            (true, true) => {
+                let (lo, hi) = (a.0[0].min(b.0[0]), a.0[1].max(b.0[1]));
+                rows.push(([lo, hi], off));
+                packed.resize(off + (hi - lo) as usize + 1, f64::INFINITY);
+                let out = &mut packed[off..];
+                let (sa, sb) = (seg(a), seg(b));
+                out[(a.0[0] - lo) as usize..][..sa.len()].copy_from_slice(sa);
+                for (o, &v) in out[(b.0[0] - lo) as usize..].iter_mut().zip(sb) {
+                    *o = min(*o, v);
+                }
+            }
+        }
+    }
+    Rows { rows, packed }
 }
 
 /// The voxel position of pixel `(p, q)`'s sample in slice `k` (fractional `k`
@@ -499,7 +496,7 @@ pub(super) fn slice_depth(plan: &FramePlan, proj: &Projector, k: usize) -> [f64;
 /// position is affine in the pixel for a fixed slice in both projections,
 /// and the depth affine in the position). Along a ray, the samples are
 /// affine in the slice index, so slice `k`'s depth is `d₀ + k·(d_last − d₀)/last`.
-struct Gather<'a> {
+struct Gather {
     to_out: DMat3,
     /// An affine warp (a parallel frame): the footprint box's half extents,
     /// the same about every pixel's centre.
@@ -515,9 +512,9 @@ struct Gather<'a> {
     /// A parallel frame: the depth step from slice to slice, the same on
     /// every ray, and its inverse.
     step: Option<[f64; 2]>,
-    /// A parallel frame whose footprint boxes are at least twice as tall as
-    /// wide: the depths by columns, read instead of the rows.
-    cols: Option<&'a Rows>,
+    /// A parallel frame whose footprint boxes are at least 5 rows tall: the
+    /// minima over `k` consecutive rows ([`GeometryLimits::row_minima`]) and `k`.
+    table: Option<(Rows, u32)>,
 }
 
 /// One in [`Fixed`]'s units: 2⁻³² output pixel.
@@ -582,9 +579,8 @@ struct RowAt {
     d: [f64; 2],
 }
 
-impl<'a> Gather<'a> {
-    /// (`par`: set up on the current thread pool)
-    fn new(plan: &FramePlan, gl: &'a GeometryLimits, par: bool) -> Self {
+impl Gather {
+    fn new(plan: &FramePlan, gl: &GeometryLimits) -> Self {
         let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
         let to_sheared =
             DMat3::from_cols(DVec3::new(pitch, 0.0, 0.0), DVec3::new(0.0, pitch, 0.0), DVec3::new(-pad * pitch, -pad * pitch, 1.0));
@@ -597,11 +593,14 @@ impl<'a> Gather<'a> {
         let (first, last_depth) = (depths(0), depths(last));
         let dk = (last_depth[0] - first[0]) / last as f64;
         let step = (affine.is_some() && last > 0 && dk != 0.0 && dk.is_finite()).then_some([dk, 1.0 / dk]);
-        // (at least twice as many rows as columns: the columns' copy costs a
-        // pass over the covered pixels, which a square box does not repay)
-        let tall = affine.is_some_and(|[ex, ey]| (2.0 * ey).floor() + 1.0 >= 2.0 * ((2.0 * ex).floor() + 1.0));
-        let cols = tall.then(|| gl.columns(par));
-        Gather { to_out, affine, fixed, half_p, half_q, first, last_depth, last, step, cols }
+        // boxes of up to n rows (n ≥ 5: the table's log₂ k passes over the
+        // covered pixels cost less than the rows a box no longer folds)
+        let table = fixed.as_ref().and_then(|f| {
+            let n = ((2 * f.e[1]) >> 32) + 1;
+            let k = (n.clamp(1, 1 << 30) as u32).next_power_of_two() / 2;
+            (k >= 4).then(|| (gl.row_minima(k), k))
+        });
+        Gather { to_out, affine, fixed, half_p, half_q, first, last_depth, last, step, table }
     }
 
     /// What row `q`'s pixels share.
@@ -636,10 +635,7 @@ impl GeometryLimits {
             let [w, h] = self.size_i;
             let Some(xs) = fixed_span(r.fixed[0] + f.x[1] * pi, f.e[0], w as i64) else { return };
             let Some(ys) = fixed_span(r.fixed[1] + f.y[1] * pi, f.e[1], h as i64) else { return };
-            match g.cols {
-                Some(cols) => Self::min_over_columns(cols, xs, ys),
-                None => self.min_over(xs, ys),
-            }
+            self.min_over_with(g.table.as_ref(), xs, ys)
         } else {
             let c = r.c + g.to_out.x_axis * pf;
             if let Some([ex, ey]) = g.affine {
@@ -789,8 +785,8 @@ impl Limiter for GeometryLimits {
             return;
         }
         if !self.cull {
-            let g = Gather::new(plan, self, true);
-            // the reference: every pixel gathers
+            // the reference: every pixel gathers, over the rows themselves
+            let g = Gather { table: None, ..Gather::new(plan, self) };
             let Some([p0, q0, p1, q1]) = self.reach(plan) else { return };
             limits.par_rows_mut().enumerate().skip(q0).take(q1 + 1 - q0).for_each(|(q, row)| {
                 let r = g.row(q);
@@ -801,25 +797,26 @@ impl Limiter for GeometryLimits {
             return;
         }
         let par = self.parallel(plan);
-        // (the gather's set-up, with any column copy, beside the marks)
-        let (g, marks) = if par {
-            rayon::join(|| Gather::new(plan, self, true), || self.marks(plan))
-        } else {
-            (Gather::new(plan, self, false), self.marks(plan))
-        };
+        // (the gather's set-up, with any table of row minima, beside the marks)
+        let (g, marks) =
+            if par { rayon::join(|| Gather::new(plan, self), || self.marks(plan)) } else { (Gather::new(plan, self), self.marks(plan)) };
+        // (a row without marks sets nothing up)
         let gather_row = |q: usize, row: &mut [[u32; 2]]| {
-            let r = g.row(q);
-            marks.each(q, |p| self.limit_at(&g, &r, p, &mut row[p]))
+            if marks.rows[q][0] <= marks.rows[q][1] {
+                let r = g.row(q);
+                marks.each(q, |p| self.limit_at(&g, &r, p, &mut row[p]))
+            }
         };
+        // (the rows holding marks)
+        let Some(qa) = marks.rows.iter().position(|r| r[0] <= r[1]) else { return };
+        let qb = marks.rows.iter().rposition(|r| r[0] <= r[1]).unwrap_or(qa);
         if !par {
-            for q in 0..plan.grid.size[1] {
-                if marks.rows[q][0] <= marks.rows[q][1] {
-                    gather_row(q, limits.row_mut(q));
-                }
+            for q in qa..=qb {
+                gather_row(q, limits.row_mut(q));
             }
             return;
         }
-        limits.par_rows_mut().enumerate().for_each(|(q, row)| gather_row(q, row));
+        limits.par_rows_mut().enumerate().skip(qa).take(qb + 1 - qa).for_each(|(q, row)| gather_row(q, row));
     }
 }
 
@@ -875,7 +872,7 @@ pub fn composite_iso_over_geometry(
             if !gd.is_finite() {
                 continue;
             }
-            let hidden = hits.at(renderer, u as f64, v as f64).is_some_and(|d| d >= gd);
+            let hidden = hits.at(u as f64, v as f64).is_some_and(|d| d >= gd);
             if hidden {
                 *px = g;
             } else {
@@ -937,12 +934,13 @@ mod tests {
     /// rectangle gives exactly the limits of visiting every pixel (a small
     /// needle, a plate across the image, nothing on screen, a mesh partly
     /// behind a perspective eye), and for a small mesh visits far fewer.
-    /// The column copy of the depths (made whole or in stripes of columns in
-    /// parallel, the same copy) gives the row layout's minimum over
-    /// every box (random boxes, sub-pixel to wide, inside and across the
-    /// image's edges, over a needle and a plate with gaps between them).
+    /// The table of minima over k consecutive rows gives the rows' minimum
+    /// over every box of k to 2k rows, and the rows themselves elsewhere,
+    /// bit for bit (random boxes, sub-pixel to tall, inside and across the
+    /// image's edges, over a needle and a plate with gaps between them; k = 2
+    /// to 16, with chest-CT-like voxels).
     #[test]
-    fn inverse_warp_columns_give_the_rows_minimum() {
+    fn inverse_warp_row_minima_give_the_rows_minimum() {
         let dims = [40, 36, 30];
         let c = DVec3::new(19.5, 17.5, 14.5);
         let cam = Camera::new(DMat3::from_euler(glam::EulerRot::XYZ, 0.5, -0.8, 0.3), [120, 90]);
@@ -955,14 +953,7 @@ mod tests {
             rasterize(&mesh, &Material::default(), Cull::None, &proj, &mut geo).unwrap();
         }
         let gl = GeometryLimits::new(proj, &geo);
-        let cols = gl.columns(false);
-        // the copy in stripes of columns (on a pool of 3) is the same copy
-        let striped = GeometryLimits::new(proj, &geo);
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
-        let striped = pool.install(|| striped.columns(true));
-        assert_eq!(striped.rows, cols.rows);
-        assert!(striped.packed.iter().zip(&cols.packed).all(|(a, b)| a.to_bits() == b.to_bits()));
-        assert_eq!(striped.packed.len(), cols.packed.len());
+        let tables: Vec<(Rows, u32)> = [2, 4, 8, 16].into_iter().map(|k| (gl.row_minima(k), k)).collect();
         let mut seed = 0x9e3779b97f4a7c15u64;
         let mut rnd = |lo: f64, hi: f64| {
             seed ^= seed << 13;
@@ -971,22 +962,28 @@ mod tests {
             lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         let [x0, y0, x1, y1] = gl.bounds.unwrap().map(|x| x as f64);
-        let (mut finite, mut n) = (0, 0);
+        let (mut finite, mut n, mut used) = (0, 0, [0usize; 4]);
         for i in 0..20000 {
             // (half the boxes about the geometry's bounds, half anywhere)
             let (u, v) =
                 if i % 2 == 0 { (rnd(x0 - 5.0, x1 + 5.0), rnd(y0 - 5.0, y1 + 5.0)) } else { (rnd(-10.0, 130.0), rnd(-10.0, 100.0)) };
-            let (ex, ey) = (rnd(0.0, 4.0), rnd(0.0, 9.0));
+            let (ex, ey) = (rnd(0.0, 4.0), rnd(0.0, 17.0));
             let rows = gl.min_depth(u - ex, u + ex, v - ey, v + ey);
-            assert_eq!(
-                rows.to_bits(),
-                gl.min_depth_by_columns(cols, u - ex, u + ex, v - ey, v + ey).to_bits(),
-                "box at ({u}, {v}) ± ({ex}, {ey})"
-            );
+            for (i, t) in tables.iter().enumerate() {
+                let (k, fp) = (t.1, gl.footprint(u - ex, u + ex, v - ey, v + ey));
+                used[i] += fp.is_some_and(|(_, [y0, y1])| (k..=2 * k).contains(&(y1 + 1 - y0))) as usize;
+                assert_eq!(
+                    rows.to_bits(),
+                    gl.min_depth_with(t, u - ex, u + ex, v - ey, v + ey).to_bits(),
+                    "k = {}: box at ({u}, {v}) ± ({ex}, {ey})",
+                    t.1
+                );
+            }
             finite += rows.is_finite() as usize;
             n += 1;
         }
         assert!(finite * 10 > n, "only {finite} of {n} boxes met geometry");
+        assert!(used.iter().all(|&u| u > 500), "boxes read through each table: {used:?}");
     }
 
     /// The fixed-point box of an affine frame takes the output pixels the
@@ -1224,7 +1221,7 @@ mod tests {
                 for x in 0..size {
                     let (u, v) = (x as f64, y as f64);
                     let want = crate::geometry::volume_hit(&r, u, v).map(|at| -proj.eye_space(at).z);
-                    let got = hits.at(&r, u, v);
+                    let got = hits.at(u, v);
                     match (want, got) {
                         (None, None) => {}
                         (Some(a), Some(b)) => {
@@ -1491,7 +1488,7 @@ mod tests {
                     l.reset(plan.grid.size, plan.slices());
                     let t = std::time::Instant::now();
                     let [p0, q0, p1, q1] = gl.reach(&plan).unwrap();
-                    let g = Gather::new(&plan, &gl, false);
+                    let g = Gather::new(&plan, &gl);
                     for q in q0..=q1 {
                         let r = g.row(q);
                         for p in p0..=p1 {

@@ -100,6 +100,20 @@ impl Image {
         Canvas { width, height, data, spans: vec![(0, width as u32); height], stamp: 0 }
     }
 
+    /// This image's pixels as `T` into `out` (resized if needed): into an
+    /// [`Image8`] each channel rounded by [`to8`], the bytes the warp writes
+    /// ([`Texel::from_rgba`]). Every pixel of `out` counts as written (the
+    /// next warp into it clears whatever it does not cover), and no renderer
+    /// frame as its last (none is skipped into it).
+    pub fn convert_into<T: Texel>(&self, out: &mut Canvas<T>) {
+        out.prepare(self.width, self.height);
+        for (o, p) in out.data.iter_mut().zip(&self.data) {
+            *o = T::from_rgba(Vec4::from_array(*p));
+        }
+        out.spans.fill((0, self.width as u32));
+        out.stamp = 0;
+    }
+
     /// Every pixel rounded to 8 bits by [`to8`] (what the warp writes into an [`Image8`]).
     pub fn to_rgba8(&self) -> Vec<[u8; 4]> {
         self.data.iter().map(|c| c.map(to8)).collect()
@@ -453,5 +467,27 @@ mod tests {
                 assert_eq!(<[u8; 4]>::from_rgba(Vec4::from_array(v)), v.map(to8), "{v:?}");
             }
         }
+    }
+
+    /// [`Image::convert_into`] gives an [`Image8`] the bytes of
+    /// [`Image::to_rgba8`], and a later warp into it clears every pixel it
+    /// does not write (the converted pixels count as written).
+    #[test]
+    fn converted_images_are_to8_and_cleared_by_the_next_warp() {
+        use crate::view::plan::Grid;
+        use glam::DMat3;
+        let data: Vec<[f32; 4]> = (0..8 * 6).map(|i| [i as f32 / 47.0, 0.5, 1.7, (i % 5) as f32 / 4.0]).collect();
+        let src = Image::from_data(8, 6, data);
+        let mut out = Image8::new(3, 3);
+        src.convert_into(&mut out);
+        assert_eq!((out.width, out.height), (8, 6));
+        assert_eq!(out.data, src.to_rgba8());
+        // a warp of an empty frame: nothing is left
+        let f = crate::view::Factorization::new(&crate::view::Camera::new(DMat3::IDENTITY, [8, 6]), [4, 4, 4], [1.0; 3]).unwrap();
+        let mut plan = FramePlan::parallel(&f, [1.0; 3]);
+        plan.grid = Grid { size: [8, 8], pad: 0, pitch: 1.0 };
+        let inter = Intermediate::default();
+        warp(&inter, &plan, &mut out);
+        assert!(out.data.iter().all(|&c| c == [0; 4]));
     }
 }

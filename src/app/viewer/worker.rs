@@ -17,14 +17,16 @@ use std::thread::JoinHandle;
 use std::time::Instant;
 
 use super::state::{Class, Kind, Lens, Plane, Spec};
+use crate::app::scene::Scene;
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
 use shearwarp::geometry::hit::KeptHits;
 use shearwarp::render::{Deluxe, Focus, Footprint, FrameStats, Method, Renderer, Settings};
 use shearwarp::view::Projection;
-use shearwarp::view::clip::{ClipPlane, ClipPlanes, Region};
-use shearwarp::warp::{Canvas, Image8, Texel};
+use shearwarp::view::clip::{ClipPlane, ClipPlanes, Limiters, Region};
+use shearwarp::view::plan::Limiter;
+use shearwarp::warp::{Canvas, Image, Image8, Texel};
 
 /// A finished frame.
 #[derive(Clone, Debug)]
@@ -82,8 +84,9 @@ pub struct Renderers {
     stale: [bool; 3],
     /// The projection of every renderer.
     projection: Projection,
-    /// The ray limits of every renderer (clip planes), if any.
-    limiter: Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>,
+    /// The ray limits of every renderer (clip planes and the scene's clip
+    /// regions), if any.
+    limiter: Option<Arc<dyn Limiter>>,
     /// The `--clip-plane` half-spaces every frame keeps ([`Renderers::set_clip_planes`]).
     planes: Vec<ClipPlane>,
     /// The interactive plane the limiter was last built with.
@@ -98,6 +101,12 @@ pub struct Renderers {
     /// threshold) of a spec (its `seq` and `lens` cleared), its plans and
     /// depths kept for the iso hit under the mouse, computed per move.
     surface: Option<(Spec, KeptHits)>,
+    /// The geometry and clip regions (`--mesh`, `--needle`, `--clip-box`,
+    /// `--clip-sphere`, `--clip-mesh`; [`Renderers::set_scene`]).
+    scene: Option<Scene>,
+    /// A frame of a scene that draws, in f32: the volume composited over the
+    /// geometry there, then rounded into the caller's canvas.
+    geometry_frame: Image,
 }
 
 impl Renderers {
@@ -126,7 +135,20 @@ impl Renderers {
             focus_tissue,
             lens: None,
             surface: None,
+            scene: None,
+            geometry_frame: Image::new(0, 0),
         })
+    }
+
+    /// Sets the scene of every frame (built by [`Scene::new`] without clip
+    /// planes: those are [`Renderers::set_clip_planes`]'s): its clip regions
+    /// join the limiter beside the clip planes and the interactive one, and
+    /// a scene that draws (meshes, a clip mesh) is drawn into every frame
+    /// at the frame's size, camera and projection ([`Scene::render_geometry`]).
+    pub fn set_scene(&mut self, scene: Option<Scene>) -> shearwarp::Result<()> {
+        self.scene = scene;
+        self.surface = None;
+        self.build_limiter()
     }
 
     /// The lens's tissue preset (a name of the tissue set; an error otherwise).
@@ -163,7 +185,7 @@ impl Renderers {
 
     /// Sets the ray limits (clip planes) of every renderer, this one's and any
     /// made later.
-    pub fn set_limiter(&mut self, limiter: Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>) {
+    pub fn set_limiter(&mut self, limiter: Option<Arc<dyn Limiter>>) {
         self.tissues.set_limiter(limiter.clone());
         if let Some(c) = &mut self.custom {
             c.set_limiter(limiter.clone());
@@ -176,24 +198,30 @@ impl Renderers {
     pub fn set_clip_planes(&mut self, planes: Vec<ClipPlane>) -> shearwarp::Result<()> {
         ClipPlanes::new(&planes, self.spacing)?;
         self.planes = planes;
-        self.build_limiter();
-        Ok(())
+        self.build_limiter()
     }
 
-    /// The limiter of the `--clip-plane` planes and the interactive one; when
-    /// there is no room for the interactive plane (six planes already), the
-    /// given ones alone.
-    fn build_limiter(&mut self) {
+    /// The limiter of the `--clip-plane` planes and the interactive one (when
+    /// there is no room for the interactive plane, six planes already, the
+    /// given ones alone), followed by the scene's clip regions.
+    fn build_limiter(&mut self) -> shearwarp::Result<()> {
         let mut all = self.planes.clone();
         if let Some(p) = self.interactive.and_then(|p| ClipPlane::new(p.normal, p.offset).ok()) {
             all.push(p);
         }
         let clip = ClipPlanes::new(&all, self.spacing).or_else(|_| ClipPlanes::new(&self.planes, self.spacing));
-        let limiter: Option<Arc<dyn shearwarp::view::plan::Limiter>> = match clip {
-            Ok(c) if !c.planes().is_empty() => Some(Arc::new(c)),
-            _ => None,
+        let mut chain: Vec<Arc<dyn Limiter>> = match clip {
+            Ok(c) if !c.planes().is_empty() => vec![Arc::new(c)],
+            _ => vec![],
+        };
+        chain.extend(self.scene.as_ref().and_then(Scene::clip));
+        let limiter: Option<Arc<dyn Limiter>> = match chain.len() {
+            0 => None,
+            1 => chain.pop(),
+            _ => Some(Arc::new(Limiters::new(chain)?)),
         };
         self.set_limiter(limiter);
+        Ok(())
     }
 
     /// The tissue presets, sorted by threshold as [`Renderer::with_tissues`] keeps them.
@@ -338,7 +366,7 @@ impl Renderers {
         }
         if spec.clip != self.interactive {
             self.interactive = spec.clip;
-            self.build_limiter();
+            self.build_limiter()?;
         }
         let q = spec.quality;
         let r = self.select(spec.class, spec.cell)?;
@@ -357,12 +385,30 @@ impl Renderers {
         if d.matched != spec.still {
             r.set_settings(Settings { deluxe: Deluxe { matched: spec.still, ..d }, ..r.settings() })?;
         }
-        let st = match r.render(&spec.camera, img) {
+        // a scene that draws: the geometry stage of render and rotate, in
+        // f32, rounded into `img` after the composite (no scene, or one of
+        // clip regions alone: the renderer's own frame, nothing more); the
+        // renderer selected above, beside the fields the stage reads
+        let r = match spec.class {
+            Class::Tissue(_) => &mut self.tissues,
+            Class::Custom(_) => self.custom.as_mut().expect("selected above"),
+        };
+        let draws = self.scene.as_ref().filter(|s| s.draws());
+        let (limiter, frame) = (&self.limiter, &mut self.geometry_frame);
+        let mut once = |r: &mut Renderer| match draws {
+            None => r.render(&spec.camera, img),
+            Some(scene) => {
+                let (st, _) = scene.render_geometry(r, &spec.camera, frame, limiter.clone(), false)?;
+                frame.convert_into(img);
+                Ok(st)
+            }
+        };
+        let st = match once(r) {
             // a zoom whose matched grid is past the memory limit: the frame without M
             Err(_) if spec.still => {
                 let s = r.settings();
                 r.set_settings(Settings { deluxe: Deluxe { matched: false, ..s.deluxe }, ..s })?;
-                r.render(&spec.camera, img)?
+                once(r)?
             }
             st => st?,
         };

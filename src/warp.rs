@@ -77,6 +77,19 @@ impl<T: Texel> Canvas<T> {
         self.to_rgb8().save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::file(path, format!("cannot write PNG: {e}")))
     }
 
+    /// Counts pixels `x0..x1` of row `y` as written (with the span the last
+    /// warp wrote there), for a pass that draws outside the warp's spans
+    /// (geometry under the volume): the next warp into this image clears
+    /// them where it does not write.
+    pub fn mark_written(&mut self, y: usize, x0: usize, x1: usize) {
+        let x1 = x1.min(self.width);
+        if x0 >= x1 {
+            return;
+        }
+        let s = &mut self.spans[y];
+        *s = if s.0 >= s.1 { (x0 as u32, x1 as u32) } else { (s.0.min(x0 as u32), s.1.max(x1 as u32)) };
+    }
+
     /// Fraction of pixels with any coverage.
     pub fn coverage(&self) -> f64 {
         self.data.iter().filter(|c| c.covered()).count() as f64 / self.data.len().max(1) as f64
@@ -471,9 +484,10 @@ mod tests {
 
     /// [`Image::convert_into`] gives an [`Image8`] the bytes of
     /// [`Image::to_rgba8`], and a later warp into it clears every pixel it
-    /// does not write (the converted pixels count as written).
+    /// does not write (the converted pixels count as written, as do pixels
+    /// [`Canvas::mark_written`] marks).
     #[test]
-    fn converted_images_are_to8_and_cleared_by_the_next_warp() {
+    fn converted_and_marked_pixels_are_cleared_by_the_next_warp() {
         use crate::view::plan::Grid;
         use glam::DMat3;
         let data: Vec<[f32; 4]> = (0..8 * 6).map(|i| [i as f32 / 47.0, 0.5, 1.7, (i % 5) as f32 / 4.0]).collect();
@@ -487,6 +501,13 @@ mod tests {
         let mut plan = FramePlan::parallel(&f, [1.0; 3]);
         plan.grid = Grid { size: [8, 8], pad: 0, pitch: 1.0 };
         let inter = Intermediate::default();
+        warp(&inter, &plan, &mut out);
+        assert!(out.data.iter().all(|&c| c == [0; 4]));
+        // pixels drawn past the last warp's spans and marked: cleared by the next
+        out.data[2 * 8 + 5] = [9; 4];
+        out.data[4 * 8 + 1] = [9; 4];
+        out.mark_written(2, 5, 6);
+        out.mark_written(4, 1, 2);
         warp(&inter, &plan, &mut out);
         assert!(out.data.iter().all(|&c| c == [0; 4]));
     }

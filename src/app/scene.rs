@@ -450,6 +450,13 @@ impl Scene {
         } else {
             composite_over_geometry(img, geo);
         }
+        // the geometry drawn outside the volume's spans: cleared by the next
+        // warp into `img` (a reused image showed the last frames' needles)
+        for y in 0..geo.height {
+            if let Some([x0, x1]) = geo.row_span(y) {
+                img.mark_written(y, x0, x1 + 1);
+            }
+        }
         cost.composite_ms = t.elapsed().as_secs_f64() * 1e3;
         Ok((st, cost))
     }

@@ -77,6 +77,19 @@ impl<T: Texel> Canvas<T> {
         self.to_rgb8().save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::file(path, format!("cannot write PNG: {e}")))
     }
 
+    /// Counts pixels `x0..x1` of row `y` as written (with the span the last
+    /// warp wrote there), for a pass that draws outside the warp's spans
+    /// (geometry under the volume): the next warp into this image clears
+    /// them where it does not write.
+    pub fn mark_written(&mut self, y: usize, x0: usize, x1: usize) {
+        let x1 = x1.min(self.width);
+        if x0 >= x1 {
+            return;
+        }
+        let s = &mut self.spans[y];
+        *s = if s.0 >= s.1 { (x0 as u32, x1 as u32) } else { (s.0.min(x0 as u32), s.1.max(x1 as u32)) };
+    }
+
     /// Fraction of pixels with any coverage.
     pub fn coverage(&self) -> f64 {
         self.data.iter().filter(|c| c.covered()).count() as f64 / self.data.len().max(1) as f64
@@ -98,6 +111,20 @@ impl Image {
     pub fn from_data(width: usize, height: usize, data: Vec<[f32; 4]>) -> Self {
         assert_eq!(data.len(), width * height, "pixel count");
         Canvas { width, height, data, spans: vec![(0, width as u32); height], stamp: 0 }
+    }
+
+    /// This image's pixels as `T` into `out` (resized if needed): into an
+    /// [`Image8`] each channel rounded by [`to8`], the bytes the warp writes
+    /// ([`Texel::from_rgba`]). Every pixel of `out` counts as written (the
+    /// next warp into it clears whatever it does not cover), and no renderer
+    /// frame as its last (none is skipped into it).
+    pub fn convert_into<T: Texel>(&self, out: &mut Canvas<T>) {
+        out.prepare(self.width, self.height);
+        for (o, p) in out.data.iter_mut().zip(&self.data) {
+            *o = T::from_rgba(Vec4::from_array(*p));
+        }
+        out.spans.fill((0, self.width as u32));
+        out.stamp = 0;
     }
 
     /// Every pixel rounded to 8 bits by [`to8`] (what the warp writes into an [`Image8`]).
@@ -453,5 +480,35 @@ mod tests {
                 assert_eq!(<[u8; 4]>::from_rgba(Vec4::from_array(v)), v.map(to8), "{v:?}");
             }
         }
+    }
+
+    /// [`Image::convert_into`] gives an [`Image8`] the bytes of
+    /// [`Image::to_rgba8`], and a later warp into it clears every pixel it
+    /// does not write (the converted pixels count as written, as do pixels
+    /// [`Canvas::mark_written`] marks).
+    #[test]
+    fn converted_and_marked_pixels_are_cleared_by_the_next_warp() {
+        use crate::view::plan::Grid;
+        use glam::DMat3;
+        let data: Vec<[f32; 4]> = (0..8 * 6).map(|i| [i as f32 / 47.0, 0.5, 1.7, (i % 5) as f32 / 4.0]).collect();
+        let src = Image::from_data(8, 6, data);
+        let mut out = Image8::new(3, 3);
+        src.convert_into(&mut out);
+        assert_eq!((out.width, out.height), (8, 6));
+        assert_eq!(out.data, src.to_rgba8());
+        // a warp of an empty frame: nothing is left
+        let f = crate::view::Factorization::new(&crate::view::Camera::new(DMat3::IDENTITY, [8, 6]), [4, 4, 4], [1.0; 3]).unwrap();
+        let mut plan = FramePlan::parallel(&f, [1.0; 3]);
+        plan.grid = Grid { size: [8, 8], pad: 0, pitch: 1.0 };
+        let inter = Intermediate::default();
+        warp(&inter, &plan, &mut out);
+        assert!(out.data.iter().all(|&c| c == [0; 4]));
+        // pixels drawn past the last warp's spans and marked: cleared by the next
+        out.data[2 * 8 + 5] = [9; 4];
+        out.data[4 * 8 + 1] = [9; 4];
+        out.mark_written(2, 5, 6);
+        out.mark_written(4, 1, 2);
+        warp(&inter, &plan, &mut out);
+        assert!(out.data.iter().all(|&c| c == [0; 4]));
     }
 }

@@ -9,7 +9,10 @@
 #   - an idle window uses no CPU (measured from /proc over a few seconds),
 #   - Q quits and the process exits with status 0,
 #   - `view --benchmark-drag 60` plays its scripted drag through the window, exits 0
-#     and prints one JSON object with the frame rate (printed here).
+#     and prints one JSON object with the frame rate (printed here),
+#   - `view --needle` and `view --clip-box ... --clip-keep outside` open, show
+#     something other than the plain view and quit; bad meshes and two outside
+#     regions are usage errors (status 2) before any window.
 # Screenshots and logs go to target/viewer-test/. Needs xvfb, xauth, xdotool,
 # ImageMagick and jq; installs them with apt-get when missing (as root) and fails
 # loudly when it cannot. Usage: tests/viewer.sh
@@ -267,6 +270,50 @@ echo "   benchmark drag (512x512, head phantom): fps $fps, frame_ms_median $fms,
 check "--benchmark-drag printed one JSON object ($objects, $(wc -l <"$BENCH") line)" test "$objects" = 1 -a "$(wc -l <"$BENCH")" -eq 1
 check "--benchmark-drag reported fps > 0 ($fps) and frame_ms_median > 0 ($fms)" bash -c "$(declare -f gt); gt '$fps' 0 && gt '$fms' 0"
 check "--benchmark-drag rendered and presented all 60 frames, none skipped" test "$(num frames)/$(num skipped_frames)" = 60/0
+
+# 14. geometry and clip regions (issue 23): `view --needle` and `view --clip-box
+# ... --clip-keep outside` open, draw something other than the plain view, and
+# quit cleanly; bad scene input is a usage error (status 2) before any window
+# scene_view NAME ARGS...: opens the viewer with ARGS, saves shot NAME, quits with Q
+scene_view() {
+    local name=$1
+    shift
+    LOG=$OUT/$name.log
+    "$BIN" view --verbose --size 512 "$@" >"$OUT/$name.out" 2>"$LOG" &
+    PID=$!
+    trap 'kill "$PID" 2>/dev/null || true' EXIT
+    WID=$(timeout 60 xdotool search --sync --name '^shearwarp view' | head -1) || true
+    [[ -n "$WID" ]] || { echo "   no window for $name" >&2; return 1; }
+    wait_log '^presented seq=[0-9]+ kind=preview' 120 || return 1
+    sleep 1
+    shot "$name"
+    hold q
+    local t=0
+    while alive && ((t < 100)); do sleep 0.1; t=$((t + 1)); done
+    alive && { echo "   $name: Q did not quit" >&2; return 1; }
+    local rc=0
+    wait "$PID" || rc=$?
+    trap - EXIT
+    echo "   $name: exit status $rc"
+    test "$rc" -eq 0
+}
+check "view (plain, for comparison) opened, rendered and quit" scene_view 20-plain
+check "view --needle opened, rendered and quit" scene_view 21-needle --needle=-30,64,56,160,64,70,3
+check "view --clip-box ... --clip-keep outside opened, rendered and quit" scene_view 22-clip-box --clip-box 0,0,0,90,127,112 --clip-keep outside
+check "the needle shows (the view differs from the plain one)" differs 20-plain 21-needle
+check "the box is cut out (the view differs from the plain one)" differs 20-plain 22-clip-box
+check "the clipped view is visible" visible 22-clip-box
+usage_rc() { # usage_rc ARGS...: the viewer refuses ARGS with status 2 and no panic
+    local rc=0
+    timeout 60 "$BIN" view "$@" >/dev/null 2>"$OUT/usage.err" || rc=$?
+    echo "   view $*: status $rc: $(head -1 "$OUT/usage.err")"
+    test "$rc" -eq 2 && ! grep -q panicked "$OUT/usage.err"
+}
+printf 'v 0 0 0\nv 1 0 0\nf 1 2 7\n' >"$OUT/garbled.obj"
+printf 'v 40 40 40\nv 80 40 40\nv 80 80 40\nv 40 80 40\nv 40 40 80\nv 80 40 80\nv 80 80 80\nv 40 80 80\nf 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n' >"$OUT/cube.obj"
+check "view --mesh with a missing file is a usage error" usage_rc --mesh "$OUT/no-such-mesh.obj"
+check "view --mesh with a garbled file is a usage error" usage_rc --mesh "$OUT/garbled.obj"
+check "view with two regions keeping their outside is a usage error" usage_rc --clip-box 0,0,0,90,127,112 --clip-mesh "$OUT/cube.obj" --clip-keep outside
 
 echo "screenshots and logs: $OUT/"
 echo "test-viewer: $PASS passed, $FAIL failed"

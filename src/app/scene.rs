@@ -344,6 +344,21 @@ impl Scene {
         }
     }
 
+    /// Whether every frame draws something (meshes or the clip mesh): a
+    /// frame then goes through [`Scene::render_geometry`]; otherwise the
+    /// limiter of [`Scene::install`] (or [`Scene::clip`] in a chain of the
+    /// caller's) is the whole job.
+    pub fn draws(&self) -> bool {
+        !self.meshes.is_empty() || self.clip_mesh.is_some()
+    }
+
+    /// The clip planes and regions as one limiter (None: none): what
+    /// [`Scene::install`] gives a renderer, for a caller that chains it with
+    /// limiters of its own (the viewer's interactive plane).
+    pub fn clip(&self) -> Option<Arc<dyn Limiter>> {
+        self.clip.clone()
+    }
+
     /// Renders one frame of `cam` into `img`: with meshes, draws them, stops
     /// the rays at them and composites the volume over them.
     pub fn render(&self, r: &mut Renderer, cam: &Camera, img: &mut Image) -> Result<(FrameStats, GeometryCost)> {
@@ -362,13 +377,34 @@ impl Scene {
             };
             r.set_focus_limiter(limiter, tissue)?;
         }
-        if self.meshes.is_empty() && self.clip_mesh.is_none() {
+        if !self.draws() {
             return Ok((r.render(cam, img)?, GeometryCost::default()));
         }
+        Ok(self.render_geometry(r, cam, img, self.clip.clone(), true)?)
+    }
+
+    /// The per-frame geometry stage of a scene that [`Scene::draws`]
+    /// (`render`, `rotate` and the viewer): draws the clip mesh's faces and
+    /// the meshes at `cam`'s size for `cam` and `r`'s projection, chains the
+    /// clip mesh and the meshes' inverse warp ([`GeometryLimits`], keeping
+    /// the iso crossing in iso mode on the raycaster) after `base` (the clip
+    /// planes and regions: [`Scene::clip`], or the caller's chain holding
+    /// it), installs that limiter in `r`, renders, and composites the volume
+    /// over the meshes' colour. `measure`: time the inverse warp once more
+    /// on its own (the cost figures of `render` and `rotate`; a frame's work
+    /// more).
+    pub fn render_geometry(
+        &self,
+        r: &mut Renderer,
+        cam: &Camera,
+        img: &mut Image,
+        base: Option<Arc<dyn Limiter>>,
+        measure: bool,
+    ) -> shearwarp::Result<(FrameStats, GeometryCost)> {
         let mut cost = GeometryCost::default();
         let t = Instant::now();
         let proj = Projector::new(cam, &r.projection(), self.dims, self.spacing)?;
-        let mut limiters: Vec<Arc<dyn Limiter>> = self.clip.iter().cloned().collect();
+        let mut limiters: Vec<Arc<dyn Limiter>> = base.into_iter().collect();
         // the clip mesh's front and back faces, drawn for this frame
         if let Some((m, keep)) = &self.clip_mesh {
             limiters.push(Arc::new(MeshClip::new(m, proj, *keep)?));
@@ -395,25 +431,52 @@ impl Scene {
         // (a split perspective frame keeps each pyramid's iso depth for the depth test)
         r.set_keep_depths(crossing);
         let st = r.render(cam, img)?;
-        // the inverse warp's own cost, on this frame's plan(s), measured once
-        // more from the start: reading the depth buffer, then the limiter (its
-        // output buffers made first; anything it makes on first use, such as
-        // a column copy of the depths, made again)
-        let mut bufs: Vec<_> = r.last_plans().iter().map(|p| shearwarp::view::plan::RayLimits::open(p.grid.size, p.slices())).collect();
-        let t = Instant::now();
-        let again = GeometryLimits::new(proj, geo).with_iso_crossing(crossing);
-        for (plan, l) in r.last_plans().iter().zip(&mut bufs) {
-            r.run_limiter(&again, plan, l);
+        if measure {
+            // the inverse warp's own cost, on this frame's plan(s), measured once
+            // more from the start: reading the depth buffer, then the limiter (its
+            // output buffers made first; anything it makes on first use, such as
+            // a column copy of the depths, made again)
+            let mut bufs: Vec<_> = r.last_plans().iter().map(|p| shearwarp::view::plan::RayLimits::open(p.grid.size, p.slices())).collect();
+            let t = Instant::now();
+            let again = GeometryLimits::new(proj, geo).with_iso_crossing(crossing);
+            for (plan, l) in r.last_plans().iter().zip(&mut bufs) {
+                r.run_limiter(&again, plan, l);
+            }
+            cost.inverse_warp_ms = t.elapsed().as_secs_f64() * 1e3;
         }
-        cost.inverse_warp_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         if crossing {
             composite_iso_over_geometry(img, geo, r, &geometry);
         } else {
             composite_over_geometry(img, geo);
         }
+        // the geometry drawn outside the volume's spans: cleared by the next
+        // warp into `img` (a reused image showed the last frames' needles)
+        for y in 0..geo.height {
+            if let Some([x0, x1]) = geo.row_span(y) {
+                img.mark_written(y, x0, x1 + 1);
+            }
+        }
         cost.composite_ms = t.elapsed().as_secs_f64() * 1e3;
         Ok((st, cost))
+    }
+}
+
+impl Clone for Scene {
+    /// The same scene with buffers of its own (the viewer's two render
+    /// threads draw at once: each its own colour and depth buffer).
+    fn clone(&self) -> Self {
+        Scene {
+            meshes: self.meshes.clone(),
+            material: self.material,
+            clip: self.clip.clone(),
+            clip_mesh: self.clip_mesh.clone(),
+            focus_mesh: self.focus_mesh.clone(),
+            focus_drawn: Default::default(),
+            drawn: Default::default(),
+            dims: self.dims,
+            spacing: self.spacing,
+        }
     }
 }
 

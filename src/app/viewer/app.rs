@@ -51,11 +51,6 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     // check the options before loading anything
     let settings = cmd.render.settings()?;
     let sc = &cmd.render.scene;
-    if !sc.mesh.is_empty() || sc.clip_box.is_some() || sc.clip_sphere.is_some() {
-        return Err(anyhow::Error::new(Usage(
-            "--mesh, --clip-box and --clip-sphere are not available in the viewer yet (render and rotate take them; the viewer takes --clip-plane)".into(),
-        )));
-    }
     let (vol, name) = cmd.volume.load()?;
     let load_ms = t_start.elapsed().as_secs_f64() * 1e3;
     let t_setup = Instant::now();
@@ -94,6 +89,13 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let planes = cmd.render.clip_plane_list(d, spacing)?;
     preview.set_clip_planes(planes.clone())?;
     blend.set_clip_planes(planes)?;
+    // --mesh, --needle, --clip-box, --clip-sphere, --clip-mesh: the scene of
+    // render and rotate (its focus is the lens above), one per display
+    let scene_args = crate::app::scene::SceneArgs { focus: None, focus_tissue: None, ..sc.clone() };
+    let scene = crate::app::scene::Scene::new(&scene_args, None, d, spacing)?;
+    let usage = |e: shearwarp::Error| anyhow::Error::new(Usage(format!("{e}")));
+    preview.set_scene(Some(scene.clone())).map_err(usage)?;
+    blend.set_scene(Some(scene)).map_err(usage)?;
     let setup_ms = t_setup.elapsed().as_secs_f64() * 1e3;
     let info = Info {
         volume: name.clone(),

@@ -17,14 +17,16 @@ use std::thread::JoinHandle;
 use std::time::Instant;
 
 use super::state::{Class, Kind, Lens, Plane, Spec};
+use crate::app::scene::Scene;
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
 use shearwarp::geometry::hit::KeptHits;
 use shearwarp::render::{Deluxe, Focus, Footprint, FrameStats, Method, Renderer, Settings};
 use shearwarp::view::Projection;
-use shearwarp::view::clip::{ClipPlane, ClipPlanes, Region};
-use shearwarp::warp::{Canvas, Image8, Texel};
+use shearwarp::view::clip::{ClipPlane, ClipPlanes, Limiters, Region};
+use shearwarp::view::plan::Limiter;
+use shearwarp::warp::{Canvas, Image, Image8, Texel};
 
 /// A finished frame.
 #[derive(Clone, Debug)]
@@ -82,8 +84,9 @@ pub struct Renderers {
     stale: [bool; 3],
     /// The projection of every renderer.
     projection: Projection,
-    /// The ray limits of every renderer (clip planes), if any.
-    limiter: Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>,
+    /// The ray limits of every renderer (clip planes and the scene's clip
+    /// regions), if any.
+    limiter: Option<Arc<dyn Limiter>>,
     /// The `--clip-plane` half-spaces every frame keeps ([`Renderers::set_clip_planes`]).
     planes: Vec<ClipPlane>,
     /// The interactive plane the limiter was last built with.
@@ -98,6 +101,12 @@ pub struct Renderers {
     /// threshold) of a spec (its `seq` and `lens` cleared), its plans and
     /// depths kept for the iso hit under the mouse, computed per move.
     surface: Option<(Spec, KeptHits)>,
+    /// The geometry and clip regions (`--mesh`, `--needle`, `--clip-box`,
+    /// `--clip-sphere`, `--clip-mesh`; [`Renderers::set_scene`]).
+    scene: Option<Scene>,
+    /// A frame of a scene that draws, in f32: the volume composited over the
+    /// geometry there, then rounded into the caller's canvas.
+    geometry_frame: Image,
 }
 
 impl Renderers {
@@ -126,7 +135,20 @@ impl Renderers {
             focus_tissue,
             lens: None,
             surface: None,
+            scene: None,
+            geometry_frame: Image::new(0, 0),
         })
+    }
+
+    /// Sets the scene of every frame (built by [`Scene::new`] without clip
+    /// planes: those are [`Renderers::set_clip_planes`]'s): its clip regions
+    /// join the limiter beside the clip planes and the interactive one, and
+    /// a scene that draws (meshes, a clip mesh) is drawn into every frame
+    /// at the frame's size, camera and projection ([`Scene::render_geometry`]).
+    pub fn set_scene(&mut self, scene: Option<Scene>) -> shearwarp::Result<()> {
+        self.scene = scene;
+        self.surface = None;
+        self.build_limiter()
     }
 
     /// The lens's tissue preset (a name of the tissue set; an error otherwise).
@@ -163,7 +185,7 @@ impl Renderers {
 
     /// Sets the ray limits (clip planes) of every renderer, this one's and any
     /// made later.
-    pub fn set_limiter(&mut self, limiter: Option<std::sync::Arc<dyn shearwarp::view::plan::Limiter>>) {
+    pub fn set_limiter(&mut self, limiter: Option<Arc<dyn Limiter>>) {
         self.tissues.set_limiter(limiter.clone());
         if let Some(c) = &mut self.custom {
             c.set_limiter(limiter.clone());
@@ -176,24 +198,30 @@ impl Renderers {
     pub fn set_clip_planes(&mut self, planes: Vec<ClipPlane>) -> shearwarp::Result<()> {
         ClipPlanes::new(&planes, self.spacing)?;
         self.planes = planes;
-        self.build_limiter();
-        Ok(())
+        self.build_limiter()
     }
 
-    /// The limiter of the `--clip-plane` planes and the interactive one; when
-    /// there is no room for the interactive plane (six planes already), the
-    /// given ones alone.
-    fn build_limiter(&mut self) {
+    /// The limiter of the `--clip-plane` planes and the interactive one (when
+    /// there is no room for the interactive plane, six planes already, the
+    /// given ones alone), followed by the scene's clip regions.
+    fn build_limiter(&mut self) -> shearwarp::Result<()> {
         let mut all = self.planes.clone();
         if let Some(p) = self.interactive.and_then(|p| ClipPlane::new(p.normal, p.offset).ok()) {
             all.push(p);
         }
         let clip = ClipPlanes::new(&all, self.spacing).or_else(|_| ClipPlanes::new(&self.planes, self.spacing));
-        let limiter: Option<Arc<dyn shearwarp::view::plan::Limiter>> = match clip {
-            Ok(c) if !c.planes().is_empty() => Some(Arc::new(c)),
-            _ => None,
+        let mut chain: Vec<Arc<dyn Limiter>> = match clip {
+            Ok(c) if !c.planes().is_empty() => vec![Arc::new(c)],
+            _ => vec![],
+        };
+        chain.extend(self.scene.as_ref().and_then(Scene::clip));
+        let limiter: Option<Arc<dyn Limiter>> = match chain.len() {
+            0 => None,
+            1 => chain.pop(),
+            _ => Some(Arc::new(Limiters::new(chain)?)),
         };
         self.set_limiter(limiter);
+        Ok(())
     }
 
     /// The tissue presets, sorted by threshold as [`Renderer::with_tissues`] keeps them.
@@ -338,7 +366,7 @@ impl Renderers {
         }
         if spec.clip != self.interactive {
             self.interactive = spec.clip;
-            self.build_limiter();
+            self.build_limiter()?;
         }
         let q = spec.quality;
         let r = self.select(spec.class, spec.cell)?;
@@ -357,12 +385,30 @@ impl Renderers {
         if d.matched != spec.still {
             r.set_settings(Settings { deluxe: Deluxe { matched: spec.still, ..d }, ..r.settings() })?;
         }
-        let st = match r.render(&spec.camera, img) {
+        // a scene that draws: the geometry stage of render and rotate, in
+        // f32, rounded into `img` after the composite (no scene, or one of
+        // clip regions alone: the renderer's own frame, nothing more); the
+        // renderer selected above, beside the fields the stage reads
+        let r = match spec.class {
+            Class::Tissue(_) => &mut self.tissues,
+            Class::Custom(_) => self.custom.as_mut().expect("selected above"),
+        };
+        let draws = self.scene.as_ref().filter(|s| s.draws());
+        let (limiter, frame) = (&self.limiter, &mut self.geometry_frame);
+        let mut once = |r: &mut Renderer| match draws {
+            None => r.render(&spec.camera, img),
+            Some(scene) => {
+                let (st, _) = scene.render_geometry(r, &spec.camera, frame, limiter.clone(), false)?;
+                frame.convert_into(img);
+                Ok(st)
+            }
+        };
+        let st = match once(r) {
             // a zoom whose matched grid is past the memory limit: the frame without M
             Err(_) if spec.still => {
                 let s = r.settings();
                 r.set_settings(Settings { deluxe: Deluxe { matched: false, ..s.deluxe }, ..s })?;
-                r.render(&spec.camera, img)?
+                once(r)?
             }
             st => st?,
         };
@@ -795,6 +841,217 @@ mod tests {
                 assert!(full.coverage() > 0.05, "{mode:?} {class:?}");
                 assert!(cut.coverage() > 0.2 * full.coverage() && cut.coverage() < 0.8 * full.coverage(), "{mode:?} {class:?}");
                 assert_eq!(empty.coverage(), 0.0, "{mode:?} {class:?}");
+            }
+        }
+    }
+
+    /// The scene flags of `shearwarp view FLAGS` (the command line's defaults
+    /// for the rest).
+    fn scene_args(flags: &[&str]) -> crate::app::scene::SceneArgs {
+        use clap::Parser;
+        let cli = crate::app::cli::Cli::try_parse_from(["shearwarp", "view"].iter().chain(flags)).expect("parses");
+        let crate::app::cli::Command::View(v) = cli.command else { panic!("not the view command") };
+        v.render.scene
+    }
+
+    /// The scene of `args` for the head phantom of [`setup`]'s size (no clip
+    /// planes: the viewer's are its own).
+    fn scene(args: &crate::app::scene::SceneArgs) -> Scene {
+        let vol = Phantom::Head.build([40, 40, 36]).unwrap();
+        Scene::new(args, None, vol.dims(), vol.spacing()).unwrap()
+    }
+
+    /// The CLI's frame (`render` / `rotate`: [`Scene::new`], [`Scene::install`],
+    /// [`Scene::render`] on one renderer) of the head phantom with the
+    /// settings, tissue and projection the viewer's renderer of `class` has
+    /// after rendering `spec` (the library renderer of the same limiters).
+    fn cli_frame(r: &mut Renderers, spec: &Spec, args: &crate::app::scene::SceneArgs, planes: Option<Arc<dyn Limiter>>) -> Image {
+        let vr = r.select(spec.class, spec.cell).unwrap();
+        let (settings, quality) = (vr.settings(), vr.quality());
+        let vol = Phantom::Head.build([40, 40, 36]).unwrap();
+        let (dims, sp) = (vol.dims(), vol.spacing());
+        let mut cli = match spec.class {
+            Class::Tissue(i) => {
+                let mut c = Renderer::with_tissues(vol.clone(), &presets::tissues_for(&vol), settings).unwrap();
+                c.select_tissue(i).unwrap();
+                c
+            }
+            Class::Custom(v) => Renderer::new(vol.clone(), &presets::generic(v, vol.value_range().1).tf, settings).unwrap(),
+        };
+        cli.set_projection(spec.projection).unwrap();
+        cli.set_quality(quality).unwrap();
+        let scene = Scene::new(args, planes, dims, sp).unwrap();
+        scene.install(&mut cli);
+        let mut img = Image::new(spec.camera.size[0], spec.camera.size[1]);
+        scene.render(&mut cli, &spec.camera, &mut img).unwrap();
+        img
+    }
+
+    /// `view --clip-box … --clip-keep inside|outside` (and `--clip-sphere`):
+    /// the viewer's frames (its f32 and its 8-bit canvas) are the CLI's
+    /// frames of the same clip region bit for bit, for a preset, another
+    /// preset, a custom iso and the blend display, parallel and perspective;
+    /// with the interactive plane (C) the region chains after it, as the
+    /// CLI's `--clip-plane` does; the region changes the picture.
+    #[test]
+    fn renderers_render_clip_regions_as_the_cli() {
+        let boxed = |keep| scene_args(&["--clip-box", "0,0,0,20,39,35", "--clip-keep", keep]);
+        let ball = scene_args(&["--clip-sphere", "20,14,18,12", "--clip-keep", "outside"]);
+        let persp = Projection::perspective(40.0, 1.5).unwrap();
+        for mode in [Mode::Iso, Mode::Blend] {
+            for args in [boxed("inside"), boxed("outside"), ball.clone()] {
+                let (mut r, spec) = setup(mode);
+                let mut plain = Image::new(64, 48);
+                r.render(&spec, &mut plain).unwrap();
+                r.set_scene(Some(scene(&args))).unwrap();
+                for (class, projection) in
+                    [(Class::Tissue(0), Projection::Parallel), (Class::Tissue(3), persp), (Class::Custom(100.0), Projection::Parallel)]
+                {
+                    let spec = Spec { class, projection, ..spec };
+                    let (mut img, mut img8) = (Image::new(64, 48), Image8::new(64, 48));
+                    r.render(&spec, &mut img).unwrap();
+                    r.render(&spec, &mut img8).unwrap();
+                    let want = cli_frame(&mut r, &spec, &args, None);
+                    let what = format!("{mode:?} {args:?} {class:?} {projection:?}");
+                    assert!(img == want, "{what}: the viewer's frame is not the CLI's");
+                    assert_eq!(img8.data, want.to_rgba8(), "{what}: 8 bits");
+                    assert!(want.coverage() > 0.02, "{what}: something is left");
+                }
+                let mut cut = Image::new(64, 48);
+                r.render(&spec, &mut cut).unwrap();
+                assert!(cut != plain, "{mode:?} {args:?}: the region changed nothing");
+                // the interactive plane and the region: the CLI's --clip-plane and region
+                let r3 = spec.camera.rotation;
+                let plane = Plane { normal: [r3.x_axis.z, r3.y_axis.z, r3.z_axis.z], offset: 10.0 };
+                let spec = Spec { clip: Some(plane), ..spec };
+                let mut img = Image::new(64, 48);
+                r.render(&spec, &mut img).unwrap();
+                let sp = Phantom::Head.build([40, 40, 36]).unwrap().spacing();
+                let planes = ClipPlanes::new(&[ClipPlane::new(plane.normal, plane.offset).unwrap()], sp).unwrap();
+                let want = cli_frame(&mut r, &spec, &args, Some(Arc::new(planes)));
+                assert!(img == want, "{mode:?} {args:?}: the plane and the region");
+                assert!(img != cut, "{mode:?} {args:?}: the plane changed nothing");
+            }
+        }
+    }
+
+    /// A closed cube, voxels 8 to 20 on every axis (OBJ).
+    const CUBE_OBJ: &str = "v 8 8 8\nv 20 8 8\nv 20 20 8\nv 8 20 8\nv 8 8 20\nv 20 8 20\nv 20 20 20\nv 8 20 20\n\
+        f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n";
+
+    /// Two regions keeping their outside (a box and a clip mesh) are refused
+    /// by the scene, as by the CLI; a clip plane chained with one is not.
+    #[test]
+    fn two_outside_clip_regions_are_refused() {
+        let dir = std::env::temp_dir().join(format!("shearwarp-viewer-clip-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cube = dir.join("cube.obj");
+        std::fs::write(&cube, CUBE_OBJ).unwrap();
+        let vol = Phantom::Head.build([40, 40, 36]).unwrap();
+        let cube = cube.to_str().unwrap();
+        let args = scene_args(&["--clip-box", "0,0,0,20,20,20", "--clip-mesh", cube, "--clip-keep", "outside"]);
+        let e = Scene::new(&args, None, vol.dims(), vol.spacing()).err().expect("refused");
+        assert!(e.to_string().contains("at most one region may keep its outside"), "{e}");
+        let (mut r, spec) = setup(Mode::Iso);
+        r.set_clip_planes(vec![ClipPlane::new([1.0, 0.0, 0.0], 0.0).unwrap()]).unwrap();
+        r.set_scene(Some(scene(&scene_args(&["--clip-mesh", cube, "--clip-keep", "outside"])))).unwrap();
+        let mut img = Image::new(64, 48);
+        r.render(&spec, &mut img).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// `view --needle …`: the viewer's frame of a needle through the head is
+    /// `Scene::render`'s frame (the CLI's) of the same camera bit for bit, in
+    /// f32 and after the same rounding to 8 bits: the iso preview (rays stop
+    /// at the needle, the crossing depth-tested) and the blend display,
+    /// drag frames at a coarse quality and still frames, parallel and
+    /// perspective, with the interactive plane; the needle shows.
+    #[test]
+    fn renderers_render_geometry_as_scene_render() {
+        let args = scene_args(&["--needle", "-10,20,18,50,20,18,1.5"]);
+        let persp = Projection::perspective(40.0, 1.5).unwrap();
+        let rot = shearwarp::view::rotate_eye(shearwarp::view::NamedView::Anterior.rotation(), 1, 30.0);
+        for mode in [Mode::Iso, Mode::Blend] {
+            let (mut r, spec) = setup(mode);
+            let spec = Spec { camera: Camera { rotation: rot, ..spec.camera }, ..spec };
+            let mut plain = Image::new(64, 48);
+            r.render(&spec, &mut plain).unwrap();
+            r.set_scene(Some(scene(&args))).unwrap();
+            let r3 = rot;
+            let plane = Plane { normal: [r3.x_axis.z, r3.y_axis.z, r3.z_axis.z], offset: 5.0 };
+            for (projection, quality, still, clip) in [
+                (Projection::Parallel, 1.0, true, None),
+                (Projection::Parallel, 0.5, false, None),
+                (persp, 1.0, true, None),
+                (persp, 0.7, false, None),
+                (Projection::Parallel, 1.0, true, Some(plane)),
+            ] {
+                let spec = Spec { projection, quality, still, clip, ..spec };
+                let (mut img, mut img8) = (Image::new(64, 48), Image8::new(64, 48));
+                r.render(&spec, &mut img).unwrap();
+                r.render(&spec, &mut img8).unwrap();
+                let planes: Option<Arc<dyn Limiter>> = clip.map(|p| {
+                    let sp = Phantom::Head.build([40, 40, 36]).unwrap().spacing();
+                    Arc::new(ClipPlanes::new(&[ClipPlane::new(p.normal, p.offset).unwrap()], sp).unwrap()) as Arc<dyn Limiter>
+                });
+                let want = cli_frame(&mut r, &spec, &args, planes);
+                let what = format!("{mode:?} {projection:?} quality {quality} still {still} clip {clip:?}");
+                assert!(img == want, "{what}: the viewer's frame is not Scene::render's");
+                assert_eq!(img8.data, want.to_rgba8(), "{what}: 8 bits");
+                if clip.is_none() && projection == Projection::Parallel && still {
+                    assert!(img != plain, "{what}: the needle does not show");
+                    // the needle's colour where it passes beside the head (pixels the volume leaves empty)
+                    let gold = img.data.iter().zip(&plain.data).filter(|(a, b)| b[3] == 0.0 && a[3] > 0.9 && a[0] > a[2]).count();
+                    assert!(gold > 10, "{what}: {gold} needle pixels beside the head");
+                }
+            }
+        }
+    }
+
+    /// A reused canvas keeps nothing of the last geometry frame: a needle
+    /// drawn beside the head in one view, the next view's frame equals that
+    /// view rendered into a fresh canvas (the composite's pixels outside the
+    /// volume's span are cleared by the next warp), f32 and 8-bit.
+    #[test]
+    fn geometry_frames_leave_no_trace_in_the_next() {
+        let args = scene_args(&["--needle", "-30,20,18,70,20,18,1.5"]);
+        let (mut r, spec) = setup(Mode::Iso);
+        r.set_scene(Some(scene(&args))).unwrap();
+        let base = spec.camera.rotation;
+        let tilted = Spec { camera: Camera { rotation: shearwarp::view::rotate_eye(base, 2, 40.0), ..spec.camera }, ..spec };
+        let (mut img, mut img8) = (Image::new(64, 48), Image8::new(64, 48));
+        r.render(&spec, &mut img).unwrap();
+        r.render(&spec, &mut img8).unwrap();
+        r.render(&tilted, &mut img).unwrap();
+        r.render(&tilted, &mut img8).unwrap();
+        let (mut fresh, mut fresh8) = (Image::new(64, 48), Image8::new(64, 48));
+        r.render(&tilted, &mut fresh).unwrap();
+        r.render(&tilted, &mut fresh8).unwrap();
+        assert!(img == fresh, "the last frame's needle is left in the f32 frame");
+        assert!(img8 == fresh8, "the last frame's needle is left in the 8-bit frame");
+    }
+
+    /// The lens (L) over a scene with geometry and a clip box: the lens
+    /// frames render (the hit under the mouse found or not, nothing panics),
+    /// on the iso preview and the blend display, parallel and perspective.
+    #[test]
+    fn lens_renders_with_geometry_and_clip() {
+        let args = scene_args(&["--needle", "-10,20,18,50,20,18,1.5", "--clip-box", "0,0,0,28,39,35", "--clip-keep", "outside"]);
+        for mode in [Mode::Iso, Mode::Blend] {
+            let (mut r, spec) = setup(mode);
+            r.set_scene(Some(scene(&args))).unwrap();
+            for projection in [Projection::Parallel, Projection::perspective(40.0, 1.5).unwrap()] {
+                let spec = Spec { projection, ..spec };
+                let mut img = Image8::new(64, 48);
+                r.render(&spec, &mut img).unwrap();
+                let before = img.clone();
+                for at in [[32.0, 24.0], [5.0, 24.0], [60.0, 40.0], [-3.0, 100.0]] {
+                    let lens = Lens { centre: [0.0; 3], radius: 15.0, at: Some(at) };
+                    r.render(&Spec { lens: Some(lens), ..spec }, &mut img).unwrap();
+                    assert!(img.coverage() > 0.02, "{mode:?} {projection:?} {at:?}");
+                }
+                r.render(&spec, &mut img).unwrap();
+                assert!(img == before, "{mode:?} {projection:?}: the lens off, the frame as before");
             }
         }
     }

@@ -144,13 +144,20 @@ fn geometry_mesh_in_front_behind_and_inside_the_volume() {
     }
 }
 
+/// `shearwarp render` of the 32³ sphere phantom at 64² into `dir/name`, with `extra` arguments.
+fn render_sphere(dir: &std::path::Path, extra: &[&str], name: &str) -> assert_cmd::assert::Assert {
+    let o = dir.join(name);
+    let mut args = vec!["render", "--phantom", "sphere", "--phantom-dims", "32,32,32", "--size", "64", "--quiet", "-o", o.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    assert_cmd::Command::cargo_bin("shearwarp").unwrap().args(&args).assert()
+}
+
 /// `--mesh` on the command line: an OBJ plate in front of the sphere
 /// phantom covers it (the output differs from the plain render and `--json`
 /// reports the geometry's costs), one far behind shows only around it, and a
 /// missing or malformed file is a usage error naming it.
 #[test]
 fn geometry_mesh_on_the_command_line() {
-    use assert_cmd::Command;
     use predicates::prelude::*;
     let dir = tempfile::tempdir().unwrap();
     let obj = dir.path().join("plate.obj");
@@ -158,13 +165,7 @@ fn geometry_mesh_on_the_command_line() {
     std::fs::write(&obj, "v -10 1 -10\nv 45 1 -10\nv 45 1 45\nv -10 1 45\nf 1 2 3 4\n").unwrap();
     let bad = dir.path().join("bad.obj");
     std::fs::write(&bad, "v 0 0 0\nf 1 2 3\n").unwrap();
-    let run = |extra: &[&str], name: &str| {
-        let o = dir.path().join(name);
-        let mut args =
-            vec!["render", "--phantom", "sphere", "--phantom-dims", "32,32,32", "--size", "64", "--quiet", "-o", o.to_str().unwrap()];
-        args.extend_from_slice(extra);
-        Command::cargo_bin("shearwarp").unwrap().args(&args).assert()
-    };
+    let run = |extra: &[&str], name: &str| render_sphere(dir.path(), extra, name);
     run(&[], "plain.png").success();
     let out = run(&["--mesh", obj.to_str().unwrap(), "--json"], "front.png").success();
     let j: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
@@ -188,6 +189,33 @@ fn geometry_mesh_on_the_command_line() {
         .failure()
         .code(2)
         .stderr(predicate::str::contains("--mesh-scale"));
+}
+
+/// `--needle` on the command line: a cylinder through the sphere phantom
+/// shows beside the ball (the frame differs from the plain render at the
+/// needle's ends and not far from it), `--json` reports the geometry's
+/// costs, and a needle with equal ends, a radius ≤ 0 or too few numbers is a
+/// usage error naming the flag.
+#[test]
+fn geometry_needle_on_the_command_line() {
+    use predicates::prelude::*;
+    let dir = tempfile::tempdir().unwrap();
+    let run = |extra: &[&str], name: &str| render_sphere(dir.path(), extra, name);
+    run(&[], "plain.png").success();
+    // along x through the ball's centre, poking out on both sides (the anterior view looks along y)
+    let out = run(&["--needle=-20,15.5,15.5,51,15.5,15.5,1.5", "--json"], "needle.png").success();
+    let j: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    assert!(j["geometry"]["inverse_warp_ms"].as_f64().unwrap() >= 0.0, "{j}");
+    let px = |n: &str| image::open(dir.path().join(n)).unwrap().to_rgb8();
+    let (plain, needle) = (px("plain.png"), px("needle.png"));
+    let differ = |x: u32, y: u32| plain.get_pixel(x, y) != needle.get_pixel(x, y);
+    // the needle's row beside the ball (off the volume: background in the plain frame)
+    assert!(differ(3, 32) || differ(3, 31), "the needle shows left of the ball");
+    assert!(differ(60, 32) || differ(60, 31), "the needle shows right of the ball");
+    assert!(!differ(32, 5) && !differ(32, 58), "far from the needle the frame is the plain one");
+    for (bad, says) in [("1,1,1,1,1,1,2", "ends must differ"), ("1,1,1,5,5,5,0", "radius"), ("1,2,3", "7 numbers")] {
+        run(&["--needle", bad], "x.png").failure().code(2).stderr(predicate::str::contains("--needle").and(predicate::str::contains(says)));
+    }
 }
 
 /// The first `t ≥ 0` where `o + t·d` enters the closed cylinder `(a, b, r)`

@@ -959,9 +959,13 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             // over the turn: warm, as a user rotating the scene sees them)
             let g = |f: fn(&crate::app::scene::GeometryCost) -> f64| median(&mut costs.iter().map(f).collect::<Vec<_>>());
             let mut share: Vec<f64> = costs.iter().zip(&all).map(|(c, s)| c.inverse_warp_ms / s.frame_ms()).collect();
+            // (of the whole frame a user waits for: the volume's, the meshes' drawing and the composite)
+            let mut share_scene: Vec<f64> =
+                costs.iter().zip(&all).map(|(c, s)| c.inverse_warp_ms / (s.frame_ms() + c.raster_ms + c.composite_ms)).collect();
             j["geometry"] = serde_json::json!({
                 "raster_ms_median": g(|c| c.raster_ms), "inverse_warp_ms_median": g(|c| c.inverse_warp_ms),
                 "composite_ms_median": g(|c| c.composite_ms), "inverse_warp_share_median": median(&mut share),
+                "inverse_warp_share_of_scene_frame_median": median(&mut share_scene),
             });
         }
         say!("{j}");

@@ -147,7 +147,8 @@ fn geometry_mesh_in_front_behind_and_inside_the_volume() {
 /// `shearwarp render` of the 32³ sphere phantom at 64² into `dir/name`, with `extra` arguments.
 fn render_sphere(dir: &std::path::Path, extra: &[&str], name: &str) -> assert_cmd::assert::Assert {
     let o = dir.join(name);
-    let mut args = vec!["render", "--phantom", "sphere", "--phantom-dims", "32,32,32", "--size", "64", "--quiet", "-o", o.to_str().unwrap()];
+    let mut args =
+        vec!["render", "--phantom", "sphere", "--phantom-dims", "32,32,32", "--size", "64", "--quiet", "-o", o.to_str().unwrap()];
     args.extend_from_slice(extra);
     assert_cmd::Command::cargo_bin("shearwarp").unwrap().args(&args).assert()
 }

@@ -202,9 +202,8 @@ fn parse_needle(s: &str) -> std::result::Result<[f64; 7], String> {
 /// millimetres from the volume centre; else voxel indices, the radius in
 /// voxels of the smallest spacing.
 fn needle_mesh(n: [f64; 7], world: bool, dims: [usize; 3], spacing: [f32; 3]) -> shearwarp::Result<Mesh> {
-    let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
+    let (sp, centre) = spacing_and_centre(dims, spacing);
     let (a, b) = (DVec3::new(n[0], n[1], n[2]), DVec3::new(n[3], n[4], n[5]));
-    let centre = (DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64) - 1.0) / 2.0;
     // (millimetres from the volume centre)
     let (a, b, r) = if world { (a, b, n[6]) } else { ((a - centre) * sp, (b - centre) * sp, n[6] * sp.min_element()) };
     let to_voxels = DAffine3::from_translation(centre) * DAffine3::from_scale(1.0 / sp);
@@ -434,8 +433,8 @@ impl Scene {
         if measure {
             // the inverse warp's own cost, on this frame's plan(s), measured once
             // more from the start: reading the depth buffer, then the limiter (its
-            // output buffers made first; anything it makes on first use, such as
-            // a column copy of the depths, made again)
+            // output buffers made first; anything it makes per frame, such as
+            // a table of row minima, made again)
             let mut bufs: Vec<_> = r.last_plans().iter().map(|p| shearwarp::view::plan::RayLimits::open(p.grid.size, p.slices())).collect();
             let t = Instant::now();
             let again = GeometryLimits::new(proj, geo).with_iso_crossing(crossing);
@@ -491,7 +490,13 @@ fn placement(args: &SceneArgs, dims: [usize; 3], spacing: [f32; 3]) -> DAffine3 
     if !args.mesh_world {
         return local;
     }
-    let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
-    let centre = DVec3::new(dims[0] as f64 - 1.0, dims[1] as f64 - 1.0, dims[2] as f64 - 1.0) / 2.0;
+    let (sp, centre) = spacing_and_centre(dims, spacing);
     DAffine3::from_translation(centre) * DAffine3::from_scale(1.0 / sp) * local
+}
+
+/// The voxel spacing (mm) and the volume centre (voxel indices) that map
+/// world millimetres from the centre to voxel indices and back.
+fn spacing_and_centre(dims: [usize; 3], spacing: [f32; 3]) -> (DVec3, DVec3) {
+    let sp = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
+    (sp, DVec3::new(dims[0] as f64 - 1.0, dims[1] as f64 - 1.0, dims[2] as f64 - 1.0) / 2.0)
 }

@@ -54,7 +54,7 @@ use crate::warp::Image;
 /// pixels gather.
 const TILE: usize = 4;
 
-/// Depths kept line by line (rows, or columns): each line's span `[x0, x1]`
+/// Depths kept row by row: each row's span `[x0, x1]`
 /// (`x0 > x1`: none) and where its values start in `packed` (`+∞` where no
 /// geometry is).
 #[derive(Clone, Debug, Default)]
@@ -65,7 +65,7 @@ struct Rows {
 
 impl Rows {
     /// The smallest value of line `y` over positions `x0 ..= x1`, folded into
-    /// `d` (rows: a row over columns; columns: a column over rows).
+    /// `d`.
     #[inline(always)]
     fn fold(&self, y: usize, x0: u32, x1: u32, d: f64) -> f64 {
         let ([a, b], off) = self.rows[y];

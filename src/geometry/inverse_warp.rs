@@ -1018,13 +1018,7 @@ mod tests {
         }
         let gl = GeometryLimits::new(proj, &geo);
         let tables: Vec<(Rows, u32)> = [2, 4, 8, 16].into_iter().map(|k| (gl.row_minima(k), k)).collect();
-        let mut seed = 0x9e3779b97f4a7c15u64;
-        let mut rnd = |lo: f64, hi: f64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = super::super::test_rng(0x9e3779b97f4a7c15u64);
         let [x0, y0, x1, y1] = gl.bounds.unwrap().map(|x| x as f64);
         let (mut finite, mut n, mut used) = (0, 0, [0usize; 4]);
         for i in 0..20000 {
@@ -1060,13 +1054,7 @@ mod tests {
             Projector::new(&Camera::new(DMat3::IDENTITY, [97, 61]), &Projection::Parallel, [8, 8, 8], [1.0; 3]).unwrap(),
             &GeometryImage::new(97, 61),
         );
-        let mut seed = 0x2545f4914f6cdd1du64;
-        let mut rnd = |lo: f64, hi: f64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = super::super::test_rng(0x2545f4914f6cdd1du64);
         let near_edge = |x: f64| (x - x.round()).abs() < 1e-6;
         let fix = |x: f64| (x * FIXED_ONE as f64).round() as i64;
         let (mut n, mut some) = (0, 0);
@@ -1092,13 +1080,7 @@ mod tests {
     #[test]
     fn inverse_warp_affine_reach_equals_the_corners_reach() {
         use crate::view::Factorization;
-        let mut seed = 0x853c49e6748fea9bu64;
-        let mut rnd = |lo: f64, hi: f64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = super::super::test_rng(0x853c49e6748fea9bu64);
         let (mut n, mut some) = (0, 0);
         for (sp, size) in [([1.0f32; 3], [96usize, 80usize]), ([0.6, 0.6, 5.0], [300, 250]), ([1.0; 3], [512, 512])] {
             for _ in 0..20 {
@@ -1185,13 +1167,7 @@ mod tests {
     fn inverse_warp_marks_change_no_limit_in_random_views() {
         use crate::view::Factorization;
         use crate::view::perspective::PerspectiveView;
-        let mut seed = 0xda942042e4dd58b5u64;
-        let mut rnd = |lo: f64, hi: f64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = super::super::test_rng(0xda942042e4dd58b5u64);
         let dims = [40, 36, 30];
         let (mut cases, mut limited) = (0, 0);
         while cases < 150 {

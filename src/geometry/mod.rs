@@ -38,3 +38,15 @@ pub use inverse_warp::{GeometryLimits, composite_iso_over_geometry, composite_ov
 pub use io::load_mesh;
 pub use mesh::Mesh;
 pub use raster::{Cull, GeometryImage, Material, Projector, rasterize};
+
+/// A small xorshift generator for the geometry tests' random cases: uniform
+/// numbers in `[lo, hi)` from `seed` (deterministic, no dependency).
+#[cfg(test)]
+pub(crate) fn test_rng(mut seed: u64) -> impl FnMut(f64, f64) -> f64 {
+    move |lo: f64, hi: f64| {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+}

@@ -449,13 +449,7 @@ mod tests {
     /// with every pixel of their boxes tested, bit for bit.
     #[test]
     fn raster_row_ranges_equal_the_whole_box() {
-        let mut seed = 0x853c49e6748fea9bu64;
-        let mut rnd = |lo: f64, hi: f64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = super::super::test_rng(0x853c49e6748fea9bu64);
         let (w, h) = (61, 47);
         let mut drawn = 0;
         for round in 0..400 {

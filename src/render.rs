@@ -937,9 +937,8 @@ impl Renderer {
     /// was on for that frame), NaN when the image does not match the plan.
     pub fn last_depth_at(&self, i: usize, p: usize, q: usize) -> f32 {
         let Some(plan) = self.last_plans().get(i) else { return f32::NAN };
-        let d = if self.last_split { self.pyramid_depths.get(i) } else { Some(&self.inter) };
-        match d {
-            Some(d) if d.size == plan.grid.size && d.depth.len() == d.size[0] * d.size[1] => d.depth_at(p, q),
+        match self.last_depth_image(i) {
+            Some(d) if d.holds_depths_of(plan.grid.size) => d.depth_at(p, q),
             _ => f32::NAN,
         }
     }

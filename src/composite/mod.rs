@@ -295,6 +295,12 @@ impl Intermediate {
         }
     }
 
+    /// Whether this image holds an iso-depth plane for a grid of `size`
+    /// (what reading another frame's or pyramid's depths checks first).
+    pub fn holds_depths_of(&self, size: [usize; 2]) -> bool {
+        self.size == size && self.depth.len() == size[0] * size[1]
+    }
+
     /// Iso depth at `(p, q)` (NaN outside the valid rectangle or without a hit).
     pub fn depth_at(&self, p: usize, q: usize) -> f32 {
         match self.valid {

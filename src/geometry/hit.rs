@@ -61,7 +61,7 @@ impl<'r> HitDepths<'r> {
             .map(|(i, plan)| {
                 let last = plan.slices().saturating_sub(1);
                 // (as Renderer::last_depth_at reads it)
-                let d = renderer.last_depth_image(i).filter(|d| d.size == plan.grid.size && d.depth.len() == d.size[0] * d.size[1]);
+                let d = renderer.last_depth_image(i).filter(|d| d.holds_depths_of(plan.grid.size));
                 (plan, d, super::inverse_warp::slice_depth(plan, proj, 0), super::inverse_warp::slice_depth(plan, proj, last), last)
             })
             .collect();
@@ -168,7 +168,7 @@ impl KeptHits {
             None => (!self.plans.is_empty()).then_some(0)?,
         };
         let (plan, d) = (&self.plans[i], &self.depths[i]);
-        let matches = d.size == plan.grid.size && d.depth.len() == d.size[0] * d.size[1];
+        let matches = d.holds_depths_of(plan.grid.size);
         hit_in(plan, |p, q| if matches { d.depth_at(p, q) } else { f32::NAN }, u, v, |x, y, k| position_at(plan, x, y, k))
     }
 }

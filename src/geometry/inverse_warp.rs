@@ -298,20 +298,25 @@ fn reach_with(plan: &FramePlan, [x0, y0, x1, y1]: [usize; 4], margin: Option<[f6
         lo = [lo[0].min(p), lo[1].min(q)];
         hi = [hi[0].max(p), hi[1].max(q)];
     }
-    if hi[0] < -1.0 || hi[1] < -1.0 || lo[0] > w as f64 || lo[1] > h as f64 {
-        return None;
-    }
     // the pixels whose centres lie in the quad's bounding box (a projective
     // map takes the rectangle's edges to lines, so the box of its corners'
     // images is exact up to rounding; the margin above already holds the
     // footprint's variation over the quad)
-    let clampi = |x: f64, n: usize| x.clamp(0.0, n as f64 - 1.0) as usize;
-    Some([
-        clampi((lo[0] - 1e-6).ceil(), w),
-        clampi((lo[1] - 1e-6).ceil(), h),
-        clampi((hi[0] + 1e-6).floor(), w),
-        clampi((hi[1] + 1e-6).floor(), h),
-    ])
+    centres_in(lo, hi, [w, h])
+}
+
+/// The pixels `[p0, q0, p1, q1]` (inclusive) of a grid of `[w, h]` (both
+/// above 0) whose centres lie in the box `lo ..= hi` (finite), widened by
+/// 10⁻⁶ for rounding (None: the box lies off the grid).
+#[inline]
+fn centres_in(lo: [f64; 2], hi: [f64; 2], [w, h]: [usize; 2]) -> Option<[usize; 4]> {
+    if !(hi[0] >= -1.0 && hi[1] >= -1.0 && lo[0] <= w as f64 && lo[1] <= h as f64) {
+        return None;
+    }
+    // (clamped to the grid first: ⌈⌉ and ⌊⌋ commute with a clamp to whole numbers)
+    let first = |x: f64, n: usize| ceil_in(max(x - 1e-6, 0.0)).min(n as i32 - 1) as usize;
+    let last = |x: f64, n: usize| floor_in(min(x + 1e-6, n as f64 - 1.0)).max(0) as usize;
+    Some([first(lo[0], w), first(lo[1], h), last(hi[0], w), last(hi[1], h)])
 }
 
 /// [`reach_with`] of an affine frame, set up once for all of a frame's
@@ -361,15 +366,7 @@ impl AffineBack {
         let [ap, aq] = &self.abs;
         let (pc, pe) = (mp[0] * uc + mp[1] * vc + mp[2], ap[0] * hu + ap[1] * hv);
         let (qc, qe) = (mq[0] * uc + mq[1] * vc + mq[2], aq[0] * hu + aq[1] * hv);
-        let (plo, phi, qlo, qhi) = (pc - pe, pc + pe, qc - qe, qc + qe);
-        if !(phi >= -1.0 && qhi >= -1.0 && plo <= w as f64 && qlo <= h as f64) {
-            return None;
-        }
-        // the pixels whose centres lie in the bounding box (clamped to the
-        // grid first: ⌈⌉ and ⌊⌋ commute with a clamp to whole numbers)
-        let lo = |x: f64, n: usize| ceil_in(max(x - 1e-6, 0.0)).min(n as i32 - 1) as usize;
-        let hi = |x: f64, n: usize| floor_in(min(x + 1e-6, n as f64 - 1.0)).max(0) as usize;
-        Some([lo(plo, w), lo(qlo, h), hi(phi, w), hi(qhi, h)])
+        centres_in([pc - pe, qc - qe], [pc + pe, qc + qe], self.size)
     }
 }
 
@@ -1018,7 +1015,7 @@ mod tests {
         }
         let gl = GeometryLimits::new(proj, &geo);
         let tables: Vec<(Rows, u32)> = [2, 4, 8, 16].into_iter().map(|k| (gl.row_minima(k), k)).collect();
-        let mut rnd = super::super::test_rng(0x9e3779b97f4a7c15u64);
+        let mut rnd = crate::geometry::test_rng(0x9e3779b97f4a7c15u64);
         let [x0, y0, x1, y1] = gl.bounds.unwrap().map(|x| x as f64);
         let (mut finite, mut n, mut used) = (0, 0, [0usize; 4]);
         for i in 0..20000 {
@@ -1054,7 +1051,7 @@ mod tests {
             Projector::new(&Camera::new(DMat3::IDENTITY, [97, 61]), &Projection::Parallel, [8, 8, 8], [1.0; 3]).unwrap(),
             &GeometryImage::new(97, 61),
         );
-        let mut rnd = super::super::test_rng(0x2545f4914f6cdd1du64);
+        let mut rnd = crate::geometry::test_rng(0x2545f4914f6cdd1du64);
         let near_edge = |x: f64| (x - x.round()).abs() < 1e-6;
         let fix = |x: f64| (x * FIXED_ONE as f64).round() as i64;
         let (mut n, mut some) = (0, 0);
@@ -1080,7 +1077,7 @@ mod tests {
     #[test]
     fn inverse_warp_affine_reach_equals_the_corners_reach() {
         use crate::view::Factorization;
-        let mut rnd = super::super::test_rng(0x853c49e6748fea9bu64);
+        let mut rnd = crate::geometry::test_rng(0x853c49e6748fea9bu64);
         let (mut n, mut some) = (0, 0);
         for (sp, size) in [([1.0f32; 3], [96usize, 80usize]), ([0.6, 0.6, 5.0], [300, 250]), ([1.0; 3], [512, 512])] {
             for _ in 0..20 {
@@ -1167,7 +1164,7 @@ mod tests {
     fn inverse_warp_marks_change_no_limit_in_random_views() {
         use crate::view::Factorization;
         use crate::view::perspective::PerspectiveView;
-        let mut rnd = super::super::test_rng(0xda942042e4dd58b5u64);
+        let mut rnd = crate::geometry::test_rng(0xda942042e4dd58b5u64);
         let dims = [40, 36, 30];
         let (mut cases, mut limited) = (0, 0);
         while cases < 150 {

@@ -449,7 +449,7 @@ mod tests {
     /// with every pixel of their boxes tested, bit for bit.
     #[test]
     fn raster_row_ranges_equal_the_whole_box() {
-        let mut rnd = super::super::test_rng(0x853c49e6748fea9bu64);
+        let mut rnd = crate::geometry::test_rng(0x853c49e6748fea9bu64);
         let (w, h) = (61, 47);
         let mut drawn = 0;
         for round in 0..400 {

@@ -93,17 +93,20 @@ impl Sampler for PostTables {
     }
 }
 
-/// The intermediate sample between slices `k` and `k + 1` from its bilinear
-/// blends `a` (slice `k`) and `b` (slice `k + 1`) at the same in-slice point:
-/// their mean, trilinear interpolation at depth `k + ½` (both paths use
-/// exactly this).
+/// The intermediate sample between slices `k` and `k + 1` at weights `w`
+/// from its cell's eight voxels `v` (slice `k`'s four in [`blend`]'s order,
+/// then slice `k + 1`'s): the bilinear blend of the two slices' means, which
+/// is trilinear interpolation at depth `k + ½` (both paths use exactly this).
 #[inline(always)]
-fn mid(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
-    let mut s = [0f32; 4];
-    for c in 0..4 {
-        s[c] = 0.5 * (a[c] + b[c]);
-    }
-    s
+fn mid(v: &[[f32; 4]; 8], w: &Weights) -> [f32; 4] {
+    let m = |a: [f32; 4], b: [f32; 4]| {
+        let mut s = [0f32; 4];
+        for c in 0..4 {
+            s[c] = 0.5 * (a[c] + b[c]);
+        }
+        s
+    };
+    blend(m(v[0], v[4]), m(v[1], v[5]), m(v[2], v[6]), m(v[3], v[7]), w)
 }
 
 /// Intermediate rows per parallel band.
@@ -981,6 +984,14 @@ impl<S: Sampler> RleFrame<'_, S> {
             // the last cell read and its eight 4-vectors: per scanline t (slice
             // k's bottom and top, slice k + 1's), columns c at 2t and c + 1 at 2t + 1
             let mut cell = (INF, [[0f32; 4]; 8]);
+            // the last weights (a translated plan's row has one)
+            let mut wc = (f32::NAN, cell_weights(0.0, wj));
+            let mut weights = |wi: f32| {
+                if wi.to_bits() != wc.0.to_bits() {
+                    wc = (wi, cell_weights(wi, wj));
+                }
+                wc.1
+            };
             let mut x = x0;
             loop {
                 if x > x1 {
@@ -1022,9 +1033,9 @@ impl<S: Sampler> RleFrame<'_, S> {
                     cell = (c, v);
                     next = c + 1;
                 }
-                let w = cell_weights(wi, wj);
+                let w = weights(wi);
                 let v = &cell.1;
-                let smp = mid(blend(v[0], v[1], v[2], v[3], &w), blend(v[4], v[5], v[6], v[7], &w));
+                let smp = mid(v, &w);
                 self.composite_sample([k, k + 1], x, q, smp, prow, lrow, p0);
                 // the fast continuation: while the next pixel is not opaque and
                 // samples the next cell, whose right column lies inside all four
@@ -1044,8 +1055,8 @@ impl<S: Sampler> RleFrame<'_, S> {
                     }
                     cell = (cn as u32, v);
                     next = c1;
-                    let w = cell_weights(wn, wj);
-                    let smp = mid(blend(v[0], v[1], v[2], v[3], &w), blend(v[4], v[5], v[6], v[7], &w));
+                    let w = weights(wn);
+                    let smp = mid(&v, &w);
                     self.composite_sample([k, k + 1], x, q, smp, prow, lrow, p0);
                 }
                 x += 1;
@@ -1183,10 +1194,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                     };
                     let b = ci as usize + ni * cj as usize;
                     let w = cell_weights(wi, wj);
-                    let smp = mid(
-                        blend(lo[b], lo[b + 1], lo[b + ni], lo[b + ni + 1], &w),
-                        blend(hi[b], hi[b + 1], hi[b + ni], hi[b + ni + 1], &w),
-                    );
+                    let smp = mid(&[lo[b], lo[b + 1], lo[b + ni], lo[b + ni + 1], hi[b], hi[b + 1], hi[b + ni], hi[b + ni + 1]], &w);
                     composite_premultiplied(acc, plan.correct_opacity(p, q, tables.finish(smp)));
                 }
             });

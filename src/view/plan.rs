@@ -433,6 +433,43 @@ impl AxisMap {
     }
 }
 
+/// The map of Deluxe I's intermediate samples along one in-slice axis
+/// ([`FramePlan::mid_map`]).
+#[derive(Clone, Copy, Debug)]
+pub enum MidMap {
+    /// A translated plan: pixel `x` samples cell `x + off` at `weight` (one
+    /// pixel per voxel; every pixel the same weight, as a slice's
+    /// [`SliceMap`]).
+    Shift { off: i64, weight: f32 },
+    /// A scaled plan (or another pitch): the mean of the two slices' maps.
+    Map(AxisMap),
+}
+
+impl MidMap {
+    /// The cell and in-cell weight of pixel `x` (which may lie off the grid).
+    #[inline(always)]
+    pub fn cell(&self, x: i64) -> (i64, f32) {
+        match *self {
+            MidMap::Shift { off, weight } => (x + off, weight),
+            MidMap::Map(m) => m.cell(x),
+        }
+    }
+
+    /// The pixels `[x0, x1]` whose cells ([`MidMap::cell`]) are in `c0 ..= c1`.
+    pub fn pixels_of_cells(&self, c0: i64, c1: i64) -> [i64; 2] {
+        match *self {
+            MidMap::Shift { off, .. } => [c0 - off, c1 - off],
+            MidMap::Map(m) => m.pixels_of_cells(c0, c1),
+        }
+    }
+
+    /// Whether consecutive pixels sample consecutive cells at one weight.
+    #[inline(always)]
+    pub fn is_shift(&self) -> bool {
+        matches!(self, MidMap::Shift { .. })
+    }
+}
+
 /// The geometry of one frame, read by every traversal and the warp.
 #[derive(Clone, Debug)]
 pub struct FramePlan {
@@ -922,19 +959,23 @@ impl FramePlan {
     /// the two slices ([`FramePlan::sample_at`]). A parallel plan translates
     /// every slice, a perspective one scales and translates it, each affinely
     /// in `k` along a straight ray, so the mean of the two maps (scale and
-    /// translation) is the map at `k + ½` exactly. The accelerated traversal
-    /// and its brute force both sample through it.
+    /// translation) is the map at `k + ½` exactly. A translated plan's map is
+    /// a whole shift of cells and one weight for every pixel
+    /// ([`MidMap::Shift`], as a slice's [`SliceMap`]). The accelerated
+    /// traversal and its brute force both sample through it.
     #[inline(always)]
-    pub fn mid_map(&self, k: usize, axis: usize) -> AxisMap {
+    pub fn mid_map(&self, k: usize, axis: usize) -> MidMap {
         let (pad, pitch) = (self.grid.pad as f64, self.grid.pitch);
         match self.kind {
             MapKind::Translate => {
                 let t = &self.shear.trans[axis];
-                AxisMap { scale: 1.0, trans: 0.5 * (t[k] + t[k + 1]), pad, pitch }
+                let m = 0.5 * (t[k] + t[k + 1]);
+                let f = m.floor();
+                MidMap::Shift { off: f as i64 - self.grid.pad as i64, weight: (m - f) as f32 }
             }
             MapKind::ScaleTranslate => {
                 let (a, b) = (&self.scaled[k], &self.scaled[k + 1]);
-                AxisMap { scale: 0.5 * (a.scale + b.scale), trans: 0.5 * (a.trans[axis] + b.trans[axis]), pad, pitch }
+                MidMap::Map(AxisMap { scale: 0.5 * (a.scale + b.scale), trans: 0.5 * (a.trans[axis] + b.trans[axis]), pad, pitch })
             }
         }
     }

@@ -19,7 +19,7 @@ use crate::composite::{Intermediate, composite_premultiplied, terminated};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::encode::rle::runs::{Cursor, INF};
 use crate::encode::rle::{PostTables, Preclass, RleVolume, RleVoxel, ViewTables, VoxelSource};
-use crate::view::plan::{FramePlan, MapKind, RayLimits, floor_i64};
+use crate::view::plan::{FramePlan, MapKind, MidMap, RayLimits, floor_i64};
 
 /// What a sample is made of (a sampler of the one slice traversal): each
 /// voxel read becomes a 4-vector ([`Sampler::voxel`], [`Sampler::MISSING`]
@@ -962,20 +962,32 @@ impl<S: Sampler> RleFrame<'_, S> {
                 // focus+context: each run of pixels whose midpoint is in / out of the focus with its sampler
                 (Some(_), Some(fl)) => focus_runs(fl.row(q), [k as u32, k as u32 + 1], x0, x1, |a, b, f| {
                     let fr = if f { self.focused() } else { *self };
-                    fr.mid_row(k, q, scan, [a, b], hi, wj, prow, lrow);
+                    fr.mid_row(k, q, imap, scan, [a, b], hi, wj, prow, lrow);
                 }),
-                _ => self.mid_row(k, q, scan, [x0, x1], hi, wj, prow, lrow),
+                _ => self.mid_row(k, q, imap, scan, [x0, x1], hi, wj, prow, lrow),
             }
         }
     }
 
     /// The pixels `x0 ..= x1` of row `q` of [`RleFrame::mid_slice`]
-    /// (scanlines `scan`: slice `k`'s two under the row, then slice `k +
-    /// 1`'s; no cell past `hi` holds a non-transparent voxel).
+    /// (columns by `imap`, the slices' [`FramePlan::mid_map`]; scanlines
+    /// `scan`: slice `k`'s two under the row, then slice `k + 1`'s; no cell
+    /// past `hi` holds a non-transparent voxel).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn mid_row(&self, k: usize, q: usize, scan: [usize; 4], [x0, x1]: [i64; 2], hi: i64, wj: f32, prow: &mut [[f32; 4]], lrow: &mut [u32]) {
-        let (rle, imap) = (self.rle, self.plan.mid_map(k, 0));
+    fn mid_row(
+        &self,
+        k: usize,
+        q: usize,
+        imap: MidMap,
+        scan: [usize; 4],
+        [x0, x1]: [i64; 2],
+        hi: i64,
+        wj: f32,
+        prow: &mut [[f32; 4]],
+        lrow: &mut [u32],
+    ) {
+        let rle = self.rle;
         let p0 = self.r.p0 as i64;
         {
             let mut cur = scan.map(|s| rle.cursor(s));
@@ -985,7 +997,7 @@ impl<S: Sampler> RleFrame<'_, S> {
             // k's bottom and top, slice k + 1's), columns c at 2t and c + 1 at 2t + 1
             let mut cell = (INF, [[0f32; 4]; 8]);
             // the last weights (a translated plan's row has one)
-            let mut wc = (f32::NAN, cell_weights(0.0, wj));
+            let mut wc: (f32, Weights) = (f32::NAN, [[0.0; 4]; 4]);
             let mut weights = |wi: f32| {
                 if wi.to_bits() != wc.0.to_bits() {
                     wc = (wi, cell_weights(wi, wj));

@@ -462,12 +462,6 @@ impl MidMap {
             MidMap::Map(m) => m.pixels_of_cells(c0, c1),
         }
     }
-
-    /// Whether consecutive pixels sample consecutive cells at one weight.
-    #[inline(always)]
-    pub fn is_shift(&self) -> bool {
-        matches!(self, MidMap::Shift { .. })
-    }
 }
 
 /// The geometry of one frame, read by every traversal and the warp.

@@ -261,6 +261,9 @@ pub struct Matcher {
     c: u32,
     /// The top bit of every slot (as a 64-bit pattern; truncates for u32).
     top: u64,
+    /// `2^nb − c` in every slot: a slot's code is ≥ c iff adding this carries
+    /// out of the slot ([`Matcher::hits`]).
+    add: u64,
     /// First slot (from the MSB) of a byte with code ≥ c, or `8/nb` if none.
     first: [u8; 256],
     /// Last slot of a byte with code ≥ c, or `8/nb` if none.
@@ -291,7 +294,9 @@ impl Matcher {
                 }
             }
         }
-        Matcher { nb, c, top, first, last }
+        // the lowest bit of every slot times 2^nb − c (< 2^nb: no slot overflows)
+        let add = (top >> (nb - 1)) * ((1u64 << nb) - c as u64);
+        Matcher { nb, c, top, add, first, last }
     }
 
     /// The plain binary matcher (1-bit codes, set bits).
@@ -316,9 +321,27 @@ impl Matcher {
         self.nb.trailing_zeros()
     }
 
-    /// The top bit of every slot whose code is ≥ c (bit-plane comparator, SWAR).
+    /// The top bit of every slot whose code is ≥ c (SWAR, branch-free).
+    ///
+    /// A slot's code `v` is ≥ `c` iff `v + (2^nb − c)` carries out of the
+    /// slot. The low `nb − 1` bits of every slot are added first with the top
+    /// bits masked off, so no carry crosses into the next slot (each sum is
+    /// below `2^nb` and lands at most in the slot's own top bit, `cin`); the
+    /// carry out of the top bit is then the full adder's majority of the two
+    /// top bits and `cin`. Equal to [`Matcher::hits_planes`] (the bit-plane
+    /// reference) for every word, width and threshold (tested).
     #[inline(always)]
     pub fn hits<W: Word>(&self, w: W) -> W {
+        let x = w.as_u64();
+        let (top, add) = (self.top, self.add);
+        let cin = ((x & !top) + (add & !top)) & top;
+        let (xt, at) = (x & top, add & top);
+        W::from_u64((xt & at) | ((xt ^ at) & cin))
+    }
+
+    /// The reference of [`Matcher::hits`]: a bit-plane comparator over the
+    /// slots from their top bit down.
+    pub fn hits_planes<W: Word>(&self, w: W) -> W {
         if self.nb == 1 {
             return w;
         }
@@ -500,6 +523,53 @@ mod tests {
         let n = row.len() * W::BITS as usize;
         let set = |k: usize| row[k / W::BITS as usize] & bit_of::<W>(k) != W::ZERO;
         if ascending { (0..n).find(|&k| set(k)) } else { (0..n).rev().find(|&k| set(k)) }
+    }
+
+    /// `hits` by its definition: the top bit of every slot whose code is ≥ c.
+    fn naive_hits(x: u64, nb: u32, c: u32, bits: u32) -> u64 {
+        let mut out = 0u64;
+        for s in 0..bits / nb {
+            let shift = bits - nb * (s + 1);
+            if ((x >> shift) & ((1 << nb) - 1)) as u32 >= c {
+                out |= 1u64 << (shift + nb - 1);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn swar_hits_equal_the_bit_planes_and_the_definition() {
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        for nb in CODE_WIDTHS {
+            for c in 1..(1u32 << nb) {
+                let m = Matcher::new(nb, c);
+                // every slot value in every slot (the rest of the word random), and random words
+                let mut words: Vec<u64> = (0..64 / nb)
+                    .flat_map(|slot| (0..1u64 << nb).map(move |v| (slot, v)))
+                    .map(|(slot, v)| {
+                        let shift = 64 - nb * (slot + 1);
+                        (next() & !(((1u64 << nb) - 1) << shift)) | (v << shift)
+                    })
+                    .collect();
+                words.extend((0..2000).map(|_| next()));
+                words.extend([0, u64::MAX, 0x5555_5555_5555_5555, 0xAAAA_AAAA_AAAA_AAAA]);
+                for &x in &words {
+                    let want = naive_hits(x, nb, c, 64);
+                    assert_eq!(m.hits(x), want, "u64 nb {nb} c {c} x {x:#x}");
+                    assert_eq!(m.hits_planes(x), want, "planes u64 nb {nb} c {c} x {x:#x}");
+                    let y = x as u32;
+                    let want = naive_hits(y as u64, nb, c, 32) as u32;
+                    assert_eq!(m.hits(y), want, "u32 nb {nb} c {c} x {y:#x}");
+                    assert_eq!(m.hits_planes(y), want, "planes u32 nb {nb} c {c} x {y:#x}");
+                }
+            }
+        }
     }
 
     #[test]

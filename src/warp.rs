@@ -397,14 +397,8 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
         let ih = inter.size[1];
         let (pmin, pmax) = ((r.p0 as f64 - 1.0).max(0.0), (r.p1 + 1).min(iw - 1) as f64 - 1e-9);
         let (qmin, qmax) = ((r.q0 as f64 - 1.0).max(0.0), (r.q1 + 1).min(ih - 1) as f64 - 1e-9);
-        for (u, px) in row.iter_mut().enumerate().take(u1).skip(u0) {
-            let uf = u as f64;
-            if let Some(o) = owned
-                && o.rays.owner(uf, vf) != o.pyramid
-            {
-                continue;
-            }
-            let inv_w = 1.0 / (wa * uf + wb);
+        // the bilinear tap of output pixel u, given 1/W there
+        let tap = |uf: f64, inv_w: f64| -> T {
             let p = ((xa * uf + xb) * inv_w + pad).clamp(pmin, pmax);
             let q = ((ya * uf + yb) * inv_w + pad).clamp(qmin, qmax);
             // p, q ≥ 0 here: truncation is the floor (no libm call: the
@@ -415,7 +409,30 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
             let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
             let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
             let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);
-            *px = T::from_rgba(t.lerp(b, fy));
+            T::from_rgba(t.lerp(b, fy))
+        };
+        let mut u = u0;
+        if owned.is_none() {
+            // four pixels' divisions side by side (packed: the same IEEE
+            // quotients, so the same image, for a fraction of the divider's time)
+            while u + 4 <= u1 {
+                let uf = [u as f64, (u + 1) as f64, (u + 2) as f64, (u + 3) as f64];
+                let d = [wa * uf[0] + wb, wa * uf[1] + wb, wa * uf[2] + wb, wa * uf[3] + wb];
+                let inv = [1.0 / d[0], 1.0 / d[1], 1.0 / d[2], 1.0 / d[3]];
+                for (j, px) in row[u..u + 4].iter_mut().enumerate() {
+                    *px = tap(uf[j], inv[j]);
+                }
+                u += 4;
+            }
+        }
+        for (u, px) in row.iter_mut().enumerate().take(u1).skip(u) {
+            let uf = u as f64;
+            if let Some(o) = owned
+                && o.rays.owner(uf, vf) != o.pyramid
+            {
+                continue;
+            }
+            *px = tap(uf, 1.0 / (wa * uf + wb));
         }
     });
 }

@@ -332,6 +332,9 @@ impl Matcher {
     /// reference) for every word, width and threshold (tested).
     #[inline(always)]
     pub fn hits<W: Word>(&self, w: W) -> W {
+        if self.nb == 1 {
+            return w; // (1-bit codes: every set bit; the same as below, sooner)
+        }
         let x = w.as_u64();
         let (top, add) = (self.top, self.add);
         let cin = ((x & !top) + (add & !top)) & top;

@@ -126,37 +126,43 @@ impl BlockOccupancy {
         let (w, h) = (r.p1 - r.p0 + 1, r.q1 - r.q0 + 1);
         self.stride = w + 1;
         let nw = mask.words_per_row();
-        let nb = m.width();
         let per_word = slots / self.len;
+        // (slots per word are 8, 16, 32 or 64: always four blocks a word)
+        assert_eq!(per_word, BLOCKS_PER_WORD, "four blocks per word");
         let nbk = nw * per_word;
         self.blocks = nbk;
-        self.sums.clear();
-        self.sums.resize((w + 1) * (h + 1) * nbk, 0);
-        let all = !W::ZERO;
-        let ranges: Vec<W> = (0..per_word)
-            .map(|i| {
-                let (j0, j1) = ((i * self.len) as u32, ((i + 1) * self.len - 1) as u32);
-                (all >> (nb * j0)) & (all << (W::BITS - nb * (j1 + 1)))
-            })
-            .collect();
         let row_len = (w + 1) * nbk;
+        // every entry is written below but the first row's (zero): no clearing pass
+        let size = (h + 1) * row_len;
+        if self.sums.len() < size {
+            self.sums.resize(size, 0);
+        }
+        self.sums[..row_len].fill(0);
+        // block i of a word holds its slots [i·len, (i + 1)·len) from the most
+        // significant bit: the word's i-th quarter from the top
+        let qb = W::BITS / BLOCKS_PER_WORD as u32;
+        let qmask = (1u64 << qb) - 1;
+        let shifts: [u32; BLOCKS_PER_WORD] = std::array::from_fn(|i| W::BITS - (i as u32 + 1) * qb);
         // each row's running counts along p, in parallel over rows
-        self.sums[row_len..].par_chunks_mut(row_len).enumerate().for_each(|(q, t)| {
+        self.sums[row_len..size].par_chunks_mut(row_len).enumerate().for_each(|(q, t)| {
+            let (first, rest) = t.split_at_mut(nbk);
+            first.fill(0);
             let mut run = vec![0u32; nbk];
-            for p in 0..w {
+            for (p, out) in rest.chunks_exact_mut(nbk).enumerate() {
                 let words = mask.row(r.p0 + p, r.q0 + q);
-                for (wi, &word) in words.iter().enumerate() {
-                    let hw = m.hits(word);
-                    for (i, &rg) in ranges.iter().enumerate() {
-                        run[wi * per_word + i] += (hw & rg != W::ZERO) as u32;
+                let blocks = out.chunks_exact_mut(BLOCKS_PER_WORD).zip(run.chunks_exact_mut(BLOCKS_PER_WORD));
+                for (&word, (o, rn)) in words.iter().zip(blocks) {
+                    let hw = m.hits(word).as_u64();
+                    for i in 0..BLOCKS_PER_WORD {
+                        rn[i] += ((hw >> shifts[i]) & qmask != 0) as u32;
+                        o[i] = rn[i];
                     }
                 }
-                t[(p + 1) * nbk..(p + 2) * nbk].copy_from_slice(&run);
             }
         });
         // then down the rows
         for q in 1..=h {
-            let (above, row) = self.sums.split_at_mut(q * row_len);
+            let (above, row) = self.sums[..size].split_at_mut(q * row_len);
             for (x, a) in row[..row_len].iter_mut().zip(&above[(q - 1) * row_len..]) {
                 *x += a;
             }

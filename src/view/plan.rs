@@ -505,6 +505,12 @@ pub struct FramePlan {
     /// uniform ratio (parallel plans, and perspective plans in iso mode: see
     /// [`FramePlan::set_ray_opacity`]).
     exponents: Vec<f32>,
+    /// What [`FramePlan::exponents`] were computed for (`None`: not computed),
+    /// so asking again for the same grid and rays costs nothing.
+    exponents_for: Option<(Grid, PerspectiveRays)>,
+    /// Whether a perspective producer computes the exponents (the last
+    /// [`FramePlan::set_ray_opacity`]: the renderer turns it off in iso mode).
+    ray_opacity: bool,
     /// The correction [`FramePlan::correct_opacity`] applies with those
     /// exponents, covering the largest (kept across frames, grown as needed).
     opacity_table: OpacityTable,
@@ -532,6 +538,8 @@ impl FramePlan {
             scaled: vec![],
             perspective: None,
             exponents: vec![],
+            exponents_for: None,
+            ray_opacity: true,
             opacity_table: OpacityTable::default(),
             box_footprint: true,
             half_step: false,
@@ -578,6 +586,7 @@ impl FramePlan {
         self.scaled.clear();
         self.perspective = None;
         self.exponents.clear();
+        self.exponents_for = None;
     }
 
     /// Moves each slice's samples by its own in-slice offset `off(k)` (voxels
@@ -724,7 +733,7 @@ impl FramePlan {
         };
         self.perspective = Some(rays);
         self.opacity_ratio = rays.rel_spacing[2] as f32;
-        self.set_ray_opacity(true);
+        self.set_ray_opacity(self.ray_opacity);
     }
 
     /// Resamples this plan's intermediate grid at `pitch` voxels per
@@ -816,9 +825,22 @@ impl FramePlan {
     /// Whether each ray's opacity is corrected to its own sample spacing
     /// (perspective plans; a no-op for parallel ones). The renderer turns it
     /// off in iso mode, whose opacities are 0 or 1 and never corrected.
+    ///
+    /// Computed once per grid and rays: asking again for the plan as it is
+    /// (the renderer asks after every producer) costs nothing, and in iso
+    /// mode the producer computes none after the first frame turned it off.
     pub fn set_ray_opacity(&mut self, on: bool) {
+        self.ray_opacity = on;
+        let Some(rays) = self.perspective.filter(|_| on) else {
+            self.exponents.clear();
+            self.exponents_for = None;
+            return;
+        };
+        if self.exponents_for == Some((self.grid, rays)) {
+            return;
+        }
         self.exponents.clear();
-        let Some(rays) = self.perspective.filter(|_| on) else { return };
+        self.exponents_for = Some((self.grid, rays));
         let [w, h] = self.grid.size;
         let base = self.opacity_ratio as f64;
         let mut e_max = 1f32;

@@ -78,7 +78,7 @@ pub struct BlockOccupancy {
     /// Table row length: rectangle width + 1.
     stride: usize,
     /// Blocks (tables), interleaved: entry `(y, x)` of block `b` is
-    /// `sums[(y · stride + x) · blocks + b]`, so the blocks a ray tests one
+    /// `sums[(y · stride + x) · blocks + (b ^ 3)]`, so the blocks a ray tests one
     /// after the other at nearby columns share cache lines.
     blocks: usize,
     /// Slices per block (a power of two) and its log2.
@@ -90,7 +90,12 @@ pub struct BlockOccupancy {
     /// translations, `[min_i, max_i, min_j, max_j]`: a sample's cell sits
     /// `floor(u + frac(trans))` columns from the ray's base (see [`ColumnWalk`]).
     frac: Vec<[f64; 4]>,
-    sums: Vec<u32>,
+    /// The counts modulo 2^16 (a rectangle of fewer than 2^16 columns is
+    /// exact; [`BlockOccupancy::any`] answers a larger one with a
+    /// conservative "maybe"), each word's four blocks in reverse order (block
+    /// `b` at `b ^ 3`: the order a little-endian store of the per-quarter
+    /// counter lanes leaves them in).
+    sums: Vec<u16>,
 }
 
 impl BlockOccupancy {
@@ -139,24 +144,22 @@ impl BlockOccupancy {
         }
         self.sums[..row_len].fill(0);
         // block i of a word holds its slots [i·len, (i + 1)·len) from the most
-        // significant bit: the word's i-th quarter from the top
-        let qb = W::BITS / BLOCKS_PER_WORD as u32;
-        let qmask = (1u64 << qb) - 1;
-        let shifts: [u32; BLOCKS_PER_WORD] = std::array::from_fn(|i| W::BITS - (i as u32 + 1) * qb);
+        // significant bit: the word's i-th quarter from the top, and the
+        // (3 − i)-th from the bottom, which lane 3 − i of a row's running
+        // counts (four u16 in a u64: a row is narrower than 2^16 columns, so
+        // no lane carries into the next) counts
+        assert!(w < 1 << 16, "a mask row of {w} columns");
         // each row's running counts along p, in parallel over rows
         self.sums[row_len..size].par_chunks_mut(row_len).enumerate().for_each(|(q, t)| {
             let (first, rest) = t.split_at_mut(nbk);
             first.fill(0);
-            let mut run = vec![0u32; nbk];
+            let mut run = vec![0u64; nw];
             for (p, out) in rest.chunks_exact_mut(nbk).enumerate() {
                 let words = mask.row(r.p0 + p, r.q0 + q);
-                let blocks = out.chunks_exact_mut(BLOCKS_PER_WORD).zip(run.chunks_exact_mut(BLOCKS_PER_WORD));
-                for (&word, (o, rn)) in words.iter().zip(blocks) {
-                    let hw = m.hits(word).as_u64();
-                    for i in 0..BLOCKS_PER_WORD {
-                        rn[i] += ((hw >> shifts[i]) & qmask != 0) as u32;
-                        o[i] = rn[i];
-                    }
+                for ((&word, o), rn) in words.iter().zip(out.chunks_exact_mut(BLOCKS_PER_WORD)).zip(run.iter_mut()) {
+                    *rn += quarter_flags::<W>(m.hits(word).as_u64());
+                    let c = *rn;
+                    o.copy_from_slice(&[c as u16, (c >> 16) as u16, (c >> 32) as u16, (c >> 48) as u16]);
                 }
             }
         });
@@ -164,7 +167,7 @@ impl BlockOccupancy {
         for q in 1..=h {
             let (above, row) = self.sums[..size].split_at_mut(q * row_len);
             for (x, a) in row[..row_len].iter_mut().zip(&above[(q - 1) * row_len..]) {
-                *x += a;
+                *x = x.wrapping_add(*a);
             }
         }
     }
@@ -232,10 +235,31 @@ impl BlockOccupancy {
         if a0 > a1 || b0 > b1 {
             return false;
         }
-        let t = &self.sums[w..];
         let (x0, x1, y0, y1) = (a0 - r.p0, a1 - r.p0 + 1, b0 - r.q0, b1 - r.q0 + 1);
+        // (counts modulo 2^16: exact below 2^16 columns)
+        if (x1 - x0) * (y1 - y0) >= 1 << 16 {
+            return true;
+        }
+        let t = &self.sums[w ^ 3..];
         let (s, n) = (self.stride, self.blocks);
-        t[(y1 * s + x1) * n] + t[(y0 * s + x0) * n] != t[(y0 * s + x1) * n] + t[(y1 * s + x0) * n]
+        t[(y1 * s + x1) * n].wrapping_add(t[(y0 * s + x0) * n]) != t[(y0 * s + x1) * n].wrapping_add(t[(y1 * s + x0) * n])
+    }
+}
+
+/// One in lane `j` (bit `16·j`) of the result for each non-zero quarter `j`
+/// (from the least significant end) of a `W` word `x`: four quarters, four
+/// u16 lanes. The top bit of each quarter's low bits plus all-ones-but-top
+/// carries into the quarter's top bit iff those bits are non-zero (no carry
+/// leaves the quarter).
+#[inline(always)]
+fn quarter_flags<W: Word>(x: u64) -> u64 {
+    if W::BITS == 64 {
+        const LOW: u64 = 0x7FFF_7FFF_7FFF_7FFF;
+        ((((x & LOW) + LOW) | x) & !LOW) >> 15
+    } else {
+        const LOW: u64 = 0x7F7F_7F7F;
+        let f = ((((x & LOW) + LOW) | x) & 0x8080_8080) >> 7;
+        (f & 1) | ((f & 0x100) << 8) | ((f & 0x1_0000) << 16) | ((f & 0x100_0000) << 24)
     }
 }
 
@@ -550,6 +574,28 @@ mod tests {
     use super::*;
     use crate::data::slices::SliceStack;
     use crate::data::volume::Volume;
+
+    #[test]
+    fn quarter_flags_mark_the_non_zero_quarters() {
+        let mut s = 0x2545_F491_4F6C_DD1Du64;
+        for n in 0..20_000u32 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            // sparse words too: most quarters empty, single bits at the edges
+            let x = match n % 4 {
+                0 => s,
+                1 => s & (s >> 3) & (s >> 7) & (s >> 11),
+                2 => 1u64 << (s % 64),
+                _ => 0,
+            };
+            let want = |bits: u32| (0..4).fold(0u64, |f, j| f | ((((x >> (j * bits)) & ((1u64 << bits) - 1)) != 0) as u64) << (16 * j));
+            assert_eq!(quarter_flags::<u64>(x), want(16), "u64 {x:#x}");
+            let y = x & 0xFFFF_FFFF;
+            let want32 = (0..4).fold(0u64, |f, j| f | ((((y >> (j * 8)) & 0xFF) != 0) as u64) << (16 * j));
+            assert_eq!(quarter_flags::<u32>(y), want32, "u32 {y:#x}");
+        }
+    }
 
     /// The block occupancy's answer for any rectangle and block is the naive
     /// scan of the mask's words, for 1-bit masks and threshold codes, u32 and

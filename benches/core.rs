@@ -1,7 +1,8 @@
 //! Criterion benches of the binary fast rotator's stages on the head phantom:
 //! mask build, one incremental shear step, and one rendered frame (iso and
 //! blend), at 128³ and 256³, comparing u32 with u64 words and the byte-LUT search
-//! with the hardware bit scan, plus the depth search alone over random rows.
+//! with the hardware bit scan, plus the depth search alone over random rows
+//! and its code comparator (SWAR against the bit-plane reference).
 //! Run: `cargo bench --bench core`.
 
 use std::time::Duration;
@@ -41,6 +42,17 @@ fn depth_search(c: &mut Criterion) {
         let m = Matcher::new(nb, 1 << (nb - 1));
         g.bench_function(BenchmarkId::new("bitscan", nb), |b| {
             b.iter(|| rows.iter().map(|r| SetBits::with_matcher(&r[..], true, Search::Bitscan, &m).sum::<usize>()).sum::<usize>())
+        });
+    }
+    // the comparator alone, side by side: the SWAR carry test the searches use
+    // against the bit-plane loop it replaced (kept as the reference kernel)
+    for nb in [2u32, 4] {
+        let m = Matcher::new(nb, 1 << (nb - 1));
+        g.bench_function(BenchmarkId::new("hits-swar", nb), |b| {
+            b.iter(|| rows.iter().flatten().fold(0u64, |a, &w| a ^ m.hits(std::hint::black_box(w))))
+        });
+        g.bench_function(BenchmarkId::new("hits-planes", nb), |b| {
+            b.iter(|| rows.iter().flatten().fold(0u64, |a, &w| a ^ m.hits_planes(std::hint::black_box(w))))
         });
     }
     g.finish();

@@ -402,36 +402,44 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
             let p = ((xa * uf + xb) * inv_w + pad).clamp(pmin, pmax);
             let q = ((ya * uf + yb) * inv_w + pad).clamp(qmin, qmax);
             // p, q ≥ 0 here: truncation is the floor (no libm call: the
-            // x86-64 baseline has no floor instruction)
-            let (xi, yi) = (p as usize, q as usize);
+            // x86-64 baseline has no floor instruction). Through i64, the
+            // conversions the CPU has (a float to u64 or back is a branchy
+            // sequence of several): the same integers below 2^53
+            let (xi, yi) = (p as i64, q as i64);
             let (fx, fy) = ((p - xi as f64) as f32, (q - yi as f64) as f32);
+            let (xi, yi) = (xi as usize, yi as usize);
             let i = yi * iw + xi;
             let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
             let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
             let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);
             T::from_rgba(t.lerp(b, fy))
         };
-        let mut u = u0;
-        if owned.is_none() {
-            // four pixels' divisions side by side (packed: the same IEEE
-            // quotients, so the same image, for a fraction of the divider's time)
-            while u + 4 <= u1 {
-                let uf = [u as f64, (u + 1) as f64, (u + 2) as f64, (u + 3) as f64];
-                let d = [wa * uf[0] + wb, wa * uf[1] + wb, wa * uf[2] + wb, wa * uf[3] + wb];
-                let inv = [1.0 / d[0], 1.0 / d[1], 1.0 / d[2], 1.0 / d[3]];
-                for (j, px) in row[u..u + 4].iter_mut().enumerate() {
-                    *px = tap(uf[j], inv[j]);
-                }
-                u += 4;
+        // a pyramid's pixels of the row are one run: its cone of rays is an
+        // intersection of half-spaces and the row's rays are affine in u, so
+        // the owner test (which decides ties) finds the run's two ends inside
+        // the span's pixel of slack, and the pixels between need none
+        let (mut u, mut u_end) = (u0, u1);
+        if let Some(o) = owned {
+            while u < u_end && o.rays.owner(u as f64, vf) != o.pyramid {
+                u += 1;
+            }
+            while u_end > u && o.rays.owner((u_end - 1) as f64, vf) != o.pyramid {
+                u_end -= 1;
             }
         }
-        for (u, px) in row.iter_mut().enumerate().take(u1).skip(u) {
-            let uf = u as f64;
-            if let Some(o) = owned
-                && o.rays.owner(uf, vf) != o.pyramid
-            {
-                continue;
+        // four pixels' divisions side by side (packed: the same IEEE
+        // quotients, so the same image, for a fraction of the divider's time)
+        while u + 4 <= u_end {
+            let uf = [u as f64, (u + 1) as f64, (u + 2) as f64, (u + 3) as f64];
+            let d = [wa * uf[0] + wb, wa * uf[1] + wb, wa * uf[2] + wb, wa * uf[3] + wb];
+            let inv = [1.0 / d[0], 1.0 / d[1], 1.0 / d[2], 1.0 / d[3]];
+            for (j, px) in row[u..u + 4].iter_mut().enumerate() {
+                *px = tap(uf[j], inv[j]);
             }
+            u += 4;
+        }
+        for (u, px) in row.iter_mut().enumerate().take(u_end).skip(u) {
+            let uf = u as f64;
             *px = tap(uf, 1.0 / (wa * uf + wb));
         }
     });

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{bits, blobs, render, renderer};
+use common::{bits, blobs, render, renderer, xorshift};
 use glam::{DMat3, EulerRot};
 use shearwarp::accuracy::metrics::rmse;
 use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene};
@@ -429,13 +429,8 @@ fn owners(vol: &Volume, cam: &Camera, proj: &Projection) -> Vec<(usize, bool)> {
 #[test]
 fn perspective_pyramid_pixels_of_a_row_are_one_run() {
     let vol = smooth_blobs([48, 44, 40]);
-    let mut s = 0x1234_5678_9ABC_DEF0u64;
-    let mut rnd = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = xorshift(0x1234_5678_9ABC_DEF0);
+    let mut rnd = move || (next() >> 11) as f64 / (1u64 << 53) as f64;
     let mut crossings = 0;
     for _ in 0..60 {
         let rot = DMat3::from_euler(EulerRot::XYZ, rnd() * 6.3, rnd() * 6.3, rnd() * 6.3);

@@ -542,13 +542,7 @@ mod tests {
 
     #[test]
     fn swar_hits_equal_the_bit_planes_and_the_definition() {
-        let mut s = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            s
-        };
+        let mut next = crate::testing::xorshift(0x9E37_79B9_7F4A_7C15);
         for nb in CODE_WIDTHS {
             for c in 1..(1u32 << nb) {
                 let m = Matcher::new(nb, c);

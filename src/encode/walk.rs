@@ -149,16 +149,18 @@ impl BlockOccupancy {
         // counts (four u16 in a u64: a row is narrower than 2^16 columns, so
         // no lane carries into the next) counts
         assert!(w < 1 << 16, "a mask row of {w} columns");
-        // each row's running counts along p, in parallel over rows
+        // each row's running counts along p, in parallel over rows: a column's
+        // counts are the column before's plus its own flags
         self.sums[row_len..size].par_chunks_mut(row_len).enumerate().for_each(|(q, t)| {
-            let (first, rest) = t.split_at_mut(nbk);
-            first.fill(0);
-            let mut run = vec![0u64; nw];
-            for (p, out) in rest.chunks_exact_mut(nbk).enumerate() {
+            t[..nbk].fill(0);
+            for p in 0..w {
+                let (before, out) = t.split_at_mut((p + 1) * nbk);
+                let (prev, out) = (&before[p * nbk..], &mut out[..nbk]);
                 let words = mask.row(r.p0 + p, r.q0 + q);
-                for ((&word, o), rn) in words.iter().zip(out.chunks_exact_mut(BLOCKS_PER_WORD)).zip(run.iter_mut()) {
-                    *rn += quarter_flags::<W>(m.hits(word).as_u64());
-                    let c = *rn;
+                let blocks = out.chunks_exact_mut(BLOCKS_PER_WORD).zip(prev.chunks_exact(BLOCKS_PER_WORD));
+                for (&word, (o, pr)) in words.iter().zip(blocks) {
+                    let run = pr.iter().rev().fold(0u64, |c, &x| (c << 16) | x as u64);
+                    let c = run + quarter_flags::<W>(m.hits(word).as_u64());
                     o.copy_from_slice(&[c as u16, (c >> 16) as u16, (c >> 32) as u16, (c >> 48) as u16]);
                 }
             }
@@ -577,11 +579,9 @@ mod tests {
 
     #[test]
     fn quarter_flags_mark_the_non_zero_quarters() {
-        let mut s = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = crate::testing::xorshift(0x2545_F491_4F6C_DD1D);
         for n in 0..20_000u32 {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
+            let s = next();
             // sparse words too: most quarters empty, single bits at the edges
             let x = match n % 4 {
                 0 => s,

@@ -774,9 +774,7 @@ impl FramePlan {
         self.grid = Grid { size, pad: new_pad, pitch };
         self.limits = None;
         self.focus = None;
-        if !self.exponents.is_empty() {
-            self.set_ray_opacity(true);
-        }
+        self.set_ray_opacity(self.ray_opacity);
     }
 
     /// Shear-Warp Deluxe M (matched sampling on zoom, Sweeney & Mueller §3.3):

@@ -30,16 +30,20 @@ pub fn bits(img: &Image) -> Vec<u32> {
     img.data.iter().flatten().map(|x| x.to_bits()).collect()
 }
 
-/// Four blobs plus sparse noise, with voxel `spacing`: a small volume with
-/// soft and hard edges for the accuracy tests.
-pub fn blobs(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
-    let mut s = seed | 1;
-    let mut next = move || {
+/// Deterministic pseudo-random u64s (xorshift64) from a non-zero `seed`.
+pub fn xorshift(mut s: u64) -> impl FnMut() -> u64 {
+    move || {
         s ^= s << 13;
         s ^= s >> 7;
         s ^= s << 17;
         s
-    };
+    }
+}
+
+/// Four blobs plus sparse noise, with voxel `spacing`: a small volume with
+/// soft and hard edges for the accuracy tests.
+pub fn blobs(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
+    let mut next = xorshift(seed | 1);
     let centres: Vec<([f32; 3], f32)> =
         (0..4).map(|_| ([0, 1, 2].map(|a| (next() % 1000) as f32 / 1000.0 * dims[a] as f32), 2.0 + (next() % 8) as f32)).collect();
     let mut data = vec![0f32; dims[0] * dims[1] * dims[2]];

@@ -139,29 +139,59 @@ impl OpacityTable {
     /// [`OpacityTable::cover`]).
     #[inline(always)]
     pub fn correct(&self, s: [f32; 4], e: f32) -> [f32; 4] {
+        if e == 1.0 || self.rows < 2 {
+            return s;
+        }
+        self.correct_row(s, self.row(e))
+    }
+
+    /// Where exponent `e` (in `[1, e_max]` of [`OpacityTable::cover`], which
+    /// has been called) lies in the table: [`OpacityTable::correct_row`]
+    /// with it is [`OpacityTable::correct`] with `e`, bit for bit, so a ray's
+    /// row can be found once for all its samples.
+    #[inline]
+    pub fn row(&self, e: f32) -> RayRow {
+        let (r, fe) = table_cell((e - 1.0) * self.per_unit);
+        RayRow { at: (r.min(self.rows.max(2) - 2) * (ALPHA_BINS + 1)) as u32, fe }
+    }
+
+    /// Sample `s` corrected on the ray whose exponent is at `row`
+    /// ([`OpacityTable::row`]). Exponent 1 (row 0, no fraction) returns `s`
+    /// itself: that row is all ones.
+    #[inline(always)]
+    pub fn correct_row(&self, s: [f32; 4], row: RayRow) -> [f32; 4] {
         let a = s[3];
-        if e == 1.0 || !(a > 0.0 && a < 1.0) || self.rows < 2 {
+        if !(a > 0.0 && a < 1.0) {
             return s;
         }
         const W: usize = ALPHA_BINS + 1;
-        // the cells' lower corners by rounding `x − ½` to an integer: adding
-        // 1.5·2²³ leaves it in the low mantissa bits (0 ≤ x < 2²², so the sum
-        // stays in [2²³, 2²⁴), where f32 steps by 1; a floor or a
-        // float-to-integer cast costs several instructions more)
-        const MAGIC: f32 = 12_582_912.0;
-        let cell = |x: f32| {
-            let b = x - 0.5 + MAGIC;
-            ((b.to_bits() & 0x3f_ffff) as usize, x - (b - MAGIC))
-        };
-        let (r, fe) = cell((e - 1.0) * self.per_unit);
-        let r = r.min(self.rows - 2);
-        let (i, fa) = cell(a * ALPHA_BINS as f32);
-        let (g0, g1) = (&self.g[r * W + i..][..2], &self.g[(r + 1) * W + i..][..2]);
+        let (i, fa) = table_cell(a * ALPHA_BINS as f32);
+        let at = row.at as usize + i;
+        let (g0, g1) = (&self.g[at..][..2], &self.g[at + W..][..2]);
         let lo = g0[0] + fa * (g0[1] - g0[0]);
         let hi = g1[0] + fa * (g1[1] - g1[0]);
-        let g = lo + fe * (hi - lo);
+        let g = lo + row.fe * (hi - lo);
         [s[0] * g, s[1] * g, s[2] * g, (a * g).min(1.0)]
     }
+}
+
+/// A ray's place in an [`OpacityTable`]: the offset of its exponent's lower
+/// row and the fraction towards the next ([`OpacityTable::row`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RayRow {
+    at: u32,
+    fe: f32,
+}
+
+/// The lower corner of the table cell holding `x ≥ 0` (`x < 2²²`) and the
+/// fraction past it, by rounding `x − ½` to an integer: adding 1.5·2²³ leaves
+/// it in the low mantissa bits (the sum stays in `[2²³, 2²⁴)`, where f32 steps
+/// by 1; a floor or a float-to-integer cast costs several instructions more).
+#[inline(always)]
+fn table_cell(x: f32) -> (usize, f32) {
+    const MAGIC: f32 = 12_582_912.0;
+    let b = x - 0.5 + MAGIC;
+    ((b.to_bits() & 0x3f_ffff) as usize, x - (b - MAGIC))
 }
 
 /// The opacity `α` of one sample spacing corrected to `e` spacings,

@@ -395,6 +395,14 @@ impl<'a> Limits<'a> {
         Limits { row: &l.row(q)[r.p0..=r.p1], holes, k: k as u32 }
     }
 
+    /// Whether pixel `s` of the row composites slice `k` (the limits'
+    /// own slice, as [`RleFrame::composite_sample`] tests a slice's sample).
+    #[inline(always)]
+    fn keeps_both(&self, s: usize, k: usize) -> bool {
+        debug_assert_eq!(k, self.k as usize);
+        self.keeps(s)
+    }
+
     /// Whether pixel `s` of the row composites the slice.
     #[inline(always)]
     fn keeps(&self, s: usize) -> bool {
@@ -691,6 +699,17 @@ impl<S: Sampler> RleFrame<'_, S> {
 
     /// The pixels `x0 ..= x1` of row `q` of [`RleFrame::scaled_slice`]
     /// (scanlines `s`, `s + 1`; cells `lo ..= hi` hold non-transparent voxels).
+    ///
+    /// Two loops: the outer one skips opaque pixels (the links) and
+    /// transparent columns (the cursors), and reads a cell's voxels through
+    /// the cursors; the inner one composites consecutive pixels while they
+    /// are not opaque and their cells' columns lie inside both scanlines'
+    /// current runs, reading those voxels straight from the runs (a cell's
+    /// right column is the next cell's left one when they are adjacent; a
+    /// magnified slice's pixels may share a cell). Each sample is
+    /// [`RleFrame::composite_sample`]'s: the same blend, ray limits, opacity
+    /// correction (the row's ray places found once a frame), "over" and
+    /// termination.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn scaled_row(
@@ -704,74 +723,100 @@ impl<S: Sampler> RleFrame<'_, S> {
         prow: &mut [[f32; 4]],
         lrow: &mut [u32],
     ) {
-        let (r, rle, plan) = (&self.r, self.rle, self.plan);
+        let (r, rle, plan, t) = (&self.r, self.rle, self.plan, self.tables);
         let p0 = r.p0 as i64;
         let map = plan.axis_map(k, 0);
-        {
-            let (mut cb, mut ct) = (rle.cursor(s), rle.cursor(s + 1));
-            // the first column the cursors may still be asked for
-            let mut next = 0u32;
-            // the columns `[lo_run, hi_run)` both cursors' current runs hold
-            let (mut lo_run, mut hi_run) = (INF, 0u32);
-            // the last cell sampled and its four voxels (c00, c10, c01, c11): its
-            // right column is the next pixel's left one when the cells are adjacent
-            let mut cell = (INF, [[0f32; 4]; 4]);
-            let mut x = x0;
-            loop {
-                // skip opaque pixels through the links
-                if x > x1 {
-                    break;
-                }
-                x = find(lrow, (x - p0) as usize) as i64 + p0;
-                if x > x1 {
-                    break;
-                }
-                let (ci, wi) = map.cell(x);
-                let c = ci as u32;
-                if c == cell.0 {
-                    // a magnified slice (pitch < 1): this pixel samples the last one's cell
-                    self.scaled_sample(k, x, q, wi, wj, cell.1, prow, lrow, p0);
-                    x += 1;
-                    continue;
-                }
-                let adjacent = cell.0 != INF && cell.0 + 1 == c;
-                let [c00, c10, c01, c11] = if lo_run <= c && c + 1 < hi_run {
-                    // the fast path: both columns inside both scanlines' current runs
-                    let (vb, vt) = (&cb.vox[cb.base.wrapping_add(c) as usize..][..2], &ct.vox[ct.base.wrapping_add(c) as usize..][..2]);
-                    let (c00, c01) = if adjacent { (cell.1[1], cell.1[3]) } else { (self.tables.voxel(vb[0]), self.tables.voxel(vt[0])) };
-                    [c00, self.tables.voxel(vb[1]), c01, self.tables.voxel(vt[1])]
-                } else {
-                    if c < next {
-                        // (rounding made two pixels share a cell: start the walk again)
-                        (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
-                    }
-                    cb.seek(c);
-                    ct.seek(c);
-                    // skip transparent voxels: the pixel reads columns c and c + 1
-                    let nx = cb.first_from(c).min(ct.first_from(c));
-                    if nx > c + 1 {
-                        if nx == INF || nx as i64 - 1 > hi {
-                            break;
-                        }
-                        next = c;
-                        let [xn, _] = plan.pixels_of_cells(k, 0, nx as i64 - 1, nx as i64 - 1);
-                        x = xn.max(x + 1);
-                        continue;
-                    }
-                    let (c00, c01) = if adjacent {
-                        (cell.1[1], cell.1[3])
-                    } else {
-                        (self.tables.get_or_missing(cb.at(c)), self.tables.get_or_missing(ct.at(c)))
-                    };
-                    cb.step(c + 1);
-                    ct.step(c + 1);
-                    (lo_run, hi_run) = (cb.s.max(ct.s), cb.e.min(ct.e));
-                    [c00, self.tables.get_or_missing(cb.at(c + 1)), c01, self.tables.get_or_missing(ct.at(c + 1))]
-                };
-                cell = (c, [c00, c10, c01, c11]);
-                next = c + 1;
-                self.scaled_sample(k, x, q, wi, wj, cell.1, prow, lrow, p0);
+        let (table, rays) = (plan.opacity_table(), plan.ray_rows_of(q));
+        let rays = if rays.is_empty() { rays } else { &rays[r.p0..=r.p1] };
+        let limits = plan.limits.as_ref().map(|l| Limits::of(l, q, r, k));
+        let mut cb = rle.cursor(s);
+        let mut ct = rle.cursor(s + 1);
+        // the first column the cursors may still be asked for
+        let mut next = 0u32;
+        // the last cell sampled and its four voxels (c00, c10, c01, c11)
+        let (mut c, mut v) = (INF, [[0f32; 4]; 4]);
+        let mut x = x0;
+        'pixels: loop {
+            // skip opaque pixels through the links
+            if x > x1 {
+                break;
+            }
+            x = find(lrow, (x - p0) as usize) as i64 + p0;
+            if x > x1 {
+                break;
+            }
+            let (ci, mut wi) = map.cell(x);
+            if ci as u32 == c {
+                // a magnified slice (pitch < 1): this pixel samples the last one's cell
+                // (the inner loop's runs no longer apply: through the cursors after it)
+                self.scaled_sample(k, x, q, wi, wj, v, prow, lrow, p0);
                 x += 1;
+                continue;
+            }
+            c = ci as u32;
+            if c < next {
+                // (rounding made two pixels share a cell: start the walk again)
+                (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
+            }
+            cb.seek(c);
+            ct.seek(c);
+            // skip transparent voxels: the pixel reads columns c and c + 1
+            let nx = cb.first_from(c).min(ct.first_from(c));
+            if nx > c + 1 {
+                if nx == INF || nx as i64 - 1 > hi {
+                    break;
+                }
+                next = c;
+                let [xn, _] = map.pixels_of_cells(nx as i64 - 1, nx as i64 - 1);
+                x = xn.max(x + 1);
+                continue;
+            }
+            let (c00, c01) = (t.get_or_missing(cb.at(c)), t.get_or_missing(ct.at(c)));
+            cb.step(c + 1);
+            ct.step(c + 1);
+            v = [c00, t.get_or_missing(cb.at(c + 1)), c01, t.get_or_missing(ct.at(c + 1))];
+            next = c + 1;
+            // the columns [lo_run, hi_run) both cursors' current runs hold
+            let (lo_run, hi_run) = (cb.s.max(ct.s), cb.e.min(ct.e));
+            let (vb, vt) = (cb.vox, ct.vox);
+            let (bb, bt) = (cb.base, ct.base);
+            loop {
+                let xr = (x - p0) as usize;
+                let keep = match &limits {
+                    None => true,
+                    Some(l) => l.keeps_both(xr, k),
+                };
+                if keep {
+                    let smp = t.finish(blend(v[0], v[1], v[2], v[3], &cell_weights(wi, wj)));
+                    let smp = if rays.is_empty() { smp } else { table.correct_row(smp, rays[xr]) };
+                    let acc = &mut prow[xr];
+                    composite_premultiplied(acc, smp);
+                    if terminated(acc[3], self.ert) {
+                        lrow[xr] = 1;
+                    }
+                }
+                x += 1;
+                if x > x1 || lrow[xr + 1] != 0 {
+                    continue 'pixels;
+                }
+                let (cn, wn) = map.cell(x);
+                let cn = cn as u32;
+                wi = wn;
+                if cn == c {
+                    continue; // a magnified slice (pitch < 1): the same cell
+                }
+                if cn < lo_run || cn + 1 >= hi_run {
+                    // a column outside a run: through the cursors
+                    continue 'pixels;
+                }
+                let (rb, rt) = (t.voxel(vb[bb.wrapping_add(cn + 1) as usize]), t.voxel(vt[bt.wrapping_add(cn + 1) as usize]));
+                v = if cn == c + 1 {
+                    [v[1], rb, v[3], rt]
+                } else {
+                    [t.voxel(vb[bb.wrapping_add(cn) as usize]), rb, t.voxel(vt[bt.wrapping_add(cn) as usize]), rt]
+                };
+                c = cn;
+                next = c + 1;
             }
         }
     }

@@ -26,7 +26,7 @@
 
 use glam::{DMat3, DVec3};
 
-use crate::composite::OpacityTable;
+use crate::composite::{OpacityTable, RayRow};
 use crate::encode::shear::ShearState;
 use crate::view::Factorization;
 use crate::view::perspective::PerspectiveView;
@@ -389,24 +389,49 @@ pub(crate) fn floor_i64(s: f64) -> i64 {
     if (c as f64) > s { c - 1 } else { c }
 }
 
+/// Fractional bits of an [`AxisMap`]'s fixed-point positions.
+const AXIS_FRAC: u32 = 36;
+
 /// One slice's scaled map along one in-slice axis, over the grid
 /// ([`FramePlan::axis_map`]): pixel `x` samples at
 /// `scale · ((x − pad) · pitch) + trans`.
+///
+/// Held in fixed point, `2^−36` voxel units: `base + step · x`, with `step`
+/// and `base` that formula's slope and intercept truncated once. So a pixel's
+/// cell and weight cost an integer multiply, a shift and a mask (no float
+/// floor per sample), they are exact functions of `x` (the traversals and
+/// their brute force read the same numbers), and the position is within
+/// `2^−36 · (|x| + 1)` of the formula (below 1e-6 voxels on a grid up to
+/// 65 536 pixels wide).
 #[derive(Clone, Copy, Debug)]
 pub struct AxisMap {
     scale: f64,
     trans: f64,
     pad: f64,
     pitch: f64,
+    /// The position of pixel 0 and the step from one pixel to the next, in
+    /// `2^−AXIS_FRAC` voxel units.
+    base: i64,
+    step: i64,
 }
 
 impl AxisMap {
+    /// The map `scale · ((x − pad) · pitch) + trans` (scale and pitch > 0).
+    #[inline]
+    pub fn new(scale: f64, trans: f64, pad: f64, pitch: f64) -> Self {
+        let unit = (1u64 << AXIS_FRAC) as f64;
+        // (truncated: a float-to-integer conversion, no call to `round`)
+        let (step, base) = ((scale * pitch * unit) as i64, ((trans - scale * pad * pitch) * unit) as i64);
+        AxisMap { scale, trans, pad, pitch, base, step }
+    }
+
     /// The cell and in-cell weight of pixel `x` (which may lie off the grid).
     #[inline(always)]
     pub fn cell(&self, x: i64) -> (i64, f32) {
-        let s = self.scale * ((x as f64 - self.pad) * self.pitch) + self.trans;
-        let c = floor_i64(s);
-        (c, (s - c as f64) as f32)
+        let s = self.base.wrapping_add(self.step.wrapping_mul(x));
+        // the weight from the fraction's top 24 bits: exact in f32, below 1
+        let w = ((s as u64 & ((1u64 << AXIS_FRAC) - 1)) >> (AXIS_FRAC - 24)) as f32 * (1.0 / (1u32 << 24) as f32);
+        (s >> AXIS_FRAC, w)
     }
 
     /// The pixels `[x0, x1]` whose cells ([`AxisMap::cell`]) are in
@@ -505,6 +530,9 @@ pub struct FramePlan {
     /// uniform ratio (parallel plans, and perspective plans in iso mode: see
     /// [`FramePlan::set_ray_opacity`]).
     exponents: Vec<f32>,
+    /// Per intermediate pixel, its exponent's place in
+    /// [`FramePlan::opacity_table`] (found once a frame, not per sample).
+    ray_rows: Vec<RayRow>,
     /// What [`FramePlan::exponents`] were computed for (`None`: not computed),
     /// so asking again for the same grid and rays costs nothing.
     exponents_for: Option<(Grid, PerspectiveRays)>,
@@ -538,6 +566,7 @@ impl FramePlan {
             scaled: vec![],
             perspective: None,
             exponents: vec![],
+            ray_rows: vec![],
             exponents_for: None,
             ray_opacity: true,
             opacity_table: OpacityTable::default(),
@@ -586,6 +615,7 @@ impl FramePlan {
         self.scaled.clear();
         self.perspective = None;
         self.exponents.clear();
+        self.ray_rows.clear();
         self.exponents_for = None;
     }
 
@@ -831,6 +861,7 @@ impl FramePlan {
         self.ray_opacity = on;
         let Some(rays) = self.perspective.filter(|_| on) else {
             self.exponents.clear();
+            self.ray_rows.clear();
             self.exponents_for = None;
             return;
         };
@@ -851,6 +882,9 @@ impl FramePlan {
             }
         }
         self.opacity_table.cover(e_max);
+        let table = &self.opacity_table;
+        self.ray_rows.clear();
+        self.ray_rows.extend(self.exponents.iter().map(|&e| table.row(e)));
     }
 
     /// The exponent `e ≥ 1` that takes an opacity corrected to
@@ -869,7 +903,22 @@ impl FramePlan {
     /// pre-classified slices and their brute force correct every sample here.
     #[inline(always)]
     pub fn correct_opacity(&self, p: usize, q: usize, s: [f32; 4]) -> [f32; 4] {
-        if self.exponents.is_empty() { s } else { self.opacity_table.correct(s, self.exponents[q * self.grid.size[0] + p]) }
+        if self.ray_rows.is_empty() { s } else { self.opacity_table.correct_row(s, self.ray_rows[q * self.grid.size[0] + p]) }
+    }
+
+    /// Intermediate row `q`'s rays' places in the opacity table, by pixel
+    /// over the grid (empty when the plan corrects no ray): with
+    /// [`FramePlan::opacity_table`], [`FramePlan::correct_opacity`] of a
+    /// whole row without its per-sample lookups.
+    #[inline(always)]
+    pub fn ray_rows_of(&self, q: usize) -> &[RayRow] {
+        if self.ray_rows.is_empty() { &[] } else { &self.ray_rows[q * self.grid.size[0]..(q + 1) * self.grid.size[0]] }
+    }
+
+    /// The table [`FramePlan::correct_opacity`] corrects with.
+    #[inline(always)]
+    pub fn opacity_table(&self) -> &OpacityTable {
+        &self.opacity_table
     }
 
     /// The real sample spacing of intermediate pixel `(p, q)`'s ray over the
@@ -905,7 +954,7 @@ impl FramePlan {
     #[inline(always)]
     pub fn axis_map(&self, k: usize, axis: usize) -> AxisMap {
         let m = &self.scaled[k];
-        AxisMap { scale: m.scale, trans: m.trans[axis], pad: self.grid.pad as f64, pitch: self.grid.pitch }
+        AxisMap::new(m.scale, m.trans[axis], self.grid.pad as f64, self.grid.pitch)
     }
 
     /// The exact in-slice sample position (voxel units, before the floor)
@@ -989,7 +1038,7 @@ impl FramePlan {
             }
             MapKind::ScaleTranslate => {
                 let (a, b) = (&self.scaled[k], &self.scaled[k + 1]);
-                MidMap::Map(AxisMap { scale: 0.5 * (a.scale + b.scale), trans: 0.5 * (a.trans[axis] + b.trans[axis]), pad, pitch })
+                MidMap::Map(AxisMap::new(0.5 * (a.scale + b.scale), 0.5 * (a.trans[axis] + b.trans[axis]), pad, pitch))
             }
         }
     }

@@ -304,10 +304,14 @@ fn clip_positive(lo: f64, hi: f64, a: f64, b: f64) -> (f64, f64) {
 /// linear in `u`, and so is each condition for a pixel to read the
 /// intermediate image: `W > 0` (in front of the eye; elsewhere background)
 /// and `p0 − 1 < X/W + pad < p1 + 1`, the same for `q` (valid rectangle and its
-/// cleared ring). Their intersection is one span of the row, solved exactly;
-/// only it is resampled (bilinear at `(X/W, Y/W)`, the coordinate clamped into
-/// the ring so rounding at the span's ends cannot reach past it), and only
-/// what the last frame wrote outside it is cleared.
+/// cleared ring). Their intersection is one span of the row, solved exactly
+/// (the ring widened by twice [`WARP_STRAY`]); only it is resampled, and only
+/// what the last frame wrote outside it is cleared. The span is resampled in
+/// linear pieces of the row (up to 64 pixels, exact at their ends, within
+/// [`WARP_STRAY`] of `(X/W, Y/W)` between): each pixel takes the bilinear
+/// sample at its piece's coordinates where those lie inside the ring, and is
+/// background elsewhere, so a pixel's value is a function of the pixel and
+/// the intermediate image alone (not of the span it was warped in).
 pub fn warp_projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>) {
     projective(inter, plan, out, None)
 }
@@ -360,8 +364,11 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
         let (xa, xb) = (m.x_axis.x / pitch, (m.y_axis.x * vf + m.z_axis.x) / pitch);
         let (ya, yb) = (m.x_axis.y / pitch, (m.y_axis.y * vf + m.z_axis.y) / pitch);
         let (wa, wb) = (m.x_axis.z, m.y_axis.z * vf + m.z_axis.z);
-        let (plo, phi) = (r.p0 as f64 - 1.0 - pad, r.p1 as f64 + 1.0 - pad);
-        let (qlo, qhi) = (r.q0 as f64 - 1.0 - pad, r.q1 as f64 + 1.0 - pad);
+        // (the ring widened by the linear pieces' stray: which of these pixels
+        // read the image is decided below, by the coordinates they sample at)
+        let slack = 2.0 * WARP_STRAY;
+        let (plo, phi) = (r.p0 as f64 - 1.0 - slack - pad, r.p1 as f64 + 1.0 + slack - pad);
+        let (qlo, qhi) = (r.q0 as f64 - 1.0 - slack - pad, r.q1 as f64 + 1.0 + slack - pad);
         let (mut lo, mut hi) = clip_positive(0.0, (w - 1) as f64, wa, wb);
         // X − plo·W > 0, phi·W − X > 0, and for Y
         (lo, hi) = clip_positive(lo, hi, xa - plo * wa, xb - plo * wb);
@@ -397,23 +404,6 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
         let ih = inter.size[1];
         let (pmin, pmax) = ((r.p0 as f64 - 1.0).max(0.0), (r.p1 + 1).min(iw - 1) as f64 - 1e-9);
         let (qmin, qmax) = ((r.q0 as f64 - 1.0).max(0.0), (r.q1 + 1).min(ih - 1) as f64 - 1e-9);
-        // the bilinear tap of output pixel u, given 1/W there
-        let tap = |uf: f64, inv_w: f64| -> T {
-            let p = ((xa * uf + xb) * inv_w + pad).clamp(pmin, pmax);
-            let q = ((ya * uf + yb) * inv_w + pad).clamp(qmin, qmax);
-            // p, q ≥ 0 here: truncation is the floor (no libm call: the
-            // x86-64 baseline has no floor instruction). Through i64, the
-            // conversions the CPU has (a float to u64 or back is a branchy
-            // sequence of several): the same integers below 2^53
-            let (xi, yi) = (p as i64, q as i64);
-            let (fx, fy) = ((p - xi as f64) as f32, (q - yi as f64) as f32);
-            let (xi, yi) = (xi as usize, yi as usize);
-            let i = yi * iw + xi;
-            let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
-            let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
-            let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);
-            T::from_rgba(t.lerp(b, fy))
-        };
         // a pyramid's pixels of the row are one run: its cone of rays is an
         // intersection of half-spaces and the row's rays are affine in u, so
         // the owner test (which decides ties) finds the run's two ends inside
@@ -427,22 +417,100 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
                 u_end -= 1;
             }
         }
-        // four pixels' divisions side by side (packed: the same IEEE
-        // quotients, so the same image, for a fraction of the divider's time)
-        while u + 4 <= u_end {
-            let uf = [u as f64, (u + 1) as f64, (u + 2) as f64, (u + 3) as f64];
-            let d = [wa * uf[0] + wb, wa * uf[1] + wb, wa * uf[2] + wb, wa * uf[3] + wb];
-            let inv = [1.0 / d[0], 1.0 / d[1], 1.0 / d[2], 1.0 / d[3]];
-            for (j, px) in row[u..u + 4].iter_mut().enumerate() {
-                *px = tap(uf[j], inv[j]);
-            }
-            u += 4;
+        if u >= u_end {
+            return;
         }
-        for (u, px) in row.iter_mut().enumerate().take(u_end).skip(u) {
-            let uf = u as f64;
-            *px = tap(uf, 1.0 / (wa * uf + wb));
+        // Pieces of `len` pixels whose ends are back-projected exactly (one
+        // division each) and whose pixels between step linearly in 32.32 fixed
+        // point, as the affine warp's do. The pieces are the row's own: laid
+        // from the first pixel of the row's part that lands on the grid (in
+        // front of the eye, within a pixel of the grid), `len` chosen for that
+        // part, so a pixel's coordinates are a function of the pixel alone,
+        // whatever valid rectangle or pyramid's run it is warped in (an
+        // accelerated frame and its brute force get the same image). Along the
+        // row `p(u) = X/W` has `p' = (xa·wb − xb·wa)/W²` and
+        // `p'' = −2·(wa/W)·p'`, so a piece strays at most `len²/8 · max|p''|`
+        // from the exact coordinates, largest where `W` is smallest (an end of
+        // the part, `W` being linear): `len` is the largest power of two up to
+        // 64 keeping that within `WARP_STRAY` pixels on both axes (1 where the
+        // row passes too close to the eye).
+        let [gw, gh] = plan.grid.size;
+        let (mut glo, mut ghi) = clip_positive(0.0, (w - 1) as f64, wa, wb);
+        for (lo_b, hi_b, a, b) in [(-1.0 - pad, gw as f64 - pad, xa, xb), (-1.0 - pad, gh as f64 - pad, ya, yb)] {
+            (glo, ghi) = clip_positive(glo, ghi, a - lo_b * wa, b - lo_b * wb);
+            (glo, ghi) = clip_positive(glo, ghi, hi_b * wa - a, hi_b * wb - b);
+        }
+        let e0 = (glo.ceil().max(0.0) as usize).min(u);
+        let e1 = ((ghi.floor().max(0.0) as usize).min(w - 1)).max(u_end - 1);
+        let w_min = (wa * e0 as f64 + wb).min(wa * e1 as f64 + wb);
+        let curve = |a: f64, b: f64| 0.25 * (wa / w_min).abs() * ((a * wb - b * wa) / (w_min * w_min)).abs();
+        let bend = curve(xa, xb).max(curve(ya, yb));
+        let mut len = 64usize;
+        // (a NaN bound, at W = 0, gives pieces of one pixel)
+        while len > 1 && !((len * len) as f64 * bend <= WARP_STRAY) {
+            len >>= 1;
+        }
+        const ONE: f64 = 4_294_967_296.0;
+        // within 2^20 pixels (no fixed-point overflow; the ring's clamp below
+        // decides where such a pixel samples)
+        let fixed = |x: f64| (x.clamp(-1_048_576.0, 1_048_576.0) * ONE) as i64;
+        let (pmin, pmax, qmin, qmax) = (fixed(pmin), fixed(pmax), fixed(qmin), fixed(qmax));
+        // a pixel reads the image where the coordinates it samples at lie
+        // inside the valid rectangle's ring (open), and is background
+        // elsewhere: decided by those coordinates, not the exact ones, so a
+        // pixel one frame draws and another (with a smaller valid rectangle
+        // over the same image) does not reads only the cleared ring there
+        let (ring_p, ring_q) = ([fixed(r.p0 as f64 - 1.0), fixed(r.p1 as f64 + 1.0)], [fixed(r.q0 as f64 - 1.0), fixed(r.q1 as f64 + 1.0)]);
+        // pixel u's exact coordinates in fixed point
+        let exact = |u: usize| {
+            let (uf, inv_w) = (u as f64, 1.0 / (wa * u as f64 + wb));
+            (fixed((xa * uf + xb) * inv_w + pad), fixed((ya * uf + yb) * inv_w + pad))
+        };
+        while u < u_end {
+            // the piece holding u: [start, end], its end the part's last pixel at most
+            let start = e0 + (u - e0) / len * len;
+            let end = (start + len).min(e1);
+            let (a, b) = (exact(start), exact(end));
+            let n = (end - start).max(1) as i64;
+            let (dp, dq) = ((b.0 - a.0) / n, (b.1 - a.1) / n);
+            let i = (u - start) as i64;
+            let (mut p, mut q) = (a.0 + i * dp, a.1 + i * dq);
+            // the piece's pixels before its end, or the part's last pixel itself
+            let stop = if end == e1 { end + 1 } else { end }.min(u_end);
+            for px in row[u..stop].iter_mut() {
+                *px = if p > ring_p[0] && p < ring_p[1] && q > ring_q[0] && q < ring_q[1] {
+                    tap_fixed(rgba, iw, p.clamp(pmin, pmax), q.clamp(qmin, qmax))
+                } else {
+                    T::CLEAR
+                };
+                p += dp;
+                q += dq;
+            }
+            u = stop;
         }
     });
+}
+
+/// How far (intermediate pixels) the projective warp's linear pieces may
+/// stray from the exact back-projection: 1/256 of a pixel, which moves a
+/// bilinear sample by at most 1/256 of the largest step between neighbouring
+/// intermediate pixels (under one 8-bit level).
+pub const WARP_STRAY: f64 = 1.0 / 256.0;
+
+/// The bilinear sample of `rgba` (row stride `iw`) at the 32.32 fixed-point
+/// coordinates `(p, q)` (non-negative, a pixel and its right/lower
+/// neighbours inside the image).
+#[inline(always)]
+fn tap_fixed<T: Texel>(rgba: &[[f32; 4]], iw: usize, p: i64, q: i64) -> T {
+    const ONE: f32 = 4_294_967_296.0;
+    let (xi, yi) = ((p >> 32) as usize, (q >> 32) as usize);
+    let fx = (p & 0xFFFF_FFFF) as f32 * (1.0 / ONE);
+    let fy = (q & 0xFFFF_FFFF) as f32 * (1.0 / ONE);
+    let i = yi * iw + xi;
+    let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
+    let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
+    let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);
+    T::from_rgba(t.lerp(b, fy))
 }
 
 #[cfg(test)]
@@ -486,6 +554,67 @@ mod tests {
         plan.warp = Warp { forward: DMat3::IDENTITY, inverse };
         warp(&inter, &plan, &mut out);
         assert!(out.data.iter().all(|&c| c == [0.0; 4]), "nothing is in front of the eye");
+    }
+
+    /// The projective warp's linear pieces stay within [`WARP_STRAY`] of the
+    /// exact back-projection: an intermediate image holding its own
+    /// coordinates (`r = p/256`, `g = q/256`, which the bilinear sample
+    /// reproduces exactly) warped through homographies from mild to steep,
+    /// each output pixel's colour read back as the coordinate it sampled.
+    #[test]
+    fn projective_warp_pieces_stay_within_the_stray_bound() {
+        use crate::view::plan::{Grid, Warp};
+        use glam::{DMat3, DVec3};
+        let f = crate::view::Factorization::new(&crate::view::Camera::new(DMat3::IDENTITY, [8, 8]), [4, 4, 4], [1.0; 3]).unwrap();
+        let mut plan = FramePlan::parallel(&f, [1.0; 3]);
+        let n = 200usize;
+        let mut inter = Intermediate::default();
+        inter.prepare([n, n]);
+        for q in 0..n {
+            for p in 0..n {
+                inter.rgba[q * n + p] = [p as f32 / 256.0, q as f32 / 256.0, 0.5, 1.0];
+            }
+        }
+        inter.valid = Some(crate::composite::Rect { p0: 1, p1: n - 2, q0: 1, q1: n - 2 });
+        let mut worst = 0f64;
+        for (i, (wu, wv, pitch)) in
+            [(0.0002, 0.0001, 1.0), (0.002, 0.001, 1.0), (0.004, -0.002, 0.5), (-0.003, 0.004, 2.0), (0.02, 0.0, 1.0)]
+                .into_iter()
+                .enumerate()
+        {
+            plan.grid = Grid { size: [n, n], pad: 0, pitch };
+            // (X, Y, W) = inverse · (u, v, 1)
+            let inverse = DMat3::from_cols(DVec3::new(0.6, 0.05, wu), DVec3::new(0.1, 0.7, wv), DVec3::new(10.0, 5.0, 0.9));
+            plan.warp = Warp { forward: inverse.inverse(), inverse };
+            let mut out = Image::new(256, 256);
+            warp(&inter, &plan, &mut out);
+            let mut seen = 0;
+            for v in 0..256 {
+                for u in 0..256 {
+                    let h = inverse * DVec3::new(u as f64, v as f64, 1.0);
+                    if h.z <= 0.0 {
+                        continue;
+                    }
+                    let (p, q) = (h.x / h.z / pitch, h.y / h.z / pitch);
+                    // inside the valid rectangle, away from its clamped ring
+                    if !(2.0..n as f64 - 3.0).contains(&p) || !(2.0..n as f64 - 3.0).contains(&q) {
+                        continue;
+                    }
+                    let c = out.at(u, v);
+                    let err = (c[0] as f64 * 256.0 - p).abs().max((c[1] as f64 * 256.0 - q).abs());
+                    assert!(
+                        err <= WARP_STRAY + 1e-4,
+                        "homography {i}: pixel ({u}, {v}) sampled ({}, {}) for ({p}, {q})",
+                        c[0] * 256.0,
+                        c[1] * 256.0
+                    );
+                    worst = worst.max(err);
+                    seen += 1;
+                }
+            }
+            assert!(seen > 1000, "homography {i}: {seen} pixels checked");
+        }
+        assert!(worst > 0.0);
     }
 
     /// Every value the 8-bit texel can meet: NaN, ±∞, out of range, and both

@@ -283,6 +283,13 @@ fn columns<W: Word>(mask: &BinaryMask<W>, frac: &[f64; 4], ax: usize, u0: f64, u
     (c0 <= c1).then_some((c0 as usize, c1 as usize))
 }
 
+/// How many integer crossings of the drift a segment may span on each axis
+/// (its columns come from its end slices, whatever its length): two halves
+/// the segments of a fast-drifting ray for one more row read each (callgrind,
+/// head phantom, FOV 30° from 2 diagonals: render 192.8 → 187.5 M
+/// instructions; more than two changes nothing there, the blocks end first).
+const SPAN: f64 = 2.0;
+
 /// A scaled plan's drift across a mask sheared to the plan's shear, for every
 /// ray at once: the drift of the ray through sheared point `a` at slice `k`,
 /// `u = σ_k · a + τ_k − trans[k]`, is affine in `k` and, at any one slice, in
@@ -490,15 +497,16 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
         }
         let k0 = self.next;
         let left = if self.ascending { self.last - k0 } else { k0 - self.last };
-        // the slices after k0 with the same floor of the drift on both axes (u
-        // reaches the next integer `room` steps on); only an estimate: the
-        // segment's columns come from its end slices' drifts, whatever its length
+        // the slices after k0 before the drift's floor changes `SPAN` times on
+        // either axis (u reaches the next integer `room` steps on); only an
+        // estimate: the segment's columns come from its end slices' drifts,
+        // whatever its length
         let mut len = left;
         for ax in 0..2 {
             let (u, du) = (self.drift(ax, k0), if self.ascending { self.g[ax] } else { -self.g[ax] });
             let f = floor_i64(u) as f64;
             // (no drift: an infinite step, and a room no segment reaches)
-            let room = if du > 0.0 { (f + 1.0 - u) * self.step[ax] } else { (u - f) * self.step[ax] };
+            let room = if du > 0.0 { (f + SPAN - u) * self.step[ax] } else { (u - f + SPAN - 1.0) * self.step[ax] };
             if room < left as f64 {
                 // ceil(room) − 1, without a call to `ceil`
                 len = len.min((-floor_i64(-room) - 1).max(0) as usize);

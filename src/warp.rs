@@ -269,25 +269,30 @@ pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T
         // drift below 1e-6 pixel over a row.
         let iw = inter.size[0];
         let (ih, rgba) = (inter.size[1], &inter.rgba);
-        const ONE: f64 = 4_294_967_296.0;
         // p(u) = round(pb·2³²) + u·round(pa·2³²): a function of u alone, so the same
         // pixel gets the same coordinate whatever span (valid rectangle) it is in
-        let (dp, dq) = ((pa * ONE).round() as i64, (qa * ONE).round() as i64);
-        let (mut p, mut q) = ((pb * ONE).round() as i64 + u0 as i64 * dp, (qb * ONE).round() as i64 + u0 as i64 * dq);
+        let (dp, dq) = ((pa * FIX_ONE).round() as i64, (qa * FIX_ONE).round() as i64);
+        let (mut p, mut q) = ((pb * FIX_ONE).round() as i64 + u0 as i64 * dp, (qb * FIX_ONE).round() as i64 + u0 as i64 * dq);
         for px in row[u0..u1].iter_mut() {
             let (x0, y0) = (((p >> 32) as usize).min(iw - 2), ((q >> 32) as usize).min(ih - 2));
-            let fx = (p & 0xFFFF_FFFF) as f32 * (1.0 / ONE as f32);
-            let fy = (q & 0xFFFF_FFFF) as f32 * (1.0 / ONE as f32);
-            let i = y0 * iw + x0;
-            let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
-            // all four channels at once in one SSE register (glam's Vec4)
-            let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
-            let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);
-            *px = T::from_rgba(t.lerp(b, fy));
+            *px = bilinear(rgba, iw, [x0, y0], [frac32(p), frac32(q)]);
             p += dp;
             q += dq;
         }
     });
+}
+
+/// The span of `u` in `(lo, hi)` where a row's back-projection lies in front of
+/// the eye and inside the box `p ∈ (p_lo, p_hi)`, `q ∈ (q_lo, q_hi)`: with
+/// `X(u) = x[0]·u + x[1]`, `Y`, `W` likewise and `(p, q) = (X, Y)/W`, each
+/// condition is linear in `u` (`W > 0`, `X − p_lo·W > 0`, `p_hi·W − X > 0`, …).
+fn clip_to_box(lo: f64, hi: f64, x: [f64; 2], y: [f64; 2], w: [f64; 2], [p_lo, p_hi]: [f64; 2], [q_lo, q_hi]: [f64; 2]) -> (f64, f64) {
+    let (mut lo, mut hi) = clip_positive(lo, hi, w[0], w[1]);
+    for (a, [b_lo, b_hi]) in [(x, [p_lo, p_hi]), (y, [q_lo, q_hi])] {
+        (lo, hi) = clip_positive(lo, hi, a[0] - b_lo * w[0], a[1] - b_lo * w[1]);
+        (lo, hi) = clip_positive(lo, hi, b_hi * w[0] - a[0], b_hi * w[1] - a[1]);
+    }
+    (lo, hi)
 }
 
 /// The span `(lo, hi)` of `u` where `a·u + b > 0`, intersected with `(lo, hi)`.
@@ -367,14 +372,9 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
         // (the ring widened by the linear pieces' stray: which of these pixels
         // read the image is decided below, by the coordinates they sample at)
         let slack = 2.0 * WARP_STRAY;
-        let (plo, phi) = (r.p0 as f64 - 1.0 - slack - pad, r.p1 as f64 + 1.0 + slack - pad);
-        let (qlo, qhi) = (r.q0 as f64 - 1.0 - slack - pad, r.q1 as f64 + 1.0 + slack - pad);
-        let (mut lo, mut hi) = clip_positive(0.0, (w - 1) as f64, wa, wb);
-        // X − plo·W > 0, phi·W − X > 0, and for Y
-        (lo, hi) = clip_positive(lo, hi, xa - plo * wa, xb - plo * wb);
-        (lo, hi) = clip_positive(lo, hi, phi * wa - xa, phi * wb - xb);
-        (lo, hi) = clip_positive(lo, hi, ya - qlo * wa, yb - qlo * wb);
-        (lo, hi) = clip_positive(lo, hi, qhi * wa - ya, qhi * wb - yb);
+        let (xr, yr, wr) = ([xa, xb], [ya, yb], [wa, wb]);
+        let ring = |a: usize, b: usize| [a as f64 - 1.0 - slack - pad, b as f64 + 1.0 + slack - pad];
+        let (mut lo, mut hi) = clip_to_box(0.0, (w - 1) as f64, xr, yr, wr, ring(r.p0, r.p1), ring(r.q0, r.q1));
         if let Some(o) = owned {
             // the pyramid's pixels of the row: s·d_axis ± d_c ≥ 0 for the other
             // two axes c, each linear in u; a pixel of slack (the exact owner
@@ -435,11 +435,7 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
         // 64 keeping that within `WARP_STRAY` pixels on both axes (1 where the
         // row passes too close to the eye).
         let [gw, gh] = plan.grid.size;
-        let (mut glo, mut ghi) = clip_positive(0.0, (w - 1) as f64, wa, wb);
-        for (lo_b, hi_b, a, b) in [(-1.0 - pad, gw as f64 - pad, xa, xb), (-1.0 - pad, gh as f64 - pad, ya, yb)] {
-            (glo, ghi) = clip_positive(glo, ghi, a - lo_b * wa, b - lo_b * wb);
-            (glo, ghi) = clip_positive(glo, ghi, hi_b * wa - a, hi_b * wb - b);
-        }
+        let (glo, ghi) = clip_to_box(0.0, (w - 1) as f64, xr, yr, wr, [-1.0 - pad, gw as f64 - pad], [-1.0 - pad, gh as f64 - pad]);
         let e0 = (glo.ceil().max(0.0) as usize).min(u);
         let e1 = ((ghi.floor().max(0.0) as usize).min(w - 1)).max(u_end - 1);
         let w_min = (wa * e0 as f64 + wb).min(wa * e1 as f64 + wb);
@@ -450,10 +446,9 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
         while len > 1 && !((len * len) as f64 * bend <= WARP_STRAY) {
             len >>= 1;
         }
-        const ONE: f64 = 4_294_967_296.0;
         // within 2^20 pixels (no fixed-point overflow; the ring's clamp below
         // decides where such a pixel samples)
-        let fixed = |x: f64| (x.clamp(-1_048_576.0, 1_048_576.0) * ONE) as i64;
+        let fixed = |x: f64| (x.clamp(-1_048_576.0, 1_048_576.0) * FIX_ONE) as i64;
         let (pmin, pmax, qmin, qmax) = (fixed(pmin), fixed(pmax), fixed(qmin), fixed(qmax));
         // a pixel reads the image where the coordinates it samples at lie
         // inside the valid rectangle's ring (open), and is background
@@ -466,11 +461,13 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
             let (uf, inv_w) = (u as f64, 1.0 / (wa * u as f64 + wb));
             (fixed((xa * uf + xb) * inv_w + pad), fixed((ya * uf + yb) * inv_w + pad))
         };
+        // the piece holding u: [start, end], its end the part's last pixel at
+        // most; the next piece starts where this one ends
+        let mut start = e0 + (u - e0) / len * len;
+        let mut a = exact(start);
         while u < u_end {
-            // the piece holding u: [start, end], its end the part's last pixel at most
-            let start = e0 + (u - e0) / len * len;
             let end = (start + len).min(e1);
-            let (a, b) = (exact(start), exact(end));
+            let b = exact(end);
             let n = (end - start).max(1) as i64;
             let (dp, dq) = ((b.0 - a.0) / n, (b.1 - a.1) / n);
             let i = (u - start) as i64;
@@ -479,14 +476,15 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
             let stop = if end == e1 { end + 1 } else { end }.min(u_end);
             for px in row[u..stop].iter_mut() {
                 *px = if p > ring_p[0] && p < ring_p[1] && q > ring_q[0] && q < ring_q[1] {
-                    tap_fixed(rgba, iw, p.clamp(pmin, pmax), q.clamp(qmin, qmax))
+                    let (p, q) = (p.clamp(pmin, pmax), q.clamp(qmin, qmax));
+                    bilinear(rgba, iw, [(p >> 32) as usize, (q >> 32) as usize], [frac32(p), frac32(q)])
                 } else {
                     T::CLEAR
                 };
                 p += dp;
                 q += dq;
             }
-            u = stop;
+            (u, start, a) = (stop, end, b);
         }
     });
 }
@@ -497,16 +495,22 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
 /// intermediate pixels (under one 8-bit level).
 pub const WARP_STRAY: f64 = 1.0 / 256.0;
 
-/// The bilinear sample of `rgba` (row stride `iw`) at the 32.32 fixed-point
-/// coordinates `(p, q)` (non-negative, a pixel and its right/lower
-/// neighbours inside the image).
+/// One in 32.32 fixed point: the warps' coordinates step in it.
+const FIX_ONE: f64 = 4_294_967_296.0;
+
+/// The fraction of a non-negative 32.32 fixed-point coordinate.
 #[inline(always)]
-fn tap_fixed<T: Texel>(rgba: &[[f32; 4]], iw: usize, p: i64, q: i64) -> T {
-    const ONE: f32 = 4_294_967_296.0;
-    let (xi, yi) = ((p >> 32) as usize, (q >> 32) as usize);
-    let fx = (p & 0xFFFF_FFFF) as f32 * (1.0 / ONE);
-    let fy = (q & 0xFFFF_FFFF) as f32 * (1.0 / ONE);
-    let i = yi * iw + xi;
+fn frac32(p: i64) -> f32 {
+    (p & 0xFFFF_FFFF) as f32 * (1.0 / FIX_ONE as f32)
+}
+
+/// The bilinear sample of `rgba` (row stride `iw`) between pixel `[x0, y0]`
+/// and its right and lower neighbours (all inside the image) at in-cell
+/// weights `[fx, fy]`: all four channels at once in one SSE register (glam's
+/// `Vec4`). Both warps take their taps from it.
+#[inline(always)]
+fn bilinear<T: Texel>(rgba: &[[f32; 4]], iw: usize, [x0, y0]: [usize; 2], [fx, fy]: [f32; 2]) -> T {
+    let i = y0 * iw + x0;
     let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
     let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
     let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);

@@ -15,7 +15,7 @@
 use rayon::prelude::*;
 
 use crate::composite::Rect;
-use crate::composite::{Intermediate, composite_premultiplied, terminated};
+use crate::composite::{Intermediate, OpacityTable, RayRow, composite_premultiplied, terminated};
 pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::encode::rle::runs::{Cursor, INF};
 use crate::encode::rle::{PostTables, Preclass, RleVolume, RleVoxel, ViewTables, VoxelSource};
@@ -395,24 +395,61 @@ impl<'a> Limits<'a> {
         Limits { row: &l.row(q)[r.p0..=r.p1], holes, k: k as u32 }
     }
 
-    /// Whether pixel `s` of the row composites slice `k` (the limits'
-    /// own slice, as [`RleFrame::composite_sample`] tests a slice's sample).
-    #[inline(always)]
-    fn keeps_both(&self, s: usize, k: usize) -> bool {
-        debug_assert_eq!(k, self.k as usize);
-        self.keeps(s)
-    }
-
     /// Whether pixel `s` of the row composites the slice.
     #[inline(always)]
     fn keeps(&self, s: usize) -> bool {
+        self.keeps_pair(s, [self.k; 2])
+    }
+
+    /// Whether pixel `s` of the row composites a sample between slices
+    /// `ka` and `kb` (the same slice for a slice's sample): both in its
+    /// interval, and its hole (if any) not between or on them.
+    #[inline(always)]
+    fn keeps_pair(&self, s: usize, [ka, kb]: [u32; 2]) -> bool {
         let [k0, k1] = self.row[s];
-        k0 <= self.k
-            && self.k <= k1
+        k0 <= ka
+            && kb <= k1
             && (self.holes.is_empty() || {
                 let [h0, h1] = self.holes[s];
-                !(h0 <= self.k && self.k <= h1)
+                h0 > h1 || h1 < ka || kb < h0
             })
+    }
+}
+
+/// What compositing a sample of one intermediate row of a scaled plan takes
+/// from the plan, sliced to the rect's columns once a row
+/// ([`RleFrame::row_composite`]): the ray limits and holes, each ray's place
+/// in the opacity table, the termination threshold.
+#[derive(Clone, Copy)]
+struct RowComposite<'a> {
+    /// The row's limits (`None`: every ray keeps every slice; their own
+    /// slice unused: [`Limits::keeps_pair`] names the slices).
+    limits: Option<Limits<'a>>,
+    /// The rays' places in `table` (empty: no ray is corrected).
+    rays: &'a [RayRow],
+    table: &'a OpacityTable,
+    ert: f32,
+}
+
+impl RowComposite<'_> {
+    /// Composites `smp` (a blend, `t`'s [`Sampler::finish`]ed here) into
+    /// pixel `xr` of the row (rect-relative), the sample between slices
+    /// `ks[0]` and `ks[1]` (the same slice for a slice's sample), if its ray
+    /// limits keep both, with the ray's own opacity correction
+    /// ([`FramePlan::correct_opacity`]); marks the pixel in the links when it
+    /// terminates.
+    #[inline(always)]
+    fn add<S: Sampler>(&self, t: &S, ks: [usize; 2], xr: usize, smp: [f32; 4], prow: &mut [[f32; 4]], lrow: &mut [u32]) {
+        if self.limits.is_some_and(|l| !l.keeps_pair(xr, [ks[0] as u32, ks[1] as u32])) {
+            return;
+        }
+        let smp = t.finish(smp);
+        let smp = if self.rays.is_empty() { smp } else { self.table.correct_row(smp, self.rays[xr]) };
+        let acc = &mut prow[xr];
+        composite_premultiplied(acc, smp);
+        if terminated(acc[3], self.ert) {
+            lrow[xr] = 1;
+        }
     }
 }
 
@@ -706,10 +743,8 @@ impl<S: Sampler> RleFrame<'_, S> {
     /// are not opaque and their cells' columns lie inside both scanlines'
     /// current runs, reading those voxels straight from the runs (a cell's
     /// right column is the next cell's left one when they are adjacent; a
-    /// magnified slice's pixels may share a cell). Each sample is
-    /// [`RleFrame::composite_sample`]'s: the same blend, ray limits, opacity
-    /// correction (the row's ray places found once a frame), "over" and
-    /// termination.
+    /// magnified slice's pixels may share a cell). Each sample is the
+    /// bilinear blend of its cell, composited by the row's [`RowComposite`].
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn scaled_row(
@@ -726,9 +761,7 @@ impl<S: Sampler> RleFrame<'_, S> {
         let (r, rle, plan, t) = (&self.r, self.rle, self.plan, self.tables);
         let p0 = r.p0 as i64;
         let map = plan.axis_map(k, 0);
-        let (table, rays) = (plan.opacity_table(), plan.ray_rows_of(q));
-        let rays = if rays.is_empty() { rays } else { &rays[r.p0..=r.p1] };
-        let limits = plan.limits.as_ref().map(|l| Limits::of(l, q, r, k));
+        let rc = self.row_composite(q);
         let mut cb = rle.cursor(s);
         let mut ct = rle.cursor(s + 1);
         // the first column the cursors may still be asked for
@@ -749,7 +782,7 @@ impl<S: Sampler> RleFrame<'_, S> {
             if ci as u32 == c {
                 // a magnified slice (pitch < 1): this pixel samples the last one's cell
                 // (the inner loop's runs no longer apply: through the cursors after it)
-                self.scaled_sample(k, x, q, wi, wj, v, prow, lrow, p0);
+                rc.add(t, [k, k], (x - p0) as usize, blend(v[0], v[1], v[2], v[3], &cell_weights(wi, wj)), prow, lrow);
                 x += 1;
                 continue;
             }
@@ -782,19 +815,7 @@ impl<S: Sampler> RleFrame<'_, S> {
             let (bb, bt) = (cb.base, ct.base);
             loop {
                 let xr = (x - p0) as usize;
-                let keep = match &limits {
-                    None => true,
-                    Some(l) => l.keeps_both(xr, k),
-                };
-                if keep {
-                    let smp = t.finish(blend(v[0], v[1], v[2], v[3], &cell_weights(wi, wj)));
-                    let smp = if rays.is_empty() { smp } else { table.correct_row(smp, rays[xr]) };
-                    let acc = &mut prow[xr];
-                    composite_premultiplied(acc, smp);
-                    if terminated(acc[3], self.ert) {
-                        lrow[xr] = 1;
-                    }
-                }
+                rc.add(t, [k, k], xr, blend(v[0], v[1], v[2], v[3], &cell_weights(wi, wj)), prow, lrow);
                 x += 1;
                 if x > x1 || lrow[xr + 1] != 0 {
                     continue 'pixels;
@@ -895,6 +916,7 @@ impl<S: Sampler> RleFrame<'_, S> {
         let &BoxRow { k, q, s, nb, hi, curs, wj } = bx;
         let mut curs = curs;
         let p0 = r.p0 as i64;
+        let rc = self.row_composite(q);
         let mut wi = [0f32; MAXW];
         {
             // the box's columns ([`box_column`]: this row's weights over its
@@ -939,7 +961,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                 }
                 decoded = decoded.max(i0 + na);
                 let smp = box_sample(&wi[..na], |u| ring[(i0 + u) % RING]);
-                self.composite_sample([k, k], x, q, smp, prow, lrow, p0);
+                rc.add(self.tables, [k, k], (x - p0) as usize, smp, prow, lrow);
                 x += 1;
             }
         }
@@ -1034,6 +1056,7 @@ impl<S: Sampler> RleFrame<'_, S> {
     ) {
         let rle = self.rle;
         let p0 = self.r.p0 as i64;
+        let rc = self.row_composite(q);
         {
             let mut cur = scan.map(|s| rle.cursor(s));
             // the first column the cursors may still be asked for
@@ -1093,7 +1116,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                 let w = weights(wi);
                 let v = &cell.1;
                 let smp = mid(v, &w);
-                self.composite_sample([k, k + 1], x, q, smp, prow, lrow, p0);
+                rc.add(self.tables, [k, k + 1], (x - p0) as usize, smp, prow, lrow);
                 // the fast continuation: while the next pixel is not opaque and
                 // samples the next cell, whose right column lies inside all four
                 // scanlines' current runs, read that column straight from the runs
@@ -1114,58 +1137,23 @@ impl<S: Sampler> RleFrame<'_, S> {
                     next = c1;
                     let w = weights(wn);
                     let smp = mid(&v, &w);
-                    self.composite_sample([k, k + 1], x, q, smp, prow, lrow, p0);
+                    rc.add(self.tables, [k, k + 1], (x - p0) as usize, smp, prow, lrow);
                 }
                 x += 1;
             }
         }
     }
 
-    /// Composites pixel `(x, q)`'s sample of slice `k` (its cell's four
-    /// classified voxels `c00, c10, c01, c11` at weights `wi, wj`) as
-    /// [`RleFrame::composite_sample`] does.
-    #[allow(clippy::too_many_arguments)]
+    /// Row `q`'s [`RowComposite`].
     #[inline(always)]
-    fn scaled_sample(
-        &self,
-        k: usize,
-        x: i64,
-        q: usize,
-        wi: f32,
-        wj: f32,
-        c: [[f32; 4]; 4],
-        prow: &mut [[f32; 4]],
-        lrow: &mut [u32],
-        p0: i64,
-    ) {
-        let smp = blend(c[0], c[1], c[2], c[3], &cell_weights(wi, wj));
-        self.composite_sample([k, k], x, q, smp, prow, lrow, p0);
-    }
-
-    /// Composites `smp` (a blend, [`Sampler::finish`]ed here), pixel `(x,
-    /// q)`'s sample between slices `ks[0]` and `ks[1]` (the same slice for a
-    /// slice's sample), if its ray limits keep both, with the ray's own
-    /// opacity correction; marks the pixel in the links when it terminates.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    fn composite_sample(&self, ks: [usize; 2], x: i64, q: usize, smp: [f32; 4], prow: &mut [[f32; 4]], lrow: &mut [u32], p0: i64) {
-        let plan = self.plan;
-        let inside = match &plan.limits {
-            None => true,
-            Some(l) => {
-                let [k0, k1] = l.get(x as usize, q);
-                let [h0, h1] = l.hole(x as usize, q);
-                // (both slices kept: in the interval, and the hole not between or on them)
-                k0 as usize <= ks[0] && ks[1] <= k1 as usize && (h0 > h1 || (h1 as usize) < ks[0] || ks[1] < h0 as usize)
-            }
-        };
-        if inside {
-            let xr = (x - p0) as usize;
-            let acc = &mut prow[xr];
-            composite_premultiplied(acc, plan.correct_opacity(x as usize, q, self.tables.finish(smp)));
-            if terminated(acc[3], self.ert) {
-                lrow[xr] = 1;
-            }
+    fn row_composite(&self, q: usize) -> RowComposite<'_> {
+        let (plan, r) = (self.plan, &self.r);
+        let rays = plan.ray_rows_of(q);
+        RowComposite {
+            limits: plan.limits.as_ref().map(|l| Limits::of(l, q, r, 0)),
+            rays: if rays.is_empty() { rays } else { &rays[r.p0..=r.p1] },
+            table: plan.opacity_table(),
+            ert: self.ert,
         }
     }
 }

@@ -405,10 +405,6 @@ const AXIS_FRAC: u32 = 36;
 /// 65 536 pixels wide).
 #[derive(Clone, Copy, Debug)]
 pub struct AxisMap {
-    scale: f64,
-    trans: f64,
-    pad: f64,
-    pitch: f64,
     /// The position of pixel 0 and the step from one pixel to the next, in
     /// `2^−AXIS_FRAC` voxel units.
     base: i64,
@@ -416,13 +412,14 @@ pub struct AxisMap {
 }
 
 impl AxisMap {
-    /// The map `scale · ((x − pad) · pitch) + trans` (scale and pitch > 0).
+    /// The map `scale · ((x − pad) · pitch) + trans` (scale and pitch > 0;
+    /// held as its fixed-point slope and intercept alone).
     #[inline]
     pub fn new(scale: f64, trans: f64, pad: f64, pitch: f64) -> Self {
         let unit = (1u64 << AXIS_FRAC) as f64;
         // (truncated: a float-to-integer conversion, no call to `round`)
         let (step, base) = ((scale * pitch * unit) as i64, ((trans - scale * pad * pitch) * unit) as i64);
-        AxisMap { scale, trans, pad, pitch, base, step }
+        AxisMap { base, step }
     }
 
     /// The cell and in-cell weight of pixel `x` (which may lie off the grid).
@@ -439,7 +436,8 @@ impl AxisMap {
     /// by the map itself (monotone: scale and pitch > 0).
     pub fn pixels_of_cells(&self, c0: i64, c1: i64) -> [i64; 2] {
         let cell = |x: i64| self.cell(x).0;
-        let inv = |c: i64| floor_i64((c as f64 - self.trans) / self.scale / self.pitch + self.pad);
+        let unit = (1u64 << AXIS_FRAC) as f64;
+        let inv = |c: i64| floor_i64((c as f64 * unit - self.base as f64) / self.step as f64);
         let mut x0 = inv(c0);
         while cell(x0) >= c0 {
             x0 -= 1;

@@ -49,6 +49,18 @@ pub trait Sampler: Sync {
     fn finish(&self, s: [f32; 4]) -> [f32; 4];
     /// The brute force's 4-vector of voxel `(i, j, k)` of `stack`.
     fn brute_voxel<V: VoxelSource + ?Sized>(&self, pre: &Preclass, stack: &V, i: usize, j: usize, k: usize) -> [f32; 4];
+    /// The bilinear blend of a cell's four voxels (`c00`, `c10`, `c01`,
+    /// `c11`) at weights `w` (every path's slice sample).
+    #[inline(always)]
+    fn blend(&self, c00: [f32; 4], c10: [f32; 4], c01: [f32; 4], c11: [f32; 4], w: &Weights) -> [f32; 4] {
+        blend(c00, c10, c01, c11, w)
+    }
+    /// The midpoint of a cell's eight voxels (`mid`'s order) at weights `w`
+    /// (every path's Deluxe I sample).
+    #[inline(always)]
+    fn mid(&self, v: &[[f32; 4]; 8], w: &Weights) -> [f32; 4] {
+        mid(v, w)
+    }
     /// [`Sampler::voxel`], [`Sampler::MISSING`] for `None`.
     #[inline(always)]
     fn get_or_missing(&self, v: Option<RleVoxel>) -> [f32; 4] {
@@ -91,6 +103,41 @@ impl Sampler for PostTables {
     fn brute_voxel<V: VoxelSource + ?Sized>(&self, pre: &Preclass, stack: &V, i: usize, j: usize, k: usize) -> [f32; 4] {
         PostTables::voxel(self, pre.post_voxel(stack, i, j, k))
     }
+    /// The blend of the voxels' nodes and of their normals each turned to
+    /// the first voxel's side (`align_normals`).
+    #[inline(always)]
+    fn blend(&self, c00: [f32; 4], c10: [f32; 4], c01: [f32; 4], c11: [f32; 4], w: &Weights) -> [f32; 4] {
+        let [c00, c10, c01, c11] = align_normals([c00, c10, c01, c11]);
+        blend(c00, c10, c01, c11, w)
+    }
+    #[inline(always)]
+    fn mid(&self, v: &[[f32; 4]; 8], w: &Weights) -> [f32; 4] {
+        mid(&align_normals(*v), w)
+    }
+}
+
+/// Post-classified voxels `[node, n]` with each normal `n` turned to the side
+/// of the first one's (negated where their dot product is negative, or −0; the
+/// first voxel's if it is not zero, else the last's). A normal code holds a
+/// direction up to sign (shading is two-sided, `|n·l|`), so two neighbours'
+/// codes may point opposite ways: where a surface's normal crosses the codes'
+/// hemisphere boundary, and across a thin shell, whose two sides' gradients
+/// point apart. Blended as they are, they partly cancel (dark seams between
+/// voxels); turned to one side first, they blend to the surface's direction.
+#[inline(always)]
+fn align_normals<const N: usize>(mut v: [[f32; 4]; N]) -> [[f32; 4]; N] {
+    let dot = |a: &[f32; 4], b: &[f32; 4]| a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
+    let r = if dot(&v[0], &v[0]) > 0.0 { v[0] } else { v[N - 1] };
+    // (the first one is the reference or zero: it stays)
+    for x in v.iter_mut().skip(1) {
+        // branch-free: the dot product's sign bit flips the normal's (a NaN
+        // normal, a voxel the encoding left out, stays NaN)
+        let sign = dot(x, &r).to_bits() & 0x8000_0000;
+        for c in &mut x[1..] {
+            *c = f32::from_bits(c.to_bits() ^ sign);
+        }
+    }
+    v
 }
 
 /// The intermediate sample between slices `k` and `k + 1` at weights `w`
@@ -487,7 +534,7 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
         let inside = !LIM || lim.keeps(s);
         if inside {
             let acc = &mut px[s];
-            composite_premultiplied(acc, t.finish(blend(lb, rb, lt, rt, w)));
+            composite_premultiplied(acc, t.finish(t.blend(lb, rb, lt, rt, w)));
             if terminated(acc[3], ert) {
                 links[s] = 1;
             }
@@ -782,7 +829,7 @@ impl<S: Sampler> RleFrame<'_, S> {
             if ci as u32 == c {
                 // a magnified slice (pitch < 1): this pixel samples the last one's cell
                 // (the inner loop's runs no longer apply: through the cursors after it)
-                rc.add(t, [k, k], (x - p0) as usize, blend(v[0], v[1], v[2], v[3], &cell_weights(wi, wj)), prow, lrow);
+                rc.add(t, [k, k], (x - p0) as usize, t.blend(v[0], v[1], v[2], v[3], &cell_weights(wi, wj)), prow, lrow);
                 x += 1;
                 continue;
             }
@@ -815,7 +862,7 @@ impl<S: Sampler> RleFrame<'_, S> {
             let (bb, bt) = (cb.base, ct.base);
             loop {
                 let xr = (x - p0) as usize;
-                rc.add(t, [k, k], xr, blend(v[0], v[1], v[2], v[3], &cell_weights(wi, wj)), prow, lrow);
+                rc.add(t, [k, k], xr, t.blend(v[0], v[1], v[2], v[3], &cell_weights(wi, wj)), prow, lrow);
                 x += 1;
                 if x > x1 || lrow[xr + 1] != 0 {
                     continue 'pixels;
@@ -1115,7 +1162,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                 }
                 let w = weights(wi);
                 let v = &cell.1;
-                let smp = mid(v, &w);
+                let smp = self.tables.mid(v, &w);
                 rc.add(self.tables, [k, k + 1], (x - p0) as usize, smp, prow, lrow);
                 // the fast continuation: while the next pixel is not opaque and
                 // samples the next cell, whose right column lies inside all four
@@ -1136,7 +1183,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                     cell = (cn as u32, v);
                     next = c1;
                     let w = weights(wn);
-                    let smp = mid(&v, &w);
+                    let smp = self.tables.mid(&v, &w);
                     rc.add(self.tables, [k, k + 1], (x - p0) as usize, smp, prow, lrow);
                 }
                 x += 1;
@@ -1239,7 +1286,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                     };
                     let b = ci as usize + ni * cj as usize;
                     let w = cell_weights(wi, wj);
-                    let smp = mid(&[lo[b], lo[b + 1], lo[b + ni], lo[b + ni + 1], hi[b], hi[b + 1], hi[b + ni], hi[b + ni + 1]], &w);
+                    let smp = tables.mid(&[lo[b], lo[b + 1], lo[b + ni], lo[b + ni + 1], hi[b], hi[b + 1], hi[b + ni], hi[b + ni + 1]], &w);
                     composite_premultiplied(acc, plan.correct_opacity(p, q, tables.finish(smp)));
                 }
             });
@@ -1279,7 +1326,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                     box_sample(&wis[..na], |u| box_column(&wjs[..nb], |t| buf[i0 + u + ni * (j0 + t)]))
                 } else {
                     let b = ci as usize + ni * cj as usize;
-                    blend(buf[b], buf[b + 1], buf[b + ni], buf[b + ni + 1], &cell_weights(wi, wj))
+                    tables.blend(buf[b], buf[b + 1], buf[b + ni], buf[b + ni + 1], &cell_weights(wi, wj))
                 };
                 composite_premultiplied(acc, plan.correct_opacity(p, q, tables.finish(smp)));
             }
@@ -1309,5 +1356,51 @@ mod tests {
         links[9] = 1;
         assert_eq!(find(&mut links, 0), 0);
         assert_eq!(find(&mut links, 3), 10);
+    }
+
+    /// The post-classified sampler (Deluxe P) blends normals turned to one
+    /// side: two neighbours on a surface whose normal crosses the codes'
+    /// hemisphere boundary (their codes decode to nearly opposite vectors)
+    /// blend to the surface's direction, not to a near-zero vector (the dark
+    /// seams P showed at 0° on the head phantom); the pre-classified sampler's
+    /// blend is the plain one.
+    #[test]
+    fn post_blend_turns_normals_to_one_side_before_blending() {
+        let t = PostTables::default();
+        let voxel = |n: [f32; 3]| t.voxel(RleVoxel { class: 7, normal: encode_normal(n) });
+        let (a, b) = (voxel([1.0, 0.2, 0.05]), voxel([1.0, 0.2, -0.05]));
+        // the codes alone: opposite sides
+        assert!(a[1] * b[1] + a[2] * b[2] + a[3] * b[3] < -0.9, "{a:?} {b:?}");
+        let unit = |s: [f32; 4]| {
+            let l = (s[1] * s[1] + s[2] * s[2] + s[3] * s[3]).sqrt();
+            [s[1] / l, s[2] / l, s[3] / l, l]
+        };
+        let truth = {
+            let l = (1.0f32 + 0.04).sqrt();
+            [1.0 / l, 0.2 / l]
+        };
+        for (wi, wj) in [(0.5, 0.5), (0.3, 0.8), (0.9, 0.1)] {
+            let w = cell_weights(wi, wj);
+            for cell in [[a, b, a, b], [b, a, a, b], [a, a, b, b], [b, b, b, a]] {
+                let s = Sampler::blend(&t, cell[0], cell[1], cell[2], cell[3], &w);
+                assert_eq!(s[0], 7.0, "the node blends as before");
+                let n = unit(s);
+                // the blend of unit vectors within a degree or so of each other: about unit length
+                assert!(n[3] > 0.99, "{cell:?} at {wi}, {wj}: |n| = {}", n[3]);
+                assert!((n[0].abs() - truth[0]).abs() < 0.02 && (n[1].abs() - truth[1]).abs() < 0.02, "{n:?}");
+                // the midpoint of eight such voxels, too
+                let m = Sampler::mid(&t, &[cell[0], cell[1], cell[2], cell[3], cell[3], cell[2], cell[1], cell[0]], &w);
+                assert!(unit(m)[3] > 0.99, "{m:?}");
+            }
+        }
+        // a zero first normal: turned to the last voxel's side
+        let z = t.voxel(RleVoxel { class: 7, normal: ZERO_NORMAL });
+        let s = Sampler::blend(&t, z, b, a, b, &cell_weights(0.5, 0.5));
+        assert!(unit(s)[3] > 0.74, "{s:?}");
+        // the pre-classified sampler: the plain blend, bit for bit
+        let v = ViewTables::default();
+        let c = [[0.1, 0.2, 0.3, 0.4], [0.5, 0.1, 0.0, 0.6], [0.2, 0.2, 0.2, 0.2], [0.0, 0.9, 0.1, 1.0]];
+        let w = cell_weights(0.3, 0.6);
+        assert_eq!(Sampler::blend(&v, c[0], c[1], c[2], c[3], &w), blend(c[0], c[1], c[2], c[3], &w));
     }
 }

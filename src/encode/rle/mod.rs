@@ -75,7 +75,8 @@
 //! - **P, post-classification** (a sampler,
 //!   [`crate::composite::slices::Sampler`]): the same traversal reads each
 //!   stored voxel as `[node, normal]` ([`PostTables`]), blends it with the
-//!   same bilinear (trilinear with I) weights, then classifies the
+//!   same bilinear (trilinear with I) weights (the cell's normals turned to
+//!   one side first: a normal code holds a direction up to sign), then classifies the
 //!   interpolated node and shades the normalized interpolated normal with the
 //!   one shading model. Its encoding ([`RleVolume::encode_post`]) stores a
 //!   voxel, transparent or not, whenever one of the 2×2×2 cells around it may

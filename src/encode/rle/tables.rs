@@ -127,12 +127,8 @@ impl PostTables {
     /// The 4-vector `[node, n]` of a stored voxel. (A normal code holds a
     /// direction up to sign, so two neighbours' codes may point opposite
     /// ways where the surface's normal crosses the codes' hemisphere
-    /// boundary, and their blend partly cancels: dark seams between voxels,
-    /// seen under M and `--quality` at 0°. Facing every normal to the light
-    /// removes the seams but moves the cancellation to the silhouettes and
-    /// doubled the head phantom's IP error on the diagonal (0.0134 →
-    /// 0.0270), so it is not done; signed normals in P's encoding are the
-    /// fix.)
+    /// boundary: the sampler turns a cell's normals to one side before
+    /// blending them, `align_normals` in [`crate::composite::slices`].)
     #[inline(always)]
     pub fn voxel(&self, v: RleVoxel) -> [f32; 4] {
         let n = self.normals[v.normal as usize & (NORMAL_CODES - 1)];

@@ -443,7 +443,7 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
         let bend = curve(xa, xb).max(curve(ya, yb));
         let mut len = 64usize;
         // (a NaN bound, at W = 0, gives pieces of one pixel)
-        while len > 1 && !((len * len) as f64 * bend <= WARP_STRAY) {
+        while len > 1 && ((len * len) as f64 * bend > WARP_STRAY || bend.is_nan()) {
             len >>= 1;
         }
         // within 2^20 pixels (no fixed-point overflow; the ring's clamp below

@@ -48,6 +48,7 @@ impl Mode {
 /// `ert ≤ 0` composites nothing, `ert = 1` stops only at full opacity (which
 /// changes no pixel), and a NaN threshold composites nothing (the renderer
 /// rejects it before a frame; this keeps every kernel in agreement anyway).
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN on either side: terminated
 #[inline(always)]
 pub fn terminated(opacity: f32, ert: f32) -> bool {
     !(opacity < ert)

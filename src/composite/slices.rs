@@ -49,11 +49,24 @@ pub trait Sampler: Sync {
     fn finish(&self, s: [f32; 4]) -> [f32; 4];
     /// The brute force's 4-vector of voxel `(i, j, k)` of `stack`.
     fn brute_voxel<V: VoxelSource + ?Sized>(&self, pre: &Preclass, stack: &V, i: usize, j: usize, k: usize) -> [f32; 4];
+    /// A cell column's two voxels (bottom, top) as [`Sampler::blend_columns`]
+    /// takes them (a row of cells reads each column once).
+    #[inline(always)]
+    fn column(&self, b: [f32; 4], t: [f32; 4]) -> [[f32; 4]; 2] {
+        [b, t]
+    }
+    /// The bilinear blend of a cell from its left and right columns (each
+    /// through [`Sampler::column`]) at weights `w`.
+    #[inline(always)]
+    fn blend_columns(&self, l: [[f32; 4]; 2], r: [[f32; 4]; 2], w: &Weights) -> [f32; 4] {
+        blend(l[0], r[0], l[1], r[1], w)
+    }
     /// The bilinear blend of a cell's four voxels (`c00`, `c10`, `c01`,
-    /// `c11`) at weights `w` (every path's slice sample).
+    /// `c11`) at weights `w` (every path's slice sample): its columns'
+    /// blend, bit for bit.
     #[inline(always)]
     fn blend(&self, c00: [f32; 4], c10: [f32; 4], c01: [f32; 4], c11: [f32; 4], w: &Weights) -> [f32; 4] {
-        blend(c00, c10, c01, c11, w)
+        self.blend_columns(self.column(c00, c01), self.column(c10, c11), w)
     }
     /// The midpoint of a cell's eight voxels (`mid`'s order) at weights `w`
     /// (every path's Deluxe I sample).
@@ -103,12 +116,20 @@ impl Sampler for PostTables {
     fn brute_voxel<V: VoxelSource + ?Sized>(&self, pre: &Preclass, stack: &V, i: usize, j: usize, k: usize) -> [f32; 4] {
         PostTables::voxel(self, pre.post_voxel(stack, i, j, k))
     }
-    /// The blend of the voxels' nodes and of their normals each turned to
-    /// the first voxel's side (`align_normals`).
+    /// The column with its top normal turned to the bottom one's side
+    /// (`turn`: negated where their dot product's sign bit is set).
     #[inline(always)]
-    fn blend(&self, c00: [f32; 4], c10: [f32; 4], c01: [f32; 4], c11: [f32; 4], w: &Weights) -> [f32; 4] {
-        let [c00, c10, c01, c11] = align_normals([c00, c10, c01, c11]);
-        blend(c00, c10, c01, c11, w)
+    fn column(&self, b: [f32; 4], t: [f32; 4]) -> [[f32; 4]; 2] {
+        [b, turn(t, normal_dot(&t, &b))]
+    }
+    /// The blend with the right column's normals turned to the left
+    /// column's side (the sign of the dot product of the columns' normal
+    /// sums, so a zero normal in either column does not decide it).
+    #[inline(always)]
+    fn blend_columns(&self, l: [[f32; 4]; 2], r: [[f32; 4]; 2], w: &Weights) -> [f32; 4] {
+        let sum = |c: &[[f32; 4]; 2]| [0.0, c[0][1] + c[1][1], c[0][2] + c[1][2], c[0][3] + c[1][3]];
+        let d = normal_dot(&sum(&l), &sum(&r));
+        blend(l[0], turn(r[0], d), l[1], turn(r[1], d), w)
     }
     #[inline(always)]
     fn mid(&self, v: &[[f32; 4]; 8], w: &Weights) -> [f32; 4] {
@@ -116,8 +137,8 @@ impl Sampler for PostTables {
     }
 }
 
-/// Post-classified voxels `[node, n]` with each normal `n` turned to the side
-/// of the first one's (negated where their dot product is negative, or −0; the
+/// Post-classified voxels `[node, n]` (a midpoint's eight) with each normal
+/// `n` turned to the side of the first one's (negated where their dot product is negative, or −0; the
 /// first voxel's if it is not zero, else the last's). A normal code holds a
 /// direction up to sign (shading is two-sided, `|n·l|`), so two neighbours'
 /// codes may point opposite ways: where a surface's normal crosses the codes'
@@ -126,18 +147,29 @@ impl Sampler for PostTables {
 /// voxels); turned to one side first, they blend to the surface's direction.
 #[inline(always)]
 fn align_normals<const N: usize>(mut v: [[f32; 4]; N]) -> [[f32; 4]; N] {
-    let dot = |a: &[f32; 4], b: &[f32; 4]| a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
-    let r = if dot(&v[0], &v[0]) > 0.0 { v[0] } else { v[N - 1] };
+    let r = if normal_dot(&v[0], &v[0]) > 0.0 { v[0] } else { v[N - 1] };
     // (the first one is the reference or zero: it stays)
     for x in v.iter_mut().skip(1) {
-        // branch-free: the dot product's sign bit flips the normal's (a NaN
-        // normal, a voxel the encoding left out, stays NaN)
-        let sign = dot(x, &r).to_bits() & 0x8000_0000;
-        for c in &mut x[1..] {
-            *c = f32::from_bits(c.to_bits() ^ sign);
-        }
+        *x = turn(*x, normal_dot(x, &r));
     }
     v
+}
+
+/// The dot product of two post-classified voxels' normals (`[node, n]`).
+#[inline(always)]
+fn normal_dot(a: &[f32; 4], b: &[f32; 4]) -> f32 {
+    a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
+}
+
+/// Voxel `x` (`[node, n]`) with its normal negated where `d`'s sign bit is
+/// set: branch-free (a NaN normal, a voxel the encoding left out, stays NaN).
+#[inline(always)]
+fn turn(mut x: [f32; 4], d: f32) -> [f32; 4] {
+    let sign = d.to_bits() & 0x8000_0000;
+    for c in &mut x[1..] {
+        *c = f32::from_bits(c.to_bits() ^ sign);
+    }
+    x
 }
 
 /// The intermediate sample between slices `k` and `k + 1` at weights `w`
@@ -358,7 +390,8 @@ fn span<S: Sampler, const LIM: bool>(
     lim: Limits,
 ) -> u32 {
     let (vb, vt) = (bot.at(ci), top.at(ci));
-    let mut left = Left { b: t.get_or_missing(vb), t: t.get_or_missing(vt), any: vb.is_some() || vt.is_some() };
+    let [b, tp] = t.column(t.get_or_missing(vb), t.get_or_missing(vt));
+    let mut left = Left { b, t: tp, any: vb.is_some() || vt.is_some() };
     loop {
         let c1 = ci + 1;
         bot.step(c1);
@@ -412,8 +445,8 @@ struct BoxRow<'w, 'c> {
     wj: &'w [f32; MAXW],
 }
 
-/// The left column of the next pixel: its two voxels' colours, and whether
-/// either is non-transparent.
+/// The left column of the next pixel: its two voxels' colours (through
+/// [`Sampler::column`]), and whether either is non-transparent.
 struct Left {
     b: [f32; 4],
     t: [f32; 4],
@@ -531,10 +564,11 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
         }
         let rb = if B { t.voxel(bv[s]) } else { S::MISSING };
         let rt = if T { t.voxel(tv[s]) } else { S::MISSING };
+        let [rb, rt] = t.column(rb, rt);
         let inside = !LIM || lim.keeps(s);
         if inside {
             let acc = &mut px[s];
-            composite_premultiplied(acc, t.finish(t.blend(lb, rb, lt, rt, w)));
+            composite_premultiplied(acc, t.finish(t.blend_columns([lb, lt], [rb, rt], w)));
             if terminated(acc[3], ert) {
                 links[s] = 1;
             }
@@ -1393,7 +1427,7 @@ mod tests {
                 assert!(unit(m)[3] > 0.99, "{m:?}");
             }
         }
-        // a zero first normal: turned to the last voxel's side
+        // a zero first normal: the right column still turns to the left column's side
         let z = t.voxel(RleVoxel { class: 7, normal: ZERO_NORMAL });
         let s = Sampler::blend(&t, z, b, a, b, &cell_weights(0.5, 0.5));
         assert!(unit(s)[3] > 0.74, "{s:?}");

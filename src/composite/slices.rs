@@ -138,13 +138,17 @@ impl Sampler for PostTables {
 }
 
 /// Post-classified voxels `[node, n]` (a midpoint's eight) with each normal
-/// `n` turned to the side of the first one's (negated where their dot product is negative, or −0; the
-/// first voxel's if it is not zero, else the last's). A normal code holds a
-/// direction up to sign (shading is two-sided, `|n·l|`), so two neighbours'
-/// codes may point opposite ways: where a surface's normal crosses the codes'
-/// hemisphere boundary, and across a thin shell, whose two sides' gradients
-/// point apart. Blended as they are, they partly cancel (dark seams between
-/// voxels); turned to one side first, they blend to the surface's direction.
+/// `n` turned to the side of the first one's (negated where their dot
+/// product's sign bit is set; the reference is the first voxel's normal if it
+/// is not zero, else the last's). A normal code holds a direction up to sign
+/// (shading is two-sided, `|n·l|`), so two neighbours' codes may point
+/// opposite ways: where a surface's normal crosses the codes' hemisphere
+/// boundary, and across a thin shell, whose two sides' gradients point apart.
+/// Blended as they are, they partly cancel (dark seams between voxels);
+/// turned to one side first, they blend to the surface's direction. A slice's
+/// cell turns its normals column by column instead ([`Sampler::column`],
+/// [`Sampler::blend_columns`]), so a row of cells turns each column once; a
+/// midpoint blends its voxels in pairs across two slices and is turned whole.
 #[inline(always)]
 fn align_normals<const N: usize>(mut v: [[f32; 4]; N]) -> [[f32; 4]; N] {
     let r = if normal_dot(&v[0], &v[0]) > 0.0 { v[0] } else { v[N - 1] };

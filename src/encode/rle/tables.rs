@@ -128,7 +128,8 @@ impl PostTables {
     /// direction up to sign, so two neighbours' codes may point opposite
     /// ways where the surface's normal crosses the codes' hemisphere
     /// boundary: the sampler turns a cell's normals to one side before
-    /// blending them, `align_normals` in [`crate::composite::slices`].)
+    /// blending them, column by column, [`crate::composite::slices::Sampler::column`]
+    /// and `blend_columns`.)
     #[inline(always)]
     pub fn voxel(&self, v: RleVoxel) -> [f32; 4] {
         let n = self.normals[v.normal as usize & (NORMAL_CODES - 1)];

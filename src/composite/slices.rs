@@ -68,11 +68,24 @@ pub trait Sampler: Sync {
     fn blend(&self, c00: [f32; 4], c10: [f32; 4], c01: [f32; 4], c11: [f32; 4], w: &Weights) -> [f32; 4] {
         self.blend_columns(self.column(c00, c01), self.column(c10, c11), w)
     }
-    /// The midpoint of a cell's eight voxels (`mid`'s order) at weights `w`
-    /// (every path's Deluxe I sample).
+    /// The column of a midpoint's cell (Deluxe I) from its four voxels:
+    /// slice `k`'s bottom and top (`bk`, `tk`), slice `k + 1`'s (`bk1`,
+    /// `tk1`): the two slices' means, bottom and top, as
+    /// [`Sampler::blend_columns`] takes them (a row of midpoints reads each
+    /// column once, as a slice's row does).
+    #[inline(always)]
+    fn mid_column(&self, bk: [f32; 4], tk: [f32; 4], bk1: [f32; 4], tk1: [f32; 4]) -> [[f32; 4]; 2] {
+        [mean(bk, bk1), mean(tk, tk1)]
+    }
+    /// The midpoint of a cell's eight voxels (`v`: slice `k`'s four in
+    /// [`Sampler::blend`]'s order, then slice `k + 1`'s) at weights `w`
+    /// (every path's Deluxe I sample): its columns' blend
+    /// ([`Sampler::mid_column`], [`Sampler::blend_columns`]), which is
+    /// trilinear interpolation at depth `k + ½` (the bilinear blend of the
+    /// two slices' means).
     #[inline(always)]
     fn mid(&self, v: &[[f32; 4]; 8], w: &Weights) -> [f32; 4] {
-        mid(v, w)
+        self.blend_columns(self.mid_column(v[0], v[2], v[4], v[6]), self.mid_column(v[1], v[3], v[5], v[7]), w)
     }
     /// [`Sampler::voxel`], [`Sampler::MISSING`] for `None`.
     #[inline(always)]
@@ -131,32 +144,14 @@ impl Sampler for PostTables {
         let d = normal_dot(&sum(&l), &sum(&r));
         blend(l[0], turn(r[0], d), l[1], turn(r[1], d), w)
     }
+    /// The midpoint's column with every normal turned to the side of slice
+    /// `k`'s bottom one before the means (as [`Sampler::column`] turns a
+    /// slice's top normal).
     #[inline(always)]
-    fn mid(&self, v: &[[f32; 4]; 8], w: &Weights) -> [f32; 4] {
-        mid(&align_normals(*v), w)
+    fn mid_column(&self, bk: [f32; 4], tk: [f32; 4], bk1: [f32; 4], tk1: [f32; 4]) -> [[f32; 4]; 2] {
+        let to_bk = |x: [f32; 4]| turn(x, normal_dot(&x, &bk));
+        [mean(bk, to_bk(bk1)), mean(to_bk(tk), to_bk(tk1))]
     }
-}
-
-/// Post-classified voxels `[node, n]` (a midpoint's eight) with each normal
-/// `n` turned to the side of the first one's (negated where their dot
-/// product's sign bit is set; the reference is the first voxel's normal if it
-/// is not zero, else the last's). A normal code holds a direction up to sign
-/// (shading is two-sided, `|n·l|`), so two neighbours' codes may point
-/// opposite ways: where a surface's normal crosses the codes' hemisphere
-/// boundary, and across a thin shell, whose two sides' gradients point apart.
-/// Blended as they are, they partly cancel (dark seams between voxels);
-/// turned to one side first, they blend to the surface's direction. A slice's
-/// cell turns its normals column by column instead ([`Sampler::column`],
-/// [`Sampler::blend_columns`]), so a row of cells turns each column once; a
-/// midpoint blends its voxels in pairs across two slices and is turned whole.
-#[inline(always)]
-fn align_normals<const N: usize>(mut v: [[f32; 4]; N]) -> [[f32; 4]; N] {
-    let r = if normal_dot(&v[0], &v[0]) > 0.0 { v[0] } else { v[N - 1] };
-    // (the first one is the reference or zero: it stays)
-    for x in v.iter_mut().skip(1) {
-        *x = turn(*x, normal_dot(x, &r));
-    }
-    v
 }
 
 /// The dot product of two post-classified voxels' normals (`[node, n]`).
@@ -176,20 +171,14 @@ fn turn(mut x: [f32; 4], d: f32) -> [f32; 4] {
     x
 }
 
-/// The intermediate sample between slices `k` and `k + 1` at weights `w`
-/// from its cell's eight voxels `v` (slice `k`'s four in [`blend`]'s order,
-/// then slice `k + 1`'s): the bilinear blend of the two slices' means, which
-/// is trilinear interpolation at depth `k + ½` (both paths use exactly this).
+/// The mean of two 4-vectors (a midpoint's pair across two slices).
 #[inline(always)]
-fn mid(v: &[[f32; 4]; 8], w: &Weights) -> [f32; 4] {
-    let m = |a: [f32; 4], b: [f32; 4]| {
-        let mut s = [0f32; 4];
-        for c in 0..4 {
-            s[c] = 0.5 * (a[c] + b[c]);
-        }
-        s
-    };
-    blend(m(v[0], v[4]), m(v[1], v[5]), m(v[2], v[6]), m(v[3], v[7]), w)
+fn mean(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+    let mut s = [0f32; 4];
+    for c in 0..4 {
+        s[c] = 0.5 * (a[c] + b[c]);
+    }
+    s
 }
 
 /// Intermediate rows per parallel band.
@@ -516,6 +505,20 @@ struct RowComposite<'a> {
 }
 
 impl RowComposite<'_> {
+    /// The row from its pixel `xs` on (rect-relative).
+    #[inline(always)]
+    fn skip(&self, xs: usize) -> Self {
+        RowComposite {
+            limits: self.limits.map(|l| Limits {
+                row: &l.row[xs..],
+                holes: if l.holes.is_empty() { l.holes } else { &l.holes[xs..] },
+                k: l.k,
+            }),
+            rays: if self.rays.is_empty() { self.rays } else { &self.rays[xs..] },
+            ..*self
+        }
+    }
+
     /// Composites `smp` (a blend, `t`'s [`Sampler::finish`]ed here) into
     /// pixel `xr` of the row (rect-relative), the sample between slices
     /// `ks[0]` and `ks[1]` (the same slice for a slice's sample), if its ray
@@ -583,6 +586,72 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
         *left = Left { b: lb, t: lt, any: B || T };
     }
     done
+}
+
+/// A run of midpoints for [`mid_run`]: between slices `k` and `k + 1`,
+/// pixels from `x` (the row's cell weight `wj`), their cells from `c`, their
+/// right columns `vox` (four scanlines' voxels from column `c + 1`, in
+/// [`RleFrame::mid_row`]'s order, all of one length).
+struct MidRun<'v> {
+    k: usize,
+    x: i64,
+    c: u32,
+    vox: [&'v [RleVoxel]; 4],
+    wj: f32,
+}
+
+/// Composites the midpoints of a [`MidRun`] into `px` / `links` (the
+/// run's pixels; `rc` from its first), the first cell's left column
+/// `left`, at weights `w` (`SHIFT`: a translated plan's row, every pixel
+/// the next cell at one weight; else each pixel's cell and weight from
+/// `imap`, stopping at one whose cell does not follow on). Stops before an
+/// opaque pixel. Returns how many it did and the last one's columns.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn mid_run<S: Sampler, const SHIFT: bool>(
+    t: &S,
+    rc: &RowComposite,
+    imap: MidMap,
+    run: &MidRun,
+    left: [[f32; 4]; 2],
+    w: &Weights,
+    px: &mut [[f32; 4]],
+    links: &mut [u32],
+) -> (usize, [[[f32; 4]; 2]; 2]) {
+    // exact lengths, so the loop below needs no bounds checks
+    let n = px.len();
+    let links = &mut links[..n];
+    let vox = run.vox.map(|v| &v[..n]);
+    #[inline(always)]
+    fn column<S: Sampler>(t: &S, vox: &[&[RleVoxel]; 4], s: usize) -> [[f32; 4]; 2] {
+        t.mid_column(t.voxel(vox[0][s]), t.voxel(vox[1][s]), t.voxel(vox[2][s]), t.voxel(vox[3][s]))
+    }
+    // the last cell's left and right columns
+    let (mut pl, mut l, mut wl) = (left, left, (f32::NAN, *w));
+    let mut done = n;
+    for s in 0..n {
+        if links[s] != 0 {
+            done = s;
+            break;
+        }
+        let w = if SHIFT {
+            w
+        } else {
+            let (cn, wn) = imap.cell(run.x + s as i64);
+            if cn != run.c as i64 + s as i64 {
+                done = s;
+                break;
+            }
+            if wn.to_bits() != wl.0.to_bits() {
+                wl = (wn, cell_weights(wn, run.wj));
+            }
+            &wl.1
+        };
+        let r = column(t, &vox, s);
+        rc.add(t, [run.k, run.k + 1], s, t.blend_columns(l, r, w), px, links);
+        (pl, l) = (l, r);
+    }
+    (done, [pl, l])
 }
 
 /// Clears `rect`'s part of the intermediate rows in `px` / `depth` (row stride `gw`).
@@ -1125,6 +1194,13 @@ impl<S: Sampler> RleFrame<'_, S> {
     /// (columns by `imap`, the slices' [`FramePlan::mid_map`]; scanlines
     /// `scan`: slice `k`'s two under the row, then slice `k + 1`'s; no cell
     /// past `hi` holds a non-transparent voxel).
+    ///
+    /// A midpoint's cell is two columns of four voxels each; a column is
+    /// read once ([`Sampler::mid_column`]) and is the left column of the next
+    /// pixel's cell when that one is adjacent. Where the next pixels' cells
+    /// follow each other and their right columns lie inside all four
+    /// scanlines' current runs (most of a row), [`mid_run`] composites
+    /// them in a plain loop over the runs' voxels.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn mid_row(
@@ -1139,93 +1215,92 @@ impl<S: Sampler> RleFrame<'_, S> {
         prow: &mut [[f32; 4]],
         lrow: &mut [u32],
     ) {
-        let rle = self.rle;
+        let (rle, t) = (self.rle, self.tables);
         let p0 = self.r.p0 as i64;
         let rc = self.row_composite(q);
-        {
-            let mut cur = scan.map(|s| rle.cursor(s));
-            // the first column the cursors may still be asked for
-            let mut next = 0u32;
-            // the last cell read and its eight 4-vectors: per scanline t (slice
-            // k's bottom and top, slice k + 1's), columns c at 2t and c + 1 at 2t + 1
-            let mut cell = (INF, [[0f32; 4]; 8]);
-            // the last weights (a translated plan's row has one)
-            let mut wc: (f32, Weights) = (f32::NAN, [[0.0; 4]; 4]);
-            let mut weights = |wi: f32| {
-                if wi.to_bits() != wc.0.to_bits() {
-                    wc = (wi, cell_weights(wi, wj));
+        let mut cur = scan.map(|s| rle.cursor(s));
+        // the first column the cursors may still be asked for
+        let mut next = 0u32;
+        // the last cell read and its left and right columns
+        let mut cell = (INF, [[[0f32; 4]; 2]; 2]);
+        // the last weights (a translated plan's row has one)
+        let mut wc: (f32, Weights) = (f32::NAN, [[0.0; 4]; 4]);
+        let mut weights = |wi: f32| {
+            if wi.to_bits() != wc.0.to_bits() {
+                wc = (wi, cell_weights(wi, wj));
+            }
+            wc.1
+        };
+        let column = |cur: &[Cursor; 4], c: u32| {
+            let at = |cu: &Cursor| t.get_or_missing(cu.at(c));
+            t.mid_column(at(&cur[0]), at(&cur[1]), at(&cur[2]), at(&cur[3]))
+        };
+        let mut x = x0;
+        loop {
+            if x > x1 {
+                break;
+            }
+            x = find(lrow, (x - p0) as usize) as i64 + p0;
+            if x > x1 {
+                break;
+            }
+            let (ci, wi) = imap.cell(x);
+            let c = ci as u32;
+            if c != cell.0 {
+                if c < next {
+                    // (rounding made two pixels share a cell: start the walk again)
+                    cur = scan.map(|s| rle.cursor(s));
                 }
-                wc.1
-            };
-            let mut x = x0;
-            loop {
-                if x > x1 {
-                    break;
+                let mut nx = INF;
+                for cu in cur.iter_mut() {
+                    cu.seek(c);
+                    nx = nx.min(cu.first_from(c));
                 }
-                x = find(lrow, (x - p0) as usize) as i64 + p0;
-                if x > x1 {
-                    break;
-                }
-                let (ci, wi) = imap.cell(x);
-                let c = ci as u32;
-                if c != cell.0 {
-                    if c < next {
-                        // (rounding made two pixels share a cell: start the walk again)
-                        cur = scan.map(|s| rle.cursor(s));
-                    }
-                    let mut nx = INF;
-                    for cu in cur.iter_mut() {
-                        cu.seek(c);
-                        nx = nx.min(cu.first_from(c));
-                    }
-                    if nx > c + 1 {
-                        // columns c and c + 1 empty in all four scanlines
-                        if nx == INF || nx as i64 - 1 > hi {
-                            break;
-                        }
-                        next = c;
-                        let [xn, _] = imap.pixels_of_cells(nx as i64 - 1, nx as i64 - 1);
-                        x = xn.max(x + 1);
-                        continue;
-                    }
-                    let adjacent = cell.0 != INF && cell.0 + 1 == c;
-                    let mut v = [[0f32; 4]; 8];
-                    for (t, cu) in cur.iter_mut().enumerate() {
-                        v[2 * t] = if adjacent { cell.1[2 * t + 1] } else { self.tables.get_or_missing(cu.at(c)) };
-                        cu.step(c + 1);
-                        v[2 * t + 1] = self.tables.get_or_missing(cu.at(c + 1));
-                    }
-                    cell = (c, v);
-                    next = c + 1;
-                }
-                let w = weights(wi);
-                let v = &cell.1;
-                let smp = self.tables.mid(v, &w);
-                rc.add(self.tables, [k, k + 1], (x - p0) as usize, smp, prow, lrow);
-                // the fast continuation: while the next pixel is not opaque and
-                // samples the next cell, whose right column lies inside all four
-                // scanlines' current runs, read that column straight from the runs
-                let (s_max, e_min) = cur.iter().fold((0u32, INF), |(s, e), cu| (s.max(cu.s), e.min(cu.e)));
-                while x < x1 && lrow[(x + 1 - p0) as usize] == 0 {
-                    let (cn, wn) = imap.cell(x + 1);
-                    let c1 = cell.0.wrapping_add(2);
-                    if cn != cell.0 as i64 + 1 || c1 < s_max || c1 >= e_min {
+                if nx > c + 1 {
+                    // columns c and c + 1 empty in all four scanlines
+                    if nx == INF || nx as i64 - 1 > hi {
                         break;
                     }
-                    x += 1;
-                    let mut v = [[0f32; 4]; 8];
-                    for (t, cu) in cur.iter().enumerate() {
-                        v[2 * t] = cell.1[2 * t + 1];
-                        v[2 * t + 1] = self.tables.voxel(cu.vox[cu.base.wrapping_add(c1) as usize]);
-                    }
-                    cell = (cn as u32, v);
-                    next = c1;
-                    let w = weights(wn);
-                    let smp = self.tables.mid(&v, &w);
-                    rc.add(self.tables, [k, k + 1], (x - p0) as usize, smp, prow, lrow);
+                    next = c;
+                    let [xn, _] = imap.pixels_of_cells(nx as i64 - 1, nx as i64 - 1);
+                    x = xn.max(x + 1);
+                    continue;
                 }
-                x += 1;
+                let left = if cell.0 != INF && cell.0 + 1 == c { cell.1[1] } else { column(&cur, c) };
+                for cu in cur.iter_mut() {
+                    cu.step(c + 1);
+                }
+                cell = (c, [left, column(&cur, c + 1)]);
+                next = c + 1;
             }
+            let w = weights(wi);
+            rc.add(t, [k, k + 1], (x - p0) as usize, t.blend_columns(cell.1[0], cell.1[1], &w), prow, lrow);
+            // the pixels after x whose cells follow on and whose right
+            // columns lie inside all four scanlines' current runs
+            let (s_max, e_min) = cur.iter().fold((0u32, INF), |(s, e), cu| (s.max(cu.s), e.min(cu.e)));
+            let c1 = cell.0.wrapping_add(2);
+            let follows = match imap {
+                MidMap::Shift { .. } => true,
+                MidMap::Map(m) => m.cell(x + 1).0 == cell.0 as i64 + 1,
+            };
+            if x < x1 && c1 >= s_max && c1 < e_min && follows {
+                let n = ((x1 - x) as u64).min((e_min - c1) as u64) as usize;
+                let vox = cur.map(|cu| &cu.vox[cu.base.wrapping_add(c1) as usize..][..n]);
+                let xs = (x + 1 - p0) as usize;
+                let run = MidRun { k, x: x + 1, c: cell.0 + 1, vox, wj };
+                let rc = rc.skip(xs);
+                let (p, l) = (&mut prow[xs..xs + n], &mut lrow[xs..xs + n]);
+                let (done, last) = match imap {
+                    MidMap::Shift { .. } => mid_run::<S, true>(t, &rc, imap, &run, cell.1[1], &weights(wi), p, l),
+                    MidMap::Map(_) => mid_run::<S, false>(t, &rc, imap, &run, cell.1[1], &weights(wi), p, l),
+                };
+                if done > 0 {
+                    cell = (cell.0 + done as u32, last);
+                    next = c1 + done as u32 - 1;
+                    x += done as i64;
+                }
+            }
+            x += 1;
         }
     }
 

@@ -19,7 +19,7 @@ use crate::classify::presets::Tissue;
 use crate::classify::shading::Shading;
 use crate::classify::{Classifier, TransferFunction};
 use crate::composite::Mode;
-use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary, render_brute, volume_rect};
+use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary, render_brute, volume_rect, volume_rect_with_mids};
 use crate::composite::{Intermediate, Rect};
 use crate::data::bcc::{BccLattice, BccStack};
 use crate::data::normals::CellSource;
@@ -1740,7 +1740,7 @@ impl Renderer {
                             rle.axis_for(plan).ok_or_else(|| missing("the run-length encoding", axis))?;
                             rle.rect(plan)
                         }
-                        _ => volume_rect(plan, stack.cells()),
+                        _ => volume_rect_with_mids(plan, stack.cells()),
                     };
                     stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();

@@ -220,10 +220,11 @@ fn rle_pair(
     persp: Option<(f64, f64)>,
     planes: Option<&[ClipPlane]>,
     threads: usize,
+    ert: f32,
 ) -> Option<[(Image, Vec<[f32; 4]>); 2]> {
     let mut out = Vec::new();
     for method in [Method::Rle, Method::BruteRle] {
-        let s = Settings { method, mode, ert: 1.0, threads, deluxe, ..Settings::default() };
+        let s = Settings { method, mode, ert, threads, deluxe, ..Settings::default() };
         let mut r = Renderer::new(vol.clone(), tf, s).unwrap();
         if mode == Mode::Iso {
             r.set_iso(70.0).unwrap();
@@ -246,15 +247,18 @@ fn rle_pair(
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(cases(24)))]
 
-    /// The RLE path equals its brute force bit for bit with I, P and IP
-    /// (early termination off): parallel and perspective (eye inside the
-    /// volume included), with and without clip planes limiting the rays.
+    /// The RLE path equals its brute force bit for bit with I, P and IP:
+    /// parallel and perspective (eye inside the volume included), with and
+    /// without clip planes limiting the rays, with early termination off and
+    /// at several thresholds (the runs of midpoints stop at a terminated
+    /// pixel as the brute force's per-pixel test does).
     #[test]
     fn deluxe_rle_equals_brute_force_bit_for_bit(
         nx in 2usize..20, ny in 2usize..20, nz in 2usize..24, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2, blend in any::<bool>(),
         which in 0usize..3, persp in any::<bool>(), fov in 20.0f64..70.0, dist in 0.05f64..3.0,
         clip in any::<bool>(), plane in ((-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0), -4.0f64..4.0),
+        ert in prop::sample::select(vec![0.3f32, 0.9, 0.99, 1.0]),
     ) {
         let vol = blobs([nx, ny, nz], seed);
         let tf = tf_of(tfs);
@@ -265,7 +269,7 @@ proptest! {
         let planes: Vec<ClipPlane> = ClipPlane::new([a, b, c], d).ok().into_iter().filter(|_| clip).collect();
         let planes = (!planes.is_empty()).then_some(&planes[..]);
         let persp = persp.then_some((fov, dist));
-        let got = rle_pair(&vol, &tf, mode, deluxe, rot, persp, planes, 2);
+        let got = rle_pair(&vol, &tf, mode, deluxe, rot, persp, planes, 2, ert);
         prop_assert!(got.is_some() || persp.is_some(), "a parallel view failed");
         if let Some([(ri, rpx), (bi, bpx)]) = got {
             prop_assert!(same_bits(&rpx, &bpx), "{} {:?}: intermediate images differ", deluxe.label(), persp);
@@ -281,8 +285,8 @@ fn deluxe_rle_is_deterministic_across_thread_counts() {
     let tf = tf_of(1);
     for deluxe in [I, P, IP] {
         let rot = DMat3::from_euler(EulerRot::XYZ, 0.5, -0.8, 0.3);
-        let one = rle_pair(&vol, &tf, Mode::Blend, deluxe, rot, Some((40.0, 1.5)), None, 1).unwrap();
-        let three = rle_pair(&vol, &tf, Mode::Blend, deluxe, rot, Some((40.0, 1.5)), None, 3).unwrap();
+        let one = rle_pair(&vol, &tf, Mode::Blend, deluxe, rot, Some((40.0, 1.5)), None, 1, 1.0).unwrap();
+        let three = rle_pair(&vol, &tf, Mode::Blend, deluxe, rot, Some((40.0, 1.5)), None, 3, 1.0).unwrap();
         assert!(same_bits(&one[0].1, &three[0].1) && same_bits(&one[1].1, &three[1].1), "{}", deluxe.label());
         assert!(one[0].0.coverage() > 0.05, "{}: empty image", deluxe.label());
     }
@@ -395,5 +399,24 @@ fn deluxe_p_is_a_no_op_on_the_raycast_paths() {
         assert_eq!(common::bits(&a), common::bits(&b));
         let (c, _) = frame(&mut Renderer::new(vol.clone(), &tf, Settings { deluxe: I, ..s }).unwrap(), &cam);
         assert!(common::bits(&a) != common::bits(&c), "I changes the raycast image");
+    }
+}
+
+/// Regression (session 18): with the eye near, consecutive slices' positions
+/// differ by more than a cell at the image's edge, so a pixel samples the
+/// volume at the midpoint between two slices and outside it at both. The
+/// brute force's rectangle held only the slices' pixels and left those
+/// midpoints out (the RLE path composited them): found by the bit-for-bit
+/// property test above, this is its shrunk case.
+#[test]
+fn deluxe_i_brute_force_keeps_midpoints_outside_both_slices() {
+    let vol = blobs([2, 5, 6], 0);
+    let tf = tf_of(30226927442339151);
+    let rot = DMat3::from_euler(EulerRot::XYZ, 0.0, -2.1050138258659707, 1.0014697563744366);
+    for ert in [0.3, 1.0] {
+        let [(ri, rpx), (bi, bpx)] = rle_pair(&vol, &tf, Mode::Iso, I, rot, Some((20.0, 0.7604588208701587)), None, 1, ert).unwrap();
+        assert!(rpx.iter().any(|p| p[3] > 0.0), "the view shows something");
+        assert!(same_bits(&rpx, &bpx), "ert {ert}: intermediate images differ");
+        assert!(same_bits(&ri.data, &bi.data), "ert {ert}: final images differ");
     }
 }

@@ -1287,6 +1287,39 @@ pub fn volume_rect(plan: &FramePlan, cells: [usize; 2]) -> Option<Rect> {
     Some(Rect { p0, p1, q0, q1 })
 }
 
+/// [`volume_rect`] with the pixels of the plan's intermediate samples
+/// (Deluxe I) as well: a midpoint's position is the mean of its two slices'
+/// positions, so where consecutive slices' positions differ by more than a
+/// cell (a perspective ray at a wide angle, the eye near) a pixel can sample
+/// the volume at the midpoint and outside it at both slices. The RLE brute
+/// force's rectangle ([`RleVolume::rect`](crate::encode::rle::runs::RleVolume::rect)
+/// takes the same maps over the slices' boxes).
+pub fn volume_rect_with_mids(plan: &FramePlan, cells: [usize; 2]) -> Option<Rect> {
+    let rect = volume_rect(plan, cells);
+    if !plan.intermediate() || plan.slices() == 0 || cells[0] == 0 || cells[1] == 0 {
+        return rect;
+    }
+    let grid = plan.grid.size;
+    let (mut lo, mut hi) = match rect {
+        Some(r) => ([r.p0 as i64, r.q0 as i64], [r.p1 as i64, r.q1 as i64]),
+        None => ([i64::MAX; 2], [i64::MIN; 2]),
+    };
+    let [k0, k1] = plan.k_range;
+    for k in k0..k1.min(plan.slices() - 1) {
+        let x: [[i64; 2]; 2] = [0, 1].map(|a| {
+            let [x0, x1] = plan.mid_map(k, a).pixels_of_cells(0, cells[a] as i64 - 1);
+            [x0.max(0), x1.min(grid[a] as i64 - 1)]
+        });
+        if x[0][0] <= x[0][1] && x[1][0] <= x[1][1] {
+            for a in 0..2 {
+                lo[a] = lo[a].min(x[a][0]);
+                hi[a] = hi[a].max(x[a][1]);
+            }
+        }
+    }
+    (lo[0] <= hi[0] && lo[1] <= hi[1]).then(|| Rect { p0: lo[0] as usize, p1: hi[0] as usize, q0: lo[1] as usize, q1: hi[1] as usize })
+}
+
 /// The rays of a scaled plan ([`MapKind::ScaleTranslate`]) that can meet an
 /// occupied cell of `mask` (of a volume of `cells` cells per slice): the
 /// pixels whose samples fall in some composited slice's box of non-zero codes

@@ -1262,29 +1262,7 @@ fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(usize, u
 /// The rectangle of the intermediate grid that rays through the volume can reach
 /// under `plan`'s slice maps (geometry only, no mask): used by brute force.
 pub fn volume_rect(plan: &FramePlan, cells: [usize; 2]) -> Option<Rect> {
-    let grid = plan.grid.size;
-    if cells[0] == 0 || cells[1] == 0 || plan.maps.is_empty() {
-        return None;
-    }
-    plan.front_to_back().next()?;
-    // the pixels whose samples fall in the cells of the slices composited
-    // (a slice whose cells no pixel of the grid samples adds none; a plan
-    // whose slices all fall off its grid — a pyramid of a split perspective
-    // frame can — has no rect)
-    let span = |a: usize| {
-        let xs = || {
-            plan.front_to_back()
-                .map(move |k| plan.pixels_of_cells(k, a, 0, cells[a] as i64 - 1))
-                .map(|[x0, x1]| [x0.max(0), x1.min(grid[a] as i64 - 1)])
-                .filter(|[x0, x1]| x0 <= x1)
-        };
-        let lo = xs().map(|x| x[0]).min()?;
-        let hi = xs().map(|x| x[1]).max()?;
-        Some((lo as usize, hi as usize))
-    };
-    let (p0, p1) = span(0)?;
-    let (q0, q1) = span(1)?;
-    Some(Rect { p0, p1, q0, q1 })
+    maps_rect(plan, cells, false)
 }
 
 /// [`volume_rect`] with the pixels of the plan's intermediate samples
@@ -1295,29 +1273,38 @@ pub fn volume_rect(plan: &FramePlan, cells: [usize; 2]) -> Option<Rect> {
 /// force's rectangle ([`RleVolume::rect`](crate::encode::rle::runs::RleVolume::rect)
 /// takes the same maps over the slices' boxes).
 pub fn volume_rect_with_mids(plan: &FramePlan, cells: [usize; 2]) -> Option<Rect> {
-    let rect = volume_rect(plan, cells);
-    if !plan.intermediate() || plan.slices() == 0 || cells[0] == 0 || cells[1] == 0 {
-        return rect;
-    }
+    maps_rect(plan, cells, plan.intermediate())
+}
+
+/// The pixels whose samples fall in the cells of the slices composited
+/// (and, with `mids`, of the intermediate samples between them).
+fn maps_rect(plan: &FramePlan, cells: [usize; 2], mids: bool) -> Option<Rect> {
     let grid = plan.grid.size;
-    let (mut lo, mut hi) = match rect {
-        Some(r) => ([r.p0 as i64, r.q0 as i64], [r.p1 as i64, r.q1 as i64]),
-        None => ([i64::MAX; 2], [i64::MIN; 2]),
-    };
-    let [k0, k1] = plan.k_range;
-    for k in k0..k1.min(plan.slices() - 1) {
-        let x: [[i64; 2]; 2] = [0, 1].map(|a| {
-            let [x0, x1] = plan.mid_map(k, a).pixels_of_cells(0, cells[a] as i64 - 1);
-            [x0.max(0), x1.min(grid[a] as i64 - 1)]
-        });
-        if x[0][0] <= x[0][1] && x[1][0] <= x[1][1] {
-            for a in 0..2 {
-                lo[a] = lo[a].min(x[a][0]);
-                hi[a] = hi[a].max(x[a][1]);
-            }
-        }
+    if cells[0] == 0 || cells[1] == 0 || plan.maps.is_empty() {
+        return None;
     }
-    (lo[0] <= hi[0] && lo[1] <= hi[1]).then(|| Rect { p0: lo[0] as usize, p1: hi[0] as usize, q0: lo[1] as usize, q1: hi[1] as usize })
+    plan.front_to_back().next()?;
+    // (a slice whose cells no pixel of the grid samples adds none; a plan
+    // whose slices all fall off its grid — a pyramid of a split perspective
+    // frame can — has no rect)
+    let [k0, k1] = plan.k_range;
+    let mid_ks = if mids { k0..k1.min(plan.slices().saturating_sub(1)) } else { 0..0 };
+    let span = |a: usize| {
+        let last = cells[a] as i64 - 1;
+        let xs = || {
+            plan.front_to_back()
+                .map(move |k| plan.pixels_of_cells(k, a, 0, last))
+                .chain(mid_ks.clone().map(move |k| plan.mid_map(k, a).pixels_of_cells(0, last)))
+                .map(|[x0, x1]| [x0.max(0), x1.min(grid[a] as i64 - 1)])
+                .filter(|[x0, x1]| x0 <= x1)
+        };
+        let lo = xs().map(|x| x[0]).min()?;
+        let hi = xs().map(|x| x[1]).max()?;
+        Some((lo as usize, hi as usize))
+    };
+    let (p0, p1) = span(0)?;
+    let (q0, q1) = span(1)?;
+    Some(Rect { p0, p1, q0, q1 })
 }
 
 /// The rays of a scaled plan ([`MapKind::ScaleTranslate`]) that can meet an

@@ -128,8 +128,9 @@ impl PostTables {
     /// direction up to sign, so two neighbours' codes may point opposite
     /// ways where the surface's normal crosses the codes' hemisphere
     /// boundary: the sampler turns a cell's normals to one side before
-    /// blending them, column by column, [`crate::composite::slices::Sampler::column`]
-    /// and `blend_columns`.)
+    /// blending them: a slice's cell column by column
+    /// ([`crate::composite::slices::Sampler::column`] and `blend_columns`),
+    /// a midpoint's eight together (`align_normals`).)
     #[inline(always)]
     pub fn voxel(&self, v: RleVoxel) -> [f32; 4] {
         let n = self.normals[v.normal as usize & (NORMAL_CODES - 1)];

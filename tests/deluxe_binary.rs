@@ -44,7 +44,8 @@ fn renderer(vol: &Volume, tissues: bool, tf: &TransferFunction, s: Settings, pro
 
 /// The generator of `perspective_binary_equals_brute_force_bit_for_bit` and
 /// `binary_equals_brute_force` with Deluxe I on: random blob volumes, views,
-/// transfer functions (band included), parallel and perspective, both modes,
+/// transfer functions (band included), parallel and perspective (the eye 0.05
+/// to 5 diagonals away: near and inside the volume too), both modes,
 /// super cells 1–4, u32/u64, LUT/bit scan, 1-bit masks and threshold codes,
 /// ERT off; the intermediate image (colour and iso depth) and the final one
 /// bit for bit, and the same for one thread and two.
@@ -58,7 +59,10 @@ fn deluxe_i_binary_equals_brute_force_bit_for_bit() {
         let vol = blobs(dims, 500 + case as u64, sp);
         let rot = DMat3::from_euler(EulerRot::XYZ, rnd() * 7.0, rnd() * 7.0, rnd() * 7.0);
         let persp = case % 2 == 1;
-        let proj = if persp { Projection::perspective(10.0 + rnd() * 60.0, 1.5 + rnd() * 3.5).unwrap() } else { Projection::Parallel };
+        // the eye near or inside the volume (the pyramid split) in every other perspective case:
+        // there a midpoint can lie in the volume while both its slices' samples lie outside
+        let dist = if case % 4 == 1 { 0.05 + rnd() * 0.95 } else { 1.5 + rnd() * 3.5 };
+        let proj = if persp { Projection::perspective(10.0 + rnd() * 60.0, dist).unwrap() } else { Projection::Parallel };
         let cam = Camera::new(rot, [44, 36]);
         let mode = if (case / 2) % 2 == 0 { Mode::Blend } else { Mode::Iso };
         let s = Settings {

@@ -29,6 +29,7 @@ use crate::data::volume::Volume;
 use crate::encode::depth::{Matcher, Search, binary_matcher};
 use crate::encode::mask::{BinaryMask, CellCodes, MAX_CELL, PackedCodes, ShearWork};
 use crate::encode::rle::{ClassKey, RleCache};
+use crate::encode::walk::Drift;
 use crate::error::{Error, Result};
 use crate::memory::Memory;
 use crate::view::clip::{ClipRegion, Region};
@@ -1692,10 +1693,13 @@ impl Renderer {
                         AnyMask::W64(m) => m.shear_to(&plan.shear),
                     };
                     if plan.kind == MapKind::ScaleTranslate {
-                        // what the diverging rays' walks skip blocks by
+                        // what the diverging rays' walks skip blocks by (rays
+                        // that do not drift read the shear's fractions only)
+                        let [lo, hi] = plan.k_range;
+                        let tables = !Drift::new(&plan.shear, &plan.scaled, lo.min(hi), hi).is_still();
                         match &mut m.mask {
-                            AnyMask::W32(m) => m.update_occupancy(matcher, &plan.shear),
-                            AnyMask::W64(m) => m.update_occupancy(matcher, &plan.shear),
+                            AnyMask::W32(m) => m.update_occupancy(matcher, &plan.shear, tables),
+                            AnyMask::W64(m) => m.update_occupancy(matcher, &plan.shear, tables),
                         }
                     }
                     (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);

@@ -31,7 +31,7 @@ use crate::data::normals::{ByteCells, NormalStack, PackedCells, ShadeTable, appl
 use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
-use crate::encode::walk::{BlockOccupancy, ColumnWalk, Drift};
+use crate::encode::walk::{BlockOccupancy, ColumnWalk, Drift, StillWalk};
 use crate::view::plan::{FramePlan, MapKind, SliceMap, floor_i64};
 
 /// Everything a ray needs, borrowed for one frame.
@@ -899,12 +899,21 @@ fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
             let mut src = Columns::new(ctx, mask, search, m, q, p0);
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
-        MapKind::ScaleTranslate => render_rows(rect, out, |q, p0, crow, drow| {
+        MapKind::ScaleTranslate => {
             let [lo, hi] = ctx.plan.k_range;
             let drift = Drift::new(&ctx.plan.shear, &ctx.plan.scaled, lo.min(hi), hi);
-            let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q, drift, blocks: None };
-            binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
-        }),
+            if drift.is_still() {
+                // a parallel plan at another pixel pitch: no ray drifts
+                return render_rows(rect, out, |q, p0, crow, drow| {
+                    let mut src = Still { ctx, mask, occ: mask.occupancy(), search, m, q, drift };
+                    binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
+                });
+            }
+            render_rows(rect, out, |q, p0, crow, drow| {
+                let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q, drift, blocks: None };
+                binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
+            })
+        }
     }
 }
 
@@ -1078,6 +1087,38 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
             let (lo, hi) = if asc { (lo.max(b * len), hi) } else { (lo, hi.min(b * len + len - 1)) };
             (b, first(lo, hi, !asc).unwrap_or(b))
         });
+    }
+}
+
+/// The rays of a scaled plan none of whose rays drifts across the mask
+/// ([`Drift::is_still`]: a parallel plan at another pixel pitch, `--quality`
+/// or Deluxe M): each reads the one or two columns per axis its cells sit in
+/// ([`StillWalk`]), as a translated ray reads its one column.
+struct Still<'a, W: Word> {
+    ctx: &'a RayContext<'a>,
+    mask: &'a BinaryMask<W>,
+    occ: &'a BlockOccupancy,
+    search: Search,
+    m: &'a Matcher,
+    q: usize,
+    drift: Drift,
+}
+
+impl<'a, W: Word> RaySource for Still<'a, W> {
+    type Ray = ScaledRay;
+    type Walk = StillWalk<'a, W>;
+    #[inline(always)]
+    fn ray<V: Cells>(&mut self, _: &V, p: usize) -> (ScaledRay, Option<(StillWalk<'a, W>, usize)>) {
+        let ctx = self.ctx;
+        let ray = ctx.scaled_ray(p, self.q);
+        let [lo, hi] = ctx.plan.ray_range(p, self.q);
+        let mut it = StillWalk::new(self.mask, self.occ, &self.drift, ray.at, lo, hi, ctx.ascending, self.search, self.m);
+        let first = it.peek();
+        (ray, first.map(|k0| (it, k0)))
+    }
+    #[inline(always)]
+    fn ray_of(&self, p: usize) -> ScaledRay {
+        self.ctx.scaled_ray(p, self.q)
     }
 }
 
@@ -1406,12 +1447,12 @@ mod tests {
                         if (i + s) % 2 == 0 {
                             let mut mask = BinaryMask::<u64>::from_codes(&codes, s);
                             mask.shear_to(&plan.shear);
-                            mask.update_occupancy(binary_matcher(), &plan.shear);
+                            mask.update_occupancy(binary_matcher(), &plan.shear, true);
                             render_binary(&ctx, &mask, Search::Bitscan, binary_matcher(), true, rect, &mut got);
                         } else {
                             let mut mask = BinaryMask::<u32>::from_codes(&codes, s);
                             mask.shear_to(&plan.shear);
-                            mask.update_occupancy(binary_matcher(), &plan.shear);
+                            mask.update_occupancy(binary_matcher(), &plan.shear, true);
                             render_binary(&ctx, &mask, Search::Bitscan, binary_matcher(), true, rect, &mut got);
                         }
                         let bits = |x: &Intermediate| {

@@ -268,6 +268,11 @@ impl<W: Word> BinaryMask<W> {
         let s = (q * self.grid[0] + p) * self.nw;
         &self.words[s..s + self.nw]
     }
+    /// Where the depth row of grid column `(p, q)` starts in [`BinaryMask::words`].
+    #[inline(always)]
+    pub fn row_start(&self, p: usize, q: usize) -> usize {
+        (q * self.grid[0] + p) * self.nw
+    }
     /// The depth row that ray `(p, q)` of the intermediate image reads.
     #[inline(always)]
     pub fn ray_row(&self, p: usize, q: usize) -> &[W] {
@@ -646,10 +651,12 @@ impl<W: Word> BinaryMask<W> {
 
     /// Rebuilds the block occupancy of the mask, sheared to `state`, for
     /// matcher `m` (what the walks of a scaled plan's rays read: see
-    /// [`crate::encode::walk`]), reusing its tables.
-    pub fn update_occupancy(&mut self, m: &crate::encode::depth::Matcher, state: &ShearState) {
+    /// [`crate::encode::walk`]), reusing its tables; without `tables` only the
+    /// shear's fractions and the occupied slices (all a
+    /// [`crate::encode::walk::StillWalk`] reads).
+    pub fn update_occupancy(&mut self, m: &crate::encode::depth::Matcher, state: &ShearState, tables: bool) {
         let mut occ = std::mem::take(&mut self.occupancy);
-        occ.build(self, m, state);
+        occ.build(self, m, state, tables);
         self.occupancy = occ;
     }
 

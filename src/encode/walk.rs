@@ -366,6 +366,17 @@ impl Drift {
     }
 }
 
+/// The slot of the first match of `cur` (the top bits of its matching slots;
+/// not zero) in walking order, cleared from `cur`: the step both walks'
+/// searches share.
+#[inline(always)]
+fn take_first<W: Word>(cur: &mut W, ascending: bool, search: Search, log_nb: u32) -> usize {
+    let bit = if ascending { lz(*cur, search) } else { W::BITS - 1 - tz(*cur, search) };
+    // clear it (the top bit of its slot)
+    *cur &= !(W::MSB >> bit);
+    (bit >> log_nb) as usize
+}
+
 /// The slices of one ray of a scaled plan whose mask codes match, front to back
 /// (a superset of the slices whose sample may be visible; see the module docs).
 pub struct ColumnWalk<'a, W: Word> {
@@ -589,10 +600,7 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
         let slots = (W::BITS >> self.log_nb) as usize;
         loop {
             if self.cur != W::ZERO {
-                let bit = if self.ascending { lz(self.cur, self.search) } else { W::BITS - 1 - tz(self.cur, self.search) };
-                // clear it (the top bit of its slot)
-                self.cur &= !(W::MSB >> bit);
-                return Some(self.word * slots + (bit >> self.log_nb) as usize);
+                return Some(self.word * slots + take_first(&mut self.cur, self.ascending, self.search, self.log_nb));
             }
             if self.start_segment() {
                 continue;
@@ -736,9 +744,7 @@ impl<'a, W: Word> StillWalk<'a, W> {
         let slots = (W::BITS >> self.log_nb) as usize;
         loop {
             if self.cur != W::ZERO {
-                let bit = if self.ascending { lz(self.cur, self.search) } else { W::BITS - 1 - tz(self.cur, self.search) };
-                self.cur &= !(W::MSB >> bit);
-                return Some(self.word * slots + (bit >> self.log_nb) as usize);
+                return Some(self.word * slots + take_first(&mut self.cur, self.ascending, self.search, self.log_nb));
             }
             if self.done {
                 return None;

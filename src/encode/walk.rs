@@ -717,10 +717,15 @@ impl<'a, W: Word> StillWalk<'a, W> {
     fn load(&mut self) {
         let w = self.word;
         self.done = w == self.word_end;
-        let mut h = W::ZERO;
+        // the codes ORed, then matched once: a slot's `a | b` is at least
+        // `max(a, b)`, so every match of a column is a match of the OR (a
+        // superset, as the columns are; exact for 1-bit codes and for
+        // thresholds that are a power of two)
+        let mut x = W::ZERO;
         for &r in &self.rows[..self.n] {
-            h |= self.m.hits(self.words[r as usize + w]);
+            x |= self.words[r as usize + w];
         }
+        let h = self.m.hits(x);
         // the ray's slices in this word
         let slots = (W::BITS >> self.log_nb) as usize;
         let nb = 1u32 << self.log_nb;

@@ -1695,8 +1695,7 @@ impl Renderer {
                     if plan.kind == MapKind::ScaleTranslate {
                         // what the diverging rays' walks skip blocks by (rays
                         // that do not drift read the shear's fractions only)
-                        let [lo, hi] = plan.k_range;
-                        let tables = !Drift::new(&plan.shear, &plan.scaled, lo.min(hi), hi).is_still();
+                        let tables = !Drift::for_plan(plan).is_still();
                         match &mut m.mask {
                             AnyMask::W32(m) => m.update_occupancy(matcher, &plan.shear, tables),
                             AnyMask::W64(m) => m.update_occupancy(matcher, &plan.shear, tables),

@@ -900,8 +900,7 @@ fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
             binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
         }),
         MapKind::ScaleTranslate => {
-            let [lo, hi] = ctx.plan.k_range;
-            let drift = Drift::new(&ctx.plan.shear, &ctx.plan.scaled, lo.min(hi), hi);
+            let drift = Drift::for_plan(ctx.plan);
             if drift.is_still() {
                 // a parallel plan at another pixel pitch: no ray drifts
                 return render_rows(rect, out, |q, p0, crow, drow| {

@@ -69,7 +69,7 @@ use crate::composite::Rect;
 use crate::encode::depth::{Matcher, Search, Word, lz, tz};
 use crate::encode::mask::BinaryMask;
 use crate::encode::shear::ShearState;
-use crate::view::plan::{ScaledMap, floor_i64};
+use crate::view::plan::{FramePlan, ScaledMap, floor_i64};
 
 /// Rounding margin on the drift `u` (voxels): the maps are computed per slice
 /// in f64, affine in `k` to far below this.
@@ -117,7 +117,8 @@ impl BlockOccupancy {
     /// reusing the allocation; without `tables`, only the fractions and the
     /// occupied slices ([`StillWalk`] reads no block table).
     pub fn build<W: Word>(&mut self, mask: &BinaryMask<W>, m: &Matcher, shear: &ShearState, tables: bool) {
-        self.rect = mask.occupied_rect();
+        // (without tables no rectangle: `any` then reads none)
+        self.rect = if tables { mask.occupied_rect() } else { None };
         let nk = mask.slices();
         let slots = (W::BITS / m.width()) as usize;
         self.len = slots.div_ceil(BLOCKS_PER_WORD);
@@ -145,11 +146,6 @@ impl BlockOccupancy {
             (Some(a), Some(b)) => [a, b],
             _ => [1, 0],
         };
-        if !tables {
-            // (no block is asked: `any` reads no table without a rectangle)
-            self.rect = None;
-            return;
-        }
         let Some(r) = self.rect else { return };
         let (w, h) = (r.p1 - r.p0 + 1, r.q1 - r.q0 + 1);
         self.stride = w + 1;
@@ -347,6 +343,14 @@ impl Drift {
             [s0, t0, (s1 - s0) / n, (t1 - t0) / n]
         });
         Drift { k0: lo as f64, c }
+    }
+
+    /// The drift of `plan`'s rays across its mask (sheared to the plan's
+    /// shear), from the ends of its slice range: what both the frame (which
+    /// block table to build) and the rows (which walk) ask.
+    pub fn for_plan(plan: &FramePlan) -> Self {
+        let [lo, hi] = plan.k_range;
+        Drift::new(&plan.shear, &plan.scaled, lo.min(hi), hi)
     }
 
     /// True when no ray drifts (a parallel plan at another pixel pitch: every
@@ -626,11 +630,11 @@ impl<W: Word> Iterator for ColumnWalk<'_, W> {
 /// The slices of one ray of a plan whose rays do not drift
 /// ([`Drift::is_still`]) whose mask codes match, front to back: the ray's
 /// cells sit in the same one or two mask columns per axis in every slice (see
-/// the module docs: `floor(u + frac(trans[k]))` with `u` fixed), so the walk
-/// reads, per word of slices, the OR of those columns' matches (at most four
-/// rows; the columns from the word's own range of fractions), masked to the
-/// ray's slices, and bit-scans it, as a translated ray scans its one column.
-/// No block table and no segments: one word test per column and word.
+/// the module docs: `floor(u + frac(trans[k]))` with `u` fixed; the columns
+/// from the frame's range of fractions, found once), so the walk reads, per
+/// word of slices, those columns' codes ORed, matches them once, masks the
+/// matches to the ray's slices and bit-scans them, as a translated ray scans
+/// its one column. No block table and no segments: one match per word.
 pub struct StillWalk<'a, W: Word> {
     /// The mask's rows ([`BinaryMask::words`]) and where the ray's columns'
     /// rows start in them (`n` of them).
@@ -711,8 +715,8 @@ impl<'a, W: Word> StillWalk<'a, W> {
         it
     }
 
-    /// Reads word `word`: the OR of its columns' matches, masked to the ray's
-    /// slices; marks the walk done at the last word.
+    /// Reads word `word`: the matches of the ray's columns' codes ORed,
+    /// masked to the ray's slices; marks the walk done at the last word.
     #[inline(always)]
     fn load(&mut self) {
         let w = self.word;

@@ -148,7 +148,9 @@ impl PostTables {
             return [0.0; 4];
         }
         let p = p.min((TABLE_NODES - 1) as f32);
-        let i = (p as usize).min(TABLE_NODES - 2);
+        // (p is in [0, TABLE_NODES − 1] here, so through i32: one conversion
+        // instead of the float-to-usize sequence; the same index)
+        let i = (p as i32 as usize).min(TABLE_NODES - 2);
         let t = p - i as f32;
         let (a, b) = (self.lut[i], self.lut[i + 1]);
         let alpha = a[3] + (b[3] - a[3]) * t;

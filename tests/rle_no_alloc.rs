@@ -3,9 +3,6 @@
 //! pre-classified paths make no heap allocations on any thread, except rayon's
 //! job injector growing by one block per 63 queued jobs (a frame queues one).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-
 use glam::DMat3;
 use shearwarp::classify::presets::tissues_for;
 use shearwarp::composite::Mode;
@@ -14,32 +11,9 @@ use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::{Camera, Projection, rotate_eye};
 use shearwarp::warp::Image;
 
-struct Counting;
-static COUNT: AtomicBool = AtomicBool::new(false);
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    // SAFETY: forwards every call unchanged to the system allocator; the counter
-    // is an atomic side effect that does not touch the memory handed out.
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        if COUNT.load(Ordering::Relaxed) {
-            ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        if COUNT.load(Ordering::Relaxed) {
-            ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+#[path = "common/counting_alloc.rs"]
+mod counting_alloc;
+use counting_alloc::allocations;
 
 #[test]
 fn steady_state_rle_frames_do_not_allocate() {
@@ -72,13 +46,11 @@ fn steady_state_rle_frames_do_not_allocate() {
                 for d in 0..40 {
                     r.render(&cam(d as f64 * 0.7), &mut img).unwrap();
                 }
-                ALLOCS.store(0, Ordering::Relaxed);
-                COUNT.store(true, Ordering::Relaxed);
-                for d in 0..40 {
-                    r.render(&cam(d as f64 * 0.7), &mut img).unwrap();
-                }
-                COUNT.store(false, Ordering::Relaxed);
-                let n = ALLOCS.load(Ordering::Relaxed);
+                let n = allocations(|| {
+                    for d in 0..40 {
+                        r.render(&cam(d as f64 * 0.7), &mut img).unwrap();
+                    }
+                });
                 assert!(n <= 1, "{n} allocations in 40 frames ({method:?}, {mode:?}, {threads} threads, {projection:?})");
             }
         }

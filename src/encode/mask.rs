@@ -265,7 +265,7 @@ impl<W: Word> BinaryMask<W> {
     /// The depth row of grid column `(p, q)`.
     #[inline(always)]
     pub fn row(&self, p: usize, q: usize) -> &[W] {
-        let s = (q * self.grid[0] + p) * self.nw;
+        let s = self.row_start(p, q);
         &self.words[s..s + self.nw]
     }
     /// Where the depth row of grid column `(p, q)` starts in [`BinaryMask::words`].

@@ -370,6 +370,17 @@ impl Drift {
     }
 }
 
+/// The slots of slices `lo ..= hi` (index order, both in word `w` of a
+/// depth row of `2^log_nb`-bit codes) as a mask over that word: what both
+/// walks keep of a word's matches.
+#[inline(always)]
+fn slots_of<W: Word>(log_nb: u32, w: usize, lo: usize, hi: usize) -> W {
+    let (slots, nb) = ((W::BITS >> log_nb) as usize, 1u32 << log_nb);
+    let (j0, j1) = ((lo - w * slots) as u32, (hi - w * slots) as u32);
+    let all = !W::ZERO;
+    (all >> (nb * j0)) & (all << (W::BITS - nb * (j1 + 1)))
+}
+
 /// The slot of the first match of `cur` (the top bits of its matching slots;
 /// not zero) in walking order, cleared from `cur`: the step both walks'
 /// searches share.
@@ -574,12 +585,8 @@ impl<'a, W: Word> ColumnWalk<'a, W> {
             return true;
         };
         let (lo, hi) = if self.ascending { (k0, k1) } else { (k1, k0) };
-        let slots = (W::BITS >> self.log_nb) as usize;
-        let nb = 1u32 << self.log_nb;
         let w = self.word;
-        let (j0, j1) = ((lo - w * slots) as u32, (hi - w * slots) as u32);
-        let all = !W::ZERO;
-        let range = (all >> (nb * j0)) & (all << (W::BITS - nb * (j1 + 1)));
+        let range = slots_of::<W>(self.log_nb, w, lo, hi);
         let mut h = W::ZERO;
         for q in q0..=q1 {
             for p in p0..=p1 {
@@ -729,14 +736,10 @@ impl<'a, W: Word> StillWalk<'a, W> {
         for &r in &self.rows[..self.n] {
             x |= self.words[r as usize + w];
         }
-        let h = self.m.hits(x);
         // the ray's slices in this word
         let slots = (W::BITS >> self.log_nb) as usize;
-        let nb = 1u32 << self.log_nb;
         let first = w * slots;
-        let (j0, j1) = (self.lo.max(first) - first, self.hi.min(first + slots - 1) - first);
-        let all = !W::ZERO;
-        self.cur = h & (all >> (nb * j0 as u32)) & (all << (W::BITS - nb * (j1 as u32 + 1)));
+        self.cur = self.m.hits(x) & slots_of::<W>(self.log_nb, w, self.lo.max(first), self.hi.min(first + slots - 1));
     }
 
     /// The next matching slice, without consuming it.

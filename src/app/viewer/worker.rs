@@ -577,25 +577,33 @@ mod tests {
     use shearwarp::view::Camera;
     use shearwarp::warp::Image;
 
-    fn setup(mode: Mode) -> (Renderers, Spec) {
+    /// The first tissue's still parallel frame through `camera`.
+    pub(super) fn spec_at(camera: Camera) -> Spec {
+        Spec {
+            seq: 1,
+            camera,
+            class: Class::Tissue(0),
+            cell: 1,
+            projection: Projection::Parallel,
+            quality: 1.0,
+            clip: None,
+            lens: None,
+            still: true,
+        }
+    }
+
+    /// The small head phantom's renderers with `s`, and [`spec_at`] a 64×48
+    /// anterior camera.
+    fn setup_with(s: Settings) -> (Renderers, Spec) {
         let vol = Phantom::Head.build([40, 40, 36]).unwrap();
         let tissues = presets::tissues_for(&vol);
-        let r = Renderers::new(vol, &tissues, Settings { mode, threads: 1, ..Settings::default() }).unwrap();
+        let r = Renderers::new(vol, &tissues, s).unwrap();
         let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-        (
-            r,
-            Spec {
-                seq: 1,
-                camera: cam,
-                class: Class::Tissue(0),
-                cell: 1,
-                projection: Projection::Parallel,
-                quality: 1.0,
-                clip: None,
-                lens: None,
-                still: true,
-            },
-        )
+        (r, spec_at(cam))
+    }
+
+    fn setup(mode: Mode) -> (Renderers, Spec) {
+        setup_with(Settings { mode, threads: 1, ..Settings::default() })
     }
 
     fn frame(rx: &mpsc::Receiver<Reply>) -> Frame {
@@ -634,17 +642,7 @@ mod tests {
             let mut centres = vec![];
             for mode in [Mode::Iso, Mode::Blend] {
                 let mut r = Renderers::new(vol.clone(), &tissues, Settings { mode, threads: 1, ..Settings::default() }).unwrap();
-                let spec = Spec {
-                    seq: 1,
-                    camera: cam,
-                    class: Class::Tissue(0),
-                    cell: 1,
-                    projection,
-                    quality: 1.0,
-                    clip: None,
-                    lens: None,
-                    still: true,
-                };
+                let spec = Spec { projection, ..spec_at(cam) };
                 let rays = Rays::with_projection(&cam, &projection, dims, [1.0; 3]).unwrap();
                 let toward_eye = rot.transpose() * glam::DVec3::Z;
                 let mut img = Image::new(64, 48);
@@ -737,22 +735,7 @@ mod tests {
     #[test]
     fn renderers_render_perspective() {
         for mode in [Mode::Iso, Mode::Blend] {
-            let vol = Phantom::Head.build([40, 40, 36]).unwrap();
-            let tissues = presets::tissues_for(&vol);
-            let s = Settings { mode, threads: 1, method: shearwarp::render::Method::Rle, ..Settings::default() };
-            let mut r = Renderers::new(vol, &tissues, s).unwrap();
-            let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec = Spec {
-                seq: 1,
-                camera: cam,
-                class: Class::Tissue(0),
-                cell: 1,
-                projection: Projection::Parallel,
-                quality: 1.0,
-                clip: None,
-                lens: None,
-                still: true,
-            };
+            let (mut r, spec) = setup_with(Settings { mode, threads: 1, method: shearwarp::render::Method::Rle, ..Settings::default() });
             let mut par = Image::new(64, 48);
             r.render(&spec, &mut par).unwrap();
             // the spec's projection is what renders
@@ -773,25 +756,10 @@ mod tests {
     #[test]
     fn renderers_render_the_interactive_clip_plane() {
         for mode in [Mode::Iso, Mode::Blend] {
-            let vol = Phantom::Head.build([40, 40, 36]).unwrap();
-            let tissues = presets::tissues_for(&vol);
-            let s = Settings { mode, threads: 1, ..Settings::default() };
-            let mut r = Renderers::new(vol, &tissues, s).unwrap();
-            let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec = Spec {
-                seq: 1,
-                camera: cam,
-                class: Class::Tissue(0),
-                cell: 1,
-                projection: Projection::Parallel,
-                quality: 1.0,
-                clip: None,
-                lens: None,
-                still: true,
-            };
+            let (mut r, spec) = setup(mode);
             let mut whole = Image::new(64, 48);
             r.render(&spec, &mut whole).unwrap();
-            let r3 = cam.rotation;
+            let r3 = spec.camera.rotation;
             let toward = [r3.x_axis.z, r3.y_axis.z, r3.z_axis.z];
             let mut cut = Image::new(64, 48);
             r.render(&Spec { clip: Some(Plane { normal: toward, offset: 0.0 }), ..spec }, &mut cut).unwrap();
@@ -811,23 +779,8 @@ mod tests {
     fn renderers_render_clip_planes() {
         use shearwarp::view::clip::{ClipPlane, ClipPlanes};
         for mode in [Mode::Iso, Mode::Blend] {
-            let vol = Phantom::Head.build([40, 40, 36]).unwrap();
-            let tissues = presets::tissues_for(&vol);
-            let s = Settings { mode, threads: 1, ..Settings::default() };
-            let sp = vol.spacing();
-            let mut r = Renderers::new(vol, &tissues, s).unwrap();
-            let cam = Camera { rotation: shearwarp::view::NamedView::Anterior.rotation(), zoom: None, size: [64, 48] };
-            let spec = Spec {
-                seq: 1,
-                camera: cam,
-                class: Class::Tissue(0),
-                cell: 1,
-                projection: Projection::Parallel,
-                quality: 1.0,
-                clip: None,
-                lens: None,
-                still: true,
-            };
+            let (mut r, spec) = setup(mode);
+            let sp = r.select(Class::Tissue(0), 1).unwrap().spacing();
             let half = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], 0.0).unwrap()], sp).unwrap();
             let none = ClipPlanes::new(&[ClipPlane::new([1.0, 0.0, 0.0], -1e6).unwrap()], sp).unwrap();
             for class in [Class::Tissue(0), Class::Custom(100.0)] {
@@ -1199,17 +1152,7 @@ mod lens_timing {
                 let skin = r.tissue_list().iter().position(|t| t.name == "skin").unwrap_or(0);
                 let base = shearwarp::view::NamedView::Anterior.rotation();
                 let cam = |deg: f64| Camera { rotation: shearwarp::view::rotate_eye(base, 1, deg), zoom: None, size: [512, 512] };
-                let spec = Spec {
-                    seq: 1,
-                    camera: cam(0.0),
-                    class: Class::Tissue(skin),
-                    cell: 1,
-                    projection: shearwarp::view::Projection::Parallel,
-                    quality: 1.0,
-                    clip: None,
-                    lens: None,
-                    still,
-                };
+                let spec = Spec { class: Class::Tissue(skin), still, ..super::tests::spec_at(cam(0.0)) };
                 let radius = std::env::var("LENS_RADIUS").ok().and_then(|s| s.parse().ok()).unwrap_or(40.0);
                 let lens = Lens { centre: [0.0; 3], radius, at: None };
                 let bone = r.tissue_list().iter().position(|t| t.name == "bone").unwrap_or(0);

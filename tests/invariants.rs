@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::random_tf;
+use common::{random_tf, random_volume};
 use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
 use shearwarp::classify::{Classifier, TransferFunction};
@@ -17,47 +17,6 @@ use shearwarp::kernels::{self, CpuLevel};
 use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
 use shearwarp::view::{Camera, Factorization, rotate_eye};
 use shearwarp::warp::{Image, Image8};
-
-/// A random volume of blobs and noise with internal empty regions.
-fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        s
-    };
-    let blobs: Vec<([f32; 3], f32, f32)> = (0..4)
-        .map(|_| {
-            let c = [0, 1, 2].map(|a| (next() % 1000) as f32 / 1000.0 * dims[a] as f32);
-            let r = 1.0 + (next() % 1000) as f32 / 1000.0 * dims.iter().copied().max().unwrap() as f32 * 0.4;
-            let v = 50.0 + (next() % 200) as f32;
-            (c, r, v)
-        })
-        .collect();
-    let noise_seed = next();
-    let n = dims[0] * dims[1] * dims[2];
-    let mut data = vec![0f32; n];
-    for z in 0..dims[2] {
-        for y in 0..dims[1] {
-            for x in 0..dims[0] {
-                let mut v = 0f32;
-                for (c, r, val) in &blobs {
-                    let d = ((x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2) + (z as f32 - c[2]).powi(2)).sqrt();
-                    if d < *r {
-                        v = v.max(val * (1.0 - d / r).min(0.5) * 2.0);
-                    }
-                }
-                let h = (x as u64 * 73856093) ^ (y as u64 * 19349663) ^ (z as u64 * 83492791) ^ noise_seed;
-                if h % 17 == 0 {
-                    v += (h % 97) as f32;
-                }
-                data[x + dims[0] * (y + dims[1] * z)] = v;
-            }
-        }
-    }
-    Volume::new(dims, spacing, VoxelData::F32(data)).unwrap()
-}
 
 /// `v` as 16-bit integer scans are: every value rounded to the nearest integer
 /// and stored as u16, so the renderer packs densities with normal codes.

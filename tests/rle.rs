@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::random_tf;
+use common::{random_tf, random_volume};
 use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
 use shearwarp::classify::presets::{Tissue, ct_tissues};
@@ -13,7 +13,7 @@ use shearwarp::classify::{Classifier, TransferFunction};
 use shearwarp::composite::Mode;
 use shearwarp::data::phantom;
 use shearwarp::data::slices::SliceStack;
-use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::data::volume::Volume;
 use shearwarp::encode::rle::{BRIDGE_NORMAL, Preclass, RleVolume};
 use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::{Camera, Projection, rotate_eye};
@@ -23,46 +23,6 @@ use shearwarp::warp::Image;
 /// reference: float rounding. (They share every operation, so in practice the
 /// images are bit-identical; `skipping_is_lossless_without_ert` asserts that.)
 const TOL: f32 = 1e-5;
-
-/// A random volume of blobs and noise with internal empty regions.
-fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        s
-    };
-    let blobs: Vec<([f32; 3], f32, f32)> = (0..4)
-        .map(|_| {
-            let c = [0, 1, 2].map(|a| (next() % 1000) as f32 / 1000.0 * dims[a] as f32);
-            let r = 1.0 + (next() % 1000) as f32 / 1000.0 * dims.iter().copied().max().unwrap() as f32 * 0.4;
-            let v = 50.0 + (next() % 200) as f32;
-            (c, r, v)
-        })
-        .collect();
-    let noise_seed = next();
-    let mut data = vec![0f32; dims[0] * dims[1] * dims[2]];
-    for z in 0..dims[2] {
-        for y in 0..dims[1] {
-            for x in 0..dims[0] {
-                let mut v = 0f32;
-                for (c, r, val) in &blobs {
-                    let d = ((x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2) + (z as f32 - c[2]).powi(2)).sqrt();
-                    if d < *r {
-                        v = v.max(val * (1.0 - d / r).min(0.5) * 2.0);
-                    }
-                }
-                let h = (x as u64 * 73856093) ^ (y as u64 * 19349663) ^ (z as u64 * 83492791) ^ noise_seed;
-                if h.is_multiple_of(17) {
-                    v += (h % 97) as f32;
-                }
-                data[x + dims[0] * (y + dims[1] * z)] = v;
-            }
-        }
-    }
-    Volume::new(dims, spacing, VoxelData::F32(data)).unwrap()
-}
 
 /// One frame: the final image and the full intermediate grid (transparent
 /// outside the valid rectangle).

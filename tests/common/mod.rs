@@ -65,6 +65,47 @@ pub fn blobs(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
     Volume::new(dims, spacing, VoxelData::F32(data)).unwrap()
 }
 
+/// A random volume of four soft blobs and hashed noise, with internal empty
+/// regions (the property tests' volumes: `invariants.rs`, `rle.rs`).
+pub fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
+    let mut s = seed | 1;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        s
+    };
+    let blobs: Vec<([f32; 3], f32, f32)> = (0..4)
+        .map(|_| {
+            let c = [0, 1, 2].map(|a| (next() % 1000) as f32 / 1000.0 * dims[a] as f32);
+            let r = 1.0 + (next() % 1000) as f32 / 1000.0 * dims.iter().copied().max().unwrap() as f32 * 0.4;
+            let v = 50.0 + (next() % 200) as f32;
+            (c, r, v)
+        })
+        .collect();
+    let noise_seed = next();
+    let mut data = vec![0f32; dims[0] * dims[1] * dims[2]];
+    for z in 0..dims[2] {
+        for y in 0..dims[1] {
+            for x in 0..dims[0] {
+                let mut v = 0f32;
+                for (c, r, val) in &blobs {
+                    let d = ((x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2) + (z as f32 - c[2]).powi(2)).sqrt();
+                    if d < *r {
+                        v = v.max(val * (1.0 - d / r).min(0.5) * 2.0);
+                    }
+                }
+                let h = (x as u64 * 73856093) ^ (y as u64 * 19349663) ^ (z as u64 * 83492791) ^ noise_seed;
+                if h.is_multiple_of(17) {
+                    v += (h % 97) as f32;
+                }
+                data[x + dims[0] * (y + dims[1] * z)] = v;
+            }
+        }
+    }
+    Volume::new(dims, spacing, VoxelData::F32(data)).unwrap()
+}
+
 /// A spherical shell and a little hashed noise: structure at every depth.
 pub fn shell_volume(dims: [usize; 3], seed: u64) -> Volume {
     let c = [0.37, 0.55, 0.46].map(|x: f32| x + (seed % 7) as f32 * 0.01);

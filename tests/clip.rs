@@ -143,6 +143,23 @@ fn clip_sphere_rays_in_the_removed_half_only_are_background() {
     }
 }
 
+/// The slices `[ka, kb]` (within `range`) in which the ray `x0 + k·dx` is
+/// inside the box `[lo, hi]`: the slab intersection (`ka > kb`: never).
+fn slab(x0: DVec3, dx: DVec3, lo: DVec3, hi: DVec3, (mut ka, mut kb): (f64, f64)) -> (f64, f64) {
+    for a in 0..3 {
+        if dx[a].abs() < 1e-12 {
+            if x0[a] < lo[a] || x0[a] > hi[a] {
+                return (1.0, 0.0);
+            }
+        } else {
+            let (s, t) = ((lo[a] - x0[a]) / dx[a], (hi[a] - x0[a]) / dx[a]);
+            ka = ka.max(s.min(t));
+            kb = kb.min(s.max(t));
+        }
+    }
+    (ka, kb)
+}
+
 /// The first hit, in (fractional) slices, of the ray `x0 + k·dx` walking
 /// `ascending` (or not) on the ball of radius `radius` about `c`, over the
 /// slices `[ka, kb]` the plane keeps; `None` for none.
@@ -461,18 +478,7 @@ fn clip_box_on_the_sphere_is_the_analytic_csg_depth() {
                 let x0 = sample(plan, 0, p, q);
                 let dx = sample(plan, 1, p, q) - x0;
                 // the box along the ray: the slab intersection, in slices
-                let (mut ka, mut kb) = (0.0f64, last as f64);
-                for a in 0..3 {
-                    if dx[a].abs() < 1e-12 {
-                        if x0[a] < lo[a] || x0[a] > hi[a] {
-                            (ka, kb) = (1.0, 0.0);
-                        }
-                    } else {
-                        let (s, t) = ((lo[a] - x0[a]) / dx[a], (hi[a] - x0[a]) / dx[a]);
-                        ka = ka.max(s.min(t));
-                        kb = kb.min(s.max(t));
-                    }
-                }
+                let (ka, kb) = slab(x0, dx, lo, hi, (0.0, last as f64));
                 let d = inter.depth_at(p, q) as f64;
                 let (Some(exact), Some(far)) =
                     (first_hit(x0, dx, c, radius, ka, kb, plan.view.ascending), first_hit(x0, dx, c, radius, ka, kb, !plan.view.ascending))
@@ -734,18 +740,7 @@ fn clip_box_cut_out_of_the_sphere_is_the_analytic_csg_depth() {
                     let x0 = sample(plan, 0, p, q);
                     let dx = sample(plan, 1, p, q) - x0;
                     // the box along the ray: the slab intersection, in slices
-                    let (mut ka, mut kb) = (f64::NEG_INFINITY, f64::INFINITY);
-                    for a in 0..3 {
-                        if dx[a].abs() < 1e-12 {
-                            if x0[a] < lo[a] || x0[a] > hi[a] {
-                                (ka, kb) = (1.0, 0.0);
-                            }
-                        } else {
-                            let (s, t) = ((lo[a] - x0[a]) / dx[a], (hi[a] - x0[a]) / dx[a]);
-                            ka = ka.max(s.min(t));
-                            kb = kb.min(s.max(t));
-                        }
-                    }
+                    let (ka, kb) = slab(x0, dx, lo, hi, (f64::NEG_INFINITY, f64::INFINITY));
                     let d = inter.depth_at(p, q) as f64;
                     // the kept pieces: exact, and quantized to the slices whose samples leave the box
                     let (exact_pieces, quant_pieces) = if ka > kb {

@@ -142,11 +142,18 @@ fn lens() -> Region {
 
 #[test]
 fn focus_with_the_context_tissue_equals_the_plain_render() {
-    for (method, deluxe) in methods() {
+    assert_context_focus_is_plain(&methods(), [lens(), Region::Box { lo: [5.0, 8.5, 3.0], hi: [30.0, 25.0, 22.2] }]);
+}
+
+/// For every method and Deluxe option of `methods`, both modes, both
+/// projections and two tissues: a focus `region` whose tissue is the context's
+/// own renders every view bit for bit as no focus does.
+fn assert_context_focus_is_plain(methods: &[(Method, Deluxe)], regions: [Region; 2]) {
+    for &(method, deluxe) in methods {
         for mode in [Mode::Iso, Mode::Blend] {
             for persp in [false, true] {
                 for tissue in ["skin", "bone"] {
-                    for region in [lens(), Region::Box { lo: [5.0, 8.5, 3.0], hi: [30.0, 25.0, 22.2] }] {
+                    for region in regions {
                         let mut plain = renderer(method, mode, deluxe, persp, tissue, None);
                         let mut focus = renderer(method, mode, deluxe, persp, tissue, Some(Focus::new(region, tissue)));
                         for rot in views() {
@@ -584,25 +591,7 @@ fn methods_i() -> Vec<(Method, Deluxe)> {
 
 #[test]
 fn focus_deluxe_i_with_the_context_tissue_equals_the_plain_render() {
-    for (method, deluxe) in methods_i() {
-        for mode in [Mode::Iso, Mode::Blend] {
-            for persp in [false, true] {
-                for tissue in ["skin", "bone"] {
-                    for region in [lens(), focus_boxes()[1]] {
-                        let mut plain = renderer(method, mode, deluxe, persp, tissue, None);
-                        let mut focus = renderer(method, mode, deluxe, persp, tissue, Some(Focus::new(region, tissue)));
-                        for rot in views() {
-                            let (a, b) = (frame(&mut plain, rot, 64), frame(&mut focus, rot, 64));
-                            assert!(
-                                bits(&a) == bits(&b),
-                                "{method:?} {deluxe:?} {mode:?} persp {persp} {tissue} {region:?} {rot:?}: the focus changed the frame"
-                            );
-                        }
-                    }
-                }
-            }
-        }
-    }
+    assert_context_focus_is_plain(&methods_i(), [lens(), focus_boxes()[1]]);
 }
 
 #[test]

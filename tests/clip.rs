@@ -143,8 +143,9 @@ fn clip_sphere_rays_in_the_removed_half_only_are_background() {
     }
 }
 
-/// The slices `[ka, kb]` (within `range`) in which the ray `x0 + k·dx` is
-/// inside the box `[lo, hi]`: the slab intersection (`ka > kb`: never).
+/// The slices `[ka, kb]`, within the given `(ka, kb)`, in which the ray
+/// `x0 + k·dx` is inside the box `[lo, hi]`: the slab intersection (`ka > kb`:
+/// never).
 fn slab(x0: DVec3, dx: DVec3, lo: DVec3, hi: DVec3, (mut ka, mut kb): (f64, f64)) -> (f64, f64) {
     for a in 0..3 {
         if dx[a].abs() < 1e-12 {

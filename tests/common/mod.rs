@@ -68,13 +68,7 @@ pub fn blobs(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
 /// A random volume of four soft blobs and hashed noise, with internal empty
 /// regions (the property tests' volumes: `invariants.rs`, `rle.rs`).
 pub fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        s
-    };
+    let mut next = xorshift(seed | 1);
     let blobs: Vec<([f32; 3], f32, f32)> = (0..4)
         .map(|_| {
             let c = [0, 1, 2].map(|a| (next() % 1000) as f32 / 1000.0 * dims[a] as f32);

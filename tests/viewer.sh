@@ -271,7 +271,7 @@ check "--benchmark-drag printed one JSON object ($objects, $(wc -l <"$BENCH") li
 check "--benchmark-drag reported fps > 0 ($fps) and frame_ms_median > 0 ($fms)" bash -c "$(declare -f gt); gt '$fps' 0 && gt '$fms' 0"
 check "--benchmark-drag rendered and presented all 60 frames, none skipped" test "$(num frames)/$(num skipped_frames)" = 60/0
 
-# 14. geometry and clip regions (issue 23): `view --needle` and `view --clip-box
+# 14. geometry and clip regions: `view --needle` and `view --clip-box
 # ... --clip-keep outside` open, draw something other than the plain view, and
 # quit cleanly; bad scene input is a usage error (status 2) before any window
 # scene_view NAME ARGS...: opens the viewer with ARGS, saves shot NAME, quits with Q

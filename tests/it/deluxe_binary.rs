@@ -6,7 +6,7 @@
 //! half steps through a homogeneous medium equal one full step, and I lowers
 //! the staircase error of a solid cube's faces seen along the main diagonal.
 
-mod common;
+use crate::common;
 
 use common::{bits, blobs, random_tf};
 use glam::{DMat3, EulerRot};

@@ -1,4 +1,4 @@
-//! Issue 20's memory checks: every structure is reported, the prediction made
+//! Memory checks: every structure is reported, the prediction made
 //! before building matches what is built, a budget that cannot hold a view
 //! fails with a clear error before anything is allocated, other axes are
 //! freed to make room, and `--max-memory` works from the command line.

@@ -23,7 +23,7 @@
 //!   and `k + 1` is in the focus iff both slices are): equal tissues give the
 //!   plain I frame, accelerated equals brute force, the bone lens holds.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use glam::{DMat3, DVec3, EulerRot};

@@ -1,4 +1,4 @@
-//! Helpers shared by the integration tests (`mod common;`); each test uses
+//! Helpers shared by the integration tests; each test module uses
 //! some of them.
 #![allow(dead_code)]
 

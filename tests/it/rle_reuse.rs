@@ -6,7 +6,7 @@
 //! least 30 % smaller on the head, the shared encoding is built once, and a
 //! classification change re-encodes (no stale pointer table).
 
-mod common;
+use crate::common;
 
 use common::{blobs, uniform};
 use glam::DMat3;

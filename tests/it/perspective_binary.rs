@@ -1,4 +1,4 @@
-//! The binary rotator under perspective (issue 21): each perspective ray walks
+//! The binary rotator under perspective: each perspective ray walks
 //! across the mask sheared to the central direction ([`shearwarp::encode::walk`]),
 //! and must give its brute force's image bit for bit (every slice of every ray
 //! sampled), over random volumes, views, fields of view, eye distances, super
@@ -6,7 +6,7 @@
 //! is as accurate as the parallel binary path, and it converges to the
 //! parallel image as the eye recedes.
 
-mod common;
+use crate::common;
 
 use common::{bits, blobs};
 use glam::{DMat3, EulerRot};

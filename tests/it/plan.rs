@@ -8,7 +8,7 @@
 //!   each ray in front of a split composited over the part behind it is the
 //!   whole ray.
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 

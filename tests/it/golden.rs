@@ -5,7 +5,7 @@
 //! The hashes were recorded before the frame-plan redesign; any refactor of the
 //! traversals, the factorization or the warp must leave them unchanged. A change
 //! that alters images on purpose re-records them with
-//! `SHEARWARP_BLESS=1 cargo test --release --test golden` and names each changed
+//! `SHEARWARP_BLESS=1 cargo test --release --test it golden::` and names each changed
 //! case in its commit message.
 //!
 //! Views are given as explicit object-to-eye rotations of the voxel index axes

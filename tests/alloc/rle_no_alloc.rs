@@ -11,12 +11,11 @@ use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::{Camera, Projection, rotate_eye};
 use shearwarp::warp::Image;
 
-#[path = "common/counting_alloc.rs"]
-mod counting_alloc;
-use counting_alloc::allocations;
+use crate::counting_alloc::{allocations, serial};
 
 #[test]
 fn steady_state_rle_frames_do_not_allocate() {
+    let _serial = serial();
     let vol = Volume::from_fn([40, 36, 44], [1.0; 3], |x, y, z| {
         let d = ((x as f32 - 20.0).powi(2) + (y as f32 - 18.0).powi(2) + (z as f32 - 22.0).powi(2)).sqrt();
         (200.0 - 10.0 * d).max(0.0)

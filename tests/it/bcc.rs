@@ -1,9 +1,9 @@
-//! Issue 22, item 5: the body-centred cubic grid on the RLE paths
+//! The body-centred cubic grid on the RLE paths
 //! (`--grid bcc`). Its size, its resampling, the accelerated path against its
 //! brute force bit for bit, its image against the reference on a smooth
 //! phantom, and its opacity correction on a homogeneous slab.
 
-mod common;
+use crate::common;
 
 use glam::DMat3;
 use shearwarp::accuracy::metrics::rmse;
@@ -235,8 +235,8 @@ fn bcc_unsupported_combinations_are_errors() {
     assert!(r.render(&Camera::new(DMat3::IDENTITY, [32, 32]), &mut img).is_err());
 }
 
-/// Measurement, not a check (`cargo test --release --test bcc -- --ignored
-/// --nocapture bcc_measure`): RMSE of the cartesian and BCC RLE images
+/// Measurement, not a check (`cargo test --release --test it
+/// bcc::bcc_measure -- --ignored --nocapture`): RMSE of the cartesian and BCC RLE images
 /// (blend, `--mode blend` classification as the CLI makes it) against the
 /// reference ray caster of the cartesian volume, over views about y and the
 /// diagonal. `BCC_VOL`: `head` (the 128³ phantom), `cube` (a 64³ binary cube,

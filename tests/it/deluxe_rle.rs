@@ -1,5 +1,5 @@
 //! Shear-Warp Deluxe options I (intermediate slices) and P (post-classified
-//! sampling) on the run-length-encoded path (issue 22, items 1 and 2):
+//! sampling) on the run-length-encoded path:
 //!
 //! - the intermediate sample is trilinear interpolation of the premultiplied
 //!   colours at the ray's midpoint between two slices;
@@ -10,7 +10,7 @@
 //! - P sharpens a step edge that pre-classification blurs;
 //! - a tissue switch under P re-classifies without re-encoding.
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 
@@ -402,7 +402,7 @@ fn deluxe_p_is_a_no_op_on_the_raycast_paths() {
     }
 }
 
-/// Regression (session 18): with the eye near, consecutive slices' positions
+/// Regression: with the eye near, consecutive slices' positions
 /// differ by more than a cell at the image's edge, so a pixel samples the
 /// volume at the midpoint between two slices and outside it at both. The
 /// brute force's rectangle held only the slices' pixels and left those

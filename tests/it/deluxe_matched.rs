@@ -4,7 +4,7 @@
 //! magnified edge, and every accelerated path equal to its brute force with M
 //! (and with I and M) bit for bit.
 
-mod common;
+use crate::common;
 
 use common::{bits, blobs};
 use glam::{DMat3, EulerRot};

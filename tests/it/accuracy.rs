@@ -6,7 +6,7 @@
 //! * the reference converges as its step shrinks;
 //! * the binary iso preview finds the sphere phantom's surface within half a voxel.
 
-mod common;
+use crate::common;
 
 use glam::{DMat3, DVec3};
 use shearwarp::accuracy::metrics::{compare, depth_error, rmse};

@@ -1,7 +1,7 @@
 //! Correctness invariants of the binary fast rotator, as property tests over
 //! random volumes, transfer functions and views.
 
-mod common;
+use crate::common;
 
 use common::{random_tf, random_volume};
 use glam::{DMat3, EulerRot};

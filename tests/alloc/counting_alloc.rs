@@ -1,11 +1,10 @@
 //! A global allocator that counts the heap allocations (and reallocations)
-//! made on any thread while counting is on: the steady-state frame tests
-//! (`no_alloc`, `rle_no_alloc`) include it as a module of their own crate
-//! (`#[path = "common/counting_alloc.rs"] mod counting_alloc;`), since a test
-//! binary has one global allocator.
+//! made on any thread while counting is on, for the steady-state frame tests
+//! (`no_alloc`, `rle_no_alloc`) of this crate.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Mutex, MutexGuard};
 
 struct Counting;
 static COUNT: AtomicBool = AtomicBool::new(false);
@@ -41,4 +40,11 @@ pub fn allocations(f: impl FnOnce()) -> u64 {
     f();
     COUNT.store(false, Ordering::Relaxed);
     ALLOCS.load(Ordering::Relaxed)
+}
+
+/// Held for the whole of a test that counts: the counter sees every thread, so
+/// two counting tests must not run at once.
+pub fn serial() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
 }

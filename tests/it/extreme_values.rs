@@ -87,7 +87,7 @@ proptest! {
 
 #[test]
 fn the_reported_extremes_do_not_panic() {
-    // the cases of issue 18: values of 1e37 and more, ±FLT_MAX sentinels
+    // reported extremes: values of 1e37 and more, ±FLT_MAX sentinels
     for (a, b) in [(0.0, 1e37), (-f32::MAX, f32::MAX), (-f32::MAX, 100.0), (-1000.0, f32::MAX), (3e38, 3.4e38)] {
         let vol =
             Volume::from_fn([6, 5, 4], [1.0; 3], |x, y, z| if (x + y + z) % 3 == 0 { a } else { b - b.abs() * 0.01 * x as f32 }).unwrap();

@@ -1,4 +1,4 @@
-//! Issue 3 invariants: super cells lose nothing, n-bit threshold codes match
+//! Tissue invariants: super cells lose nothing, n-bit threshold codes match
 //! masks built from scratch for each threshold (also after any sequence of
 //! shears), and tissue switches need no rebuild.
 

@@ -1,9 +1,9 @@
-//! Issue 4 invariants of the run-length-encoded pre-classified path: it equals its
+//! Invariants of the run-length-encoded pre-classified path: it equals its
 //! brute-force reference (runs and skip links lose nothing), it is deterministic
 //! across thread counts, its encoding round-trips to the classified voxels, it
 //! follows classification changes, and it draws the same object as the binary path.
 
-mod common;
+use crate::common;
 
 use common::{random_tf, random_volume};
 use glam::{DMat3, EulerRot};

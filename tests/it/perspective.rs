@@ -1,9 +1,9 @@
-//! Perspective shear-warp (issue 21, first phase): the RLE path and its brute
+//! Perspective shear-warp: the RLE path and its brute
 //! force under perspective plans, against each other, the parallel image as
 //! the eye recedes, the perspective reference ray caster, and regression tests
 //! for the defects of the public implementations (Virvo).
 
-mod common;
+use crate::common;
 
 use common::{bits, blobs, render, renderer, xorshift};
 use glam::{DMat3, EulerRot};

@@ -1,7 +1,7 @@
 //! Numerical stability and extreme inputs.
 //!
 //! The normal suite runs short (but real) versions; the long ones are
-//! `#[ignore]`d: `cargo test --release --test stress -- --ignored --nocapture`.
+//! `#[ignore]`d: `cargo test --release --test it stress:: -- --ignored --nocapture`.
 //! Tests that compare against the reference print what they measured
 //! (`--nocapture`), so the worst cases can be read off.
 

@@ -13,7 +13,7 @@
 //!   keeping nothing is an empty frame.
 //! - Zero / NaN normals are errors, in the library and on the command line.
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 
@@ -388,7 +388,7 @@ fn clip_cli_renders_and_rejects_bad_planes_with_exit_code_2() {
 }
 
 /// In blend mode the two halves of a plane-clipped volume composite to the
-/// unclipped image (issue 21): per intermediate pixel, the half toward the
+/// unclipped image: per intermediate pixel, the half toward the
 /// viewer "over" the other equals the whole volume's composite (early
 /// termination off: it would stop the whole ray before the far half), in
 /// both projections, on the RLE path and the binary rotator's blend, over

@@ -1,7 +1,7 @@
-//! Geometry in the volume through the frame plan (issue 23): a mesh's
+//! Geometry in the volume through the frame plan: a mesh's
 //! inverse-warped depth limits every path the same way.
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 

@@ -1,4 +1,4 @@
-//! Issue 18's command-line checks: the thread cap, NaN / zero / negative
+//! Command-line checks: the thread cap, NaN / zero / negative
 //! arguments (exit 2, never a panic or exit 1), warnings instead of silent
 //! black images, one error line per missing file, orientation in `info` and
 //! `--orientation`, and ±FLT_MAX sentinels.

@@ -1,10 +1,10 @@
-//! The adaptive intermediate image size (issue 21, Schulze et al.): `q`
+//! The adaptive intermediate image size (Schulze et al.): `q`
 //! intermediate pixels per voxel, in both projections. The accelerated RLE
 //! path and the binary rotator equal their brute forces at every `q`; `q = 1` is the classic image
 //! bit for bit; the image at any `q` stays close to the reference; the intermediate image's
 //! pixel count scales with `q²`.
 
-mod common;
+use crate::common;
 
 use common::{bits, blobs, render};
 use glam::{DMat3, EulerRot};
@@ -158,7 +158,7 @@ fn quality_images_track_the_reference_in_both_projections() {
             // pre-classified slices blend classified colours between voxels, so a
             // finer grid resamples the same blend (the warp's bilinear did it
             // before): about the same error, not less (matched sampling with
-            // post-classification is what removes the blur, issue 22)
+            // post-classification is what removes the blur)
             assert!(e(2.0) <= e(1.0) * 1.5, "{name} {proj:?}: the finer grid is much worse: {errs:?}");
             assert!(e(0.25) >= e(0.5) && e(0.5) >= e(1.0) * 0.98, "{name} {proj:?}: coarser grids are not coarser: {errs:?}");
             report.push(format!("{name} {}: {errs:?}", if proj.is_perspective() { "perspective" } else { "parallel" }));
@@ -226,7 +226,7 @@ fn quality_cli_renders_and_rejects_bad_values() {
         .stdout(predicate::str::contains("\"quality\":1.5"));
 }
 
-/// The box footprint of a minified slice (issue 21: "a box footprint over
+/// The box footprint of a minified slice ("a box footprint over
 /// opacity-weighted colours where it is minified"): at a quarter pixel per
 /// voxel a one-voxel-thin slab contributes the same total opacity to the
 /// intermediate image wherever it sits between two pixels (one slice thick,

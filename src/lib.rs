@@ -35,6 +35,7 @@ pub mod error;
 pub mod geometry;
 pub mod kernels;
 pub mod memory;
+pub mod output;
 pub mod render;
 pub mod view;
 pub mod warp;

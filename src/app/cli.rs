@@ -7,7 +7,7 @@
 //! bad usage or input and 1 for failures while running.
 
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -282,7 +282,8 @@ pub struct RenderCmd {
     pub volume: VolumeArgs,
     #[command(flatten)]
     pub render: RenderArgs,
-    /// Output PNG.
+    /// Output image: .png, .gif or .apng (by the extension); `-` writes a
+    /// PNG to standard output.
     #[arg(long, short, default_value = "shearwarp.png")]
     pub output: PathBuf,
     /// Print the frame's statistics as JSON.
@@ -762,6 +763,13 @@ fn memory_estimate(vol: &Volume, tissues: usize) -> serde_json::Value {
 
 /// Runs `shearwarp render`.
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
+    let kind = match crate::app::output::image_kind(&cmd.output) {
+        Ok(k) => k,
+        Err(why) => usage!("-o {why}"),
+    };
+    if cmd.json && cmd.output.as_os_str() == "-" {
+        usage!("-o - and --json both write to standard output; give the image a file");
+    }
     let (vol, name) = cmd.volume.load()?;
     let load_ms = crate::app::since_start_ms();
     let dims = vol.dims();
@@ -770,7 +778,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let build_ms = prepare_first(&mut r, &cam)?;
     let (stats, geometry) = scene.render(&mut r, &cam, &mut img)?;
-    img.save_png(&cmd.output)?;
+    crate::app::output::write_image(&cmd.output, kind, &img.to_rgb8())?;
     let first_frame_ms = crate::app::since_start_ms();
     let warnings = shearwarp::checks::frame_warnings(&r, img.coverage());
     for w in &warnings {
@@ -921,10 +929,10 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         kept
     };
     if let Some(p) = &cmd.gif {
-        write_gif(p, &kept)?;
+        crate::app::output::write_gif(p, &kept)?;
     }
     if let Some(p) = &cmd.apng {
-        write_apng(p, &kept)?;
+        crate::app::output::write_apng(p, &kept)?;
     }
     let s = r.settings();
     if cmd.json {
@@ -1164,35 +1172,6 @@ pub fn run_export(cmd: &ExportCmd) -> Result<()> {
 /// Most frames an animation (`--gif`, `--apng`) keeps; longer runs keep every n-th.
 pub const MAX_ANIMATION_FRAMES: usize = 200;
 
-fn write_gif(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
-    use image::codecs::gif::{GifEncoder, Repeat};
-    let f = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
-    let mut enc = GifEncoder::new_with_speed(std::io::BufWriter::new(f), 10);
-    enc.set_repeat(Repeat::Infinite)?;
-    for fr in frames {
-        let rgba = image::DynamicImage::ImageRgb8(fr.clone()).to_rgba8();
-        enc.encode_frame(image::Frame::from_parts(rgba, 0, 0, image::Delay::from_numer_denom_ms(40, 1)))
-            .with_context(|| format!("{}: cannot write GIF frame", path.display()))?;
-    }
-    Ok(())
-}
-
-fn write_apng(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
-    let Some(first) = frames.first() else { usage!("no frames to write") };
-    let f = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(f), first.width(), first.height());
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    enc.set_animated(frames.len() as u32, 0)?;
-    enc.set_frame_delay(1, 25)?;
-    let mut w = enc.write_header()?;
-    for fr in frames {
-        w.write_image_data(fr.as_raw())?;
-    }
-    w.finish()?;
-    Ok(())
-}
-
 /// Rejects a `SHEARWARP_CPU` that names no CPU level: the library would
 /// quietly run the scalar kernels, so the command line says so and stops.
 fn check_cpu_env() -> Result<()> {
@@ -1205,6 +1184,7 @@ fn check_cpu_env() -> Result<()> {
 /// Entry point of the binary: parses arguments, runs, maps errors to exit codes.
 pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    crate::app::output::install_signal_handlers();
     let res = check_cpu_env().and_then(|()| match &cli.command {
         Command::Render(c) => run_render(c),
         Command::Rotate(c) => run_rotate(c),

@@ -418,7 +418,7 @@ impl App {
                 let p = f.pixels[y as usize * f.width + x as usize];
                 image::Rgb([(p >> 16) as u8, (p >> 8) as u8, p as u8])
             });
-            img.save_with_format(&path, image::ImageFormat::Png).with_context(|| format!("{}: cannot write PNG", path.display()))?;
+            shearwarp::output::write_png(&path, &img)?;
             Ok(path)
         })();
         let msg = match res {

@@ -604,6 +604,7 @@ pub fn run(cmd: &BenchCmd) -> Result<()> {
     cmd.check()?;
     shearwarp::checks::check_threads(cmd.threads)?;
     let (vol, name) = cmd.volume.load()?;
+    crate::app::cli::renderable(&name, &vol)?;
     let report = measure(cmd, vol, name)?;
     if let Some(p) = &cmd.csv {
         crate::app::output::write_text(p, &to_csv(&report))?;

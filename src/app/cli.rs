@@ -452,6 +452,15 @@ fn parse_rotation(s: &str) -> std::result::Result<[f64; 3], String> {
     Ok(r)
 }
 
+/// A [`Usage`] error naming the volume when it cannot be rendered (one
+/// voxel thick along an axis).
+pub fn renderable(name: &str, vol: &Volume) -> Result<()> {
+    if let Err(e) = shearwarp::checks::check_renderable(vol.dims()) {
+        usage!("{name}: {e}");
+    }
+    Ok(())
+}
+
 impl VolumeArgs {
     /// Loads or builds the volume and names it for reports. Any failure is a
     /// [`Usage`] error: the input is what is wrong.
@@ -493,6 +502,20 @@ impl VolumeArgs {
             None => {
                 let p = self.phantom;
                 let dims = self.phantom_dims.unwrap_or_else(|| p.default_dims());
+                // checked before a byte is allocated
+                let bytes = p.bytes(dims).unwrap_or(u64::MAX);
+                if let Some(b) = crate::app::budget().filter(|&b| bytes > b) {
+                    let f = shearwarp::checks::fmt_bytes;
+                    usage!(
+                        "{} phantom {}×{}×{}: its voxels need {}, over the memory budget of {} (--max-memory)",
+                        p.name(),
+                        dims[0],
+                        dims[1],
+                        dims[2],
+                        f(bytes),
+                        f(b)
+                    );
+                }
                 p.build(dims)?
             }
         };
@@ -771,6 +794,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
         usage!("-o - and --json both write to standard output; give the image a file");
     }
     let (vol, name) = cmd.volume.load()?;
+    renderable(&name, &vol)?;
     let load_ms = crate::app::since_start_ms();
     let dims = vol.dims();
     let cam = cmd.render.camera(vol.frame())?;
@@ -824,6 +848,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
 /// Runs `shearwarp rotate`.
 pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let (vol, name) = cmd.volume.load()?;
+    renderable(&name, &vol)?;
     let load_ms = crate::app::since_start_ms();
     let dims = vol.dims();
     let step = match cmd.step_deg.as_str() {

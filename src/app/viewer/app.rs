@@ -52,6 +52,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let settings = cmd.render.settings()?;
     let sc = &cmd.render.scene;
     let (vol, name) = cmd.volume.load()?;
+    crate::app::cli::renderable(&name, &vol)?;
     let load_ms = t_start.elapsed().as_secs_f64() * 1e3;
     let t_setup = Instant::now();
     let camera = cmd.render.camera(vol.frame())?;

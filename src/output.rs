@@ -197,7 +197,20 @@ impl Output {
     /// temporary over the target (the previous file stays until then). Any
     /// write, flush, sync or rename error is an error naming the path (the
     /// temporary removed, the previous file untouched).
-    pub fn commit(mut self) -> Result<()> {
+    pub fn commit(self) -> Result<()> {
+        self.finish(true)
+    }
+
+    /// [`Output::commit`] without the sync: complete and in place (an error
+    /// or a signal still leaves the previous file), durable once
+    /// [`sync_written`] ran for its directory. For many files in a row (a
+    /// directory of frames), where a sync per file would cost more than the
+    /// frames themselves.
+    pub fn commit_unsynced(self) -> Result<()> {
+        self.finish(false)
+    }
+
+    fn finish(mut self, sync: bool) -> Result<()> {
         let mut w = self.w.take().expect("committed once");
         let path = self.path.clone();
         let flushed = w.flush();
@@ -228,7 +241,7 @@ impl Output {
                         return Err(why);
                     }
                 };
-                if let Err(e) = f.sync_all() {
+                if sync && let Err(e) = f.sync_all() {
                     forget_temp(&temp, true);
                     return Err(named(&path, "cannot write (sync)", e));
                 }
@@ -248,7 +261,8 @@ impl Output {
                 drop(p);
                 // the rename itself made durable (best effort: not every file
                 // system syncs a directory, and the output is complete either way)
-                if let Some(d) = target.parent().filter(|d| !d.as_os_str().is_empty())
+                if sync
+                    && let Some(d) = target.parent().filter(|d| !d.as_os_str().is_empty())
                     && let Ok(d) = File::open(d)
                 {
                     let _ = d.sync_all();
@@ -292,16 +306,36 @@ impl Drop for Output {
     }
 }
 
+/// Makes the files [`Output::commit_unsynced`] put in directory `dir`
+/// durable: one sync of its file system (Linux), else of the directory.
+pub fn sync_written(dir: &Path) -> Result<()> {
+    let d = File::open(dir).map_err(|e| named(dir, "cannot open to sync", e))?;
+    #[cfg(target_os = "linux")]
+    rustix::fs::syncfs(&d).map_err(|e| named(dir, "cannot sync", std::io::Error::from(e)))?;
+    #[cfg(not(target_os = "linux"))]
+    let _ = d.sync_all();
+    Ok(())
+}
+
+/// [`write_png`] committed with [`Output::commit_unsynced`] (see there).
+pub fn write_png_unsynced(path: impl AsRef<Path>, img: &image::RgbImage) -> Result<()> {
+    let mut out = Output::create(path)?;
+    encode_png(&mut out, img)?;
+    out.commit_unsynced()
+}
+
+fn encode_png(out: &mut Output, img: &image::RgbImage) -> Result<()> {
+    use image::ImageEncoder;
+    let enc = image::codecs::png::PngEncoder::new(out.writer());
+    enc.write_image(img.as_raw(), img.width(), img.height(), image::ExtendedColorType::Rgb8)
+        .map_err(|e| named(out.path(), "cannot write PNG", e))
+}
+
 /// Writes an 8-bit RGB PNG to `path` atomically (see [`Output`]).
 pub fn write_png(path: impl AsRef<Path>, img: &image::RgbImage) -> Result<()> {
-    use image::ImageEncoder;
     let mut out = Output::create(path)?;
-    let enc = image::codecs::png::PngEncoder::new(out.writer());
-    if let Err(e) = enc.write_image(img.as_raw(), img.width(), img.height(), image::ExtendedColorType::Rgb8) {
-        let path = out.path().to_path_buf();
-        drop(out);
-        return Err(named(&path, "cannot write PNG", e));
-    }
+    // (an error drops the output uncommitted: the temporary goes)
+    encode_png(&mut out, img)?;
     out.commit()
 }
 

@@ -920,7 +920,8 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         }
         all.push(st);
         if let Some(d) = &cmd.frames_dir {
-            img.save_png(&d.join(format!("frame_{f:05}.png")))?;
+            // (each frame whole or not at all; one sync for the directory after the loop)
+            shearwarp::output::write_png_unsynced(d.join(format!("frame_{f:05}.png")), &img.to_rgb8())?;
         }
         first_frame_ms.get_or_insert_with(crate::app::since_start_ms);
         if keep_frames {
@@ -929,6 +930,9 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         pb.inc(1);
     }
     let loop_ms = loop_start.elapsed().as_secs_f64() * 1e3;
+    if let Some(d) = &cmd.frames_dir {
+        shearwarp::output::sync_written(d)?;
+    }
     pb.finish_and_clear();
     let frames_ms_total: f64 = all.iter().map(|s| s.build_ms + s.frame_ms()).sum();
     let build_ms: f64 = build_ms_first + all.iter().map(|s| s.build_ms).sum::<f64>();

@@ -188,3 +188,25 @@ fn a_frames_directory_csv_and_json_are_written_whole() {
     let _: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert!(temps(dir.path()).is_empty());
 }
+
+#[test]
+fn a_report_to_a_full_stdout_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let full = || std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let render = std::process::Command::new(bin())
+        .args(["render", "--size", "32", "--json", "-o"])
+        .arg(dir.path().join("r.png"))
+        .stdout(full())
+        .output()
+        .unwrap();
+    assert_eq!(render.status.code(), Some(2), "{render:?}");
+    assert!(String::from_utf8_lossy(&render.stderr).contains("standard output"));
+    let bench = std::process::Command::new(bin())
+        .args(["bench", "--phantom", "sphere", "--phantom-dims", "16,16,16", "--size", "24", "--random-views", "0"])
+        .args(["--reps", "1", "--rounds", "1", "--only", "brute", "--ref-step", "0.25", "--quiet", "--json"])
+        .stdout(full())
+        .output()
+        .unwrap();
+    assert_eq!(bench.status.code(), Some(2), "{bench:?}");
+    assert!(String::from_utf8_lossy(&bench.stderr).contains("standard output"));
+}

@@ -616,9 +616,9 @@ pub fn run(cmd: &BenchCmd) -> Result<()> {
         crate::app::output::write_text(p, &serde_json::to_string_pretty(&report)?)?;
     }
     if cmd.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        crate::app::output::print_text(&(serde_json::to_string_pretty(&report)? + "\n"))?;
     } else {
-        print!("{}", to_markdown(&report, cmd.per_view));
+        crate::app::output::print_text(&to_markdown(&report, cmd.per_view))?;
     }
     Ok(())
 }

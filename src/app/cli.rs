@@ -52,7 +52,8 @@ macro_rules! say {
             if e.kind() == std::io::ErrorKind::BrokenPipe {
                 std::process::exit(0);
             }
-            return Err(anyhow::Error::new(e).context("cannot write to standard output"));
+            // (a write failure, as for every output: exit 2, the destination named)
+            return Err(shearwarp::Error::file("standard output", format!("cannot write: {e}")).into());
         }
     }};
 }

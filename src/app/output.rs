@@ -103,6 +103,18 @@ pub fn write_text(path: &Path, text: &str) -> Result<()> {
     shearwarp::output::write_with(path, |w| w.write_all(text.as_bytes()))
 }
 
+/// Prints `text` to standard output, checked: a write error (a full disk
+/// behind a redirection) is an error; a closed pipe (`… | head`) ends the
+/// program quietly, as the command line's other reports do.
+pub fn print_text(text: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+        Err(e) => Err(Error::file("standard output", format!("cannot write: {e}"))),
+    }
+}
+
 /// Installs the handler of SIGINT, SIGTERM and SIGHUP (a thread: remove
 /// every temporary output, exit 128 + the signal) and ignores SIGXFSZ, so a
 /// file-size limit is a write error (reported, the temporary removed) rather

@@ -20,7 +20,9 @@
 //! level every SIMD kernel is chosen by; [`memory`] what each structure holds
 //! and the fallible allocation of the large ones. [`accuracy`] (reference renderer,
 //! analytic truth, metrics) is what the fast paths are measured against;
-//! [`checks`] holds the sanity checks and warnings every front end shares.
+//! [`checks`] holds the sanity checks and warnings every front end shares;
+//! [`output`] writes every file atomically (a temporary renamed into place),
+//! every error checked.
 //!
 //! The everyday API is re-exported here: load or build a [`Volume`], make a
 //! [`Renderer`] with [`Settings`], and render a [`Camera`] into an [`Image`].
@@ -35,6 +37,7 @@ pub mod error;
 pub mod geometry;
 pub mod kernels;
 pub mod memory;
+pub mod output;
 pub mod render;
 pub mod view;
 pub mod warp;

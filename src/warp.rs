@@ -15,7 +15,7 @@ use glam::Vec4;
 use rayon::prelude::*;
 
 use crate::composite::Intermediate;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::view::perspective::RayDirections;
 use crate::view::plan::FramePlan;
 
@@ -72,9 +72,9 @@ impl<T: Texel> Canvas<T> {
         out
     }
 
-    /// Writes a PNG.
+    /// Writes a PNG, atomically ([`crate::output`]).
     pub fn save_png(&self, path: &std::path::Path) -> Result<()> {
-        self.to_rgb8().save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::file(path, format!("cannot write PNG: {e}")))
+        crate::output::write_png(path, &self.to_rgb8())
     }
 
     /// Counts pixels `x0..x1` of row `y` as written (with the span the last

@@ -54,9 +54,10 @@ use rayon::prelude::*;
 use crate::classify::Classifier;
 use crate::classify::shading::Shading;
 use crate::composite::Mode;
+use crate::data::bcc::BccLattice;
 use crate::data::volume::Volume;
 use crate::error::{Error, Result};
-use crate::render::Renderer;
+use crate::render::{Lattice, Renderer};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::Image;
 
@@ -634,9 +635,24 @@ pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>>
         Some((cam, distance)) => (cam, Some(PerspectiveView::new(&cam, distance, dims, spacing)?)),
     };
     let f = &plan.view;
-    // (the permutation the frame was rendered with: the RLE paths' reuse mirrors y)
-    let perms = [0, 1, 2].map(|a| if a == f.axis { f.perm } else { crate::view::permutation(a) });
-    if *f != Factorization::with_permutations(&cam, dims, spacing, perms)? || pv.is_some() != plan.perspective.is_some() {
+    // the BCC grid's plan is that of its interleaved slices, whose sheared
+    // coordinates are moved onto sub-grid A's samples (see `crate::data::bcc`)
+    let bcc = match renderer.settings().lattice {
+        Lattice::Bcc if pv.is_none() => Some(BccLattice::new(dims)?),
+        _ => None,
+    };
+    let expected = match &bcc {
+        None => {
+            // (the permutation the frame was rendered with: the RLE paths' reuse mirrors y)
+            let perms = [0, 1, 2].map(|a| if a == f.axis { f.perm } else { crate::view::permutation(a) });
+            Factorization::with_permutations(&cam, dims, spacing, perms)?
+        }
+        Some(lattice) => {
+            let cartesian = Factorization::with_axis(&cam, dims, spacing, f.axis)?;
+            lattice.factorization(&cam, spacing, f.axis, cartesian.zoom)?
+        }
+    };
+    if *f != expected || pv.is_some() != plan.perspective.is_some() {
         return Err(Error::value("fast path depth", "the last frame was rendered with a different camera"));
     }
     let shift = plan.perspective.map_or([0.0; 2], |r| r.shift);
@@ -667,10 +683,14 @@ pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>>
                 }
             }
             if wsum >= 0.5 {
-                let voxel = match &pv {
-                    None => f.sheared_to_voxel(a, b, ksum / wsum),
+                let voxel = match (&pv, &bcc) {
+                    (None, None) => f.sheared_to_voxel(a, b, ksum / wsum),
+                    (None, Some(lattice)) => {
+                        let [da, db] = BccLattice::SHEARED_SHIFT;
+                        lattice.slice_volume_to_voxel(dims, f.axis, f.sheared_to_voxel(a - da, b - db, ksum / wsum))
+                    }
                     // the plan's sheared point is the view's, shifted
-                    Some(pv) => pv.sheared_to_voxel(a + shift[0], b + shift[1], ksum / wsum),
+                    (Some(pv), _) => pv.sheared_to_voxel(a + shift[0], b + shift[1], ksum / wsum),
                 };
                 *o = rays.depth_of(DVec3::from_array(voxel));
             }

@@ -604,20 +604,21 @@ pub fn run(cmd: &BenchCmd) -> Result<()> {
     cmd.check()?;
     shearwarp::checks::check_threads(cmd.threads)?;
     let (vol, name) = cmd.volume.load()?;
+    crate::app::cli::renderable(&name, &vol)?;
     let report = measure(cmd, vol, name)?;
     if let Some(p) = &cmd.csv {
-        std::fs::write(p, to_csv(&report)).with_context(|| format!("{}: cannot write", p.display()))?;
+        crate::app::output::write_text(p, &to_csv(&report))?;
     }
     for p in &cmd.plot {
         write_plot(p, &report)?;
     }
     if let Some(p) = &cmd.json_out {
-        std::fs::write(p, serde_json::to_string_pretty(&report)?).with_context(|| format!("{}: cannot write", p.display()))?;
+        crate::app::output::write_text(p, &serde_json::to_string_pretty(&report)?)?;
     }
     if cmd.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        crate::app::output::print_text(&(serde_json::to_string_pretty(&report)? + "\n"))?;
     } else {
-        print!("{}", to_markdown(&report, cmd.per_view));
+        crate::app::output::print_text(&to_markdown(&report, cmd.per_view))?;
     }
     Ok(())
 }
@@ -1284,13 +1285,17 @@ pub fn write_plot(path: &Path, rep: &Report) -> Result<()> {
     }
     let size = (1000u32, 640u32);
     match plot_format(path)? {
-        "svg" => draw_plot(SVGBackend::new(path, size).into_drawing_area(), rep)
-            .with_context(|| format!("{}: cannot draw the plot", path.display()))?,
+        "svg" => {
+            let mut svg = String::new();
+            draw_plot(SVGBackend::with_string(&mut svg, size).into_drawing_area(), rep)
+                .with_context(|| format!("{}: cannot draw the plot", path.display()))?;
+            crate::app::output::write_text(path, &svg)?;
+        }
         _ => {
             let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
             draw_plot(BitMapBackend::with_buffer(&mut buf, size).into_drawing_area(), rep).context("cannot draw the plot")?;
             let img = image::RgbImage::from_raw(size.0, size.1, buf).context("plot buffer size")?;
-            img.save_with_format(path, image::ImageFormat::Png).with_context(|| format!("{}: cannot write PNG", path.display()))?;
+            shearwarp::output::write_png(path, &img)?;
         }
     }
     Ok(())

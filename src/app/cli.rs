@@ -7,7 +7,7 @@
 //! bad usage or input and 1 for failures while running.
 
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -52,7 +52,8 @@ macro_rules! say {
             if e.kind() == std::io::ErrorKind::BrokenPipe {
                 std::process::exit(0);
             }
-            return Err(anyhow::Error::new(e).context("cannot write to standard output"));
+            // (a write failure, as for every output: exit 2, the destination named)
+            return Err(shearwarp::Error::file("standard output", format!("cannot write: {e}")).into());
         }
     }};
 }
@@ -282,7 +283,8 @@ pub struct RenderCmd {
     pub volume: VolumeArgs,
     #[command(flatten)]
     pub render: RenderArgs,
-    /// Output PNG.
+    /// Output image: .png, .gif or .apng (by the extension); `-` writes a
+    /// PNG to standard output.
     #[arg(long, short, default_value = "shearwarp.png")]
     pub output: PathBuf,
     /// Print the frame's statistics as JSON.
@@ -451,6 +453,15 @@ fn parse_rotation(s: &str) -> std::result::Result<[f64; 3], String> {
     Ok(r)
 }
 
+/// A [`Usage`] error naming the volume when it cannot be rendered (one
+/// voxel thick along an axis).
+pub fn renderable(name: &str, vol: &Volume) -> Result<()> {
+    if let Err(e) = shearwarp::checks::check_renderable(vol.dims()) {
+        usage!("{name}: {e}");
+    }
+    Ok(())
+}
+
 impl VolumeArgs {
     /// Loads or builds the volume and names it for reports. Any failure is a
     /// [`Usage`] error: the input is what is wrong.
@@ -492,6 +503,20 @@ impl VolumeArgs {
             None => {
                 let p = self.phantom;
                 let dims = self.phantom_dims.unwrap_or_else(|| p.default_dims());
+                // checked before a byte is allocated
+                let bytes = p.bytes(dims).unwrap_or(u64::MAX);
+                if let Some(b) = crate::app::budget().filter(|&b| bytes > b) {
+                    let f = shearwarp::checks::fmt_bytes;
+                    usage!(
+                        "{} phantom {}×{}×{}: its voxels need {}, over the memory budget of {} (--max-memory)",
+                        p.name(),
+                        dims[0],
+                        dims[1],
+                        dims[2],
+                        f(bytes),
+                        f(b)
+                    );
+                }
                 p.build(dims)?
             }
         };
@@ -762,7 +787,15 @@ fn memory_estimate(vol: &Volume, tissues: usize) -> serde_json::Value {
 
 /// Runs `shearwarp render`.
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
+    let kind = match crate::app::output::image_kind(&cmd.output) {
+        Ok(k) => k,
+        Err(why) => usage!("-o {why}"),
+    };
+    if cmd.json && cmd.output.as_os_str() == "-" {
+        usage!("-o - and --json both write to standard output; give the image a file");
+    }
     let (vol, name) = cmd.volume.load()?;
+    renderable(&name, &vol)?;
     let load_ms = crate::app::since_start_ms();
     let dims = vol.dims();
     let cam = cmd.render.camera(vol.frame())?;
@@ -770,7 +803,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let build_ms = prepare_first(&mut r, &cam)?;
     let (stats, geometry) = scene.render(&mut r, &cam, &mut img)?;
-    img.save_png(&cmd.output)?;
+    crate::app::output::write_image(&cmd.output, kind, &img.to_rgb8())?;
     let first_frame_ms = crate::app::since_start_ms();
     let warnings = shearwarp::checks::frame_warnings(&r, img.coverage());
     for w in &warnings {
@@ -816,6 +849,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
 /// Runs `shearwarp rotate`.
 pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let (vol, name) = cmd.volume.load()?;
+    renderable(&name, &vol)?;
     let load_ms = crate::app::since_start_ms();
     let dims = vol.dims();
     let step = match cmd.step_deg.as_str() {
@@ -887,7 +921,8 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         }
         all.push(st);
         if let Some(d) = &cmd.frames_dir {
-            img.save_png(&d.join(format!("frame_{f:05}.png")))?;
+            // (each frame whole or not at all; one sync for the directory after the loop)
+            shearwarp::output::write_png_unsynced(d.join(format!("frame_{f:05}.png")), &img.to_rgb8())?;
         }
         first_frame_ms.get_or_insert_with(crate::app::since_start_ms);
         if keep_frames {
@@ -896,6 +931,9 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         pb.inc(1);
     }
     let loop_ms = loop_start.elapsed().as_secs_f64() * 1e3;
+    if let Some(d) = &cmd.frames_dir {
+        shearwarp::output::sync_written(d)?;
+    }
     pb.finish_and_clear();
     let frames_ms_total: f64 = all.iter().map(|s| s.build_ms + s.frame_ms()).sum();
     let build_ms: f64 = build_ms_first + all.iter().map(|s| s.build_ms).sum::<f64>();
@@ -921,10 +959,10 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         kept
     };
     if let Some(p) = &cmd.gif {
-        write_gif(p, &kept)?;
+        crate::app::output::write_gif(p, &kept)?;
     }
     if let Some(p) = &cmd.apng {
-        write_apng(p, &kept)?;
+        crate::app::output::write_apng(p, &kept)?;
     }
     let s = r.settings();
     if cmd.json {
@@ -1164,35 +1202,6 @@ pub fn run_export(cmd: &ExportCmd) -> Result<()> {
 /// Most frames an animation (`--gif`, `--apng`) keeps; longer runs keep every n-th.
 pub const MAX_ANIMATION_FRAMES: usize = 200;
 
-fn write_gif(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
-    use image::codecs::gif::{GifEncoder, Repeat};
-    let f = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
-    let mut enc = GifEncoder::new_with_speed(std::io::BufWriter::new(f), 10);
-    enc.set_repeat(Repeat::Infinite)?;
-    for fr in frames {
-        let rgba = image::DynamicImage::ImageRgb8(fr.clone()).to_rgba8();
-        enc.encode_frame(image::Frame::from_parts(rgba, 0, 0, image::Delay::from_numer_denom_ms(40, 1)))
-            .with_context(|| format!("{}: cannot write GIF frame", path.display()))?;
-    }
-    Ok(())
-}
-
-fn write_apng(path: &Path, frames: &[image::RgbImage]) -> Result<()> {
-    let Some(first) = frames.first() else { usage!("no frames to write") };
-    let f = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(f), first.width(), first.height());
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    enc.set_animated(frames.len() as u32, 0)?;
-    enc.set_frame_delay(1, 25)?;
-    let mut w = enc.write_header()?;
-    for fr in frames {
-        w.write_image_data(fr.as_raw())?;
-    }
-    w.finish()?;
-    Ok(())
-}
-
 /// Rejects a `SHEARWARP_CPU` that names no CPU level: the library would
 /// quietly run the scalar kernels, so the command line says so and stops.
 fn check_cpu_env() -> Result<()> {
@@ -1205,6 +1214,7 @@ fn check_cpu_env() -> Result<()> {
 /// Entry point of the binary: parses arguments, runs, maps errors to exit codes.
 pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    crate::app::output::install_signal_handlers();
     let res = check_cpu_env().and_then(|()| match &cli.command {
         Command::Render(c) => run_render(c),
         Command::Rotate(c) => run_rotate(c),

@@ -7,11 +7,14 @@
 //!   variant against the reference renderer, with tables and plots;
 //! - [`peers`]: `shearwarp bench --peers`, VTK run at the benchmark's views
 //!   with the shared peer model, its frames read back for the metrics;
+//! - [`output`]: output image types, animations, plots and the signal
+//!   handler around the library's atomic outputs;
 //! - [`scene`]: the meshes and clip regions of the command line, per frame;
 //! - [`viewer`] (feature `viewer`): `shearwarp view`, the interactive window.
 
 pub mod bench;
 pub mod cli;
+pub mod output;
 pub mod peers;
 pub mod scene;
 pub mod viewer;

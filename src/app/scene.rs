@@ -21,7 +21,7 @@ use glam::{DAffine3, DMat3, DVec3, EulerRot};
 use shearwarp::composite::Mode;
 use shearwarp::geometry::{
     ConvexMesh, Cull, GeometryImage, GeometryLimits, Material, Mesh, MeshClip, Projector, composite_iso_over_geometry,
-    composite_over_geometry, load_mesh, rasterize,
+    composite_over_geometry, load_mesh_within, rasterize,
 };
 use shearwarp::render::{FrameStats, Method, Renderer};
 use shearwarp::view::Camera;
@@ -283,7 +283,7 @@ impl Scene {
         let clip_mesh = match &args.clip_mesh {
             None => None,
             Some(path) => {
-                let m = load_mesh(path).map_err(|e| usage(format!("--clip-mesh: {e}")))?;
+                let m = load_mesh_within(path, crate::app::budget()).map_err(|e| usage(format!("--clip-mesh: {e}")))?;
                 let m = m.transformed(place).map_err(|e| usage(format!("--clip-mesh {}: {e}", path.display())))?;
                 Some((ConvexMesh::new(&m).map_err(|e| usage(format!("--clip-mesh {}: {e}", path.display())))?, keep))
             }
@@ -297,7 +297,7 @@ impl Scene {
         let focus_mesh = match focus_of(args)? {
             Some((FocusArg::Mesh(path), tissue)) => {
                 let what = |e: &dyn std::fmt::Display| usage(format!("--focus mesh:{}: {e}", path.display()));
-                let m = load_mesh(&path).map_err(|e| what(&e))?;
+                let m = load_mesh_within(&path, crate::app::budget()).map_err(|e| what(&e))?;
                 let m = m.transformed(place).map_err(|e| what(&e))?;
                 Some((ConvexMesh::new(&m).map_err(|e| what(&e))?, tissue))
             }
@@ -308,7 +308,7 @@ impl Scene {
             meshes.push(needle_mesh(*n, args.mesh_world, dims, spacing).map_err(|e| usage(format!("--needle: {e}")))?);
         }
         for path in &args.mesh {
-            let m = load_mesh(path).map_err(|e| usage(e.to_string()))?;
+            let m = load_mesh_within(path, crate::app::budget()).map_err(|e| usage(e.to_string()))?;
             meshes.push(m.transformed(place).map_err(|e| usage(format!("{}: {e}", path.display())))?);
         }
         let clip: Option<Arc<dyn Limiter>> = match limiters.len() {

@@ -114,6 +114,16 @@ impl BccLattice {
         Factorization::with_axis(&cam, dims, sp, axis)
     }
 
+    /// The volume's voxel position of point `x` (object order) of
+    /// [`BccLattice::slice_volume`]`(_, axis)`: the two share their centre,
+    /// the slice volume's voxels are `s` voxels apart (`s/2` along `axis`).
+    pub fn slice_volume_to_voxel(&self, dims: [usize; 3], axis: usize, x: [f64; 3]) -> [f64; 3] {
+        [0, 1, 2].map(|c| {
+            let (n, f) = if c == axis { (2 * self.m[c], SUB_SPACING / 2.0) } else { (self.m[c], SUB_SPACING) };
+            (dims[c] as f64 - 1.0) / 2.0 + f * (x[c] - (n as f64 - 1.0) / 2.0)
+        })
+    }
+
     /// The in-slice offset `(i, j)` of slice `k`'s samples (the paper's
     /// Fig. 10), in sub-grid cells: 0 for A (even `k`), `−½` for B (odd `k`),
     /// in the sheared coordinates of [`BccLattice::SHEARED_SHIFT`].
@@ -254,6 +264,27 @@ fn resample<T: Copy + Into<f32> + Sync>(v: &[T], d: [usize; 3], lat: &BccLattice
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every sample of either sub-grid lies where its place in the
+    /// interleaved slices' volume says (sub-grid A `¼` cell before a column,
+    /// B `¼` past, slice `2·layer + sub`).
+    #[test]
+    fn slice_volume_points_map_to_their_samples() {
+        let dims = [9, 14, 7];
+        let lat = BccLattice::new(dims).unwrap();
+        for axis in 0..3 {
+            for sub in 0..2 {
+                for idx in [[0, 0, 0], [1, 2, 1], [lat.m[0] - 1, lat.m[1] - 1, lat.m[2] - 1]] {
+                    let x = [0, 1, 2]
+                        .map(|c| if c == axis { (2 * idx[c] + sub) as f64 } else { idx[c] as f64 + if sub == 0 { -0.25 } else { 0.25 } });
+                    let (got, want) = (lat.slice_volume_to_voxel(dims, axis, x), lat.position(sub, idx));
+                    for c in 0..3 {
+                        assert!((got[c] - want[c]).abs() < 1e-12, "axis {axis} sub {sub} {idx:?}: {got:?} vs {want:?}");
+                    }
+                }
+            }
+        }
+    }
 
     /// The same BCC sample has the same value along every axis's slices.
     #[test]

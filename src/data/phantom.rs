@@ -101,6 +101,14 @@ impl Phantom {
     }
 
     /// Builds the phantom at `dims` (`[nx, ny, nz]`).
+    /// Bytes of the voxels of this phantom at `dims` (the head is `i16`, the
+    /// others `f32`), `None` when it overflows: what [`Phantom::build`]
+    /// allocates, to check against a memory budget before building.
+    pub fn bytes(self, dims: [usize; 3]) -> Option<u64> {
+        let per = if self == Phantom::Head { 2 } else { 4 };
+        dims.iter().try_fold(per, |a: u64, &n| a.checked_mul(n as u64))
+    }
+
     pub fn build(self, dims: [usize; 3]) -> Result<Volume> {
         match self {
             Phantom::Head => head(dims),
@@ -130,7 +138,16 @@ impl fmt::Display for Phantom {
 fn build_slices<T: Copy + Default + Send>(dims: [usize; 3], fill: impl Fn(usize, &mut [T]) + Sync) -> Result<([usize; 3], Vec<T>)> {
     let d = check_dims(dims.map(|n| n as u64))?;
     let slice = d[0] * d[1];
-    let mut v = vec![T::default(); slice * d[2]];
+    // (a refused allocation is an error, not an abort)
+    let n = slice * d[2];
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|_| crate::error::Error::Memory {
+        what: "phantom voxels".into(),
+        needed: (n as u64).saturating_mul(std::mem::size_of::<T>() as u64),
+        held: 0,
+        budget: 0,
+    })?;
+    v.resize(n, T::default());
     v.par_chunks_mut(slice).enumerate().for_each(|(z, s)| fill(z, s));
     Ok((d, v))
 }

@@ -34,19 +34,90 @@ impl MeshFormat {
 }
 
 /// Reads the triangles of the OBJ, STL or PLY file at `path` (coordinates
-/// as stored: place them with [`Mesh::transformed`]).
+/// as stored: place them with [`Mesh::transformed`]); the file is bounded as
+/// by [`load_mesh_within`] without a memory budget.
 pub fn load_mesh(path: &Path) -> Result<Mesh> {
+    load_mesh_within(path, None)
+}
+
+/// Longest line a text mesh (OBJ, ASCII STL, a PLY header or ASCII body)
+/// may have: far beyond any real one, and it keeps a file without line
+/// breaks from being read as one giant line.
+pub const MAX_MESH_LINE: usize = 1 << 20;
+
+/// Memory a mesh file takes to read, per byte of the file: the bytes
+/// themselves and the parsed vertices and triangles (an upper bound for every
+/// format).
+pub const MESH_BYTES_PER_FILE_BYTE: u64 = 3;
+
+/// [`load_mesh`] within a memory budget of `budget` bytes: the path must be
+/// a regular file (a FIFO, a device, a directory is refused before it is
+/// opened for reading), its size times [`MESH_BYTES_PER_FILE_BYTE`] must fit
+/// the budget (checked before reading it), and a text format must have no
+/// line longer than [`MAX_MESH_LINE`] bytes. Each refusal is an
+/// [`Error::File`] naming the file.
+pub fn load_mesh_within(path: &Path, budget: Option<u64>) -> Result<Mesh> {
     let format = MeshFormat::of(path)?;
+    let bytes = read_bounded(path, budget)?;
     let bad = |why: String| Error::file(path, why);
     let (vertices, triangles) = match format {
-        MeshFormat::Obj => read_obj(path).map_err(bad)?,
-        MeshFormat::Stl => read_stl(path).map_err(bad)?,
-        MeshFormat::Ply => read_ply(path).map_err(bad)?,
+        MeshFormat::Obj => read_obj(&bytes).map_err(bad)?,
+        MeshFormat::Stl => read_stl(&bytes).map_err(bad)?,
+        MeshFormat::Ply => read_ply(&bytes).map_err(bad)?,
     };
+    drop(bytes);
     if triangles.is_empty() {
         return Err(Error::file(path, "the mesh has no triangles"));
     }
     Mesh::new(vertices, triangles).map_err(|e| Error::file(path, e.to_string()))
+}
+
+/// The bytes of mesh file `path`, after the checks of [`load_mesh_within`]
+/// that need no parsing (regular file, size against the budget).
+fn read_bounded(path: &Path, budget: Option<u64>) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let not_regular = || Error::file(path, "not a regular file (a mesh is read from a file, not a device, FIFO or directory)");
+    let meta = std::fs::metadata(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+    if !meta.is_file() {
+        return Err(not_regular());
+    }
+    let f = std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))?;
+    // (what was opened, not what the name pointed to a moment before)
+    let len = match f.metadata() {
+        Ok(m) if m.is_file() => m.len(),
+        Ok(_) => return Err(not_regular()),
+        Err(e) => return Err(Error::file(path, format!("cannot read: {e}"))),
+    };
+    let need = len.saturating_mul(MESH_BYTES_PER_FILE_BYTE);
+    if let Some(b) = budget
+        && need > b
+    {
+        return Err(Error::file(
+            path,
+            format!(
+                "the mesh file is {len} bytes; reading it needs about {need} bytes of memory, more than the budget of {b} bytes (--max-memory)"
+            ),
+        ));
+    }
+    let cap = usize::try_from(len).map_err(|_| Error::file(path, format!("the mesh file is too large ({len} bytes)")))?;
+    let mut bytes = Vec::new();
+    bytes.try_reserve_exact(cap).map_err(|_| Error::file(path, format!("not enough memory to read the mesh file ({len} bytes)")))?;
+    // (at most the size just read: a file growing meanwhile is cut there)
+    f.take(len).read_to_end(&mut bytes).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+    Ok(bytes)
+}
+
+/// An error when a line of `text` is longer than [`MAX_MESH_LINE`].
+fn check_lines(text: &[u8]) -> std::result::Result<(), String> {
+    let mut start = 0;
+    for (i, &b) in text.iter().enumerate() {
+        if b == b'\n' {
+            start = i + 1;
+        } else if i - start >= MAX_MESH_LINE {
+            return Err(format!("a line longer than {MAX_MESH_LINE} bytes at byte {start}: not a text mesh"));
+        }
+    }
+    Ok(())
 }
 
 type Triangles = (Vec<DVec3>, Vec<[u32; 3]>);
@@ -58,10 +129,12 @@ fn fan(face: &[u32], out: &mut Vec<[u32; 3]>) {
     }
 }
 
-fn read_obj(path: &Path) -> std::result::Result<Triangles, String> {
+fn read_obj(bytes: &[u8]) -> std::result::Result<Triangles, String> {
+    check_lines(bytes)?;
     let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
-    // (materials are not needed: a missing .mtl is not an error)
-    let (models, _materials) = tobj::load_obj(path, &opts).map_err(|e| format!("cannot read as OBJ: {e}"))?;
+    // (materials are not needed: none is read, a missing .mtl is not an error)
+    let (models, _materials) = tobj::load_obj_buf(&mut std::io::Cursor::new(bytes), &opts, |_| Err(tobj::LoadError::OpenFileFailed))
+        .map_err(|e| format!("cannot read as OBJ: {e}"))?;
     let (mut vertices, mut triangles) = (vec![], vec![]);
     for m in models {
         let base = vertices.len() as u32;
@@ -77,9 +150,22 @@ fn read_obj(path: &Path) -> std::result::Result<Triangles, String> {
     Ok((vertices, triangles))
 }
 
-fn read_stl(path: &Path) -> std::result::Result<Triangles, String> {
-    let mut f = std::fs::File::open(path).map_err(|e| format!("cannot open: {e}"))?;
-    let mesh = stl_io::read_stl(&mut f).map_err(|e| format!("cannot read as STL: {e}"))?;
+fn read_stl(bytes: &[u8]) -> std::result::Result<Triangles, String> {
+    // binary: an 80-byte header, a triangle count, 50 bytes per triangle
+    let binary = bytes.len() >= 84 && {
+        let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as u64;
+        84 + 50 * n == bytes.len() as u64
+    };
+    if !binary {
+        if !bytes.trim_ascii_start().starts_with(b"solid") {
+            return Err(format!(
+                "not an STL file: neither ASCII (\"solid …\") nor binary ({} bytes does not match the triangle count in its header)",
+                bytes.len()
+            ));
+        }
+        check_lines(bytes)?;
+    }
+    let mesh = stl_io::read_stl(&mut std::io::Cursor::new(bytes)).map_err(|e| format!("cannot read as STL: {e}"))?;
     let vertices = mesh.vertices.iter().map(|v| DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64)).collect();
     let mut triangles = Vec::with_capacity(mesh.faces.len());
     for t in &mesh.faces {
@@ -89,11 +175,14 @@ fn read_stl(path: &Path) -> std::result::Result<Triangles, String> {
     Ok((vertices, triangles))
 }
 
-fn read_ply(path: &Path) -> std::result::Result<Triangles, String> {
+fn read_ply(bytes: &[u8]) -> std::result::Result<Triangles, String> {
     use ply_rs_bw::parser::Parser;
     use ply_rs_bw::ply::DefaultElement;
-    let f = std::fs::File::open(path).map_err(|e| format!("cannot open: {e}"))?;
-    let mut reader = std::io::BufReader::new(f);
+    // the header is text (and an ASCII body): bounded lines
+    let header_end = bytes.windows(10).position(|w| w == b"end_header").map_or(bytes.len(), |i| i + 10);
+    let ascii = bytes[..header_end].windows(12).any(|w| w == b"format ascii");
+    check_lines(if ascii { bytes } else { &bytes[..header_end] })?;
+    let mut reader = std::io::Cursor::new(bytes);
     let ply = Parser::<DefaultElement>::new().read_ply(&mut reader).map_err(|e| format!("cannot read as PLY: {e}"))?;
     let verts = ply.payload.get("vertex").ok_or("no 'vertex' element")?;
     let coord = |e: &DefaultElement, k: &str| -> std::result::Result<f64, String> {

@@ -35,7 +35,7 @@ pub mod raster;
 pub use clip_mesh::{ConvexMesh, MeshClip};
 pub use hit::volume_hit;
 pub use inverse_warp::{GeometryLimits, composite_iso_over_geometry, composite_over_geometry};
-pub use io::load_mesh;
+pub use io::{load_mesh, load_mesh_within};
 pub use mesh::Mesh;
 pub use raster::{Cull, GeometryImage, Material, Projector, rasterize};
 

@@ -84,7 +84,17 @@ impl ClipPlane {
         }
         let c = dims.map(|d| (d as f64 - 1.0) / 2.0);
         let m = [0, 1, 2].map(|a| normal[a] / spacing[a] as f64);
-        Self::new(m, offset - (0..3).map(|a| normal[a] * c[a]).sum::<f64>())
+        let shifted = offset - (0..3).map(|a| normal[a] * c[a]).sum::<f64>();
+        if m.iter().any(|x| !x.is_finite()) || !shifted.is_finite() {
+            // (the numbers were finite as given: too large for the volume's frame)
+            return Err(Error::value(
+                "clip plane",
+                format!(
+                    "normal {normal:?} and offset {offset} are too large: moved to the volume's centre they overflow; scale them down (only their ratio matters)"
+                ),
+            ));
+        }
+        Self::new(m, shifted)
     }
 
     /// The half-space through `point` (mm) keeping the side opposite `normal`

@@ -9,6 +9,11 @@
 //! under [`MAX_RSS_MIB`]. Each loader gets `IO_FUZZ_CASES` inputs (default
 //! 10,000) from a fixed seed; `IO_FUZZ_RANDOM=1` draws a fresh seed instead.
 //! Each test prints its input count, time and slowest input.
+//!
+//! The mesh readers (OBJ, STL ASCII and binary, PLY ASCII and binary) get
+//! the same treatment (`fuzz_obj`, `fuzz_stl`, `fuzz_ply`, behind `#[ignore]`:
+//! `cargo test --release --test io_fuzz -- --ignored mesh_`), each loaded
+//! within a memory budget as the command line does.
 
 use std::cell::Cell;
 use std::io::{Read, Write};
@@ -669,4 +674,154 @@ fn seeds_are_valid_files() {
         std::fs::create_dir(&d).unwrap();
         check(&format!("dcm{i}/a.dcm"), s, Format::Dicom);
     }
+}
+
+// ------------------------------------------------------------ meshes
+
+/// Like [`fuzz`], for a mesh reader: `Ok` meshes must index their own vertices.
+fn fuzz_mesh<S: Strategy>(name: &str, strategy: S, run: impl Fn(S::Value) -> shearwarp::Result<shearwarp::geometry::mesh::Mesh>) {
+    let (n, ok, slowest) = (Cell::new(0u64), Cell::new(0u64), Cell::new(Duration::ZERO));
+    let start = Instant::now();
+    let result = runner().run(&strategy, |input| {
+        let t = Instant::now();
+        let r = run(input);
+        let dt = t.elapsed();
+        n.set(n.get() + 1);
+        slowest.set(slowest.get().max(dt));
+        prop_assert!(dt < max_case(), "one input took {dt:?}");
+        if let Ok(m) = r {
+            ok.set(ok.get() + 1);
+            prop_assert!(!m.triangles.is_empty());
+            prop_assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.vertices.len()));
+        }
+        Ok(())
+    });
+    let secs = start.elapsed().as_secs_f64();
+    let rss = peak_rss_mib();
+    println!(
+        "io_fuzz {name}: {} inputs ({} loaded, {} rejected) in {secs:.2} s, slowest {:.1} ms, peak RSS {rss} MiB",
+        n.get(),
+        ok.get(),
+        n.get() - ok.get(),
+        slowest.get().as_secs_f64() * 1e3
+    );
+    if let Err(e) = result {
+        panic!("{name}: {e}");
+    }
+    assert!(n.get() >= cases() as u64, "{name}: only {} inputs ran", n.get());
+    assert!(rss < MAX_RSS_MIB, "{name}: peak RSS {rss} MiB");
+}
+
+/// The budget the mesh fuzz loads within (the command line passes `--max-memory`).
+const MESH_BUDGET: Option<u64> = Some(256 << 20);
+
+/// A small closed mesh: an octahedron's vertices and faces.
+fn octahedron() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let v = vec![[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+    let f = vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+    (v, f)
+}
+
+fn obj_seeds() -> Vec<Vec<u8>> {
+    let (v, f) = octahedron();
+    let mut a = String::from("# octahedron\no oct\n");
+    for p in &v {
+        a += &format!("v {} {} {}\n", p[0], p[1], p[2]);
+    }
+    for t in &f {
+        a += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    // quads, normals and texture coordinates, negative indices
+    let b = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nvt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3/1/1 4/1/1\nf -1 -2 -3\nusemtl none\nl 1 2\n";
+    vec![a.into_bytes(), b.as_bytes().to_vec()]
+}
+
+fn stl_seeds() -> Vec<Vec<u8>> {
+    let (v, f) = octahedron();
+    let mut ascii = String::from("solid oct\n");
+    for t in &f {
+        ascii += "facet normal 0 0 0\n outer loop\n";
+        for &i in t {
+            let p = v[i as usize];
+            ascii += &format!("  vertex {} {} {}\n", p[0], p[1], p[2]);
+        }
+        ascii += " endloop\nendfacet\n";
+    }
+    ascii += "endsolid oct\n";
+    let mut bin = vec![0u8; 80];
+    bin.extend_from_slice(&(f.len() as u32).to_le_bytes());
+    for t in &f {
+        bin.extend_from_slice(&[0u8; 12]);
+        for &i in t {
+            for c in v[i as usize] {
+                bin.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        bin.extend_from_slice(&[0u8; 2]);
+    }
+    vec![ascii.into_bytes(), bin]
+}
+
+fn ply_seeds() -> Vec<Vec<u8>> {
+    let (v, f) = octahedron();
+    let header = |format: &str| {
+        format!(
+            "ply\nformat {format} 1.0\ncomment octahedron\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+            v.len(),
+            f.len()
+        )
+    };
+    let mut ascii = header("ascii");
+    for p in &v {
+        ascii += &format!("{} {} {}\n", p[0], p[1], p[2]);
+    }
+    for t in &f {
+        ascii += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+    }
+    let mut bin = header("binary_little_endian").into_bytes();
+    for p in &v {
+        for c in p {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for t in &f {
+        bin.push(3);
+        for &i in t {
+            bin.extend_from_slice(&(i as i32).to_le_bytes());
+        }
+    }
+    vec![ascii.into_bytes(), bin]
+}
+
+fn fuzz_mesh_format(name: &str, ext: &str, seeds: Vec<Vec<u8>>) {
+    for s in &seeds {
+        let dir = scratch();
+        let p = dir.path().join(format!("seed.{ext}"));
+        std::fs::write(&p, s).unwrap();
+        shearwarp::geometry::load_mesh_within(&p, MESH_BUDGET).unwrap_or_else(|e| panic!("{name} seed: {e}"));
+    }
+    let dir = scratch();
+    fuzz_mesh(name, inputs(seeds.len()), |input| {
+        let p = dir.path().join(format!("f.{ext}"));
+        std::fs::write(&p, realize(&seeds, &input)).unwrap();
+        shearwarp::geometry::load_mesh_within(&p, MESH_BUDGET)
+    });
+}
+
+#[test]
+#[ignore = "a fuzz campaign: run with --ignored"]
+fn mesh_fuzz_obj() {
+    fuzz_mesh_format("obj", "obj", obj_seeds());
+}
+
+#[test]
+#[ignore = "a fuzz campaign: run with --ignored"]
+fn mesh_fuzz_stl() {
+    fuzz_mesh_format("stl", "stl", stl_seeds());
+}
+
+#[test]
+#[ignore = "a fuzz campaign: run with --ignored"]
+fn mesh_fuzz_ply() {
+    fuzz_mesh_format("ply", "ply", ply_seeds());
 }

@@ -470,6 +470,28 @@ fn dicom_series_is_sorted_and_rescaled_to_hu() {
 }
 
 #[test]
+fn dicom_pixel_data_must_match_rows_and_columns() {
+    // 16×16 pixels stored, Columns 15 (or Rows 15): refused, naming the file,
+    // in every native transfer syntax; the true 16×16 loads
+    #[allow(deprecated)]
+    for ts in [uids::EXPLICIT_VR_LITTLE_ENDIAN, uids::IMPLICIT_VR_LITTLE_ENDIAN, uids::EXPLICIT_VR_BIG_ENDIAN] {
+        for (rows, cols) in [(16u16, 15u16), (15, 16), (16, 17)] {
+            let dir = tempfile::tempdir().unwrap();
+            for k in 0..3 {
+                ct_slice(&dir.path().join(format!("s{k}.dcm")), "1.2.3.9", k + 1, rows, cols, k as f64, &ct_values(16, 16, k as usize), ts);
+            }
+            let e = load_err(dir.path());
+            assert!(e.contains(".dcm") && e.contains("pixel data holds 512 bytes") && e.contains(&format!("Columns {cols}")), "{e}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        for k in 0..3 {
+            ct_slice(&dir.path().join(format!("s{k}.dcm")), "1.2.3.9", k + 1, 16, 16, k as f64, &ct_values(16, 16, k as usize), ts);
+        }
+        assert_eq!(load(dir.path(), &LoadOptions::default()).unwrap().dims(), [16, 16, 3]);
+    }
+}
+
+#[test]
 fn dicom_rejections_are_clear() {
     let ts = uids::EXPLICIT_VR_LITTLE_ENDIAN;
     // Mixed slice sizes: the error names the odd file.

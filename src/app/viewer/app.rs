@@ -52,6 +52,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let settings = cmd.render.settings()?;
     let sc = &cmd.render.scene;
     let (vol, name) = cmd.volume.load()?;
+    crate::app::cli::renderable(&name, &vol)?;
     let load_ms = t_start.elapsed().as_secs_f64() * 1e3;
     let t_setup = Instant::now();
     let camera = cmd.render.camera(vol.frame())?;
@@ -418,7 +419,7 @@ impl App {
                 let p = f.pixels[y as usize * f.width + x as usize];
                 image::Rgb([(p >> 16) as u8, (p >> 8) as u8, p as u8])
             });
-            img.save_with_format(&path, image::ImageFormat::Png).with_context(|| format!("{}: cannot write PNG", path.display()))?;
+            shearwarp::output::write_png(&path, &img)?;
             Ok(path)
         })();
         let msg = match res {

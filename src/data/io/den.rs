@@ -16,7 +16,7 @@
 //! The file must be exactly 62 + `map_length` bytes long.
 
 use std::fs::File;
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::Path;
 
 use super::{io_error, make_volume, read_region};
@@ -101,7 +101,7 @@ pub fn save_den(path: &Path, dims: [usize; 3], voxels: &[u8]) -> Result<()> {
     }
     let len = d.map(|x| x as i16);
     let max = len.map(|x| x - 1);
-    let mut out = Vec::with_capacity(DEN_HEADER_BYTES as usize + voxels.len());
+    let mut out = Vec::with_capacity(DEN_HEADER_BYTES as usize);
     out.extend_from_slice(&1i16.to_le_bytes());
     for group in [[0i16; 3], max, len, [0; 3], max, len, [0; 3], max, len] {
         for v in group {
@@ -110,6 +110,8 @@ pub fn save_den(path: &Path, dims: [usize; 3], voxels: &[u8]) -> Result<()> {
     }
     out.extend_from_slice(&0i16.to_le_bytes());
     out.extend_from_slice(&(voxels.len() as i32).to_le_bytes());
-    out.extend_from_slice(voxels);
-    std::fs::write(path, out).map_err(|e| io_error(path, e))
+    crate::output::write_with(path, |w| {
+        w.write_all(&out)?;
+        w.write_all(voxels)
+    })
 }

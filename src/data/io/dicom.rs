@@ -352,9 +352,8 @@ fn slice_info(path: &Path, obj: &DefaultDicomObject, file_len: u64) -> Result<Op
     // plausibly expand to, so a tiny file cannot make a decoder allocate
     // gigabytes.
     let ts = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']);
-    let native = ["1.2.840.10008.1.2", "1.2.840.10008.1.2.1", "1.2.840.10008.1.2.2"];
     let slice_bytes = rows as u64 * cols as u64 * (bits as u64 / 8);
-    if !native.contains(&ts) && slice_bytes > MAX_EXPANSION * file_len + (1 << 20) {
+    if !NATIVE.contains(&ts) && slice_bytes > MAX_EXPANSION * file_len + (1 << 20) {
         return Err(err(format!("compressed DICOM slice claims {cols}×{rows} pixels, more than its {file_len} bytes can hold")));
     }
     let series = match obj.element_opt(tags::SERIES_INSTANCE_UID) {
@@ -466,6 +465,25 @@ fn decode_slice(path: &Path, obj: &DefaultDicomObject) -> Result<Vec<f32>> {
     if JPEG.contains(&ts) {
         check_jpeg(obj).map_err(|why| err(format!("invalid JPEG pixel data: {why}")))?;
     }
+    // native pixel data holds exactly Rows × Columns × SamplesPerPixel ×
+    // NumberOfFrames samples (plus one pad byte to an even length): any other
+    // length would load as skewed rows
+    if NATIVE.contains(&ts) {
+        let int = |tag| obj.element_opt(tag).ok().flatten().and_then(|e| e.to_int::<u64>().ok());
+        let (rows, cols, bits) = (int(tags::ROWS).unwrap_or(0), int(tags::COLUMNS).unwrap_or(0), int(tags::BITS_ALLOCATED).unwrap_or(0));
+        let (samples, frames) = (int(tags::SAMPLES_PER_PIXEL).unwrap_or(1), int(tags::NUMBER_OF_FRAMES).unwrap_or(1));
+        let need = rows * cols * samples * frames * bits.div_ceil(8);
+        let have = match obj.element_opt(tags::PIXEL_DATA) {
+            Ok(Some(e)) => e.to_bytes().map_err(|e| err(format!("cannot read the pixel data: {e}")))?.len() as u64,
+            _ => return Err(err("DICOM image has no pixel data (7FE0,0010)".into())),
+        };
+        if have != need && have != need + (need & 1) {
+            return Err(err(format!(
+                "the pixel data holds {have} bytes, but Rows {rows} × Columns {cols} × SamplesPerPixel {samples} × NumberOfFrames {frames} × {} bytes per sample needs {need}",
+                bits.div_ceil(8)
+            )));
+        }
+    }
     let decoded = obj.decode_pixel_data().map_err(|e| err(format!("cannot decode the pixel data: {e}")))?;
     let arr = decoded.to_ndarray::<f32>().map_err(|e| err(format!("cannot convert the pixel data: {e}")))?;
     let v: Vec<f32> = arr.iter().copied().collect();
@@ -474,6 +492,10 @@ fn decode_slice(path: &Path, obj: &DefaultDicomObject) -> Result<Vec<f32>> {
     }
     Ok(v)
 }
+
+/// The native (uncompressed) transfer syntaxes: implicit and explicit VR
+/// little endian, explicit VR big endian.
+const NATIVE: [&str; 3] = ["1.2.840.10008.1.2", "1.2.840.10008.1.2.1", "1.2.840.10008.1.2.2"];
 
 /// The RLE Lossless transfer syntax.
 const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";

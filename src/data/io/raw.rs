@@ -20,7 +20,7 @@
 //! truncated, a longer one means the spec is wrong.
 
 use std::fs::File;
-use std::io::{BufWriter, Read, Write};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -208,15 +208,12 @@ pub fn load_raw_with_sidecar(path: &Path) -> Result<Volume> {
 /// Writes `volume` as little-endian raw voxels to `path` and its sidecar to
 /// [`sidecar_path`]`(path)`; returns the sidecar's path.
 pub fn save_raw(volume: &Volume, path: &Path) -> Result<PathBuf> {
-    let f = File::create(path).map_err(|e| io_error(path, e))?;
-    let mut w = BufWriter::new(f);
-    let res = match volume.data() {
+    crate::output::write_with(path, |w| match volume.data() {
         VoxelData::U8(v) => w.write_all(v),
         VoxelData::U16(v) => v.iter().try_for_each(|x| w.write_all(&x.to_le_bytes())),
         VoxelData::I16(v) => v.iter().try_for_each(|x| w.write_all(&x.to_le_bytes())),
         VoxelData::F32(v) => v.iter().try_for_each(|x| w.write_all(&x.to_le_bytes())),
-    };
-    res.and_then(|_| w.flush()).map_err(|e| io_error(path, e))?;
+    })?;
     let sidecar = Sidecar {
         dims: volume.dims().map(|d| d as u64),
         voxel_type: volume.data().voxel_type().name().into(),
@@ -227,6 +224,6 @@ pub fn save_raw(volume: &Volume, path: &Path) -> Result<PathBuf> {
     };
     let json = serde_json::to_string_pretty(&sidecar).map_err(|e| Error::Other(e.to_string()))?;
     let side = sidecar_path(path);
-    std::fs::write(&side, json + "\n").map_err(|e| io_error(&side, e))?;
+    crate::output::write_bytes(&side, (json + "\n").as_bytes())?;
     Ok(side)
 }

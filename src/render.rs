@@ -62,13 +62,13 @@ pub enum Method {
     Binary,
     /// Unaccelerated reference: every slice of every ray, same sample positions.
     Brute,
-    /// Lacroute's run-length-encoded, pre-classified shear-warp ([`crate::encode::rle`]):
-    /// voxels are classified and shaded before interpolation, transparent voxels
-    /// skipped run by run, opaque pixels through skip links, and every pixel stops
-    /// at opacity [`Settings::ert`] — in iso mode too, where the transfer function
+    /// Lacroute's run-length-encoded, pre-classified shear-warp: voxels are
+    /// classified and shaded before interpolation, transparent voxels skipped
+    /// run by run, opaque pixels through skip links, and every pixel stops at
+    /// the early-ray-termination opacity — in iso mode too, where the transfer function
     /// is the iso threshold (opaque from the iso value on, in the iso colour).
     Rle,
-    /// The pre-classified reference for [`Method::Rle`]: the same samples,
+    /// The pre-classified reference for the RLE method: the same samples,
     /// every voxel of every slice, no runs and no skip links.
     #[serde(rename = "brute-rle")]
     BruteRle,
@@ -234,7 +234,7 @@ impl Lattice {
 #[serde(rename_all = "lowercase")]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Normals {
-    /// VolPack's shading tables ([`crate::data::normals`]): every voxel's gradient
+    /// VolPack's shading tables: every voxel's gradient
     /// direction quantized to a 14-bit code once per axis, a shade table per view,
     /// and a sample's shade blended from its cell's four corner entries.
     Codes,

@@ -121,7 +121,7 @@ pub struct BenchCmd {
     /// volume diagonals (comma-separated or repeated) [default: 2].
     #[arg(long, value_name = "D", allow_negative_numbers = true, value_delimiter = ',', requires = "perspective")]
     pub eye_distance: Vec<f64>,
-    /// The perspective matrix of issue 21: fields of view 20°, 40° and 60°
+    /// The perspective matrix: fields of view 20°, 40° and 60°
     /// from 3, 1.5 and 0.75 volume diagonals, and the eye inside the volume
     /// (60° from 0.1 diagonals), beside the parallel rows (adds to any
     /// --perspective).
@@ -173,7 +173,7 @@ pub struct Variant {
 
 /// The intermediate resolution of the `-q2` variants: Schulze's adaptive
 /// size at its finest, two pixels per voxel (what a zoomed-in view needs
-/// for the output's sampling rate; issue 22's matched sampling generalizes it).
+/// for the output's sampling rate; Deluxe's matched sampling generalizes it).
 pub const FINE_QUALITY: f64 = 2.0;
 
 /// Every variant benchmarked for the mode and shared settings of `base`:
@@ -219,7 +219,7 @@ pub fn registry(base: Settings) -> Vec<Variant> {
     v
 }
 
-/// The Shear-Warp Deluxe variants (issue 22): the RLE path with every
+/// The Shear-Warp Deluxe variants: the RLE path with every
 /// combination of I, P and M (`rle-deluxe-I`, …, `rle-deluxe-IMP`), the binary
 /// rotator with I, M and IM (it classifies after interpolation already: P
 /// adds nothing), the RLE path with one encoding serving two axes
@@ -292,7 +292,7 @@ pub fn perspective_variants(base: Settings, projection: Projection, suffix: &str
     .to_vec()
 }
 
-/// The perspective projections of `--perspective-matrix` (issue 21): fields
+/// The perspective projections of `--perspective-matrix`: fields
 /// of view 20°, 40°, 60° from 3, 1.5 and 0.75 volume diagonals, and 60° from
 /// 0.1 diagonals (the eye inside).
 pub fn perspective_matrix() -> Vec<Projection> {

@@ -180,7 +180,7 @@ impl Sampler for PostTables {
 /// [`Sampler::blend_columns`]), so a row of cells turns each column once; a
 /// midpoint's eight are turned whole: turned column by column (each column's
 /// four to one side, then the columns by the slice's rule) the cube phantom's
-/// I,P error rose by up to 13 % at 0° and 45° (IMP 28 %), session 18.
+/// I,P error rose by up to 13 % at 0° and 45° (IMP 28 %).
 #[inline(always)]
 fn align_normals<const N: usize>(mut v: [[f32; 4]; N]) -> [[f32; 4]; N] {
     let r = if normal_dot(&v[0], &v[0]) > 0.0 { v[0] } else { v[N - 1] };

@@ -35,15 +35,15 @@ use crate::error::{Error, Result};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Phantom {
-    /// The CT head of [`head`] (Hounsfield units, `i16`).
+    /// The CT head phantom (Hounsfield units, `i16`), built by `head`.
     Head,
-    /// The analytic ball of [`sphere`] (`f32`).
+    /// The analytic ball (`f32`), built by `sphere`.
     Sphere,
-    /// The Marschner–Lobb signal of [`marschner_lobb`] (`f32`).
+    /// The Marschner–Lobb signal (`f32`), built by `marschner_lobb`.
     MarschnerLobb,
-    /// The solid cube of [`cube`] (`f32`): flat faces and sharp edges.
+    /// The solid cube (`f32`): flat faces and sharp edges.
     Cube,
-    /// The engine-like block of [`engine`] (`f32`): two materials, bores,
+    /// The engine-like block (`f32`): two materials, bores,
     /// a shaft and bolts.
     Engine,
 }

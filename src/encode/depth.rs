@@ -137,10 +137,9 @@ pub enum Search {
     /// The paper's binary search for the first non-zero byte plus a byte table.
     Lut,
     /// Hardware bit scan (`leading_zeros` / `trailing_zeros`). At CPU level
-    /// [`CpuLevel::Avx2`](crate::kernels::CpuLevel::Avx2) the binary path's row loop
-    /// runs a copy compiled for `lzcnt`/`tzcnt`; at [`CpuLevel::Scalar`](crate::kernels::CpuLevel::Scalar)
-    /// the plain build's `bsr`/`bsf` (the scalar reference, chosen by
-    /// [`crate::render::Settings::cpu`]).
+    /// AVX2 the binary path's row loop runs a copy compiled for
+    /// `lzcnt`/`tzcnt`; at the scalar level the plain build's `bsr`/`bsf`
+    /// (the scalar reference, chosen by the `cpu` setting).
     Bitscan,
 }
 

@@ -1,4 +1,4 @@
-//! Geometry in the volume (issue 23; Bruckner's InverseWarp hybrid).
+//! Geometry in the volume (Bruckner's InverseWarp hybrid).
 //!
 //! Owns the surfaces placed in a volume and their picture at the output
 //! resolution:

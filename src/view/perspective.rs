@@ -1,5 +1,5 @@
 //! The perspective factorization (Schulze et al.; Lacroute's disabled
-//! perspective code in VolPack): the first building block of issue 21.
+//! perspective code in VolPack): the first building block of perspective frames.
 //!
 //! The eye sits at eye-space `(0, 0, D)`, `D` world units in front of the
 //! volume centre; a point at eye coordinates `e` lands on the output pixel

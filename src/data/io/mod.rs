@@ -41,7 +41,7 @@ pub use raw::{RawSpec, save_raw, sidecar_path};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Format {
-    /// Headerless voxels plus a [`RawSpec`] (given, or read from a JSON sidecar).
+    /// Headerless voxels plus a raw spec: dimensions, type, spacing (given, or read from a JSON sidecar).
     Raw,
     /// NRRD, attached (`.nrrd`) or detached (`.nhdr`).
     Nrrd,

@@ -32,7 +32,8 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 
-use crate::app::cli::{Usage, VolumeArgs};
+use crate::app::Usage;
+use crate::app::args::VolumeArgs;
 use crate::app::peers::{self, MODEL_SHADING, Peer, PeerCamera, PeerView};
 use shearwarp::accuracy::metrics::{DepthError, ImageError, compare, depth_error};
 use shearwarp::accuracy::reference::{ReferenceImage, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
@@ -147,7 +148,7 @@ pub struct BenchCmd {
     /// plain rows and their I rows side by side). Without it the matrix
     /// already holds every option combination of the RLE path and the
     /// raycast paths' I, M and IM (parallel only).
-    #[arg(long, value_name = "LIST", value_parser = crate::app::cli::parse_deluxe, action = clap::ArgAction::Append)]
+    #[arg(long, value_name = "LIST", value_parser = crate::app::args::parse_deluxe, action = clap::ArgAction::Append)]
     pub deluxe: Vec<shearwarp::Deluxe>,
     /// The sample lattice of every variant: `bcc` renders each variant on the
     /// body-centred cubic grid (names end in `-bcc`); without it the matrix
@@ -427,7 +428,7 @@ impl BenchCmd {
     /// `--perspective-matrix`, without repeats.
     fn projections(&self) -> Result<Vec<Projection>> {
         let mut out: Vec<Projection> = vec![];
-        let default = [crate::app::cli::DEFAULT_EYE_DISTANCE];
+        let default = [crate::app::args::DEFAULT_EYE_DISTANCE];
         let ds: &[f64] = if self.eye_distance.is_empty() { &default } else { &self.eye_distance };
         for &fov in &self.perspective {
             if !(fov > 0.0 && fov < 180.0) {
@@ -602,7 +603,7 @@ pub struct ReferenceRecord {
 /// Runs `shearwarp bench`.
 pub fn run(cmd: &BenchCmd) -> Result<()> {
     cmd.check()?;
-    shearwarp::checks::check_threads(cmd.threads)?;
+    shearwarp::render::checks::check_threads(cmd.threads)?;
     let (vol, name) = cmd.volume.load()?;
     let report = measure(cmd, vol, name)?;
     if let Some(p) = &cmd.csv {

@@ -112,7 +112,7 @@ impl DataRange {
 
     /// What a report should say about the sentinel, if there is one.
     pub fn sentinel_note(&self) -> Option<String> {
-        let n = crate::checks::fmt_density;
+        let n = crate::fmt::fmt_density;
         self.sentinel.map(|s| {
             format!(
                 "{} voxels hold {}, far from the other values ({} … {}): a no-data sentinel? It dominates the range; the \

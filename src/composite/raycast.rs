@@ -1,4 +1,4 @@
-//! Stage 5c — the bilinear resampling raycaster over the intermediate image.
+//! The bilinear resampling raycaster over the intermediate image.
 //!
 //! Owns the per-ray loop shared by the binary path and its brute-force reference:
 //! each ray of the intermediate image visits candidate slices in front-to-back
@@ -24,10 +24,12 @@
 use rayon::prelude::*;
 
 use crate::classify::Classifier;
+use crate::classify::shade_table::ShadeTable;
+use crate::classify::shading::apply_shade;
 use crate::classify::shading::{Shading, headlight_ndl};
 use crate::composite::Rect;
 use crate::composite::{Intermediate, Mode, composite, correct_alpha, terminated};
-use crate::data::normals::{ByteCells, NormalStack, PackedCells, ShadeTable, apply_shade};
+use crate::data::normals::{ByteCells, NormalStack, PackedCells};
 use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;

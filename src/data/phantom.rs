@@ -1087,7 +1087,7 @@ mod tests {
             let v = head(dims).unwrap();
             assert_eq!(v.dims(), dims);
             assert_eq!(v.spacing(), [1.0; 3]);
-            assert_eq!(v.data().voxel_type(), crate::VoxelType::I16);
+            assert_eq!(v.data().voxel_type(), crate::data::volume::VoxelType::I16);
             // The midline between the ventricles is white matter.
             let [x, y, z] = voxel_at(dims, BRAIN_CENTRE);
             for dz in -1..=1i64 {

@@ -1,4 +1,4 @@
-//! Stage 1 — the volume: a regular grid of scalar densities with voxel spacing.
+//! The volume: a regular grid of scalar densities with voxel spacing.
 //!
 //! Owns the voxel storage ([`VoxelData`], u8/u16/i16/f32), the grid dimensions and
 //! the physical spacing, the size limits every loader checks *before* allocating,

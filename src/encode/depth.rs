@@ -1,4 +1,4 @@
-//! Stage 5b — first-opaque depth search in packed depth rows.
+//! First-opaque depth search in packed depth rows.
 //!
 //! Owns the [`Word`] abstraction (one implementation of everything bit-packed,
 //! generic over `u32` and `u64`), the bit order of a depth row, the paper's

@@ -30,13 +30,13 @@
 
 use rayon::prelude::*;
 
-use crate::composite::Rect;
 use crate::data::slices::SliceStack;
 pub use crate::encode::cells::{CellCodes, PackedCodes};
 use crate::encode::depth::{Word, slot_shift};
-use crate::encode::shear::{ShearState, shift_vectors, shift_vectors2};
 use crate::encode::shift::*;
 use crate::kernels::{self, CpuLevel};
+use crate::view::plan::Rect;
+use crate::view::shear::ShearState;
 
 /// Steps above this count are done as one direct shear instead. A direct
 /// shear clears the occupied region and scatters every non-zero code; a step

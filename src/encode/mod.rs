@@ -1,4 +1,4 @@
-//! Stage 3 — encodings of a classified volume that let a frame skip what it does not need.
+//! Encodings of a classified volume that let a frame skip what it does not need.
 //!
 //! Owns the two acceleration structures and their per-frame updates:
 //! - the bit-packed binary cell mask: cell codes from the classification
@@ -17,6 +17,5 @@ pub mod cells;
 pub mod depth;
 pub mod mask;
 pub mod rle;
-pub mod shear;
 pub mod shift;
 pub mod walk;

@@ -31,6 +31,7 @@ pub mod inverse_warp;
 pub mod io;
 pub mod mesh;
 pub mod raster;
+pub mod sampling;
 
 pub use clip_mesh::{ConvexMesh, MeshClip};
 pub use hit::volume_hit;

@@ -1,4 +1,4 @@
-//! Stage 4 — the view: camera, factorization, and the frame plan every traversal reads.
+//! The view: camera, factorization, and the frame plan every traversal reads.
 //!
 //! Owns the camera and its standard views ([`camera`]), Lacroute's
 //! factorization of the viewing transform into a shear of the slices and a
@@ -15,8 +15,10 @@
 pub mod camera;
 pub mod clip;
 mod factor;
+pub mod opacity;
 pub mod perspective;
 pub mod plan;
+pub mod shear;
 
 pub use camera::*;
 pub use factor::*;

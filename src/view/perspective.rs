@@ -37,8 +37,7 @@
 use glam::{DMat3, DVec3};
 
 use crate::error::{Error, Result};
-use crate::view::factor::{camera_zoom, unpermute};
-use crate::view::plan::Warp;
+use crate::view::factor::{Warp, camera_zoom, unpermute};
 use crate::view::{Camera, permutation, principal_axis};
 
 /// The projection of a frame: parallel (orthographic), or perspective from an

@@ -30,7 +30,7 @@ use super::state::{
     Adaptive, Class, Display, Drag, HELP, Hud, Input, Key, Kind, Lens, Meter, Outcome, Request, Start, State, TissueInfo, button_labels,
 };
 use super::worker::{Frame, Renderers, Reply, Worker};
-use crate::app::cli::Usage;
+use crate::app::Usage;
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::render::{FrameStats, Settings};

@@ -1,4 +1,4 @@
-//! Stage 0 — volume file loaders: turning files on disk into a [`Volume`].
+//! Volume file loaders: turning files on disk into a [`Volume`].
 //!
 //! This module owns every on-disk volume format the crate reads, and the one
 //! format it writes (raw voxels with a JSON sidecar):

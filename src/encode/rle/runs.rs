@@ -8,10 +8,9 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::preclass::{BRIDGE, BRIDGE_NORMAL, PostVisible, Preclass, RleVoxel, VoxelSource};
-use crate::composite::Rect;
-pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::data::slices::{SliceStack, prefetch};
 use crate::view::plan::FramePlan;
+use crate::view::plan::Rect;
 
 /// End of a scanline for the run cursors.
 pub(crate) const INF: u32 = u32::MAX;

@@ -1,4 +1,4 @@
-//! The frame pipeline: volume → classify → mask → factorize → composite → warp.
+//! The renderer: one frame through every stage, from the volume to the image.
 //!
 //! Owns [`Renderer`], which holds the volume, the classification (one transfer
 //! function, or a set of tissue presets sharing one threshold-coded mask), one
@@ -13,9 +13,12 @@
 //! re-encoded when the classification (transfer function, iso value, tissue or
 //! mode) changes.
 
+pub mod checks;
+
 use std::time::Instant;
 
 use crate::classify::presets::Tissue;
+use crate::classify::shade_table::{ShadeTable, headlight_object};
 use crate::classify::shading::Shading;
 use crate::classify::{Classifier, TransferFunction};
 use crate::composite::Mode;
@@ -23,7 +26,7 @@ use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary,
 use crate::composite::{Intermediate, Rect};
 use crate::data::bcc::{BccLattice, BccStack};
 use crate::data::normals::CellSource;
-use crate::data::normals::{NormalStack, ShadeTable, headlight_object};
+use crate::data::normals::NormalStack;
 use crate::data::slices::{Densities, SliceStack};
 use crate::data::volume::Volume;
 use crate::encode::depth::{Matcher, Search, binary_matcher};
@@ -1897,7 +1900,7 @@ fn check_deluxe(s: &Settings) -> Result<()> {
 }
 
 fn build_pool(threads: usize) -> Result<rayon::ThreadPool> {
-    crate::checks::check_threads(threads)?;
+    checks::check_threads(threads)?;
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()

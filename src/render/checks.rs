@@ -4,27 +4,10 @@
 //! image). Quiet: callers print what these return.
 
 use super::Renderer;
+pub use super::settings::{check_threads, max_threads};
 use crate::composite::Mode;
 use crate::error::{Error, Result};
 use crate::fmt::fmt_density;
-
-/// The largest thread count accepted: 8 per core. More threads than that
-/// only add start-up and scheduling cost (`--threads 100000` used to hang).
-pub fn max_threads() -> usize {
-    8 * std::thread::available_parallelism().map_or(1, |n| n.get())
-}
-
-/// Checks a `--threads` count (0 = every core) against [`max_threads`].
-pub fn check_threads(threads: usize) -> Result<()> {
-    let max = max_threads();
-    if threads > max {
-        return Err(Error::value(
-            "--threads",
-            format!("{threads} is more than {max} (8 per core on this machine's {} cores); 0 uses every core", max / 8),
-        ));
-    }
-    Ok(())
-}
 
 /// A volume one voxel thick along an axis has no cells there, so shear-warp
 /// would draw an empty image: an error naming the axis.

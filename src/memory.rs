@@ -4,7 +4,7 @@
 //! Owns [`Memory`] (bytes per structure and principal axis, as
 //! [`crate::Renderer::memory`] reports them and
 //! [`crate::render::estimate_axis`] predicts them before anything is built) and
-//! [`zeroed`], the fallible zero-filled allocation the large per-axis arrays
+//! `zeroed`, the fallible zero-filled allocation the large per-axis arrays
 //! use: a scan too large for the machine, or for an address-space limit, gets
 //! [`Error::Memory`] rather than a SIGABRT from the global allocator; and
 //! [`parse_bytes`], the byte counts (memory budgets) the command line accepts.

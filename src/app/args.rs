@@ -485,10 +485,10 @@ impl RenderArgs {
         if let Some([rx, ry, rz]) = self.rotate {
             r = rotate_eye(rotate_eye(rotate_eye(r, 0, rx), 1, ry), 2, rz);
         }
-        if let Some(z) = self.zoom {
-            if !(z.is_finite() && z > 0.0) {
-                usage!("--zoom must be finite and > 0, got {z}");
-            }
+        if let Some(z) = self.zoom
+            && !(z.is_finite() && z > 0.0)
+        {
+            usage!("--zoom must be finite and > 0, got {z}");
         }
         Ok(Camera { rotation: r, zoom: self.zoom, size: [self.size, self.size] })
     }

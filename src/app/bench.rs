@@ -398,10 +398,10 @@ impl BenchCmd {
         if !(self.ert > 0.0 && self.ert <= 1.0) {
             return Err(usage(format!("--ert must be in (0, 1], got {}", self.ert)));
         }
-        if let Some(iso) = self.iso {
-            if !iso.is_finite() {
-                return Err(usage("--iso must be a finite number".into()));
-            }
+        if let Some(iso) = self.iso
+            && !iso.is_finite()
+        {
+            return Err(usage("--iso must be a finite number".into()));
         }
         self.projections()?;
         if !self.peers.is_empty() {
@@ -489,11 +489,11 @@ impl BenchCmd {
         let hi = vol.value_range().1;
         let mut r = Renderer::with_tissues(vol, &tissues, base)?;
         r.set_memory_budget(crate::app::budget());
-        if let Some(name) = self.tissue.as_deref().filter(|n| *n != "auto") {
-            if r.select_tissue_named(name).is_err() {
-                let names: Vec<&str> = tissues.iter().map(|t| t.name).collect();
-                return Err(usage(format!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "))));
-            }
+        if let Some(name) = self.tissue.as_deref().filter(|n| *n != "auto")
+            && r.select_tissue_named(name).is_err()
+        {
+            let names: Vec<&str> = tissues.iter().map(|t| t.name).collect();
+            return Err(usage(format!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "))));
         }
         let iso = self.iso.or(self.phantom().and_then(Phantom::iso));
         if let Some(iso) = iso {

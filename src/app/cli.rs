@@ -593,10 +593,10 @@ pub fn run_export(cmd: &ExportCmd) -> Result<()> {
     if cmd.output.extension().and_then(|e| e.to_str()).map(|e| e.eq_ignore_ascii_case("den")) != Some(true) {
         usage!("{}: export writes VolPack .den files; give the output a .den extension", cmd.output.display());
     }
-    if let Some(d) = cmd.out_dims {
-        if d.iter().any(|&x| x > i16::MAX as usize) {
-            usage!("--out-dims {d:?}: a .den file holds at most {} voxels per edge", i16::MAX);
-        }
+    if let Some(d) = cmd.out_dims
+        && d.iter().any(|&x| x > i16::MAX as usize)
+    {
+        usage!("--out-dims {d:?}: a .den file holds at most {} voxels per edge", i16::MAX);
     }
     let (vol, name) = cmd.volume.load()?;
     let target = match (cmd.out_dims, cmd.max_dim) {

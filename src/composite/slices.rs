@@ -153,7 +153,7 @@ impl Sampler for PostTables {
         blend(l[0], turn(r[0], d), l[1], turn(r[1], d), w)
     }
     /// The column's four voxels as they are: the cell's eight are turned
-    /// to one side together ([`align_normals`]).
+    /// to one side together (`align_normals`).
     type MidColumn = [[f32; 4]; 4];
     #[inline(always)]
     fn mid_column(&self, bk: [f32; 4], tk: [f32; 4], bk1: [f32; 4], tk1: [f32; 4]) -> [[f32; 4]; 4] {

@@ -110,7 +110,7 @@ fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
 /// layout (index [`SliceStack::index`]). Three layouts, the same image bit for
 /// bit:
 ///
-/// - **bytes** ([`NormalStack::try_cells`], the binary path of 8-bit scans):
+/// - **bytes** (`NormalStack::try_cells`, the binary path of 8-bit scans):
 ///   `[density, code]` in three bytes a voxel ([`ByteCells`]);
 /// - **packed** (the binary path of 16-bit scans, and
 ///   [`NormalStack::with_packing`] of an f32 stack whose densities are
@@ -119,7 +119,7 @@ fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
 /// - **codes** only, 2 bytes per voxel, beside the f32 stack.
 ///
 /// In the first two a ray reads a cell's densities and codes from the same two
-/// cache lines. Built by [`NormalStack::try_cells`], they hold every voxel
+/// cache lines. Built by `NormalStack::try_cells`, they hold every voxel
 /// exactly and need no f32 stack nor the volume beside them: the renderer lets
 /// go of the volume and gets it back from them
 /// ([`NormalStack::voxels_in_volume_order`]).
@@ -262,7 +262,7 @@ impl NormalStack {
     }
 
     /// True when this stack holds every voxel of the scan exactly (built by
-    /// [`NormalStack::try_cells`]).
+    /// `NormalStack::try_cells`).
     pub fn holds_voxels(&self) -> bool {
         self.voxels.is_some()
     }

@@ -1,6 +1,6 @@
 //! The binary path's cells of an integer scan, built in place.
 //!
-//! Owns [`InPlace`]: one principal axis of an 8- or 16-bit scan as the cells a
+//! Owns `InPlace`: one principal axis of an 8- or 16-bit scan as the cells a
 //! binary ray reads, each voxel's density beside its normal code in one small
 //! array element (`[u8; 3]`: the u8 density and the u16 code; `[u16; 2]`: the
 //! 16-bit density less an offset and the code), so a cell's densities and

@@ -169,7 +169,7 @@ impl SliceStack {
 
     /// The geometry of the stack of `vol` along `axis` without its densities:
     /// what a path that reads its samples from elsewhere (the binary path from
-    /// packed cells, [`crate::data::normals::NormalStack::try_cells`])
+    /// packed cells, `NormalStack::try_cells`)
     /// needs. Reading a density from it panics; [`SliceStack::is_resident`] says which it is.
     pub fn shell(vol: &Volume, axis: usize) -> Self {
         let (perm, d) = (permutation(axis), vol.dims());

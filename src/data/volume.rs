@@ -157,10 +157,10 @@ impl Volume {
             });
         }
         check_spacing(spacing)?;
-        if let VoxelData::F32(v) = &data {
-            if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
-                return Err(Error::NonFinite { index, value });
-            }
+        if let VoxelData::F32(v) = &data
+            && let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite())
+        {
+            return Err(Error::NonFinite { index, value });
         }
         Ok(Volume { dims: d, spacing, data: std::sync::Arc::new(data), frame: None, stats: StatsCache::default() })
     }

@@ -38,6 +38,10 @@ fn position_at(plan: &FramePlan, x: usize, y: usize, k: f64) -> DVec3 {
     a + (b - a) * (k - k0 as f64)
 }
 
+/// One plan's depth lookup: the plan, its kept depth image, the first and
+/// last slice's depth functions, and the last slice.
+type PlanDepths<'r> = (&'r FramePlan, Option<&'r Intermediate>, [f64; 3], [f64; 3], usize);
+
 /// [`volume_hit`]'s eye depth (`−z` in a projector's eye space) for a run of
 /// output pixels of one frame: each plan's first and last slice depths set
 /// up once ([`super::sampling::slice_depth`]), and a pixel's hit depth
@@ -49,7 +53,7 @@ pub(crate) struct HitDepths<'r> {
     /// Per plan: the plan, its depth plane (None: not kept, or not of the
     /// plan's grid: no hit), the first and last slice's depth functions and
     /// the last slice — looked up once per frame, not per pixel.
-    plans: Vec<(&'r FramePlan, Option<&'r Intermediate>, [f64; 3], [f64; 3], usize)>,
+    plans: Vec<PlanDepths<'r>>,
 }
 
 impl<'r> HitDepths<'r> {

@@ -336,6 +336,7 @@ struct AffineBack {
 
 impl AffineBack {
     /// None unless the inverse warp is affine and finite.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN fails the test too
     fn new(plan: &FramePlan, margin: [f64; 2]) -> Option<AffineBack> {
         let inv = &plan.warp.inverse;
         if inv.row(2) != DVec3::Z || !(plan.grid.pitch > 0.0) {
@@ -662,6 +663,7 @@ impl GeometryLimits {
     /// front of the nearest geometry depth over its footprint (the gather of
     /// one pixel).
     #[inline(always)]
+    #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN fails the test too
     fn limit_at(&self, g: &Gather, r: &RowAt, p: usize, l: &mut [u32; 2]) {
         if l[0] > l[1] {
             return;

@@ -22,7 +22,7 @@ pub(super) struct Classes {
     pub(super) focus: Option<(FocusShape, usize, u64)>,
 }
 
-/// Focus+context ([`Renderer::set_focus`]): inside `region` (voxel indices,
+/// Focus+context ([`super::Renderer::set_focus`]): inside `region` (voxel indices,
 /// as [`ClipRegion`] takes it) the samples are classified by the tissue
 /// preset named `tissue`, outside it by the renderer's current one.
 #[derive(Clone, Debug, PartialEq)]

@@ -117,10 +117,10 @@ impl Renderer {
         }
         for t in &ts {
             // the code mask is conservative only if each tissue is transparent below its threshold
-            if let Some(lt) = t.tf.lower_threshold() {
-                if lt < t.threshold {
-                    return Err(Error::value("tissues", format!("{} has opacity below its threshold {}", t.name, t.threshold)));
-                }
+            if let Some(lt) = t.tf.lower_threshold()
+                && lt < t.threshold
+            {
+                return Err(Error::value("tissues", format!("{} has opacity below its threshold {}", t.name, t.threshold)));
             }
         }
         let nb = crate::encode::depth::code_width_for(ts.len()).ok_or_else(|| Error::value("tissues", "at most 15 presets"))?;
@@ -935,10 +935,13 @@ impl Renderer {
             limiter: self.frame.limiter.as_ref().map(|l| l.1),
             focus: self.classes.focus.as_ref().map(|f| (f.2, f.1)),
         };
-        if let Some((k, stamp)) = self.frame.last_frame {
-            if k == key && out.stamp == stamp && out.width == camera.size[0] && out.height == camera.size[1] {
-                return Ok(FrameStats { skipped: true, axis: self.last_plan().map_or(0, |p| p.view.axis), ..Default::default() });
-            }
+        if let Some((k, stamp)) = self.frame.last_frame
+            && k == key
+            && out.stamp == stamp
+            && out.width == camera.size[0]
+            && out.height == camera.size[1]
+        {
+            return Ok(FrameStats { skipped: true, axis: self.last_plan().map_or(0, |p| p.view.axis), ..Default::default() });
         }
         let (dims, spacing) = (self.volume.dims(), self.volume.spacing());
         let bcc = self.settings.lattice == Lattice::Bcc;
@@ -1288,6 +1291,34 @@ impl Renderer {
     }
 }
 
+/// The rays' context of a frame of `plan`: the classification, iso value and
+/// material, with table shading when the settings ask for it and the normal
+/// codes exist (the shade table brought up to date for the view).
+#[allow(clippy::too_many_arguments)]
+fn ray_context<'a>(
+    stack: &'a SliceStack,
+    cls: &'a Classifier,
+    plan: &'a FramePlan,
+    iso: f32,
+    focus: Option<(&'a Classifier, f32)>,
+    settings: Settings,
+    normals: Option<&'a NormalStack>,
+    shade: &'a mut ShadeTable,
+) -> RayContext<'a> {
+    let mut ctx =
+        RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert).with_intermediate(plan.intermediate());
+    if let Some((fc, fiso)) = focus {
+        ctx = ctx.with_focus(fc, fiso);
+    }
+    match (settings.normals, normals) {
+        (Normals::Codes, Some(ns)) => {
+            shade.update(headlight_object(&plan.view), settings.shading);
+            ctx.with_normals(ns, shade)
+        }
+        _ => ctx,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1314,33 +1345,5 @@ mod tests {
         assert!(r.render(&cam, &mut img).unwrap().skipped);
         r.set_settings(Settings { mode: Mode::Blend, ..r.settings() }).unwrap();
         assert!(!r.render(&cam, &mut img).unwrap().skipped);
-    }
-}
-
-/// The rays' context of a frame of `plan`: the classification, iso value and
-/// material, with table shading when the settings ask for it and the normal
-/// codes exist (the shade table brought up to date for the view).
-#[allow(clippy::too_many_arguments)]
-fn ray_context<'a>(
-    stack: &'a SliceStack,
-    cls: &'a Classifier,
-    plan: &'a FramePlan,
-    iso: f32,
-    focus: Option<(&'a Classifier, f32)>,
-    settings: Settings,
-    normals: Option<&'a NormalStack>,
-    shade: &'a mut ShadeTable,
-) -> RayContext<'a> {
-    let mut ctx =
-        RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert).with_intermediate(plan.intermediate());
-    if let Some((fc, fiso)) = focus {
-        ctx = ctx.with_focus(fc, fiso);
-    }
-    match (settings.normals, normals) {
-        (Normals::Codes, Some(ns)) => {
-            shade.update(headlight_object(&plan.view), settings.shading);
-            ctx.with_normals(ns, shade)
-        }
-        _ => ctx,
     }
 }

@@ -15,7 +15,7 @@ use crate::error::{Error, Result};
 pub const MAX_MASK_BYTES: u64 = 1 << 34;
 /// Largest intermediate image, in pixels, a renderer allocates.
 pub const MAX_INTERMEDIATE_PIXELS: u64 = 1 << 29;
-/// The smallest intermediate image resolution, in pixels per voxel ([`Renderer::set_quality`]).
+/// The smallest intermediate image resolution, in pixels per voxel ([`super::Renderer::set_quality`]).
 pub const MIN_QUALITY: f64 = 0.25;
 /// The largest intermediate image resolution, in pixels per voxel.
 pub const MAX_QUALITY: f64 = 2.0;

@@ -2,7 +2,7 @@
 //!
 //! Owns the camera and its standard views ([`camera`]), Lacroute's
 //! factorization of the viewing transform into a shear of the slices and a
-//! warp of the intermediate image ([`factor`], re-exported here), and the
+//! warp of the intermediate image (`factor`, re-exported here), and the
 //! per-frame plan every traversal reads ([`plan`]). A factorization takes
 //! the object axes of each principal axis it is given
 //! ([`Factorization::with_permutations`]): the cyclic [`permutation`] by

@@ -1169,6 +1169,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)] // the index picks one axis of several arrays
     fn the_maps_are_the_exact_translations_split() {
         let p = plan(rotate_eye(DMat3::from_rotation_x(0.4), 1, 31.0), [20, 24, 18]);
         assert_eq!(p.maps.len(), p.view.n[2]);

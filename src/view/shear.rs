@@ -41,6 +41,7 @@ impl ShearState {
 
     /// Overwrites this state with that of a factorized view, reusing the arrays
     /// (no allocation per frame once they have grown to the slice count).
+    #[allow(clippy::needless_range_loop)] // the index picks one axis of several arrays
     pub fn set_view(&mut self, f: &Factorization) {
         let nk = f.n[2];
         for a in 0..2 {
@@ -109,6 +110,7 @@ mod tests {
     use super::*;
 
     #[test]
+    #[allow(clippy::needless_range_loop)] // the index picks one axis of several arrays
     fn rotation_steps_stay_in_closed_form() {
         let nk = 113;
         let mut s = ShearState::identity(nk);

@@ -333,12 +333,12 @@ mod tests {
     #[test]
     fn decode_samples_endianness_and_widening() {
         let b = [0x01, 0x02, 0xff, 0xfe];
-        assert_eq!(decode_samples(&b, Sample::U16, false), VoxelData::U16(vec![0x0201, 0xfeff]));
-        assert_eq!(decode_samples(&b, Sample::U16, true), VoxelData::U16(vec![0x0102, 0xfffe]));
-        assert_eq!(decode_samples(&b, Sample::I16, true), VoxelData::I16(vec![0x0102, -2]));
-        assert_eq!(decode_samples(&b, Sample::I8, true), VoxelData::I16(vec![1, 2, -1, -2]));
-        assert_eq!(decode_samples(&1.5f64.to_be_bytes(), Sample::F64, true), VoxelData::F32(vec![1.5]));
-        assert_eq!(decode_samples(&(-7i32).to_le_bytes(), Sample::I32, false), VoxelData::F32(vec![-7.0]));
+        assert_eq!(decode_samples(b, Sample::U16, false), VoxelData::U16(vec![0x0201, 0xfeff]));
+        assert_eq!(decode_samples(b, Sample::U16, true), VoxelData::U16(vec![0x0102, 0xfffe]));
+        assert_eq!(decode_samples(b, Sample::I16, true), VoxelData::I16(vec![0x0102, -2]));
+        assert_eq!(decode_samples(b, Sample::I8, true), VoxelData::I16(vec![1, 2, -1, -2]));
+        assert_eq!(decode_samples(1.5f64.to_be_bytes(), Sample::F64, true), VoxelData::F32(vec![1.5]));
+        assert_eq!(decode_samples((-7i32).to_le_bytes(), Sample::I32, false), VoxelData::F32(vec![-7.0]));
     }
 
     #[test]

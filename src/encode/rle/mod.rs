@@ -240,7 +240,7 @@ impl RleCache {
     /// the same (its permutation with `j` and `k` swapped), else a new
     /// encoding of `src`. An encoding of the axis under another permutation
     /// is replaced. Returns true if it built anything; false also when there
-    /// is no classification. (`src` is a [`SliceStack`] or the interleaved
+    /// is no classification. (`src` is a [`crate::data::slices::SliceStack`] or the interleaved
     /// slices of a BCC grid; the owner resets the cache when it switches
     /// between them.)
     pub fn ensure_axis<S: VoxelSource + ?Sized>(&mut self, src: &S) -> bool {

@@ -15,8 +15,8 @@ use shearwarp::data::phantom;
 use shearwarp::data::slices::SliceStack;
 use shearwarp::encode::depth::{Matcher, Search, SetBits};
 use shearwarp::encode::mask::{BinaryMask, CellCodes};
-use shearwarp::encode::shear::ShearState;
 use shearwarp::render::{Method, Renderer, Settings, WordSize};
+use shearwarp::view::shear::ShearState;
 use shearwarp::view::{Camera, rotate_eye};
 use shearwarp::warp::Image;
 

@@ -27,8 +27,8 @@ use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::encode::depth::Search;
 use shearwarp::encode::mask::{BinaryMask, CellCodes};
 use shearwarp::encode::rle::{Preclass, ViewTables};
-use shearwarp::encode::shear::ShearState;
 use shearwarp::render::{Method, Normals, Renderer, Settings};
+use shearwarp::view::shear::ShearState;
 use shearwarp::view::{Camera, rotate_eye};
 use shearwarp::warp::{Canvas, Image, Image8, Texel};
 

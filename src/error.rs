@@ -35,7 +35,7 @@ pub enum Error {
 }
 
 fn memory_message(what: &str, needed: u64, held: u64, budget: u64) -> String {
-    let b = crate::checks::fmt_bytes;
+    let b = crate::fmt::fmt_bytes;
     if budget == 0 {
         format!("{what} needs {}: the system refused the allocation (not enough memory or address space)", b(needed))
     } else {

@@ -4,9 +4,10 @@
 //! Owns [`Memory`] (bytes per structure and principal axis, as
 //! [`crate::Renderer::memory`] reports them and
 //! [`crate::render::estimate_axis`] predicts them before anything is built) and
-//! [`zeroed`], the fallible zero-filled allocation the large per-axis arrays
+//! `zeroed`, the fallible zero-filled allocation the large per-axis arrays
 //! use: a scan too large for the machine, or for an address-space limit, gets
-//! [`Error::Memory`] rather than a SIGABRT from the global allocator.
+//! [`Error::Memory`] rather than a SIGABRT from the global allocator; and
+//! [`parse_bytes`], the byte counts (memory budgets) the command line accepts.
 
 use crate::error::{Error, Result};
 
@@ -84,9 +85,49 @@ pub(crate) fn zeroed<T: Zeroable>(n: usize, what: &str) -> Result<Vec<T>> {
     Ok(unsafe { Vec::from_raw_parts(ptr, n, n) })
 }
 
+/// Parses a byte count with an optional binary suffix: `4096`, `512k`,
+/// `300M`, `2G`, `1.5G` (k/M/G/T = 2^10/2^20/2^30/2^40; a trailing `B` or `iB`
+/// is allowed).
+pub fn parse_bytes(s: &str) -> Result<u64> {
+    let t = s.trim();
+    let t = t.strip_suffix("iB").or_else(|| t.strip_suffix('B')).unwrap_or(t);
+    let (num, mult) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let m = match c.to_ascii_lowercase() {
+                'k' => 1u64 << 10,
+                'm' => 1 << 20,
+                'g' => 1 << 30,
+                't' => 1 << 40,
+                _ => return Err(Error::value("byte count", format!("'{s}': the suffix must be k, M, G or T"))),
+            };
+            (&t[..i], m)
+        }
+        _ => (t, 1),
+    };
+    let x: f64 = num.trim().parse().map_err(|_| Error::value("byte count", format!("'{s}' is not a number of bytes (e.g. 512M, 2G)")))?;
+    let v = x * mult as f64;
+    if !(v.is_finite() && v >= 1.0 && v < 2f64.powi(63)) {
+        return Err(Error::value("byte count", format!("'{s}' must be at least 1 byte and finite")));
+    }
+    Ok(v as u64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn byte_counts_parse_with_binary_suffixes() {
+        assert_eq!(parse_bytes("4096").unwrap(), 4096);
+        assert_eq!(parse_bytes("512k").unwrap(), 512 << 10);
+        assert_eq!(parse_bytes("300M").unwrap(), 300 << 20);
+        assert_eq!(parse_bytes("1.5G").unwrap(), 3 << 29);
+        assert_eq!(parse_bytes("2GiB").unwrap(), 2 << 30);
+        assert_eq!(parse_bytes("64MB").unwrap(), 64 << 20);
+        for bad in ["", "x", "12Q", "-5M", "NaN", "0", "1e300G"] {
+            assert!(parse_bytes(bad).is_err(), "{bad}");
+        }
+    }
 
     #[test]
     fn zeroed_gives_zeros_and_refuses_absurd_sizes() {

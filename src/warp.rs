@@ -1,4 +1,4 @@
-//! Stage 7 — the warp: intermediate image to final image.
+//! The warp: intermediate image to final image.
 //!
 //! Owns the final images — [`Image`] (premultiplied RGBA f32, row 0 at the
 //! top: the exact result every test and metric compares) and [`Image8`] (the
@@ -526,7 +526,8 @@ mod tests {
     /// background, and the pixels in front are the bilinear sample.
     #[test]
     fn perspective_warp_behind_the_eye_is_background() {
-        use crate::view::plan::{Grid, Warp};
+        use crate::view::Warp;
+        use crate::view::plan::Grid;
         use glam::{DMat3, DVec3};
         let f = crate::view::Factorization::new(&crate::view::Camera::new(DMat3::IDENTITY, [8, 8]), [4, 4, 4], [1.0; 3]).unwrap();
         let mut plan = FramePlan::parallel(&f, [1.0; 3]);
@@ -567,7 +568,8 @@ mod tests {
     /// each output pixel's colour read back as the coordinate it sampled.
     #[test]
     fn projective_warp_pieces_stay_within_the_stray_bound() {
-        use crate::view::plan::{Grid, Warp};
+        use crate::view::Warp;
+        use crate::view::plan::Grid;
         use glam::{DMat3, DVec3};
         let f = crate::view::Factorization::new(&crate::view::Camera::new(DMat3::IDENTITY, [8, 8]), [4, 4, 4], [1.0; 3]).unwrap();
         let mut plan = FramePlan::parallel(&f, [1.0; 3]);

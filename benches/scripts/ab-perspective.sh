@@ -4,7 +4,7 @@
 # image: every round runs OLD then NEW, each parallel then perspective; the
 # table gives the median of the rounds' frame_ms_median for all four, NEW/OLD
 # per projection, and the perspective/parallel ratio of each binary (the
-# ratio issue 21 asks for, measured side by side in one run).
+# ratio that matters for perspective, measured side by side in one run).
 #
 #   benches/scripts/ab-perspective.sh /tmp/old target/release/shearwarp --phantom head
 #   ROUNDS=3 benches/scripts/ab-perspective.sh OLD NEW "$SHEARWARP_DATA/chest-ct-lung1.nrrd"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# compare-rotators.sh -- the side-by-side rotation benchmark of issue 8:
+# compare-rotators.sh -- the side-by-side rotation benchmark:
 # VolPack (Lacroute's RLE shear-warp in C), VTK's vtkFixedPointVolumeRayCastMapper
 # and `shearwarp rotate` (binary iso, RLE iso, RLE blend), the same volumes,
 # views, image sizes and classifications, interleaved case by case in one run.

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Reproduces Table 1 of Sweeney & Mueller, "Shear-Warp Deluxe" (2002) on this machine,
-# with the error beside every time (issue 22).
+# with the error beside every time.
 #   Rows:    the cube 64³ and the engine-like block 128³ (phantoms), the head phantom at 128³
 #            (or volumes of your own: VOLUMES="label|args …"), each on the cartesian and the
 #            BCC grid.

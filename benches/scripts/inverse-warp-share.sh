@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The inverse warp's share of the frame (issue 23's goal: at most 5 % at 512²), the 16 cases of
+# The inverse warp's share of the frame (the goal: at most 5 % at 512²), the 16 cases of
 # README's tables: the head phantom and the chest CT, parallel and --perspective 40, binary iso
 # and RLE blend, skin and bone, each a 30° turn with `rotate --json`. One line a case: the
 # inverse warp's median µs, its share of the volume's frame and of the whole frame (meshes'

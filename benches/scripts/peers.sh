@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# peers.sh -- issue 24's charts: every shearwarp method beside VolPack and VTK,
+# peers.sh -- the peer charts: every shearwarp method beside VolPack and VTK,
 # frame time against error, the peers' frames measured by shearwarp's own
 # reference with the peers' model (`shearwarp bench --peers`), one run per
 # volume, image size and thread count.

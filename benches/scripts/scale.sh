@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # scale.sh -- how a clinical-size scan's first frame, memory and steady frame
-# time grow with volume size (issue 20), beside VolPack's preprocessing and
+# time grow with volume size, beside VolPack's preprocessing and
 # per-frame time for the same volumes and iso surface.
 #
 # For each volume (all 8-bit .den files, so VolPack reads the same voxels):

@@ -32,7 +32,8 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 
-use crate::app::cli::{Usage, VolumeArgs};
+use crate::app::Usage;
+use crate::app::args::VolumeArgs;
 use crate::app::peers::{self, MODEL_SHADING, Peer, PeerCamera, PeerView};
 use shearwarp::accuracy::metrics::{DepthError, ImageError, compare, depth_error};
 use shearwarp::accuracy::reference::{ReferenceImage, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
@@ -121,7 +122,7 @@ pub struct BenchCmd {
     /// volume diagonals (comma-separated or repeated) [default: 2].
     #[arg(long, value_name = "D", allow_negative_numbers = true, value_delimiter = ',', requires = "perspective")]
     pub eye_distance: Vec<f64>,
-    /// The perspective matrix of issue 21: fields of view 20°, 40° and 60°
+    /// The perspective matrix: fields of view 20°, 40° and 60°
     /// from 3, 1.5 and 0.75 volume diagonals, and the eye inside the volume
     /// (60° from 0.1 diagonals), beside the parallel rows (adds to any
     /// --perspective).
@@ -147,7 +148,7 @@ pub struct BenchCmd {
     /// plain rows and their I rows side by side). Without it the matrix
     /// already holds every option combination of the RLE path and the
     /// raycast paths' I, M and IM (parallel only).
-    #[arg(long, value_name = "LIST", value_parser = crate::app::cli::parse_deluxe, action = clap::ArgAction::Append)]
+    #[arg(long, value_name = "LIST", value_parser = crate::app::args::parse_deluxe, action = clap::ArgAction::Append)]
     pub deluxe: Vec<shearwarp::Deluxe>,
     /// The sample lattice of every variant: `bcc` renders each variant on the
     /// body-centred cubic grid (names end in `-bcc`); without it the matrix
@@ -173,7 +174,7 @@ pub struct Variant {
 
 /// The intermediate resolution of the `-q2` variants: Schulze's adaptive
 /// size at its finest, two pixels per voxel (what a zoomed-in view needs
-/// for the output's sampling rate; issue 22's matched sampling generalizes it).
+/// for the output's sampling rate; Deluxe's matched sampling generalizes it).
 pub const FINE_QUALITY: f64 = 2.0;
 
 /// Every variant benchmarked for the mode and shared settings of `base`:
@@ -219,7 +220,7 @@ pub fn registry(base: Settings) -> Vec<Variant> {
     v
 }
 
-/// The Shear-Warp Deluxe variants (issue 22): the RLE path with every
+/// The Shear-Warp Deluxe variants: the RLE path with every
 /// combination of I, P and M (`rle-deluxe-I`, …, `rle-deluxe-IMP`), the binary
 /// rotator with I, M and IM (it classifies after interpolation already: P
 /// adds nothing), the RLE path with one encoding serving two axes
@@ -292,7 +293,7 @@ pub fn perspective_variants(base: Settings, projection: Projection, suffix: &str
     .to_vec()
 }
 
-/// The perspective projections of `--perspective-matrix` (issue 21): fields
+/// The perspective projections of `--perspective-matrix`: fields
 /// of view 20°, 40°, 60° from 3, 1.5 and 0.75 volume diagonals, and 60° from
 /// 0.1 diagonals (the eye inside).
 pub fn perspective_matrix() -> Vec<Projection> {
@@ -397,10 +398,10 @@ impl BenchCmd {
         if !(self.ert > 0.0 && self.ert <= 1.0) {
             return Err(usage(format!("--ert must be in (0, 1], got {}", self.ert)));
         }
-        if let Some(iso) = self.iso {
-            if !iso.is_finite() {
-                return Err(usage("--iso must be a finite number".into()));
-            }
+        if let Some(iso) = self.iso
+            && !iso.is_finite()
+        {
+            return Err(usage("--iso must be a finite number".into()));
         }
         self.projections()?;
         if !self.peers.is_empty() {
@@ -427,7 +428,7 @@ impl BenchCmd {
     /// `--perspective-matrix`, without repeats.
     fn projections(&self) -> Result<Vec<Projection>> {
         let mut out: Vec<Projection> = vec![];
-        let default = [crate::app::cli::DEFAULT_EYE_DISTANCE];
+        let default = [crate::app::args::DEFAULT_EYE_DISTANCE];
         let ds: &[f64] = if self.eye_distance.is_empty() { &default } else { &self.eye_distance };
         for &fov in &self.perspective {
             if !(fov > 0.0 && fov < 180.0) {
@@ -488,11 +489,11 @@ impl BenchCmd {
         let hi = vol.value_range().1;
         let mut r = Renderer::with_tissues(vol, &tissues, base)?;
         r.set_memory_budget(crate::app::budget());
-        if let Some(name) = self.tissue.as_deref().filter(|n| *n != "auto") {
-            if r.select_tissue_named(name).is_err() {
-                let names: Vec<&str> = tissues.iter().map(|t| t.name).collect();
-                return Err(usage(format!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "))));
-            }
+        if let Some(name) = self.tissue.as_deref().filter(|n| *n != "auto")
+            && r.select_tissue_named(name).is_err()
+        {
+            let names: Vec<&str> = tissues.iter().map(|t| t.name).collect();
+            return Err(usage(format!("unknown tissue '{name}' for this volume (its presets: {}, or auto)", names.join(", "))));
         }
         let iso = self.iso.or(self.phantom().and_then(Phantom::iso));
         if let Some(iso) = iso {
@@ -602,9 +603,9 @@ pub struct ReferenceRecord {
 /// Runs `shearwarp bench`.
 pub fn run(cmd: &BenchCmd) -> Result<()> {
     cmd.check()?;
-    shearwarp::checks::check_threads(cmd.threads)?;
+    shearwarp::render::checks::check_threads(cmd.threads)?;
     let (vol, name) = cmd.volume.load()?;
-    crate::app::cli::renderable(&name, &vol)?;
+    crate::app::args::renderable(&name, &vol)?;
     let report = measure(cmd, vol, name)?;
     if let Some(p) = &cmd.csv {
         crate::app::output::write_text(p, &to_csv(&report))?;

@@ -1,6 +1,8 @@
 //! The application around the renderer: everything a person runs, nothing a
 //! library user needs.
 //!
+//! - [`args`]: the argument types the commands share (volume, render
+//!   settings) and their parsers;
 //! - [`cli`]: argument parsing, loading, the `render` / `rotate` / `info` /
 //!   `export` commands, reports and image/animation output;
 //! - [`bench`]: `shearwarp bench`, the speed-against-error matrix of every
@@ -12,6 +14,30 @@
 //! - [`scene`]: the meshes and clip regions of the command line, per frame;
 //! - [`viewer`] (feature `viewer`): `shearwarp view`, the interactive window.
 
+/// Prints a line to stdout; a closed pipe (`shearwarp … | head`) ends the
+/// program quietly instead of panicking like `println!`.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        if let Err(e) = writeln!(out, $($t)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            // (a write failure, as for every output: exit 2, the destination named)
+            return Err(shearwarp::Error::file("standard output", format!("cannot write: {e}")).into());
+        }
+    }};
+}
+
+/// Returns a [`Usage`] error from the current function.
+macro_rules! usage {
+    ($($t:tt)*) => {
+        return Err(anyhow::Error::new($crate::app::Usage(format!($($t)*))))
+    };
+}
+
+pub mod args;
 pub mod bench;
 pub mod cli;
 pub mod output;
@@ -19,6 +45,7 @@ pub mod peers;
 pub mod scene;
 pub mod viewer;
 
+use std::io::IsTerminal;
 use std::sync::OnceLock;
 use std::time::Instant;
 
@@ -81,4 +108,29 @@ pub fn median(v: &mut [f64]) -> Option<f64> {
     v.sort_by(f64::total_cmp);
     let n = v.len();
     Some(if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) })
+}
+
+/// A problem with the arguments or the input (exit code 2), as opposed to a
+/// failure while running (exit code 1).
+#[derive(Debug)]
+pub struct Usage(pub String);
+
+impl std::fmt::Display for Usage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Usage {}
+
+/// A spinner on stderr while something of unknown length runs (hidden when
+/// stderr is not a terminal).
+pub fn spinner(msg: &str) -> indicatif::ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new_spinner();
+    pb.set_message(msg.to_string());
+    pb.enable_steady_tick(std::time::Duration::from_millis(100));
+    pb
 }

@@ -29,7 +29,7 @@ use shearwarp::view::clip::{self, ClipRegion, Limiters, Region};
 use shearwarp::view::plan::Limiter;
 use shearwarp::warp::Image;
 
-use crate::app::cli::Usage;
+use crate::app::Usage;
 
 /// Which side of a convex clip region is kept.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]

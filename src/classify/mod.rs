@@ -1,4 +1,4 @@
-//! Stage 2 — classification: densities to colour and opacity, and how a sample is shaded.
+//! Classification: densities to colour and opacity, and how a sample is shaded.
 //!
 //! Owns the transfer functions and the [`Classifier`] every path evaluates
 //! (`tf`, re-exported here), the tissue presets ([`presets`]), and the one
@@ -6,6 +6,7 @@
 //! casting, RLE slices, the references — uses.
 
 pub mod presets;
+pub mod shade_table;
 pub mod shading;
 mod tf;
 

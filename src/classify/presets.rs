@@ -112,7 +112,7 @@ impl DataRange {
 
     /// What a report should say about the sentinel, if there is one.
     pub fn sentinel_note(&self) -> Option<String> {
-        let n = crate::checks::fmt_density;
+        let n = crate::fmt::fmt_density;
         self.sentinel.map(|s| {
             format!(
                 "{} voxels hold {}, far from the other values ({} … {}): a no-data sentinel? It dominates the range; the \
@@ -156,7 +156,7 @@ pub fn data_range(v: &Volume) -> DataRange {
 /// judged on the range without a sentinel.
 pub fn looks_like_ct(v: &Volume) -> bool {
     let (lo, hi) = data_range(v).working();
-    lo <= -900.0 && lo >= -3100.0 && hi > 0.0
+    (-3100.0..=-900.0).contains(&lo) && hi > 0.0
 }
 
 /// `lo + (hi − lo)·f` without overflow (f64), as a finite f32.
@@ -183,6 +183,7 @@ pub fn otsu_threshold(v: &Volume) -> f32 {
 }
 
 /// Otsu's split of histogram bins `[a, b)`: the last bin of the lower class.
+#[allow(clippy::needless_range_loop)] // `t` is both the bin index and its value
 fn otsu_bins(h: &[u64], a: usize, b: usize) -> Option<usize> {
     let total: f64 = h[a..b].iter().sum::<u64>() as f64;
     let sum_all: f64 = (a..b).map(|i| i as f64 * h[i] as f64).sum();

@@ -4,7 +4,7 @@
 //! `|n·l|` to ([`pow_int`]), and `|n·l|` of a voxel-space gradient under the
 //! headlight ([`headlight_ndl`]). The per-sample gradient shading of the ray
 //! paths and the per-view shade table of the table-shaded paths
-//! ([`crate::data::normals::ShadeTable`]) both evaluate [`Shading::entry`] and [`apply_shade`], so a
+//! ([`crate::classify::shade_table::ShadeTable`]) both evaluate [`Shading::entry`] and [`apply_shade`], so a
 //! normal shades the same everywhere.
 
 /// Blinn-Phong material for a headlight (light and eye along the view direction,

@@ -1,4 +1,4 @@
-//! Stage 2 — classification: densities to colour and opacity.
+//! Classification: densities to colour and opacity.
 //!
 //! Owns the user-facing [`TransferFunction`] (piecewise-linear opacity and colour
 //! over density), the iso (threshold) preset, and the [`Classifier`]: the one

@@ -1,4 +1,4 @@
-//! Stage 5c — the bilinear resampling raycaster over the intermediate image.
+//! The bilinear resampling raycaster over the intermediate image.
 //!
 //! Owns the per-ray loop shared by the binary path and its brute-force reference:
 //! each ray of the intermediate image visits candidate slices in front-to-back
@@ -24,10 +24,12 @@
 use rayon::prelude::*;
 
 use crate::classify::Classifier;
+use crate::classify::shade_table::ShadeTable;
+use crate::classify::shading::apply_shade;
 use crate::classify::shading::{Shading, headlight_ndl};
 use crate::composite::Rect;
 use crate::composite::{Intermediate, Mode, composite, correct_alpha, terminated};
-use crate::data::normals::{ByteCells, NormalStack, PackedCells, ShadeTable, apply_shade};
+use crate::data::normals::{ByteCells, NormalStack, PackedCells};
 use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
@@ -996,10 +998,7 @@ impl<'a, W: Word> RaySource for Columns<'a, W> {
     #[inline(always)]
     fn ray<V: Cells>(&mut self, _: &V, p: usize) -> (GridRay, Option<(SetBits<'a, W>, usize)>) {
         let mut it = SetBits::with_matcher(self.mask.row(self.sp, self.sq), self.ctx.ascending, self.search, self.m);
-        let walk = match it.peek() {
-            Some(k0) => Some((it, k0)),
-            None => None,
-        };
+        let walk = it.peek().map(|k0| (it, k0));
         self.left -= 1;
         if self.left == 0 {
             self.sp += 1;
@@ -1060,10 +1059,7 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
         let (first, last) = if ctx.ascending { (b, e) } else { (e, b) };
         (lo, hi) = (lo.max(first * len), hi.min(last * len + len - 1));
         let mut it = ColumnWalk::new(self.mask, self.occ, &self.drift, ray.at, lo, hi, ctx.ascending, self.search, self.m);
-        let walk = match it.peek() {
-            Some(k0) => Some((it, k0)),
-            None => None,
-        };
+        let walk = it.peek().map(|k0| (it, k0));
         (ray, walk)
     }
     #[inline(always)]

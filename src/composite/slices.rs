@@ -16,9 +16,8 @@ use rayon::prelude::*;
 
 use crate::composite::Rect;
 use crate::composite::{Intermediate, OpacityTable, RayRow, composite_premultiplied, terminated};
-pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::encode::rle::runs::{Cursor, INF};
-use crate::encode::rle::{PostTables, Preclass, RleVolume, RleVoxel, ViewTables, VoxelSource};
+use crate::encode::rle::{PostTables, Preclass, RleCache, RleVolume, RleVoxel, ViewTables, VoxelSource};
 use crate::view::plan::{FramePlan, MapKind, MidMap, RayLimits, floor_i64};
 
 /// What a sample is made of (a sampler of the one slice traversal): each
@@ -154,7 +153,7 @@ impl Sampler for PostTables {
         blend(l[0], turn(r[0], d), l[1], turn(r[1], d), w)
     }
     /// The column's four voxels as they are: the cell's eight are turned
-    /// to one side together ([`align_normals`]).
+    /// to one side together (`align_normals`).
     type MidColumn = [[f32; 4]; 4];
     #[inline(always)]
     fn mid_column(&self, bk: [f32; 4], tk: [f32; 4], bk1: [f32; 4], tk1: [f32; 4]) -> [[f32; 4]; 4] {
@@ -180,7 +179,7 @@ impl Sampler for PostTables {
 /// [`Sampler::blend_columns`]), so a row of cells turns each column once; a
 /// midpoint's eight are turned whole: turned column by column (each column's
 /// four to one side, then the columns by the slice's rule) the cube phantom's
-/// I,P error rose by up to 13 % at 0° and 45° (IMP 28 %), session 18.
+/// I,P error rose by up to 13 % at 0° and 45° (IMP 28 %).
 #[inline(always)]
 fn align_normals<const N: usize>(mut v: [[f32; 4]; N]) -> [[f32; 4]; N] {
     let r = if normal_dot(&v[0], &v[0]) > 0.0 { v[0] } else { v[N - 1] };
@@ -1485,9 +1484,54 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
     }
 }
 
+/// The RLE compositor of a renderer's pre-classified state: its encodings
+/// and tables through [`render_rle`] and [`render_brute_preclassified`].
+impl RleCache {
+    /// Composites view `f` from the encoding of its axis (see [`render_rle`]);
+    /// an axis that is not encoded (under the plan's permutation) renders transparent.
+    pub fn render(&mut self, plan: &FramePlan, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
+        let focused = self.focus.is_some();
+        match (self.axes[plan.view.axis].as_ref().filter(|e| e.perm == plan.view.perm), &self.post_tables) {
+            (Some(rle), Some(pt)) if self.post.is_some() => {
+                let ft = self.focus_post_tables.as_deref().filter(|_| focused);
+                render_rle(rle, pt.as_ref(), ft, plan, ert, rect, &mut self.links, out)
+            }
+            (Some(rle), _) => {
+                let ft = Some(&self.focus_tables).filter(|_| focused);
+                render_rle(rle, &self.tables, ft, plan, ert, rect, &mut self.links, out)
+            }
+            (None, _) => out.seal(None),
+        }
+    }
+
+    /// The brute-force pre-classified reference of view `f` over `rect` (see
+    /// [`render_brute_preclassified`]).
+    pub fn render_brute<V: VoxelSource + ?Sized>(
+        &mut self,
+        stack: &V,
+        plan: &FramePlan,
+        ert: f32,
+        rect: Option<Rect>,
+        out: &mut Intermediate,
+    ) {
+        match (&self.pre, &self.post_tables) {
+            (Some(pre), Some(pt)) if self.post.is_some() => {
+                let focus = self.focus.as_ref().zip(self.focus_post_tables.as_deref());
+                render_brute_preclassified(stack, pre, pt.as_ref(), focus, plan, ert, rect, &mut self.slice_buf, out)
+            }
+            (Some(pre), _) => {
+                let focus = self.focus.as_ref().map(|f| (f, &self.focus_tables));
+                render_brute_preclassified(stack, pre, &self.tables, focus, plan, ert, rect, &mut self.slice_buf, out)
+            }
+            (None, _) => out.seal(None),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::normals::{ZERO_NORMAL, encode_normal};
 
     #[test]
     fn links_compress_paths() {

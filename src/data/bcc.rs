@@ -1,4 +1,4 @@
-//! Stage 1c — the volume resampled to a body-centred cubic (BCC) grid
+//! The volume resampled to a body-centred cubic (BCC) grid
 //! (Sweeney & Mueller, "Shear-Warp Deluxe", §4; Theussl, Möller & Gröller).
 //!
 //! A BCC grid is two interleaved cubic sub-grids of spacing `s = √2` voxels,
@@ -33,10 +33,9 @@
 
 use rayon::prelude::*;
 
-use crate::data::normals::encode_normal;
+use crate::data::normals::{VoxelSource, encode_normal};
 use crate::data::slices::SliceStack;
 use crate::data::volume::{Volume, VoxelData};
-use crate::encode::rle::VoxelSource;
 use crate::error::{Error, Result};
 use crate::view::{Camera, Factorization, permutation};
 

@@ -1,4 +1,4 @@
-//! Stage 1 — data: what a frame samples, before any classification.
+//! Data: what a frame samples, before any classification.
 //!
 //! Owns the volume ([`volume`]: voxels of their own type, spacing, size limits,
 //! and where its index axes lie in the patient: [`orientation`]),

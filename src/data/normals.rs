@@ -1,7 +1,7 @@
-//! Stage 2b — shading by normal code (VolPack's shading tables).
+//! Normal codes (VolPack's quantized normals).
 //!
-//! Owns the quantized normals and the per-view shade table that the
-//! table-shaded paths share, so a voxel shades the same on all of them:
+//! Owns the quantized normals that the table-shaded paths share, so a voxel
+//! shades the same on all of them:
 //!
 //! - [`encode_normal`] / [`decode_normal`]: the 14-bit hemi-octahedral code of a
 //!   gradient direction, up to sign (the headlight shading is two-sided).
@@ -11,23 +11,20 @@
 //!   non-transparent voxel; [`NormalStack`] stores it for every voxel of one
 //!   principal axis, laid out like the stack, for the binary path and its
 //!   brute-force reference.
-//! - [`ShadeTable`]: `[ambient + diffuse·|n·l|, specular·|n·l|^shininess]` for
-//!   every code under the headlight ([`headlight_object`]), rebuilt only when the
-//!   light direction or the material changes. A sample shades as
-//!   `rgb·d + s` from the bilinear blend `[d, s]` of its cell's four corner
-//!   entries ([`ShadeTable::blend`]): four code loads and four table loads
-//!   instead of a gradient, a normalization and a power per sample.
-
-use std::sync::OnceLock;
+//! - [`VoxelSource`]: what the pre-classified paths read voxels and their
+//!   codes from (a cartesian stack, or the BCC grid's slices).
+//!
+//! The per-view table of shades by code is
+//! [`crate::classify::shade_table::ShadeTable`]: a sample shades as
+//! `rgb·d + s` from the bilinear blend `[d, s]` of its cell's four corner
+//! entries — four code loads and four table loads instead of a gradient, a
+//! normalization and a power per sample.
 
 use rayon::prelude::*;
 
-pub use crate::classify::shading::apply_shade;
-use crate::classify::shading::{ShadeEntry, Shading};
 use crate::data::packing::{InPlace, restride};
 use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch_cell};
 use crate::data::volume::{Volume, VoxelData, VoxelType};
-use crate::view::Factorization;
 
 /// Cells per side of the hemi-octahedral normal grid.
 pub const NORMAL_SIDE: usize = 128;
@@ -113,7 +110,7 @@ fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
 /// layout (index [`SliceStack::index`]). Three layouts, the same image bit for
 /// bit:
 ///
-/// - **bytes** ([`NormalStack::try_cells`], the binary path of 8-bit scans):
+/// - **bytes** (`NormalStack::try_cells`, the binary path of 8-bit scans):
 ///   `[density, code]` in three bytes a voxel ([`ByteCells`]);
 /// - **packed** (the binary path of 16-bit scans, and
 ///   [`NormalStack::with_packing`] of an f32 stack whose densities are
@@ -122,7 +119,7 @@ fn object_normal(g: [f32; 3], perm: [usize; 3], inv_spacing: [f32; 3]) -> u16 {
 /// - **codes** only, 2 bytes per voxel, beside the f32 stack.
 ///
 /// In the first two a ray reads a cell's densities and codes from the same two
-/// cache lines. Built by [`NormalStack::try_cells`], they hold every voxel
+/// cache lines. Built by `NormalStack::try_cells`, they hold every voxel
 /// exactly and need no f32 stack nor the volume beside them: the renderer lets
 /// go of the volume and gets it back from them
 /// ([`NormalStack::voxels_in_volume_order`]).
@@ -206,7 +203,7 @@ impl NormalStack {
 
     /// [`NormalStack::with_packing`], or [`crate::Error::Memory`] when the
     /// system refuses the allocation.
-    pub fn try_with_packing(stack: &SliceStack, spacing: [f32; 3], pack: bool) -> crate::Result<Self> {
+    pub fn try_with_packing(stack: &SliceStack, spacing: [f32; 3], pack: bool) -> crate::error::Result<Self> {
         let len = stack.n[0] * stack.n[1] * stack.n[2];
         let store = match pack.then(|| packing_offset(stack.data())).flatten() {
             Some(offset) => {
@@ -231,7 +228,7 @@ impl NormalStack {
     /// The source may be let go before [`CellBuild::finish`], which computes
     /// the codes and cannot fail: the volume and the cells are held together
     /// only while the voxels are laid out.
-    pub(crate) fn try_cells(src: CellSource, axis: usize, threads: usize) -> crate::Result<Option<CellBuild>> {
+    pub(crate) fn try_cells(src: CellSource, axis: usize, threads: usize) -> crate::error::Result<Option<CellBuild>> {
         match src {
             CellSource::Volume(vol) => {
                 let (d, lo) = (vol.dims(), vol.value_range().0 as i32);
@@ -265,21 +262,21 @@ impl NormalStack {
     }
 
     /// True when this stack holds every voxel of the scan exactly (built by
-    /// [`NormalStack::try_cells`]).
+    /// `NormalStack::try_cells`).
     pub fn holds_voxels(&self) -> bool {
         self.voxels.is_some()
     }
 
     /// The scan's voxels back in the volume's order and type, when this stack
     /// holds them ([`NormalStack::holds_voxels`]), or [`crate::Error::Memory`].
-    pub fn voxels_in_volume_order(&self) -> crate::Result<Option<VoxelData>> {
+    pub fn voxels_in_volume_order(&self) -> crate::error::Result<Option<VoxelData>> {
         let (d, s) = restride(self.axis, self.n, 2);
         fn go<T: Copy + Sync, U: crate::memory::Zeroable + Send>(
             src: &[T],
             d: [usize; 3],
             s: [usize; 3],
             f: impl Fn(T) -> U + Sync,
-        ) -> crate::Result<Vec<U>> {
+        ) -> crate::error::Result<Vec<U>> {
             let mut out = crate::memory::zeroed(d[0] * d[1] * d[2], "the volume")?;
             crate::data::slices::gather(src, &mut out, d, s, f);
             Ok(out)
@@ -555,114 +552,31 @@ impl ByteCells<'_> {
     }
 }
 
-/// The per-view shade table: one [`ShadeEntry`] per normal code. A fixed-size
-/// array indexed with a mask, so a lookup needs no bounds check.
-#[derive(Clone, Debug)]
-pub struct ShadeTable {
-    shade: Box<[ShadeEntry; NORMAL_CODES]>,
-    key: Option<([u32; 3], Shading)>,
+/// What the pre-classified paths read voxels from: slices of densities (a
+/// [`SliceStack`]: its sizes, axis and densities) and each voxel's normal
+/// code. A cartesian [`SliceStack`] is its own source (central differences
+/// between neighbouring voxels, [`voxel_normal`]); the interleaved slices of a
+/// BCC grid ([`crate::data::bcc::BccStack`]) differentiate across slices two
+/// apart (the same sub-grid). The encoder ([`crate::encode::rle::RleVolume::encode`]) and
+/// the brute force ([`crate::composite::slices::render_brute_preclassified`])
+/// see only this.
+pub trait VoxelSource: Sync {
+    /// The slices' densities (sizes along `(i, j, k)`, principal axis).
+    fn slices(&self) -> &SliceStack;
+    /// The normal code of voxel `(i, j, k)` (`inv_spacing`: `1 / spacing` per
+    /// object axis of the cartesian volume).
+    fn normal(&self, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16;
 }
 
-impl Default for ShadeTable {
-    fn default() -> Self {
-        ShadeTable { shade: boxed([0.0; 2]), key: None }
-    }
-}
-
-impl ShadeTable {
-    /// Brings the table up to date for the object-space headlight direction
-    /// `light` and material `shading`; returns true if it was rebuilt.
-    pub fn update(&mut self, light: [f32; 3], shading: Shading) -> bool {
-        let key = Some((light.map(f32::to_bits), shading));
-        if self.key == key {
-            return false;
-        }
-        let [nx, ny, nz] = unit_normals();
-        const BLOCK: usize = 4096;
-        self.shade.par_chunks_mut(BLOCK).enumerate().for_each(|(c, out)| {
-            let r = c * BLOCK..c * BLOCK + out.len();
-            shade_block(out, &nx[r.clone()], &ny[r.clone()], &nz[r], light, &shading);
-        });
-        // a zero gradient faces the viewer
-        self.shade[ZERO_NORMAL as usize] = shading.entry(1.0, 1.0);
-        self.key = key;
-        true
-    }
-
-    /// The entry of `code` (codes above the table, such as the RLE path's
-    /// bridge marker, index a real entry).
+impl VoxelSource for SliceStack {
     #[inline(always)]
-    pub fn get(&self, code: u16) -> ShadeEntry {
-        self.shade[code as usize & (NORMAL_CODES - 1)]
+    fn slices(&self) -> &SliceStack {
+        self
     }
-
-    /// The bilinear blend of the entries of a cell's four corner codes (order of
-    /// [`NormalStack::corners`]) at in-cell weights `(wi, wj)`.
-    #[inline(always)]
-    pub fn blend(&self, codes: [u16; 4], wi: f32, wj: f32) -> ShadeEntry {
-        let [e00, e10, e01, e11] = codes.map(|c| self.get(c));
-        let mut out = [0f32; 2];
-        for a in 0..2 {
-            let top = e00[a] + (e10[a] - e00[a]) * wi;
-            let bot = e01[a] + (e11[a] - e01[a]) * wi;
-            out[a] = top + (bot - top) * wj;
-        }
-        out
+    #[inline]
+    fn normal(&self, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
+        voxel_normal(self, i, j, k, inv_spacing)
     }
-}
-
-/// The unit direction of every normal code, as three coordinate arrays (built
-/// once per process: 768 KiB, view-independent; code 0 holds +z).
-fn unit_normals() -> &'static [Vec<f32>; 3] {
-    static NORMALS: OnceLock<[Vec<f32>; 3]> = OnceLock::new();
-    NORMALS.get_or_init(|| {
-        let dirs: Vec<[f32; 3]> = (0..NORMAL_CODES).map(|c| decode_normal(c as u16).unwrap_or([0.0, 0.0, 1.0])).collect();
-        [0, 1, 2].map(|a| dirs.iter().map(|d| d[a]).collect())
-    })
-}
-
-/// Lanes of the shade-table build: sixteen entries at a time stay in registers.
-const LANES: usize = 16;
-
-/// Shade-table entries for the unit normals `(nx, ny, nz)` (same lengths as
-/// `out`, a multiple of [`LANES`]): plain fixed-size loops, so they vectorize.
-#[inline(never)]
-fn shade_block(out: &mut [ShadeEntry], nx: &[f32], ny: &[f32], nz: &[f32], l: [f32; 3], sh: &Shading) {
-    let lanes = out.chunks_exact_mut(LANES).zip(nx.chunks_exact(LANES).zip(ny.chunks_exact(LANES)).zip(nz.chunks_exact(LANES)));
-    for (o, ((x, y), z)) in lanes {
-        let mut ndl = [0f32; LANES];
-        for t in 0..LANES {
-            ndl[t] = (x[t] * l[0] + y[t] * l[1] + z[t] * l[2]).abs().min(1.0);
-        }
-        // ndl^shininess by repeated squaring (the exponent is the same for every lane)
-        let mut pow = [1f32; LANES];
-        let mut base = ndl;
-        let mut e = sh.exponent();
-        while e > 0 {
-            if e & 1 == 1 {
-                for t in 0..LANES {
-                    pow[t] *= base[t];
-                }
-            }
-            e >>= 1;
-            for b in base.iter_mut() {
-                *b *= *b;
-            }
-        }
-        for t in 0..LANES {
-            o[t] = sh.entry(ndl[t], pow[t]);
-        }
-    }
-}
-
-/// The headlight direction (towards the viewer) in object space for view `f`.
-pub fn headlight_object(f: &Factorization) -> [f32; 3] {
-    // grad_to_eye_z[c] = R[2][perm[c]] · grad_scale[c]
-    let mut l = [0f32; 3];
-    for c in 0..3 {
-        l[f.perm[c]] = (f.grad_to_eye_z[c] / f.grad_scale[c]) as f32;
-    }
-    l
 }
 
 #[cfg(test)]
@@ -698,23 +612,6 @@ mod tests {
         }
         assert_eq!(encode_normal([0.0; 3]), ZERO_NORMAL);
         assert_eq!(encode_normal([f32::NAN, 0.0, 1.0]), ZERO_NORMAL);
-    }
-
-    #[test]
-    fn shade_table_matches_the_shading_model() {
-        let l = [0.36f32, -0.48, 0.8];
-        for sh in [Shading::default(), Shading { shininess: 7, ..Shading::default() }, Shading { shininess: 0, ..Shading::default() }] {
-            let [nx, ny, nz] = unit_normals();
-            let mut out = vec![[0.0; 2]; NORMAL_CODES];
-            shade_block(&mut out, nx, ny, nz, l, &sh);
-            for code in (1..NORMAL_CODES).step_by(7) {
-                let n = decode_normal(code as u16).unwrap();
-                let ndl = (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).abs().min(1.0);
-                let want = sh.entry(ndl, ndl.powi(sh.shininess));
-                let got = out[code];
-                assert!((0..2).all(|a| (got[a] - want[a]).abs() < 1e-5), "{code}: {got:?} vs {want:?}");
-            }
-        }
     }
 
     #[test]
@@ -909,31 +806,5 @@ mod tests {
         assert_eq!(packing_offset(&big), Some(-9.0));
         big[PACK_CHUNK + 3] = 0.25;
         assert_eq!(packing_offset(&big), None);
-    }
-
-    #[test]
-    fn shade_table_blend_is_bilinear_and_applies_like_the_shading_model() {
-        let sh = Shading::default();
-        let mut t = ShadeTable::default();
-        assert!(t.update([0.0, 0.6, 0.8], sh));
-        assert!(!t.update([0.0, 0.6, 0.8], sh), "same light and material: no rebuild");
-        let codes = [encode_normal([0.0, 0.0, 1.0]), encode_normal([1.0, 0.0, 0.0]), encode_normal([0.0, 1.0, 0.0]), ZERO_NORMAL];
-        for (i, &c) in codes.iter().enumerate() {
-            let (wi, wj) = ((i & 1) as f32, (i >> 1) as f32);
-            let (e, want) = (t.blend(codes, wi, wj), t.get(c));
-            assert!((0..2).all(|a| (e[a] - want[a]).abs() < 1e-6), "corner {i}: {e:?} vs {want:?}");
-        }
-        let e = t.blend(codes, 0.25, 0.5);
-        let want = [0, 1].map(|a| {
-            let g = codes.map(|c| t.get(c)[a]);
-            0.5 * (0.75 * g[0] + 0.25 * g[1]) + 0.5 * (0.75 * g[2] + 0.25 * g[3])
-        });
-        assert!((0..2).all(|a| (e[a] - want[a]).abs() < 1e-6), "{e:?} vs {want:?}");
-        // the entry of a normal along the light is the shading model's at ndl = 1
-        let up = t.get(encode_normal([0.0, 0.6, 0.8]));
-        let rgb = [0.9, 0.5, 0.2];
-        let (a, b) = (apply_shade(rgb, up), sh.shade(rgb, 1.0));
-        assert!((0..3).all(|c| (a[c] - b[c]).abs() < 1e-3), "{a:?} vs {b:?}");
-        assert_eq!(t.get(u16::MAX), t.get(NORMAL_CODES as u16 - 1));
     }
 }

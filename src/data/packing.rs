@@ -1,6 +1,6 @@
-//! Stage 1c — the binary path's cells of an integer scan, built in place.
+//! The binary path's cells of an integer scan, built in place.
 //!
-//! Owns [`InPlace`]: one principal axis of an 8- or 16-bit scan as the cells a
+//! Owns `InPlace`: one principal axis of an 8- or 16-bit scan as the cells a
 //! binary ray reads, each voxel's density beside its normal code in one small
 //! array element (`[u8; 3]`: the u8 density and the u16 code; `[u16; 2]`: the
 //! 16-bit density less an offset and the code), so a cell's densities and
@@ -72,14 +72,14 @@ impl<E: Zeroable + Send + Sync, const K: usize> InPlace<E, K> {
         axis: usize,
         threads: usize,
         conv: impl Fn(T) -> E + Sync,
-    ) -> crate::Result<Self> {
+    ) -> crate::error::Result<Self> {
         let (n, s) = restride(from, src_n, axis);
         let len = n[0] * n[1] * n[2];
         let mut cells: Vec<[E; K]> = crate::memory::zeroed(len, "the packed densities and normal codes")?;
         let n01 = n[0] * n[1];
         let windows = (0..threads.max(1))
             .map(|_| crate::memory::zeroed((BLOCK + 2).min(n[2]) * n01, "a window of the slice stack"))
-            .collect::<crate::Result<Vec<Vec<f32>>>>()?;
+            .collect::<crate::error::Result<Vec<Vec<f32>>>>()?;
         let flat = cells.as_flattened_mut();
         crate::data::slices::gather(src, &mut flat[(K - 1) * len..], n, s, conv);
         Ok(InPlace { axis, n, cells, windows })

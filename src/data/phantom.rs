@@ -35,15 +35,15 @@ use crate::error::{Error, Result};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Phantom {
-    /// The CT head of [`head`] (Hounsfield units, `i16`).
+    /// The CT head phantom (Hounsfield units, `i16`), built by `head`.
     Head,
-    /// The analytic ball of [`sphere`] (`f32`).
+    /// The analytic ball (`f32`), built by `sphere`.
     Sphere,
-    /// The Marschner–Lobb signal of [`marschner_lobb`] (`f32`).
+    /// The Marschner–Lobb signal (`f32`), built by `marschner_lobb`.
     MarschnerLobb,
-    /// The solid cube of [`cube`] (`f32`): flat faces and sharp edges.
+    /// The solid cube (`f32`): flat faces and sharp edges.
     Cube,
-    /// The engine-like block of [`engine`] (`f32`): two materials, bores,
+    /// The engine-like block (`f32`): two materials, bores,
     /// a shaft and bolts.
     Engine,
 }
@@ -1104,7 +1104,7 @@ mod tests {
             let v = head(dims).unwrap();
             assert_eq!(v.dims(), dims);
             assert_eq!(v.spacing(), [1.0; 3]);
-            assert_eq!(v.data().voxel_type(), crate::VoxelType::I16);
+            assert_eq!(v.data().voxel_type(), crate::data::volume::VoxelType::I16);
             // The midline between the ventricles is white matter.
             let [x, y, z] = voxel_at(dims, BRAIN_CENTRE);
             for dz in -1..=1i64 {

@@ -1,4 +1,4 @@
-//! Stage 1b — the volume seen along one principal axis.
+//! The volume seen along one principal axis.
 //!
 //! Owns [`SliceStack`]: the densities re-laid out as f32 in permuted `(i, j, k)`
 //! order (i fastest) so that every slice a shear-warp path walks is contiguous,
@@ -111,7 +111,7 @@ impl SliceStack {
 
     /// [`SliceStack::new`], or [`crate::Error::Memory`] when the system refuses
     /// the allocation.
-    pub fn try_new(vol: &Volume, axis: usize) -> crate::Result<Self> {
+    pub fn try_new(vol: &Volume, axis: usize) -> crate::error::Result<Self> {
         let nk = vol.dims()[permutation(axis)[2]];
         Self::try_window(vol, axis, 0..nk)
     }
@@ -120,19 +120,19 @@ impl SliceStack {
     /// axis)`: its slice `k` is the full stack's slice `ks.start + k`. What
     /// builds an axis's normal codes a few slices at a time, without the
     /// whole f32 stack in memory.
-    pub fn try_window(vol: &Volume, axis: usize, ks: std::ops::Range<usize>) -> crate::Result<Self> {
+    pub fn try_window(vol: &Volume, axis: usize, ks: std::ops::Range<usize>) -> crate::error::Result<Self> {
         Self::try_window_permuted(vol, permutation(axis), ks)
     }
 
     /// [`SliceStack::try_new`] with object axes `perm` for `(i, j, k)` (any
     /// permutation of 0, 1, 2; the principal axis is `perm[2]`): what the
     /// RLE paths' mirrored permutation reads ([`crate::view::reuse_permutation`]).
-    pub fn try_permuted(vol: &Volume, perm: [usize; 3]) -> crate::Result<Self> {
+    pub fn try_permuted(vol: &Volume, perm: [usize; 3]) -> crate::error::Result<Self> {
         assert!(crate::view::is_permutation(perm), "{perm:?} is not a permutation of the axes");
         Self::try_window_permuted(vol, perm, 0..vol.dims()[perm[2]])
     }
 
-    fn try_window_permuted(vol: &Volume, perm: [usize; 3], ks: std::ops::Range<usize>) -> crate::Result<Self> {
+    fn try_window_permuted(vol: &Volume, perm: [usize; 3], ks: std::ops::Range<usize>) -> crate::error::Result<Self> {
         let axis = perm[2];
         let d = vol.dims();
         let ks = ks.start.min(d[perm[2]])..ks.end.min(d[perm[2]]);
@@ -169,7 +169,7 @@ impl SliceStack {
 
     /// The geometry of the stack of `vol` along `axis` without its densities:
     /// what a path that reads its samples from elsewhere (the binary path from
-    /// packed cells, [`crate::data::normals::NormalStack::try_cells`])
+    /// packed cells, `NormalStack::try_cells`)
     /// needs. Reading a density from it panics; [`SliceStack::is_resident`] says which it is.
     pub fn shell(vol: &Volume, axis: usize) -> Self {
         let (perm, d) = (permutation(axis), vol.dims());

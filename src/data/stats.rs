@@ -1,4 +1,4 @@
-//! Stage 1a — the value statistics of a volume, computed once per volume.
+//! The value statistics of a volume, computed once per volume.
 //!
 //! Owns [`ValueStats`]: the smallest and largest density, the runners-up and
 //! how many voxels hold each end (what the sentinel test of

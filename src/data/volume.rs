@@ -1,4 +1,4 @@
-//! Stage 1 — the volume: a regular grid of scalar densities with voxel spacing.
+//! The volume: a regular grid of scalar densities with voxel spacing.
 //!
 //! Owns the voxel storage ([`VoxelData`], u8/u16/i16/f32), the grid dimensions and
 //! the physical spacing, the size limits every loader checks *before* allocating,
@@ -157,10 +157,10 @@ impl Volume {
             });
         }
         check_spacing(spacing)?;
-        if let VoxelData::F32(v) = &data {
-            if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
-                return Err(Error::NonFinite { index, value });
-            }
+        if let VoxelData::F32(v) = &data
+            && let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite())
+        {
+            return Err(Error::NonFinite { index, value });
         }
         Ok(Volume { dims: d, spacing, data: std::sync::Arc::new(data), frame: None, stats: StatsCache::default() })
     }

@@ -87,6 +87,7 @@ impl PackedCodes {
     /// Calls `f(i, code)` for every non-zero cell `i` in `[from, to]` of row `r`,
     /// in order, a word at a time (all-zero words cost one test).
     #[inline]
+    #[allow(clippy::needless_range_loop)] // words are indexed by their position in the row
     pub fn for_each_nonzero(&self, r: usize, from: usize, to: usize, mut f: impl FnMut(usize, u8)) {
         if from > to || self.len == 0 {
             return;
@@ -368,7 +369,7 @@ mod tests {
             for len in [1usize, 7, 15, 16, 31, 32, 33, 63, 64, 65, 130, 200] {
                 let rows = 5;
                 let plain: Vec<Vec<u8>> = (0..rows)
-                    .map(|r| (0..len).map(|_| if r == 2 || rnd() % 3 == 0 { 0 } else { (rnd() % (1 << nb)) as u8 }).collect())
+                    .map(|r| (0..len).map(|_| if r == 2 || rnd().is_multiple_of(3) { 0 } else { (rnd() % (1 << nb)) as u8 }).collect())
                     .collect();
                 let mut p = PackedCodes::new(nb, len, rows);
                 let rw = p.row_words;

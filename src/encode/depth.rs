@@ -1,4 +1,4 @@
-//! Stage 5b — first-opaque depth search in packed depth rows.
+//! First-opaque depth search in packed depth rows.
 //!
 //! Owns the [`Word`] abstraction (one implementation of everything bit-packed,
 //! generic over `u32` and `u64`), the bit order of a depth row, the paper's
@@ -137,10 +137,9 @@ pub enum Search {
     /// The paper's binary search for the first non-zero byte plus a byte table.
     Lut,
     /// Hardware bit scan (`leading_zeros` / `trailing_zeros`). At CPU level
-    /// [`CpuLevel::Avx2`](crate::kernels::CpuLevel::Avx2) the binary path's row loop
-    /// runs a copy compiled for `lzcnt`/`tzcnt`; at [`CpuLevel::Scalar`](crate::kernels::CpuLevel::Scalar)
-    /// the plain build's `bsr`/`bsf` (the scalar reference, chosen by
-    /// [`crate::render::Settings::cpu`]).
+    /// AVX2 the binary path's row loop runs a copy compiled for
+    /// `lzcnt`/`tzcnt`; at the scalar level the plain build's `bsr`/`bsf`
+    /// (the scalar reference, chosen by the `cpu` setting).
     Bitscan,
 }
 

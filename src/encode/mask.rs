@@ -30,13 +30,13 @@
 
 use rayon::prelude::*;
 
-use crate::composite::Rect;
 use crate::data::slices::SliceStack;
 pub use crate::encode::cells::{CellCodes, PackedCodes};
 use crate::encode::depth::{Word, slot_shift};
-use crate::encode::shear::{ShearState, shift_vectors, shift_vectors2};
 use crate::encode::shift::*;
 use crate::kernels::{self, CpuLevel};
+use crate::view::plan::Rect;
+use crate::view::shear::ShearState;
 
 /// Steps above this count are done as one direct shear instead. A direct
 /// shear clears the occupied region and scatters every non-zero code; a step
@@ -370,6 +370,7 @@ impl<W: Word> BinaryMask<W> {
     }
 
     /// Target offsets of a state; panics only if the state is not for this mask.
+    #[allow(clippy::needless_range_loop)] // the index picks one axis of several arrays
     fn offsets_for(&self, state: &ShearState, out: &mut [Vec<i32>; 2]) {
         assert_eq!(state.slices(), self.nk, "shear state for a different slice count");
         for a in 0..2 {
@@ -418,6 +419,7 @@ impl<W: Word> BinaryMask<W> {
         w
     }
 
+    #[allow(clippy::needless_range_loop)] // the index picks one axis of several arrays
     fn direct(&mut self, target: &[Vec<i32>; 2]) -> ShearWork {
         let mut words = 0;
         if let Some(r) = self.occupied_rect() {
@@ -687,13 +689,14 @@ mod tests {
             s ^= s >> 7;
             s ^= s << 17;
             s = s.wrapping_mul(0x2545F4914F6CDD1D);
-            if (s >> 40) % 7 == 0 { 100.0 } else { 0.0 }
+            if (s >> 40).is_multiple_of(7) { 100.0 } else { 0.0 }
         })
         .unwrap()
     }
 
     /// The mask recomputed from scratch with a bit vector per code plane: code
     /// (p, q, k) is the unsheared code at (p − off_i, q − off_j).
+    #[allow(clippy::needless_range_loop)] // the index picks one slice of several arrays
     fn naive<W: Word>(m: &BinaryMask<W>) -> Vec<W> {
         use bitvec::prelude::*;
         let slots = (W::BITS / m.nb) as usize;

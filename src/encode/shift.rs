@@ -10,7 +10,7 @@
 //! its [`crate::kernels::CpuLevel`], and the invariant tests compare every
 //! level with the scalar kernels word for word.
 
-use crate::encode::depth::Word;
+use crate::encode::depth::{Word, slot_mask};
 
 /// One grid row of [`BinaryMask::shift_columns`] for columns of `N` words:
 /// columns `ps..=pe` of `row` become `old[p] & keep | old[p−1] & up | old[p+1] & down`
@@ -187,5 +187,96 @@ pub(crate) fn shift_row_any<W: Word>(row: &mut [W], next: &[W], prev: &mut [W], 
             cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx & down[w]);
             pw[w] = old;
         }
+    }
+}
+
+/// Per-word shift vectors for one step along one axis, for rows of `nb`-bit
+/// codes: every bit of slice `k`'s slot is set in `up` when the slice moves one
+/// position up (towards higher mask index), in `down` when it moves one down, so
+/// the bits of a code always move together. `from`/`to` are the slices' current
+/// and target mask offsets.
+///
+/// Returns the largest `|to − from|` seen; the vectors are only meaningful when
+/// that is at most 1.
+pub fn shift_vectors<W: Word>(nb: u32, from: &[i32], to: &[i32], up: &mut [W], down: &mut [W]) -> u32 {
+    up.fill(W::ZERO);
+    down.fill(W::ZERO);
+    let mut worst = 0u32;
+    let slots = (W::BITS / nb) as usize;
+    for (k, (&a, &b)) in from.iter().zip(to).enumerate() {
+        let d = b - a;
+        worst = worst.max(d.unsigned_abs());
+        let w = k / slots;
+        let bit = slot_mask::<W>(nb, k);
+        if d > 0 {
+            up[w] |= bit;
+        } else if d < 0 {
+            down[w] |= bit;
+        }
+    }
+    worst
+}
+
+/// The shift vectors of two fused steps from offsets `from` to `to` (every
+/// slice moving by d ∈ −2..=2): `moves[2 − d]` holds the slots of the slices
+/// that move by d, `moves[2]` (no move) every other slot of the words, so the
+/// five are disjoint and cover every bit. Returns the largest |d|.
+pub fn shift_vectors2<W: Word>(nb: u32, from: &[i32], to: &[i32], moves: &mut [Vec<W>; 5]) -> u32 {
+    for m in moves.iter_mut() {
+        m.fill(W::ZERO);
+    }
+    let mut worst = 0u32;
+    let slots = (W::BITS / nb) as usize;
+    for (k, (&a, &b)) in from.iter().zip(to).enumerate() {
+        let d = b - a;
+        debug_assert!(d.abs() <= 2, "a fused step moves at most two bits");
+        worst = worst.max(d.unsigned_abs());
+        if d != 0 {
+            moves[(2 - d) as usize][k / slots] |= slot_mask::<W>(nb, k);
+        }
+    }
+    let [m0, m1, keep, m3, m4] = moves;
+    for (w, k) in keep.iter_mut().enumerate() {
+        *k = !(m0[w] | m1[w] | m3[w] | m4[w]);
+    }
+    worst
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fused_shift_vectors_are_disjoint_and_cover_every_bit() {
+        let from = vec![0, 0, 0, 1, 1, 1, 2, 5];
+        let to = vec![-2, 0, 1, 1, 3, 0, 2, 4];
+        let mut m: [Vec<u32>; 5] = std::array::from_fn(|_| vec![0u32; 1]);
+        assert_eq!(shift_vectors2(1, &from, &to, &mut m), 2);
+        // bit 31 − k for slice k
+        assert_eq!(m[0][0], 1 << 27, "+2: slice 4");
+        assert_eq!(m[1][0], 1 << 29, "+1: slice 2");
+        assert_eq!(m[3][0], (1 << 26) | (1 << 24), "−1: slices 5 and 7");
+        assert_eq!(m[4][0], 1 << 31, "−2: slice 0");
+        assert_eq!(m[2][0], !((1 << 27) | (1 << 29) | (1 << 26) | (1 << 24) | (1 << 31)));
+        // 2-bit codes: both bits of a slot move together
+        shift_vectors2(2, &from, &to, &mut m);
+        assert_eq!(m[0][0], 0b11 << 22);
+        assert_eq!(m[4][0], 0b11 << 30);
+        assert_eq!(m.iter().fold(0u32, |a, v| a ^ v[0]), u32::MAX, "disjoint and covering");
+    }
+
+    #[test]
+    fn shift_vectors_split_per_bit() {
+        let from = vec![0, 0, 0, 1, 1, 1, 2];
+        let to = vec![-1, 0, 1, 1, 2, 0, 2];
+        let mut up = vec![0u32; 1];
+        let mut down = vec![0u32; 1];
+        assert_eq!(shift_vectors(1, &from, &to, &mut up, &mut down), 1);
+        assert_eq!(up[0], (1 << 29) | (1 << 27));
+        assert_eq!(down[0], (1 << 31) | (1 << 26));
+        // 2-bit codes: both bits of a slot move together
+        assert_eq!(shift_vectors(2, &from, &to, &mut up, &mut down), 1);
+        assert_eq!(up[0], (0b11 << 26) | (0b11 << 22));
+        assert_eq!(down[0], (0b11 << 30) | (0b11 << 20));
     }
 }

@@ -1,4 +1,4 @@
-//! Stage 5b′ — the candidate slices of a ray that is not a mask column: the
+//! The candidate slices of a ray that is not a mask column: the
 //! binary rotator under scaled sample maps (a perspective plan, or a parallel
 //! plan at another pixel pitch).
 //!
@@ -65,11 +65,11 @@
 
 use rayon::prelude::*;
 
-use crate::composite::Rect;
 use crate::encode::depth::{Matcher, Search, Word, lz, tz};
 use crate::encode::mask::BinaryMask;
-use crate::encode::shear::ShearState;
+use crate::view::plan::Rect;
 use crate::view::plan::{FramePlan, ScaledMap, floor_i64};
+use crate::view::shear::ShearState;
 
 /// Rounding margin on the drift `u` (voxels): the maps are computed per slice
 /// in f64, affine in `k` to far below this.

@@ -9,7 +9,7 @@
 //! output position of its ray (the plan's warp of the pixel centre):
 //! bilinearly between the four output pixels around it where all four hold
 //! the surface, else (the silhouette) through the inverse warp's gather
-//! ([`GeometryLimits::min_depth`], the nearest depth over a pixel-sized box
+//! (`GeometryLimits::min_depth`, the nearest depth over a pixel-sized box
 //! about the point, then two pixels) — a clip face is read at the ray, where the occlusion
 //! gather takes the minimum over the whole footprint. Its samples — whose depth is affine in the
 //! slice index in both projections — are kept from the first slice at or

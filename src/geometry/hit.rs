@@ -8,7 +8,7 @@
 
 use glam::DVec3;
 
-use super::inverse_warp::sample_voxel;
+use super::sampling::sample_voxel;
 use crate::composite::Intermediate;
 use crate::render::Renderer;
 use crate::view::perspective::RayDirections;
@@ -38,9 +38,13 @@ fn position_at(plan: &FramePlan, x: usize, y: usize, k: f64) -> DVec3 {
     a + (b - a) * (k - k0 as f64)
 }
 
+/// One plan's depth lookup: the plan, its kept depth image, the first and
+/// last slice's depth functions, and the last slice.
+type PlanDepths<'r> = (&'r FramePlan, Option<&'r Intermediate>, [f64; 3], [f64; 3], usize);
+
 /// [`volume_hit`]'s eye depth (`−z` in a projector's eye space) for a run of
 /// output pixels of one frame: each plan's first and last slice depths set
-/// up once ([`super::inverse_warp::slice_depth`]), and a pixel's hit depth
+/// up once ([`super::sampling::slice_depth`]), and a pixel's hit depth
 /// the same weighted mean of its neighbours' hits (the depth is affine in
 /// the position: the depth of the mean position, up to rounding) with no
 /// sample position per pixel.
@@ -49,7 +53,7 @@ pub(crate) struct HitDepths<'r> {
     /// Per plan: the plan, its depth plane (None: not kept, or not of the
     /// plan's grid: no hit), the first and last slice's depth functions and
     /// the last slice — looked up once per frame, not per pixel.
-    plans: Vec<(&'r FramePlan, Option<&'r Intermediate>, [f64; 3], [f64; 3], usize)>,
+    plans: Vec<PlanDepths<'r>>,
 }
 
 impl<'r> HitDepths<'r> {
@@ -62,7 +66,7 @@ impl<'r> HitDepths<'r> {
                 let last = plan.slices().saturating_sub(1);
                 // (as Renderer::last_depth_at reads it)
                 let d = renderer.last_depth_image(i).filter(|d| d.holds_depths_of(plan.grid.size));
-                (plan, d, super::inverse_warp::slice_depth(plan, proj, 0), super::inverse_warp::slice_depth(plan, proj, last), last)
+                (plan, d, super::sampling::slice_depth(plan, proj, 0), super::sampling::slice_depth(plan, proj, last), last)
             })
             .collect();
         HitDepths { renderer, plans }

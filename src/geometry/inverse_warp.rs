@@ -46,8 +46,8 @@ use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
 use super::raster::{GeometryImage, Projector};
+use super::sampling::slice_depth;
 use crate::view::plan::{FramePlan, Limiter, RayLimits};
-use crate::view::unpermute;
 use crate::warp::Image;
 
 /// The side of the output tiles whose coverage decides which intermediate
@@ -336,6 +336,7 @@ struct AffineBack {
 
 impl AffineBack {
     /// None unless the inverse warp is affine and finite.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN fails the test too
     fn new(plan: &FramePlan, margin: [f64; 2]) -> Option<AffineBack> {
         let inv = &plan.warp.inverse;
         if inv.row(2) != DVec3::Z || !(plan.grid.pitch > 0.0) {
@@ -529,22 +530,6 @@ fn double_rows(prev: &Rows, s: usize, h: usize) -> Rows {
     Rows { rows, packed }
 }
 
-/// The voxel position of pixel `(p, q)`'s sample in slice `k` (fractional `k`
-/// on the ray's line).
-pub(super) fn sample_voxel(plan: &FramePlan, k: usize, p: usize, q: usize) -> DVec3 {
-    unpermute(plan.view.perm, DVec3::new(plan.sample_at(k, 0, p), plan.sample_at(k, 1, q), k as f64))
-}
-
-/// The eye depth (`−z` in `proj`'s eye space) of slice `k`'s samples as an
-/// affine function `c + c_p·p + c_q·q` of the intermediate pixel `(p, q)`
-/// (a sample's voxel position is affine in the pixel for a fixed slice in
-/// both projections, and the depth affine in the position).
-pub(super) fn slice_depth(plan: &FramePlan, proj: &Projector, k: usize) -> [f64; 3] {
-    let depth = |p: usize, q: usize| -proj.eye_space(sample_voxel(plan, k, p, q)).z;
-    let c = depth(0, 0);
-    [c, depth(1, 0) - c, depth(0, 1) - c]
-}
-
 /// What the gather of one frame reads, set once per plan: intermediate pixel
 /// `(p, q, 1)` → homogeneous output point (`to_out`, and its half-pixel steps
 /// along p and q), and the eye depth of the first and last slice's samples
@@ -678,6 +663,7 @@ impl GeometryLimits {
     /// front of the nearest geometry depth over its footprint (the gather of
     /// one pixel).
     #[inline(always)]
+    #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN fails the test too
     fn limit_at(&self, g: &Gather, r: &RowAt, p: usize, l: &mut [u32; 2]) {
         if l[0] > l[1] {
             return;
@@ -952,6 +938,7 @@ mod tests {
     use crate::accuracy::reference::{Rays, fast_path_depth};
     use crate::composite::Mode;
     use crate::data::phantom::{SPHERE_ISO, sphere, sphere_geometry};
+    use crate::geometry::sampling::sample_voxel;
     use crate::geometry::{Cull, Material, Mesh, rasterize};
     use crate::render::{Method, Renderer, Settings};
     use crate::view::{Camera, NamedView, Projection, rotate_eye};

@@ -1,4 +1,4 @@
-//! Geometry in the volume (issue 23; Bruckner's InverseWarp hybrid).
+//! Geometry in the volume (Bruckner's InverseWarp hybrid).
 //!
 //! Owns the surfaces placed in a volume and their picture at the output
 //! resolution:
@@ -31,6 +31,7 @@ pub mod inverse_warp;
 pub mod io;
 pub mod mesh;
 pub mod raster;
+pub mod sampling;
 
 pub use clip_mesh::{ConvexMesh, MeshClip};
 pub use hit::volume_hit;

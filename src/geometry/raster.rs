@@ -312,6 +312,7 @@ fn ceil_small(x: f64) -> f64 {
 /// Fills one screen triangle (each vertex `(u, v, depth, 1/w)`); `NARROW`:
 /// each row's pixels only between the edges' lines (false: every pixel of
 /// the bounding box, the reference the narrowing is tested against).
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN fails the test too
 fn fill<const NARROW: bool>(out: &mut GeometryImage, v: [(f64, f64, f64, f64); 3], cull: Cull, color: [f32; 4]) {
     let p = v.map(|x| (x.0, x.1));
     let area = edge(p[0], p[1], p[2]);

@@ -1,8 +1,8 @@
-//! Stage 4 — the view: camera, factorization, and the frame plan every traversal reads.
+//! The view: camera, factorization, and the frame plan every traversal reads.
 //!
 //! Owns the camera and its standard views ([`camera`]), Lacroute's
 //! factorization of the viewing transform into a shear of the slices and a
-//! warp of the intermediate image ([`factor`], re-exported here), and the
+//! warp of the intermediate image (`factor`, re-exported here), and the
 //! per-frame plan every traversal reads ([`plan`]). A factorization takes
 //! the object axes of each principal axis it is given
 //! ([`Factorization::with_permutations`]): the cyclic [`permutation`] by
@@ -15,8 +15,10 @@
 pub mod camera;
 pub mod clip;
 mod factor;
+pub mod opacity;
 pub mod perspective;
 pub mod plan;
+pub mod shear;
 
 pub use camera::*;
 pub use factor::*;

@@ -1,5 +1,5 @@
 //! The perspective factorization (Schulze et al.; Lacroute's disabled
-//! perspective code in VolPack): the first building block of issue 21.
+//! perspective code in VolPack): the first building block of perspective frames.
 //!
 //! The eye sits at eye-space `(0, 0, D)`, `D` world units in front of the
 //! volume centre; a point at eye coordinates `e` lands on the output pixel
@@ -37,8 +37,7 @@
 use glam::{DMat3, DVec3};
 
 use crate::error::{Error, Result};
-use crate::view::factor::{camera_zoom, unpermute};
-use crate::view::plan::Warp;
+use crate::view::factor::{Warp, camera_zoom, unpermute};
 use crate::view::{Camera, permutation, principal_axis};
 
 /// The projection of a frame: parallel (orthographic), or perspective from an

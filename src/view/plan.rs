@@ -26,10 +26,10 @@
 
 use glam::{DMat3, DVec3};
 
-use crate::composite::{OpacityTable, RayRow};
-use crate::encode::shear::ShearState;
-use crate::view::Factorization;
+use crate::view::opacity::{OpacityTable, RayRow};
 use crate::view::perspective::PerspectiveView;
+use crate::view::shear::ShearState;
+use crate::view::{Factorization, Warp};
 
 /// How the slices' sample maps are built.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -112,60 +112,6 @@ impl Grid {
     /// Pixels.
     pub fn pixels(&self) -> usize {
         self.size[0] * self.size[1]
-    }
-}
-
-/// The warp from sheared coordinates `(a, b)` to output pixels `(u, v)` as 3×3
-/// homogeneous matrices (column vectors: `[u w, v w, w] = forward · [a, b, 1]`),
-/// and the inverse, which the warp kernel and the depth lookups use.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Warp {
-    pub forward: DMat3,
-    pub inverse: DMat3,
-}
-
-impl Default for Warp {
-    fn default() -> Self {
-        Warp { forward: DMat3::IDENTITY, inverse: DMat3::IDENTITY }
-    }
-}
-
-impl Warp {
-    /// True when both maps are affine (bottom row `0, 0, 1`): the warp kernel's
-    /// fast path, with coordinates stepping linearly along a row.
-    pub fn is_affine(&self) -> bool {
-        let f = self.forward.row(2);
-        let i = self.inverse.row(2);
-        f == DVec3::Z && i == DVec3::Z
-    }
-
-    /// The sheared point of output pixel `(u, v)`, or `None` where the
-    /// back-projection has `w ≤ 0` (behind the eye).
-    pub fn to_sheared(&self, u: f64, v: f64) -> Option<[f64; 2]> {
-        let m = &self.inverse;
-        // in the affine case this is the 2×2 map plus translation, term by term
-        let a = m.x_axis.x * u + m.y_axis.x * v + m.z_axis.x;
-        let b = m.x_axis.y * u + m.y_axis.y * v + m.z_axis.y;
-        let w = m.x_axis.z * u + m.y_axis.z * v + m.z_axis.z;
-        if w == 1.0 {
-            Some([a, b])
-        } else if w > 0.0 {
-            Some([a / w, b / w])
-        } else {
-            None
-        }
-    }
-
-    /// The output pixel of sheared point `(a, b)`, or `None` behind the eye.
-    pub fn to_output(&self, a: f64, b: f64) -> Option<[f64; 2]> {
-        let p = self.forward * DVec3::new(a, b, 1.0);
-        if p.z == 1.0 {
-            Some([p.x, p.y])
-        } else if p.z > 0.0 {
-            Some([p.x / p.z, p.y / p.z])
-        } else {
-            None
-        }
     }
 }
 
@@ -1193,6 +1139,25 @@ impl FramePlan {
     }
 }
 
+/// Inclusive rectangle `[p0, p1] × [q0, q1]` of grid columns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Rect {
+    pub p0: usize,
+    pub p1: usize,
+    pub q0: usize,
+    pub q1: usize,
+}
+
+impl Rect {
+    pub(crate) fn union(a: Option<Rect>, b: Option<Rect>) -> Option<Rect> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(Rect { p0: a.p0.min(b.p0), p1: a.p1.max(b.p1), q0: a.q0.min(b.q0), q1: a.q1.max(b.q1) }),
+            (a, None) => a,
+            (None, b) => b,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1204,6 +1169,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)] // the index picks one axis of several arrays
     fn the_maps_are_the_exact_translations_split() {
         let p = plan(rotate_eye(DMat3::from_rotation_x(0.4), 1, 31.0), [20, 24, 18]);
         assert_eq!(p.maps.len(), p.view.n[2]);

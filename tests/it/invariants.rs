@@ -12,9 +12,9 @@ use shearwarp::data::slices::SliceStack;
 use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::encode::depth::{Search, bit_of};
 use shearwarp::encode::mask::BinaryMask;
-use shearwarp::encode::shear::ShearState;
 use shearwarp::kernels::{self, CpuLevel};
 use shearwarp::render::{Method, Normals, Renderer, Settings, WordSize};
+use shearwarp::view::shear::ShearState;
 use shearwarp::view::{Camera, Factorization, rotate_eye};
 use shearwarp::warp::{Image, Image8};
 

@@ -11,8 +11,8 @@ use shearwarp::data::slices::SliceStack;
 use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::encode::depth::{Matcher, Search, SetBits};
 use shearwarp::encode::mask::{BinaryMask, CellCodes};
-use shearwarp::encode::shear::ShearState;
 use shearwarp::render::{Method, Renderer, Settings, WordSize};
+use shearwarp::view::shear::ShearState;
 use shearwarp::view::{Camera, Factorization, rotate_eye};
 use shearwarp::warp::Image;
 

@@ -30,7 +30,7 @@ use super::state::{
     Adaptive, Class, Display, Drag, HELP, Hud, Input, Key, Kind, Lens, Meter, Outcome, Request, Start, State, TissueInfo, button_labels,
 };
 use super::worker::{Frame, Renderers, Reply, Worker};
-use crate::app::cli::Usage;
+use crate::app::Usage;
 use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::render::{FrameStats, Settings};
@@ -52,7 +52,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let settings = cmd.render.settings()?;
     let sc = &cmd.render.scene;
     let (vol, name) = cmd.volume.load()?;
-    crate::app::cli::renderable(&name, &vol)?;
+    crate::app::args::renderable(&name, &vol)?;
     let load_ms = t_start.elapsed().as_secs_f64() * 1e3;
     let t_setup = Instant::now();
     let camera = cmd.render.camera(vol.frame())?;

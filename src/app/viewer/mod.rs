@@ -30,7 +30,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use crate::app::cli::{RenderArgs, VolumeArgs};
+use crate::app::args::{RenderArgs, VolumeArgs};
 
 #[cfg(feature = "viewer")]
 mod app;
@@ -81,10 +81,10 @@ pub const MAX_BENCH_FRAMES: usize = 100_000;
 /// Runs `shearwarp view`.
 pub fn run(cmd: &ViewCmd) -> anyhow::Result<()> {
     if let Some(n) = cmd.benchmark_drag.filter(|n| !(1..=MAX_BENCH_FRAMES).contains(n)) {
-        return Err(anyhow::Error::new(crate::app::cli::Usage(format!("--benchmark-drag must be 1..={MAX_BENCH_FRAMES} frames, got {n}"))));
+        return Err(anyhow::Error::new(crate::app::Usage(format!("--benchmark-drag must be 1..={MAX_BENCH_FRAMES} frames, got {n}"))));
     }
     if let Some(f) = cmd.target_fps.filter(|f| !(f.is_finite() && (1.0..=1000.0).contains(f))) {
-        return Err(anyhow::Error::new(crate::app::cli::Usage(format!("--target-fps must be 1..=1000 frames a second, got {f}"))));
+        return Err(anyhow::Error::new(crate::app::Usage(format!("--target-fps must be 1..=1000 frames a second, got {f}"))));
     }
     #[cfg(feature = "viewer")]
     {
@@ -93,7 +93,7 @@ pub fn run(cmd: &ViewCmd) -> anyhow::Result<()> {
     #[cfg(not(feature = "viewer"))]
     {
         let _ = cmd;
-        Err(anyhow::Error::new(crate::app::cli::Usage(
+        Err(anyhow::Error::new(crate::app::Usage(
             "this shearwarp was built without the `viewer` feature; rebuild with `cargo build --release --features viewer`".into(),
         )))
     }
@@ -135,7 +135,7 @@ mod tests {
             let cli = Cli::try_parse_from(["shearwarp", "view", "--benchmark-drag", n]).expect("parses");
             let Command::View(v) = cli.command else { panic!("not the view command") };
             let err = super::run(&v).expect_err("out of range");
-            assert!(err.chain().any(|e| e.downcast_ref::<crate::app::cli::Usage>().is_some()), "{err:#}");
+            assert!(err.chain().any(|e| e.downcast_ref::<crate::app::Usage>().is_some()), "{err:#}");
             assert!(format!("{err:#}").contains("--benchmark-drag must be 1..=100000 frames"), "{err:#}");
         }
         assert!(Cli::try_parse_from(["shearwarp", "view", "--benchmark-drag", "-3"]).is_err());
@@ -150,6 +150,6 @@ mod tests {
         let cli = Cli::try_parse_from(["shearwarp", "view", "--cell", "9"]).expect("parses");
         let Command::View(v) = cli.command else { panic!("not the view command") };
         let err = super::run(&v).expect_err("cell 9 is out of range");
-        assert!(err.chain().any(|e| e.downcast_ref::<crate::app::cli::Usage>().is_some()), "{err:#}");
+        assert!(err.chain().any(|e| e.downcast_ref::<crate::app::Usage>().is_some()), "{err:#}");
     }
 }

@@ -397,7 +397,7 @@ impl State {
     /// Whether the preview's quality follows the frame rate now (not in the
     /// parallel projection when [`Adaptive::fixed_in_parallel`]).
     pub fn adapts(&self) -> bool {
-        !(self.adaptive.fixed_in_parallel && !self.projection.is_perspective())
+        !self.adaptive.fixed_in_parallel || self.projection.is_perspective()
     }
 
     /// The current camera.

@@ -1,4 +1,4 @@
-//! Stage 0 — volume file loaders: turning files on disk into a [`Volume`].
+//! Volume file loaders: turning files on disk into a [`Volume`].
 //!
 //! This module owns every on-disk volume format the crate reads, and the one
 //! format it writes (raw voxels with a JSON sidecar):
@@ -41,7 +41,7 @@ pub use raw::{RawSpec, save_raw, sidecar_path};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Format {
-    /// Headerless voxels plus a [`RawSpec`] (given, or read from a JSON sidecar).
+    /// Headerless voxels plus a raw spec: dimensions, type, spacing (given, or read from a JSON sidecar).
     Raw,
     /// NRRD, attached (`.nrrd`) or detached (`.nhdr`).
     Nrrd,
@@ -333,12 +333,12 @@ mod tests {
     #[test]
     fn decode_samples_endianness_and_widening() {
         let b = [0x01, 0x02, 0xff, 0xfe];
-        assert_eq!(decode_samples(&b, Sample::U16, false), VoxelData::U16(vec![0x0201, 0xfeff]));
-        assert_eq!(decode_samples(&b, Sample::U16, true), VoxelData::U16(vec![0x0102, 0xfffe]));
-        assert_eq!(decode_samples(&b, Sample::I16, true), VoxelData::I16(vec![0x0102, -2]));
-        assert_eq!(decode_samples(&b, Sample::I8, true), VoxelData::I16(vec![1, 2, -1, -2]));
-        assert_eq!(decode_samples(&1.5f64.to_be_bytes(), Sample::F64, true), VoxelData::F32(vec![1.5]));
-        assert_eq!(decode_samples(&(-7i32).to_le_bytes(), Sample::I32, false), VoxelData::F32(vec![-7.0]));
+        assert_eq!(decode_samples(b, Sample::U16, false), VoxelData::U16(vec![0x0201, 0xfeff]));
+        assert_eq!(decode_samples(b, Sample::U16, true), VoxelData::U16(vec![0x0102, 0xfffe]));
+        assert_eq!(decode_samples(b, Sample::I16, true), VoxelData::I16(vec![0x0102, -2]));
+        assert_eq!(decode_samples(b, Sample::I8, true), VoxelData::I16(vec![1, 2, -1, -2]));
+        assert_eq!(decode_samples(1.5f64.to_be_bytes(), Sample::F64, true), VoxelData::F32(vec![1.5]));
+        assert_eq!(decode_samples((-7i32).to_le_bytes(), Sample::I32, false), VoxelData::F32(vec![-7.0]));
     }
 
     #[test]

@@ -8,10 +8,10 @@
 //!   (before the per-view sample-spacing correction) *and* its colour, so one
 //!   index stores both. A voxel whose node has zero opacity is transparent. Its
 //!   shading index ([`RleVoxel::normal`]) is the 14-bit hemi-octahedral code
-//!   ([`encode_normal`]) of the central-difference gradient
+//!   ([`crate::data::normals::encode_normal`]) of the central-difference gradient
 //!   ([`crate::data::slices::SliceStack::gradient_at`]) mapped to object (world) space with the voxel
 //!   spacing, up to sign because the headlight shading is two-sided; code
-//!   [`ZERO_NORMAL`] is a zero gradient, which faces the viewer like
+//!   [`crate::data::normals::ZERO_NORMAL`] is a zero gradient, which faces the viewer like
 //!   [`crate::classify::shading::headlight_ndl`]'s.
 //! - [`RleVolume`]: one principal axis's encoding. Every scanline (row `j` of
 //!   slice `k`, along `i`) is a list of `(transparent, non-transparent)` run-length
@@ -114,12 +114,10 @@ pub use runs::RleVolume;
 pub use tables::{PostTables, ViewTables};
 
 use crate::classify::Classifier;
+use crate::classify::shade_table::headlight_object;
 use crate::classify::shading::Shading;
-use crate::composite::Intermediate;
-use crate::composite::Rect;
-use crate::composite::slices::{render_brute_preclassified, render_rle};
-pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::view::plan::FramePlan;
+use crate::view::plan::Rect;
 
 /// What a [`RleCache`]'s encodings were built for (chosen by the owner).
 pub type ClassKey = u64;
@@ -129,26 +127,26 @@ pub type ClassKey = u64;
 #[derive(Debug, Default)]
 pub struct RleCache {
     key: Option<ClassKey>,
-    pre: Option<Preclass>,
+    pub(crate) pre: Option<Preclass>,
     /// What the encodings were built for: the classification's key
     /// (pre-classified), or the post-classified encoding's own.
     enc_key: Option<ClassKey>,
     /// The post-classified encoding's cells (Deluxe P; None: pre-classified).
-    post: Option<PostVisible>,
-    axes: [Option<RleVolume>; 3],
+    pub(crate) post: Option<PostVisible>,
+    pub(crate) axes: [Option<RleVolume>; 3],
     /// Encodings built since the last [`RleCache::reset`] (a transposed axis
     /// builds none).
     encoded: usize,
-    tables: ViewTables,
-    post_tables: Option<Box<PostTables>>,
+    pub(crate) tables: ViewTables,
+    pub(crate) post_tables: Option<Box<PostTables>>,
     /// Focus+context: the focus's classification (same density range as the
     /// context's, so the same nodes) and its per-view tables
     /// ([`RleCache::set_focus`]).
-    focus: Option<Preclass>,
-    focus_tables: ViewTables,
-    focus_post_tables: Option<Box<PostTables>>,
-    links: Vec<u32>,
-    slice_buf: Vec<[f32; 4]>,
+    pub(crate) focus: Option<Preclass>,
+    pub(crate) focus_tables: ViewTables,
+    pub(crate) focus_post_tables: Option<Box<PostTables>>,
+    pub(crate) links: Vec<u32>,
+    pub(crate) slice_buf: Vec<[f32; 4]>,
 }
 
 impl RleCache {
@@ -242,7 +240,7 @@ impl RleCache {
     /// the same (its permutation with `j` and `k` swapped), else a new
     /// encoding of `src`. An encoding of the axis under another permutation
     /// is replaced. Returns true if it built anything; false also when there
-    /// is no classification. (`src` is a [`SliceStack`] or the interleaved
+    /// is no classification. (`src` is a [`crate::data::slices::SliceStack`] or the interleaved
     /// slices of a BCC grid; the owner resets the cache when it switches
     /// between them.)
     pub fn ensure_axis<S: VoxelSource + ?Sized>(&mut self, src: &S) -> bool {
@@ -316,45 +314,5 @@ impl RleCache {
     /// The encoding view `plan` reads: its axis's, if built under the plan's permutation.
     pub fn axis_for(&self, plan: &FramePlan) -> Option<&RleVolume> {
         self.axes[plan.view.axis].as_ref().filter(|e| e.perm == plan.view.perm)
-    }
-
-    /// Composites view `f` from the encoding of its axis (see [`render_rle`]);
-    /// an axis that is not encoded (under the plan's permutation) renders transparent.
-    pub fn render(&mut self, plan: &FramePlan, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
-        let focused = self.focus.is_some();
-        match (self.axes[plan.view.axis].as_ref().filter(|e| e.perm == plan.view.perm), &self.post_tables) {
-            (Some(rle), Some(pt)) if self.post.is_some() => {
-                let ft = self.focus_post_tables.as_deref().filter(|_| focused);
-                render_rle(rle, pt.as_ref(), ft, plan, ert, rect, &mut self.links, out)
-            }
-            (Some(rle), _) => {
-                let ft = Some(&self.focus_tables).filter(|_| focused);
-                render_rle(rle, &self.tables, ft, plan, ert, rect, &mut self.links, out)
-            }
-            (None, _) => out.seal(None),
-        }
-    }
-
-    /// The brute-force pre-classified reference of view `f` over `rect` (see
-    /// [`render_brute_preclassified`]).
-    pub fn render_brute<V: VoxelSource + ?Sized>(
-        &mut self,
-        stack: &V,
-        plan: &FramePlan,
-        ert: f32,
-        rect: Option<Rect>,
-        out: &mut Intermediate,
-    ) {
-        match (&self.pre, &self.post_tables) {
-            (Some(pre), Some(pt)) if self.post.is_some() => {
-                let focus = self.focus.as_ref().zip(self.focus_post_tables.as_deref());
-                render_brute_preclassified(stack, pre, pt.as_ref(), focus, plan, ert, rect, &mut self.slice_buf, out)
-            }
-            (Some(pre), _) => {
-                let focus = self.focus.as_ref().map(|f| (f, &self.focus_tables));
-                render_brute_preclassified(stack, pre, &self.tables, focus, plan, ert, rect, &mut self.slice_buf, out)
-            }
-            (None, _) => out.seal(None),
-        }
     }
 }

@@ -4,8 +4,7 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::classify::{Classifier, TABLE_NODES};
-use crate::data::normals::voxel_normal;
-pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
+pub use crate::data::normals::VoxelSource;
 use crate::data::slices::SliceStack;
 
 /// Gaps of at most this many transparent voxels between two non-transparent
@@ -18,7 +17,7 @@ use crate::data::slices::SliceStack;
 pub const BRIDGE: usize = 8;
 
 /// The normal code that marks a bridged transparent voxel (real codes are below
-/// [`NORMAL_CODES`]; masked, it indexes a real shade entry, multiplied by zero).
+/// [`crate::data::normals::NORMAL_CODES`]; masked, it indexes a real shade entry, multiplied by zero).
 pub const BRIDGE_NORMAL: u16 = u16::MAX;
 
 /// One stored voxel of the encoding (non-transparent, or a bridged transparent one).
@@ -27,35 +26,8 @@ pub const BRIDGE_NORMAL: u16 = u16::MAX;
 pub struct RleVoxel {
     /// Classifier table node of the voxel's density: indexes its raw opacity and colour.
     pub class: u16,
-    /// Hemi-octahedral code of its object-space gradient direction ([`ZERO_NORMAL`] if none).
+    /// Hemi-octahedral code of its object-space gradient direction ([`crate::data::normals::ZERO_NORMAL`] if none).
     pub normal: u16,
-}
-
-/// What the pre-classified paths read voxels from: slices of densities (a
-/// [`SliceStack`]: its sizes, axis and densities) and each voxel's normal
-/// code. A cartesian [`SliceStack`] is its own source (central differences
-/// between neighbouring voxels, [`voxel_normal`]); the interleaved slices of a
-/// BCC grid ([`crate::data::bcc::BccStack`]) differentiate across slices two
-/// apart (the same sub-grid). The encoder ([`super::RleVolume::encode`]) and
-/// the brute force ([`crate::composite::slices::render_brute_preclassified`])
-/// see only this.
-pub trait VoxelSource: Sync {
-    /// The slices' densities (sizes along `(i, j, k)`, principal axis).
-    fn slices(&self) -> &SliceStack;
-    /// The normal code of voxel `(i, j, k)` (`inv_spacing`: `1 / spacing` per
-    /// object axis of the cartesian volume).
-    fn normal(&self, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16;
-}
-
-impl VoxelSource for SliceStack {
-    #[inline(always)]
-    fn slices(&self) -> &SliceStack {
-        self
-    }
-    #[inline]
-    fn normal(&self, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
-        voxel_normal(self, i, j, k, inv_spacing)
-    }
 }
 
 /// Source of [`Preclass`] ids (tables remember which classification they were built for).

@@ -1,6 +1,6 @@
 //! One principal axis's run-length encoding ([`RleVolume`]): per scanline,
 //! `(transparent, non-transparent)` run pairs and the stored voxels, the
-//! per-slice bounding boxes and per-scanline extents, and the run [`Cursor`]
+//! per-slice bounding boxes and per-scanline extents, and the run `Cursor`
 //! the slice traversal walks two scanlines with.
 
 use std::sync::Arc;
@@ -8,16 +8,15 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::preclass::{BRIDGE, BRIDGE_NORMAL, PostVisible, Preclass, RleVoxel, VoxelSource};
-use crate::composite::Rect;
-pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
 use crate::data::slices::{SliceStack, prefetch};
 use crate::view::plan::FramePlan;
+use crate::view::plan::Rect;
 
 /// End of a scanline for the run cursors.
 pub(crate) const INF: u32 = u32::MAX;
 
 /// One principal axis of the volume, run-length encoded: a pointer table over
-/// [`Scanlines`] it may share with another axis.
+/// `Scanlines` it may share with another axis.
 ///
 /// Two axes whose permutations run their scanlines along the same object axis
 /// ([`crate::view::reuse_permutation`]: x = (y, z, x) and z = (y, x, z)) hold

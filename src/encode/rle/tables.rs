@@ -4,9 +4,9 @@
 
 use super::preclass::{Preclass, RleVoxel};
 use crate::classify::TABLE_NODES;
+use crate::classify::shade_table::ShadeTable;
 use crate::classify::shading::{Shading, apply_shade, pow_int};
-pub use crate::data::normals::{NORMAL_CODES, NORMAL_SIDE, ZERO_NORMAL, decode_normal, encode_normal, headlight_object};
-use crate::data::normals::{ShadeTable, boxed};
+use crate::data::normals::{NORMAL_CODES, boxed, decode_normal};
 
 /// The per-view lookup tables of the pre-classified paths. Fixed-size arrays
 /// indexed with masks, so lookups need no bounds checks.
@@ -76,7 +76,7 @@ impl ViewTables {
 /// [`crate::composite::slices::Sampler`]): per class node its colour and
 /// opacity-corrected opacity `[r, g, b, α']` (the classifier's table, corrected
 /// like [`ViewTables`]' premultiplied one), the decoded unit normal of every
-/// normal code (zero for [`ZERO_NORMAL`]), the object-space headlight and the
+/// normal code (zero for [`crate::data::normals::ZERO_NORMAL`]), the object-space headlight and the
 /// material. A voxel is the 4-vector `[node, n_x, n_y, n_z]` (its classifier
 /// node as a float: interpolating nodes is interpolating densities, the
 /// node spacing being uniform); a blend of them is classified at its

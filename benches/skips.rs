@@ -27,6 +27,7 @@ use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::encode::depth::Search;
 use shearwarp::encode::mask::{BinaryMask, CellCodes};
 use shearwarp::encode::rle::{Preclass, ViewTables};
+use shearwarp::render::Target;
 use shearwarp::render::{Method, Normals, Renderer, Settings};
 use shearwarp::view::shear::ShearState;
 use shearwarp::view::{Camera, rotate_eye};
@@ -65,7 +66,9 @@ fn bench_turn_into<T: Texel>(
     mut r: Renderer,
     mut img: Canvas<T>,
     mut show: impl FnMut(&Canvas<T>),
-) {
+) where
+    Canvas<T>: Target,
+{
     g.sampling_mode(SamplingMode::Flat);
     g.bench_function(name.into(), |b| {
         b.iter_custom(|frames| {

@@ -60,6 +60,29 @@ use crate::view::plan::{FramePlan, Grid, Limiter, MapKind, RayLimits};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::{Canvas, Owned, Texel, clear_for_pyramids, warp, warp_owned};
 
+/// An image a frame renders into: [`crate::warp::Image`] (f32) or
+/// [`crate::warp::Image8`] (8 bits).
+///
+/// The frame is compiled once, in this crate, for each of them: a caller's
+/// `render` call links to it instead of instantiating the whole pipeline again
+/// in every crate that renders (the binary, the examples, the tests).
+pub trait Target {
+    /// Renders one frame of `camera` into `out` (what [`Renderer::render`] does).
+    fn render_frame(renderer: &mut Renderer, camera: &Camera, out: &mut Self) -> Result<FrameStats>;
+}
+
+impl Target for Canvas<[f32; 4]> {
+    fn render_frame(renderer: &mut Renderer, camera: &Camera, out: &mut Self) -> Result<FrameStats> {
+        renderer.render_texel(camera, out)
+    }
+}
+
+impl Target for Canvas<[u8; 4]> {
+    fn render_frame(renderer: &mut Renderer, camera: &Camera, out: &mut Self) -> Result<FrameStats> {
+        renderer.render_texel(camera, out)
+    }
+}
+
 /// Renders frames of one volume.
 pub struct Renderer {
     volume: Volume,
@@ -924,7 +947,13 @@ impl Renderer {
     ///
     /// `out` is a [`crate::warp::Image`] (f32) or a [`crate::warp::Image8`]
     /// (the same pixels rounded to 8 bits, as a display wants them).
-    pub fn render<T: Texel>(&mut self, camera: &Camera, out: &mut Canvas<T>) -> Result<FrameStats> {
+    pub fn render<C: Target>(&mut self, camera: &Camera, out: &mut C) -> Result<FrameStats> {
+        C::render_frame(self, camera, out)
+    }
+
+    /// [`Renderer::render`] for one texel type: instantiated in this crate for
+    /// the two [`Target`]s only.
+    fn render_texel<T: Texel>(&mut self, camera: &Camera, out: &mut Canvas<T>) -> Result<FrameStats> {
         let key = FrameKey {
             camera: *camera,
             projection: self.frame.projection,

@@ -22,7 +22,7 @@ use shearwarp::classify::presets::{self, Tissue};
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::Volume;
 use shearwarp::geometry::hit::KeptHits;
-use shearwarp::render::{Deluxe, Focus, Footprint, FrameStats, Method, Renderer, Settings};
+use shearwarp::render::{Deluxe, Focus, Footprint, FrameStats, Method, Renderer, Settings, Target};
 use shearwarp::view::Projection;
 use shearwarp::view::clip::{ClipPlane, ClipPlanes, Limiters, Region};
 use shearwarp::view::plan::Limiter;
@@ -278,7 +278,10 @@ impl Renderers {
 
     /// Renders `spec` into `img` (its lens on the surface under the mouse:
     /// [`Renderers::lens_on_surface`]).
-    pub fn render<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats> {
+    pub fn render<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats>
+    where
+        Canvas<T>: Target,
+    {
         let lens = match spec.lens {
             Some(l) => Some(self.lens_on_surface(spec, l)?),
             None => None,
@@ -360,7 +363,10 @@ impl Renderers {
     }
 
     /// Renders `spec` into `img` with the lens the renderers have now.
-    fn render_spec<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats> {
+    fn render_spec<T: Texel>(&mut self, spec: &Spec, img: &mut Canvas<T>) -> shearwarp::Result<FrameStats>
+    where
+        Canvas<T>: Target,
+    {
         if spec.projection != self.projection {
             self.set_projection(spec.projection)?;
         }

@@ -21,3 +21,4 @@ pub mod phantom;
 pub mod slices;
 pub mod stats;
 pub mod volume;
+pub mod voxels;

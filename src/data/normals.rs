@@ -22,7 +22,7 @@
 
 use rayon::prelude::*;
 
-use crate::data::packing::{InPlace, restride};
+use crate::data::packing::{BLOCK, InPlace, restride};
 use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch_cell};
 use crate::data::volume::{Volume, VoxelData, VoxelType};
 
@@ -576,6 +576,53 @@ impl VoxelSource for SliceStack {
     #[inline]
     fn normal(&self, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
         voxel_normal(self, i, j, k, inv_spacing)
+    }
+}
+
+/// Phase 2 of the packed cells: their normal codes (phase 1, the packing, is
+/// [`InPlace::new`]).
+impl<E: crate::memory::Zeroable + Send + Sync, const K: usize> InPlace<E, K> {
+    /// Phase 2: codes every voxel (for voxel `spacing`, as [`code_slices`] of
+    /// the whole f32 stack would) and writes each cell as `make(density, code)`;
+    /// `density` reads an element back as f32. Returns the cells.
+    pub(crate) fn finish(
+        mut self,
+        spacing: [f32; 3],
+        density: impl Fn(E) -> f32 + Sync,
+        make: impl Fn(f32, u16) -> [E; K] + Sync,
+    ) -> Vec<[E; K]> {
+        let n = self.n;
+        let (n01, len) = (n[0] * n[1], n[0] * n[1] * n[2]);
+        if len == 0 {
+            return self.cells;
+        }
+        let per_wave = self.windows.len();
+        let mut s0 = 0;
+        while s0 < n[2] {
+            let s1 = (s0 + BLOCK * per_wave).min(n[2]);
+            let blocks: Vec<(usize, usize)> = (s0..s1).step_by(BLOCK).map(|k0| (k0, (k0 + BLOCK).min(s1))).collect();
+            // copy what the wave reads: converted voxels from their cells, the
+            // others from the voxels at the end, all intact (module docs)
+            let (cells, done) = (self.cells.as_flattened(), s0 * n01);
+            self.windows.par_iter_mut().zip(blocks.par_iter()).for_each(|(win, &(k0, k1))| {
+                let (w0, w1) = (k0.saturating_sub(1), (k1 + 1).min(n[2]));
+                let split = done.clamp(w0 * n01, w1 * n01);
+                win.truncate(0);
+                win.extend((w0 * n01..split).map(|j| density(cells[K * j])));
+                win.extend((split..w1 * n01).map(|j| density(cells[(K - 1) * len + j])));
+            });
+            // then write the wave's cells, a block per window
+            let out = &mut self.cells[s0 * n01..s1 * n01];
+            out.par_chunks_mut(BLOCK * n01).zip(self.windows.par_iter_mut()).zip(blocks.par_iter()).for_each(|((out, win), &(k0, k1))| {
+                let w0 = k0.saturating_sub(1);
+                let w1 = (k1 + 1).min(n[2]);
+                let stack = SliceStack::from_parts(self.axis, [n[0], n[1], w1 - w0], std::mem::take(win));
+                code_slices(&stack, k0 - w0..k1 - w0, spacing, out, |c, d, code| *c = make(d, code));
+                *win = stack.into_data();
+            });
+            s0 = s1;
+        }
+        self.cells
     }
 }
 

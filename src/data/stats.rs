@@ -10,7 +10,7 @@
 
 use rayon::prelude::*;
 
-use crate::data::volume::VoxelData;
+use crate::data::voxels::VoxelData;
 
 /// Voxels per parallel task.
 const CHUNK: usize = 1 << 20;

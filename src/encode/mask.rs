@@ -32,10 +32,10 @@ use rayon::prelude::*;
 
 use crate::data::slices::SliceStack;
 pub use crate::encode::cells::{CellCodes, PackedCodes};
-use crate::encode::depth::{Word, slot_shift};
+use crate::encode::depth::{Matcher, Word, slot_shift};
 use crate::encode::shift::*;
 use crate::kernels::{self, CpuLevel};
-use crate::view::plan::Rect;
+use crate::view::plan::{Rect, ScaledMap, floor_i64};
 use crate::view::shear::ShearState;
 
 /// Steps above this count are done as one direct shear instead. A direct
@@ -122,7 +122,7 @@ pub struct BinaryMask<W: Word> {
     zero_row: Vec<W>,
     /// The block occupancy of the last scaled frame ([`BinaryMask::update_occupancy`]),
     /// its tables reused across frames.
-    occupancy: crate::encode::walk::BlockOccupancy,
+    occupancy: BlockOccupancy,
 }
 
 /// Runs `$fixed` with the constant `$n` bound to the column length `$nw` when it
@@ -663,7 +663,7 @@ impl<W: Word> BinaryMask<W> {
     }
 
     /// The block occupancy last built by [`BinaryMask::update_occupancy`].
-    pub fn occupancy(&self) -> &crate::encode::walk::BlockOccupancy {
+    pub fn occupancy(&self) -> &BlockOccupancy {
         &self.occupancy
     }
 
@@ -675,6 +675,237 @@ impl<W: Word> BinaryMask<W> {
         self.shear_to(&next);
         next
     }
+}
+
+/// Rounding margin on the drift `u` (voxels): the maps are computed per slice
+/// in f64, affine in `k` to far below this.
+pub(crate) const MARGIN: f64 = 1e-7;
+
+/// Blocks of slices per word of [`BlockOccupancy`]: a quarter word (16 slices
+/// of a u64 1-bit mask) spans a narrower rectangle of columns than a word.
+pub const BLOCKS_PER_WORD: usize = 4;
+
+/// Per block of slices (a quarter of a word: [`BLOCKS_PER_WORD`]), a
+/// summed-area table of the mask columns with a code the matcher accepts in
+/// the block, over the occupied rectangle of the mask (see the module docs).
+/// Built per frame, after the shear.
+#[derive(Clone, Debug, Default)]
+pub struct BlockOccupancy {
+    /// The occupied rectangle, in super columns (None: nothing occupied).
+    pub(crate) rect: Option<Rect>,
+    /// Table row length: rectangle width + 1.
+    pub(crate) stride: usize,
+    /// Blocks (tables), interleaved: entry `(y, x)` of block `b` is
+    /// `sums[(y · stride + x) · blocks + (b ^ 3)]`, so the blocks a ray tests one
+    /// after the other at nearby columns share cache lines.
+    pub(crate) blocks: usize,
+    /// Slices per block (a power of two) and its log2.
+    pub(crate) len: usize,
+    pub(crate) log_len: u32,
+    /// The slices with a non-zero code `[k0, k1]` (`k0 > k1`: none).
+    pub(crate) slices: [usize; 2],
+    /// Per block, the range of the fractional parts of its slices' shear
+    /// translations, `[min_i, max_i, min_j, max_j]`: a sample's cell sits
+    /// `floor(u + frac(trans))` columns from the ray's base (see [`ColumnWalk`](crate::encode::walk::ColumnWalk)).
+    pub(crate) frac: Vec<[f64; 4]>,
+    /// The union of the blocks' ranges, for [`StillWalk`](crate::encode::walk::StillWalk).
+    pub(crate) all_frac: [f64; 4],
+    /// The counts modulo 2^16 (a rectangle of fewer than 2^16 columns is
+    /// exact; [`BlockOccupancy::any`] answers a larger one with a
+    /// conservative "maybe"), each word's four blocks in reverse order (block
+    /// `b` at `b ^ 3`: the order a little-endian store of the per-quarter
+    /// counter lanes leaves them in).
+    pub(crate) sums: Vec<u16>,
+}
+
+impl BlockOccupancy {
+    /// Rebuilds the tables for `mask` in its current shear and matcher `m`,
+    /// reusing the allocation; without `tables`, only the fractions and the
+    /// occupied slices ([`StillWalk`] reads no block table).
+    pub fn build<W: Word>(&mut self, mask: &BinaryMask<W>, m: &Matcher, shear: &ShearState, tables: bool) {
+        // (without tables no rectangle: `any` then reads none)
+        self.rect = if tables { mask.occupied_rect() } else { None };
+        let nk = mask.slices();
+        let slots = (W::BITS / m.width()) as usize;
+        self.len = slots.div_ceil(BLOCKS_PER_WORD);
+        assert!(self.len.is_power_of_two(), "slots per word are a power of two");
+        self.log_len = self.len.trailing_zeros();
+        self.frac.clear();
+        self.frac.extend((0..nk.div_ceil(self.len)).map(|b| {
+            let mut f = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+            for k in b * self.len..((b + 1) * self.len).min(nk) {
+                for ax in [0, 1] {
+                    let t = shear.trans[ax][k];
+                    let x = t - t.floor();
+                    f[2 * ax] = f[2 * ax].min(x);
+                    f[2 * ax + 1] = f[2 * ax + 1].max(x);
+                }
+            }
+            f
+        }));
+        self.all_frac = self.frac.iter().fold([f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY], |a, f| {
+            [a[0].min(f[0]), a[1].max(f[1]), a[2].min(f[2]), a[3].max(f[3])]
+        });
+        let first = (0..nk).find(|&k| mask.slice_cells(k).is_some());
+        let last = (0..nk).rev().find(|&k| mask.slice_cells(k).is_some());
+        self.slices = match (first, last) {
+            (Some(a), Some(b)) => [a, b],
+            _ => [1, 0],
+        };
+        let Some(r) = self.rect else { return };
+        let (w, h) = (r.p1 - r.p0 + 1, r.q1 - r.q0 + 1);
+        self.stride = w + 1;
+        let nw = mask.words_per_row();
+        let per_word = slots / self.len;
+        // (slots per word are 8, 16, 32 or 64: always four blocks a word)
+        assert_eq!(per_word, BLOCKS_PER_WORD, "four blocks per word");
+        let nbk = nw * per_word;
+        self.blocks = nbk;
+        let row_len = (w + 1) * nbk;
+        // every entry is written below but the first row's (zero): no clearing pass
+        let size = (h + 1) * row_len;
+        if self.sums.len() < size {
+            self.sums.resize(size, 0);
+        }
+        self.sums[..row_len].fill(0);
+        // block i of a word holds its slots [i·len, (i + 1)·len) from the most
+        // significant bit: the word's i-th quarter from the top, and the
+        // (3 − i)-th from the bottom, which lane 3 − i of a row's running
+        // counts (four u16 in a u64: a row is narrower than 2^16 columns, so
+        // no lane carries into the next) counts
+        assert!(w < 1 << 16, "a mask row of {w} columns");
+        // each row's running counts along p, in parallel over rows: a column's
+        // counts are the column before's plus its own flags
+        self.sums[row_len..size].par_chunks_mut(row_len).enumerate().for_each(|(q, t)| {
+            t[..nbk].fill(0);
+            for p in 0..w {
+                let (before, out) = t.split_at_mut((p + 1) * nbk);
+                let (prev, out) = (&before[p * nbk..], &mut out[..nbk]);
+                let words = mask.row(r.p0 + p, r.q0 + q);
+                let blocks = out.chunks_exact_mut(BLOCKS_PER_WORD).zip(prev.chunks_exact(BLOCKS_PER_WORD));
+                for (&word, (o, pr)) in words.iter().zip(blocks) {
+                    let run = pr.iter().rev().fold(0u64, |c, &x| (c << 16) | x as u64);
+                    let c = run + quarter_flags::<W>(m.hits(word).as_u64());
+                    o.copy_from_slice(&[c as u16, (c >> 16) as u16, (c >> 32) as u16, (c >> 48) as u16]);
+                }
+            }
+        });
+        // then down the rows
+        for q in 1..=h {
+            let (above, row) = self.sums[..size].split_at_mut(q * row_len);
+            for (x, a) in row[..row_len].iter_mut().zip(&above[(q - 1) * row_len..]) {
+                *x = x.wrapping_add(*a);
+            }
+        }
+    }
+
+    /// Slices per block.
+    pub fn block_len(&self) -> usize {
+        self.len
+    }
+
+    /// The first block, in walking order, over slices `[lo, hi]` (index
+    /// order) in which a ray of a group may meet a matching column: every ray
+    /// through a sheared point of `[at[0][0], at[0][1]] × [at[1][0], at[1][1]]`
+    /// (min, max per axis) under the slices' `scaled` maps, against `mask` in
+    /// `shear` (the mask and shear this table was built for). `None`: no ray
+    /// of the group has a candidate. The group's drift over a block spans the
+    /// extremes of its corner rays at the block's end slices (affine in the
+    /// point and in `k`), so its rectangle holds every member's columns and a
+    /// block it skips has no candidate for any of them: a group of rays pays
+    /// for the empty blocks in front of its surface once instead of once per
+    /// ray.
+    #[allow(clippy::too_many_arguments)]
+    pub fn first_block<W: Word>(
+        &self,
+        mask: &BinaryMask<W>,
+        shear: &ShearState,
+        scaled: &[ScaledMap],
+        at: [[f64; 2]; 2],
+        lo: usize,
+        hi: usize,
+        ascending: bool,
+    ) -> Option<usize> {
+        let (lo, hi) = (lo.max(self.slices[0]), hi.min(self.slices[1]));
+        if lo > hi || self.rect.is_none() {
+            return None;
+        }
+        let len = self.len.max(1);
+        let (bl, bh) = (lo / len, hi / len);
+        let drift = |ax: usize, k: usize| {
+            let (s, t) = (&scaled[k], shear.trans[ax][k]);
+            let (x0, x1) = (s.scale * at[ax][0] + s.trans[ax] - t, s.scale * at[ax][1] + s.trans[ax] - t);
+            (x0.min(x1), x0.max(x1))
+        };
+        for i in 0..=bh - bl {
+            let b = if ascending { bl + i } else { bh - i };
+            let (ka, kb) = (lo.max(b * len), hi.min(b * len + len - 1));
+            let cols = |ax: usize| {
+                let ((a0, a1), (b0, b1)) = (drift(ax, ka), drift(ax, kb));
+                columns(mask, &self.frac[b], ax, a0.min(b0), a1.max(b1))
+            };
+            if let (Some((p0, p1)), Some((q0, q1))) = (cols(0), cols(1))
+                && self.any(b, p0, p1, q0, q1)
+            {
+                return Some(b);
+            }
+        }
+        None
+    }
+
+    /// True when some column of `[p0, p1] × [q0, q1]` (super columns) has a
+    /// match in block `w`.
+    #[inline(always)]
+    pub(crate) fn any(&self, w: usize, p0: usize, p1: usize, q0: usize, q1: usize) -> bool {
+        let Some(r) = self.rect else { return false };
+        let (a0, a1, b0, b1) = (p0.max(r.p0), p1.min(r.p1), q0.max(r.q0), q1.min(r.q1));
+        if a0 > a1 || b0 > b1 {
+            return false;
+        }
+        let (x0, x1, y0, y1) = (a0 - r.p0, a1 - r.p0 + 1, b0 - r.q0, b1 - r.q0 + 1);
+        // (counts modulo 2^16: exact below 2^16 columns)
+        if (x1 - x0) * (y1 - y0) >= 1 << 16 {
+            return true;
+        }
+        let t = &self.sums[w ^ 3..];
+        let (s, n) = (self.stride, self.blocks);
+        t[(y1 * s + x1) * n].wrapping_add(t[(y0 * s + x0) * n]) != t[(y0 * s + x1) * n].wrapping_add(t[(y1 * s + x0) * n])
+    }
+}
+
+/// One in lane `j` (bit `16·j`) of the result for each non-zero quarter `j`
+/// (from the least significant end) of a `W` word `x`: four quarters, four
+/// u16 lanes. The top bit of each quarter's low bits plus all-ones-but-top
+/// carries into the quarter's top bit iff those bits are non-zero (no carry
+/// leaves the quarter).
+#[inline(always)]
+pub(crate) fn quarter_flags<W: Word>(x: u64) -> u64 {
+    if W::BITS == 64 {
+        const LOW: u64 = 0x7FFF_7FFF_7FFF_7FFF;
+        ((((x & LOW) + LOW) | x) & !LOW) >> 15
+    } else {
+        const LOW: u64 = 0x7F7F_7F7F;
+        let f = ((((x & LOW) + LOW) | x) & 0x8080_8080) >> 7;
+        (f & 1) | ((f & 0x100) << 8) | ((f & 0x1_0000) << 16) | ((f & 0x100_0000) << 24)
+    }
+}
+
+/// The mask columns `[c0, c1]` along axis `ax` that hold the cells of samples
+/// whose drift lies in `[u0, u1]`, in slices of one block (whose fractions of
+/// the shear translations are `frac`: [`BlockOccupancy`]), clipped to the grid
+/// (`None`: off the grid). See the module docs.
+#[inline(always)]
+pub(crate) fn columns<W: Word>(mask: &BinaryMask<W>, frac: &[f64; 4], ax: usize, u0: f64, u1: f64) -> Option<(usize, usize)> {
+    // the cell's offset from the slice's, floor(x) − floor(t) = floor(u + frac(t)),
+    // over the slices' fractions in the block
+    let h0 = floor_i64(u0 + frac[2 * ax] - MARGIN);
+    let h1 = floor_i64(u1 + frac[2 * ax + 1] + MARGIN);
+    let s = mask.cell_size() as i64;
+    let pad = mask.pad() as i64;
+    // (no division at cell size 1, the usual case)
+    let (c0, c1) = if s == 1 { (h0 + pad, h1 + pad) } else { ((h0 - s + 1).div_euclid(s) + pad, h1.div_euclid(s) + pad) };
+    let (c0, c1) = (c0.max(0), c1.min(mask.grid()[ax] as i64 - 1));
+    (c0 <= c1).then_some((c0 as usize, c1 as usize))
 }
 
 #[cfg(test)]

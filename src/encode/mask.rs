@@ -721,7 +721,7 @@ pub struct BlockOccupancy {
 impl BlockOccupancy {
     /// Rebuilds the tables for `mask` in its current shear and matcher `m`,
     /// reusing the allocation; without `tables`, only the fractions and the
-    /// occupied slices ([`StillWalk`] reads no block table).
+    /// occupied slices ([`StillWalk`](crate::encode::walk::StillWalk) reads no block table).
     pub fn build<W: Word>(&mut self, mask: &BinaryMask<W>, m: &Matcher, shear: &ShearState, tables: bool) {
         // (without tables no rectangle: `any` then reads none)
         self.rect = if tables { mask.occupied_rect() } else { None };

@@ -4,7 +4,7 @@
 //! memory budget they are built under; [`estimate_axis`] predicts their
 //! bytes before anything is built.
 
-use super::settings::{Lattice, Method, Normals, Settings, WordSize};
+use super::settings::{Lattice, Normals, Settings, WordSize};
 use super::stats::BuildTimes;
 use crate::composite::Mode;
 use crate::data::bcc::{BccLattice, BccStack};
@@ -80,7 +80,7 @@ pub(super) struct AxisMask {
 /// with packed cells, whose 8- or 16-bit densities are all its rays read (8-
 /// and 16-bit scans). Every other path samples a resident [`SliceStack`].
 pub(super) fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
-    settings.method == Method::Binary
+    settings.method.uses_mask()
         && settings.normals == Normals::Codes
         && settings.pack
         && volume.data().voxel_type() != crate::data::volume::VoxelType::F32
@@ -119,7 +119,7 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
         // the interleaved BCC slices (f32)
         Lattice::Bcc => BccLattice::new(dims).map_or(0, |l| l.samples() as u64 * 4),
     };
-    let raycast = matches!(settings.method, Method::Binary | Method::Brute);
+    let raycast = settings.method.is_raycast();
     if raycast && settings.normals == Normals::Codes {
         m.normals[a] = if compact {
             // the densities in their own type packed with 2-byte codes
@@ -131,7 +131,7 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
             voxels * if settings.pack { 4 } else { 2 }
         };
     }
-    if settings.method == Method::Binary {
+    if settings.method.uses_mask() {
         let nb = code_bits.max(1);
         m.cell_codes[a] = PackedCodes::bytes_for(nb, cells[0], cells[1] * n[2]);
         m.masks[a] = match settings.word {

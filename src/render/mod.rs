@@ -659,7 +659,7 @@ impl Renderer {
     /// [`Settings::rle_reuse`] on an RLE path under a parallel projection
     /// [`crate::view::reuse_permutation`] (z mirrored to share x's scanlines).
     fn axis_perm(&self, axis: usize) -> [usize; 3] {
-        let rle = matches!(self.settings.method, Method::Rle | Method::BruteRle);
+        let rle = self.settings.method.is_rle();
         if self.settings.rle_reuse && rle && !self.frame.projection.is_perspective() {
             crate::view::reuse_permutation(axis)
         } else {
@@ -736,7 +736,7 @@ impl Renderer {
         if px > MAX_INTERMEDIATE_PIXELS {
             return too_big(format!("the intermediate image would need {}×{} pixels (limit {MAX_INTERMEDIATE_PIXELS})", grid[0], grid[1]));
         }
-        if self.settings.method == Method::Binary {
+        if self.settings.method.uses_mask() {
             // an upper bound of what BinaryMask::from_codes allocates
             let bytes = estimate_axis(&self.volume, &self.settings, self.code_bits(), axis).masks[axis];
             if bytes > MAX_MASK_BYTES {
@@ -770,7 +770,7 @@ impl Renderer {
             self.axes.bcc = [None, None, None];
         }
         let compact = compact_binary(&self.volume, &self.settings);
-        let raycast = matches!(self.settings.method, Method::Binary | Method::Brute);
+        let raycast = self.settings.method.is_raycast();
         if compact && self.axes.normals[axis].is_none() {
             // the densities and codes packed in 3 (8-bit) or 4 bytes a voxel,
             // no f32 stack, and the volume let go once the cells hold its voxels
@@ -808,7 +808,7 @@ impl Renderer {
             self.axes.normals[axis] = Some(self.pool.install(|| NormalStack::try_with_packing(stack, spacing, pack))?);
             self.axes.build_times.normals[axis] = ms(t);
         }
-        if self.settings.method == Method::Binary {
+        if self.settings.method.uses_mask() {
             let key = self.mask_key();
             if self.axes.masks[axis].as_ref().map(|m| m.key) != Some(key) {
                 // the densities come from the resident stack, or from the packed cells
@@ -860,7 +860,7 @@ impl Renderer {
                 m.mask.set_cpu_level(self.settings.cpu);
             }
         }
-        if matches!(self.settings.method, Method::Rle | Method::BruteRle) {
+        if self.settings.method.is_rle() {
             self.ensure_rle(axis, false);
         }
         Ok(t.elapsed().as_secs_f64() * 1e3)
@@ -893,7 +893,7 @@ impl Renderer {
             };
             self.axes.rle.set_focus(focus, self.volume.spacing());
         }
-        if self.settings.method == Method::Rle {
+        if self.settings.method.encodes_runs() {
             // (an encoding, or a pointer table over another axis's: see RleCache::ensure_axis)
             let t = Instant::now();
             let rle = &mut self.axes.rle;

@@ -142,8 +142,8 @@ fn write_nifti_sform(path: &Path, g: &Grid) {
     let st = g.steps();
     let o = g.origin();
     for r in 0..3 {
-        for c in 0..3 {
-            put_f32(&mut h, 280 + 16 * r + 4 * c, st[c][r]);
+        for (c, col) in st.iter().enumerate() {
+            put_f32(&mut h, 280 + 16 * r + 4 * c, col[r]);
         }
         put_f32(&mut h, 280 + 16 * r + 12, o[r]);
     }
@@ -372,7 +372,7 @@ fn mirrored_files_are_reversed_and_record_it() {
     let text = std::fs::read(&p).unwrap();
     let text = String::from_utf8_lossy(&text[..200]).replace("space: left-anterior-superior\n", "space dimension: 3\n");
     let cut = text.find("\n\n").unwrap() + 2;
-    let mut bytes = text[..cut].as_bytes().to_vec();
+    let mut bytes = text.as_bytes()[..cut].to_vec();
     bytes.extend(f32_bytes(&raw));
     std::fs::write(&p, bytes).unwrap();
     let v = load_file(&p);

@@ -527,7 +527,7 @@ fn non_finite_voxels_are_rejected_at_construction() {
 fn non_finite_voxels_are_rejected_by_the_raw_loader() {
     let dir = tempfile::tempdir().unwrap();
     for (i, (bad, big)) in [(f32::NAN, false), (f32::INFINITY, true), (f32::NEG_INFINITY, false)].into_iter().enumerate() {
-        let mut v = vec![10.0f32; 4 * 3 * 2];
+        let mut v = [10.0f32; 4 * 3 * 2];
         v[7] = bad;
         let bytes: Vec<u8> = v.iter().flat_map(|x| if big { x.to_be_bytes() } else { x.to_le_bytes() }).collect();
         let path = dir.path().join(format!("bad{i}.raw"));

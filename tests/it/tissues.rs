@@ -197,7 +197,7 @@ fn tissue_switch_is_constant_time_and_keeps_the_mask() {
         let mut img = Image::new(64, 64);
         r.render(&cam, &mut img).unwrap()
     };
-    assert_eq!(st.build_ms < 5.0, true);
+    assert!(st.build_ms < 5.0);
     assert_eq!(st.shear_steps + st.shear_direct, 0, "no re-shear after a switch");
     let _ = Factorization::new(&cam, [40, 40, 40], [1.0; 3]).unwrap();
 }

@@ -3,17 +3,25 @@
 //! codes, sheared masks, run-length encodings), how long each took, and the
 //! memory budget they are built under; [`estimate_axis`] predicts their
 //! bytes before anything is built.
+//! The [`super::Renderer`] methods that build them ([`super::Renderer::prepare_axis`]
+//! and the frame's own build), keep them within the budget, and let go of
+//! the volume's voxels (park, unpark) live here too.
 
-use super::settings::{Lattice, Method, Normals, Settings, WordSize};
+use super::settings::{Lattice, Normals, Settings, WordSize};
 use super::stats::BuildTimes;
+use super::{MAX_INTERMEDIATE_PIXELS, MAX_MASK_BYTES, Renderer};
+
+use std::time::Instant;
+
+use crate::classify::Classifier;
 use crate::composite::Mode;
 use crate::data::bcc::{BccLattice, BccStack};
-use crate::data::normals::NormalStack;
-use crate::data::slices::SliceStack;
+use crate::data::normals::{CellSource, NormalStack};
+use crate::data::slices::{Densities, SliceStack};
 use crate::data::volume::Volume;
 use crate::encode::mask::{BinaryMask, CellCodes, PackedCodes};
-use crate::encode::rle::RleCache;
-use crate::error::Error;
+use crate::encode::rle::{ClassKey, RleCache};
+use crate::error::{Error, Result};
 use crate::memory::Memory;
 use crate::view::plan::Grid;
 
@@ -80,7 +88,7 @@ pub(super) struct AxisMask {
 /// with packed cells, whose 8- or 16-bit densities are all its rays read (8-
 /// and 16-bit scans). Every other path samples a resident [`SliceStack`].
 pub(super) fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
-    settings.method == Method::Binary
+    settings.method.uses_mask()
         && settings.normals == Normals::Codes
         && settings.pack
         && volume.data().voxel_type() != crate::data::volume::VoxelType::F32
@@ -119,7 +127,7 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
         // the interleaved BCC slices (f32)
         Lattice::Bcc => BccLattice::new(dims).map_or(0, |l| l.samples() as u64 * 4),
     };
-    let raycast = matches!(settings.method, Method::Binary | Method::Brute);
+    let raycast = settings.method.is_raycast();
     if raycast && settings.normals == Normals::Codes {
         m.normals[a] = if compact {
             // the densities in their own type packed with 2-byte codes
@@ -131,7 +139,7 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
             voxels * if settings.pack { 4 } else { 2 }
         };
     }
-    if settings.method == Method::Binary {
+    if settings.method.uses_mask() {
         let nb = code_bits.max(1);
         m.cell_codes[a] = PackedCodes::bytes_for(nb, cells[0], cells[1] * n[2]);
         m.masks[a] = match settings.word {
@@ -146,4 +154,461 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
 /// error, never a silent fall-back to another path.
 pub(super) fn missing(what: &str, axis: usize) -> Error {
     Error::Other(format!("internal: {what} of axis {} was not built for this frame", ["x", "y", "z"][axis]))
+}
+
+impl Renderer {
+    /// The voxels of a parked volume, from any packed cells that hold them.
+    pub(super) fn parked_voxels(&self) -> Result<std::sync::Arc<crate::data::volume::VoxelData>> {
+        let lost = || Error::Other("internal: the volume's voxels were let go with no packed cells holding them".into());
+        let ns = self.axes.normals.iter().flatten().find(|n| n.holds_voxels()).ok_or_else(lost)?;
+        Ok(std::sync::Arc::new(ns.voxels_in_volume_order()?.ok_or_else(lost)?))
+    }
+
+    /// Gives the volume its voxels back if this renderer let go of them.
+    pub(super) fn unpark(&mut self) -> Result<()> {
+        if self.volume.is_parked() {
+            let data = self.pool.install(|| self.parked_voxels())?;
+            self.volume.unpark(data);
+        }
+        Ok(())
+    }
+
+    /// Lets go of the volume's voxels when packed cells of this renderer hold
+    /// them (or a build of them is under way: `building`) and nothing outside
+    /// it shares them: the binary path of an integer scan then holds the
+    /// voxels once, in its cells, instead of twice ([`Renderer::volume`] and
+    /// the builds of other paths get them back from the cells).
+    pub(super) fn park(&mut self, building: bool) {
+        let held = building || self.axes.normals.iter().flatten().any(NormalStack::holds_voxels);
+        if held && self.can_let_go() {
+            self.volume.park();
+        }
+    }
+
+    /// True when the volume's voxels are resident and only this renderer holds them.
+    pub(super) fn can_let_go(&self) -> bool {
+        !self.volume.is_parked() && self.volume.data_handles() == 1
+    }
+
+    /// Bytes of the packed masks that exist now.
+    pub fn mask_bytes(&self) -> usize {
+        self.axes.masks.iter().flatten().map(|m| m.mask.bytes()).sum()
+    }
+
+    /// Bytes of the run-length encodings that exist now, per axis.
+    pub fn rle_axis_bytes(&self) -> [usize; 3] {
+        self.axes.rle.bytes()
+    }
+
+    /// Bytes of the run-length encodings that exist now.
+    pub fn rle_bytes(&self) -> usize {
+        self.axes.rle.bytes().iter().sum()
+    }
+
+    /// The pre-classified state (classification and encodings) of the RLE paths.
+    pub fn rle_cache(&self) -> &RleCache {
+        &self.axes.rle
+    }
+
+    /// How long the last build of each structure took, per axis.
+    pub fn build_times(&self) -> BuildTimes {
+        self.axes.build_times
+    }
+
+    /// Bytes held now, per structure and axis.
+    pub fn memory(&self) -> Memory {
+        let per = |f: &dyn Fn(usize) -> usize| [0, 1, 2].map(|a| f(a) as u64);
+        Memory {
+            volume: self.volume.bytes(),
+            stacks: per(&|a| {
+                self.axes.stacks[a].as_ref().map_or(0, SliceStack::bytes) + self.axes.bcc[a].as_ref().map_or(0, BccStack::bytes)
+            }),
+            normals: per(&|a| self.axes.normals[a].as_ref().map_or(0, NormalStack::bytes)),
+            cell_codes: per(&|a| self.axes.codes[a].as_ref().map_or(0, |c| c.1.bytes())),
+            masks: per(&|a| {
+                self.axes.masks[a].as_ref().map_or(0, |m| match &m.mask {
+                    AnyMask::W32(m) => m.held_bytes(),
+                    AnyMask::W64(m) => m.held_bytes(),
+                })
+            }),
+            rle: self.axes.rle.bytes().map(|b| b as u64),
+            intermediate: self.inter.bytes() as u64,
+        }
+    }
+
+    /// Limits what the renderer may hold ([`Renderer::memory`]'s total): before
+    /// it builds the structures a view needs, it predicts their size
+    /// ([`estimate_axis`]); when they would not fit it first frees the other
+    /// axes' structures (rebuilt when a view needs them again), and when they
+    /// still would not fit the frame fails with [`Error::Memory`], before
+    /// anything is allocated. `None` (the default) sets no limit.
+    pub fn set_memory_budget(&mut self, budget: Option<u64>) {
+        self.axes.budget = budget;
+    }
+
+    /// The memory budget, if any.
+    pub fn memory_budget(&self) -> Option<u64> {
+        self.axes.budget
+    }
+
+    /// The bytes `ensure_axis(axis)` would allocate now (structures that exist
+    /// and are current count 0), and the intermediate image's growth.
+    pub(super) fn missing_bytes(&self, axis: usize) -> Memory {
+        let mut m = estimate_axis(&self.volume, &self.settings, self.code_bits(), axis);
+        if self.axes.stacks[axis].as_ref().is_some_and(|s| s.is_resident() && s.perm() == self.axis_perm(axis))
+            && self.settings.lattice == Lattice::Cartesian
+        {
+            m.stacks[axis] = 0;
+        }
+        if self.axes.bcc[axis].is_some() && self.settings.lattice == Lattice::Bcc {
+            m.stacks[axis] = 0;
+        }
+        if self.axes.normals[axis].is_some() {
+            m.normals[axis] = 0;
+        }
+        if self.axes.masks[axis].as_ref().map(|m| m.key) == Some(self.mask_key()) {
+            m.masks[axis] = 0;
+            m.cell_codes[axis] = 0;
+        }
+        m.volume = 0;
+        m.intermediate = m.intermediate.saturating_sub(self.inter.bytes() as u64);
+        m
+    }
+
+    /// Frees every structure of principal axis `axis` (first giving the volume
+    /// its voxels back if they were let go).
+    pub(super) fn drop_axis(&mut self, axis: usize) -> Result<()> {
+        if self.axes.normals[axis].is_some() {
+            self.unpark()?;
+        }
+        self.axes.stacks[axis] = None;
+        self.axes.bcc[axis] = None;
+        self.axes.normals[axis] = None;
+        self.axes.codes[axis] = None;
+        self.axes.masks[axis] = None;
+        self.axes.rle.drop_axis(axis);
+        Ok(())
+    }
+
+    /// True when building `axis` now fits the budget beside everything held
+    /// (less the volume, when the build lets go of it). The build allocates
+    /// the cell array while the volume is still held, but touches only its
+    /// last third (one byte a voxel of an 8-bit scan) before the volume goes,
+    /// so what is resident stays below the total counted here; under a
+    /// virtual-memory limit (`ulimit -v`) the allocation itself may be refused,
+    /// which is [`Error::Memory`], never an abort.
+    pub(super) fn fits_budget(&self, axis: usize) -> bool {
+        let needed = self.missing_bytes(axis).total();
+        needed == 0 || self.axes.budget.is_none_or(|b| (self.memory().total() + needed).saturating_sub(self.releasable(axis)) <= b)
+    }
+
+    /// The bytes of volume that building `axis` lets go of: all of it when the
+    /// compact binary path builds packed cells while the volume is resident
+    /// and nothing outside this renderer shares the voxels.
+    pub(super) fn releasable(&self, axis: usize) -> u64 {
+        let building = compact_binary(&self.volume, &self.settings) && self.axes.normals[axis].is_none();
+        if building && self.can_let_go() { self.volume.bytes() } else { 0 }
+    }
+
+    /// Checks the budget for building `axis` now; frees the other axes first
+    /// if that makes it fit.
+    pub(super) fn fit_budget(&mut self, axis: usize) -> Result<()> {
+        let Some(budget) = self.axes.budget else { return Ok(()) };
+        if self.fits_budget(axis) {
+            return Ok(());
+        }
+        for a in (0..3).filter(|&a| a != axis) {
+            self.drop_axis(a)?;
+        }
+        if !self.fits_budget(axis) {
+            let (needed, held) = (self.missing_bytes(axis).total(), self.memory().total());
+            let d = self.volume.dims();
+            return Err(Error::Memory {
+                what: format!(
+                    "rendering the {}×{}×{} volume along {} ({})",
+                    d[0],
+                    d[1],
+                    d[2],
+                    ["x", "y", "z"][axis],
+                    self.settings.method.name()
+                ),
+                needed,
+                held,
+                budget,
+            });
+        }
+        Ok(())
+    }
+
+    /// The object axes `(i, j, k)` of principal axis `axis` this renderer's
+    /// frames use: the cyclic [`crate::view::permutation`], or with
+    /// [`Settings::rle_reuse`] on an RLE path under a parallel projection
+    /// [`crate::view::reuse_permutation`] (z mirrored to share x's scanlines).
+    pub(super) fn axis_perm(&self, axis: usize) -> [usize; 3] {
+        let rle = self.settings.method.is_rle();
+        if self.settings.rle_reuse && rle && !self.frame.projection.is_perspective() {
+            crate::view::reuse_permutation(axis)
+        } else {
+            crate::view::permutation(axis)
+        }
+    }
+
+    /// What the pre-classified state depends on: classification generation,
+    /// tissue, mode and the sampler (pre- or post-classified, Deluxe P).
+    pub(super) fn rle_key(&self) -> ClassKey {
+        let tissue = self.classes.tissues.as_ref().map_or(0, |t| t.current as u64 + 1);
+        // (a pre-classified encoding holds the voxels the focus tissue shows too)
+        let focus = self.focus_tissue().map_or(0, |f| f as u64 + 1);
+        self.rle_enc_key() | (tissue << 2) | (focus << 12)
+    }
+
+    /// What a post-classified encoding depends on (the key without the
+    /// tissue: it keeps the cells every tissue preset may show), and the lattice.
+    pub(super) fn rle_enc_key(&self) -> ClassKey {
+        let bcc = (self.settings.lattice == Lattice::Bcc) as u64;
+        (self.classes.generation << 20)
+            | (bcc << 9)
+            | ((self.settings.deluxe.post as u64) << 1)
+            | (self.settings.mode == Mode::Blend) as u64
+    }
+
+    pub(super) fn mask_key(&self) -> MaskKey {
+        MaskKey {
+            mode: if self.classes.tissues.is_some() { None } else { Some(self.settings.mode) },
+            word: self.settings.word,
+            cell: self.settings.cell,
+            generation: self.classes.generation,
+            half: self.settings.deluxe.intermediate,
+        }
+    }
+
+    /// Fails when the intermediate image or (binary path) the sheared mask of
+    /// principal axis `axis` would exceed [`MAX_INTERMEDIATE_PIXELS`] or
+    /// [`MAX_MASK_BYTES`] — very elongated volumes (e.g. 16384×4×4 seen along its
+    /// long axis), whose padding for shears up to 45° dwarfs the data. Without
+    /// this the allocation fails and aborts the process.
+    pub(super) fn check_axis_size(&self, axis: usize) -> Result<()> {
+        let dims = self.volume.dims();
+        let p = crate::view::permutation(axis);
+        let n = [dims[p[0]], dims[p[1]], dims[p[2]]];
+        let cells = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
+        let Grid { size: grid, .. } = Grid::parallel(cells, n[2]);
+        let too_big = |what: String| {
+            Err(Error::value(
+                "volume shape",
+                format!(
+                    "{}×{}×{} seen along {}: {what}; the volume is too elongated for shear-warp along this axis",
+                    dims[0],
+                    dims[1],
+                    dims[2],
+                    ["x", "y", "z"][axis]
+                ),
+            ))
+        };
+        let px = grid[0] as u64 * grid[1] as u64;
+        if px > MAX_INTERMEDIATE_PIXELS {
+            return too_big(format!("the intermediate image would need {}×{} pixels (limit {MAX_INTERMEDIATE_PIXELS})", grid[0], grid[1]));
+        }
+        if self.settings.method.uses_mask() {
+            // an upper bound of what BinaryMask::from_codes allocates
+            let bytes = estimate_axis(&self.volume, &self.settings, self.code_bits(), axis).masks[axis];
+            if bytes > MAX_MASK_BYTES {
+                return too_big(format!("its sheared mask would need {bytes} bytes (limit {MAX_MASK_BYTES})"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Makes sure the slice stack (and, for the binary path, the mask) of `axis`
+    /// exist and are current. Returns the milliseconds spent building.
+    pub(super) fn ensure_axis(&mut self, axis: usize) -> Result<f64> {
+        self.check_axis_size(axis)?;
+        self.fit_budget(axis)?;
+        let t = Instant::now();
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        if self.settings.lattice == Lattice::Bcc {
+            // the RLE paths on the BCC grid (check_deluxe allows no other):
+            // the interleaved slices, their classification and encoding
+            if self.axes.bcc[axis].is_none() {
+                let t = Instant::now();
+                self.unpark()?;
+                let vol = &self.volume;
+                self.axes.bcc[axis] = Some(self.pool.install(|| BccStack::try_new(vol, axis))?);
+                self.axes.build_times.stacks[axis] = ms(t);
+            }
+            self.ensure_rle(axis, true);
+            return Ok(t.elapsed().as_secs_f64() * 1e3);
+        }
+        if self.axes.bcc.iter().any(Option::is_some) {
+            self.axes.bcc = [None, None, None];
+        }
+        let compact = compact_binary(&self.volume, &self.settings);
+        let raycast = self.settings.method.is_raycast();
+        if compact && self.axes.normals[axis].is_none() {
+            // the densities and codes packed in 3 (8-bit) or 4 bytes a voxel,
+            // no f32 stack, and the volume let go once the cells hold its voxels
+            let t = Instant::now();
+            let threads = self.pool.current_num_threads();
+            let vol = &self.volume;
+            let src = match self.axes.normals.iter().flatten().find(|n| n.holds_voxels()) {
+                // the volume was let go: re-lay another axis's cells
+                Some(ns) if vol.is_parked() => CellSource::Cells(ns),
+                _ => CellSource::Volume(vol),
+            };
+            let build =
+                self.pool.install(|| NormalStack::try_cells(src, axis, threads))?.ok_or_else(|| missing("the packed cells", axis))?;
+            if self.axes.stacks[axis].is_none() {
+                self.axes.stacks[axis] = Some(SliceStack::shell(vol, axis));
+            }
+            // the build holds the voxels now: the volume can go before the codes are computed
+            self.park(true);
+            let spacing = self.volume.spacing();
+            self.axes.normals[axis] = Some(self.pool.install(|| build.finish(spacing)));
+            self.axes.build_times.normals[axis] = ms(t);
+        }
+        let perm = self.axis_perm(axis);
+        if !compact && self.axes.stacks[axis].as_ref().is_none_or(|s| !s.is_resident() || s.perm() != perm) {
+            let t = Instant::now();
+            self.unpark()?;
+            let vol = &self.volume;
+            self.axes.stacks[axis] = Some(self.pool.install(|| SliceStack::try_permuted(vol, perm))?);
+            self.axes.build_times.stacks[axis] = ms(t);
+        }
+        if raycast && self.settings.normals == Normals::Codes && self.axes.normals[axis].is_none() {
+            let t = Instant::now();
+            let (stack, spacing, pack) =
+                (self.axes.stacks[axis].as_ref().expect("stack built above"), self.volume.spacing(), self.settings.pack);
+            self.axes.normals[axis] = Some(self.pool.install(|| NormalStack::try_with_packing(stack, spacing, pack))?);
+            self.axes.build_times.normals[axis] = ms(t);
+        }
+        if self.settings.method.uses_mask() {
+            let key = self.mask_key();
+            if self.axes.masks[axis].as_ref().map(|m| m.key) != Some(key) {
+                // the densities come from the resident stack, or from the packed cells
+                let stack: &dyn Densities = match (&self.axes.stacks[axis], &self.axes.normals[axis]) {
+                    (Some(s), _) if s.is_resident() => s,
+                    (_, Some(ns)) => ns,
+                    _ => return Err(missing("the densities", axis)),
+                };
+                // cell codes depend only on the classification (and Deluxe I's
+                // dilation); cell size and word size reuse them
+                let codes_key = key.generation * 4 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64) * 2 + key.half as u64;
+                if self.axes.codes[axis].as_ref().map(|c| c.0) != Some(codes_key) {
+                    let t = Instant::now();
+                    let half = key.half;
+                    let codes = self.pool.install(|| match (&self.classes.tissues, self.settings.mode) {
+                        (Some(ts), _) if half => {
+                            CellCodes::thresholds_half(stack, &ts.thresholds).expect("thresholds validated in with_tissues")
+                        }
+                        (Some(ts), _) => CellCodes::thresholds(stack, &ts.thresholds).expect("thresholds validated in with_tissues"),
+                        (None, Mode::Iso) => {
+                            let iso = self.classes.iso;
+                            if half {
+                                CellCodes::binary_half(stack, |_, hi| hi >= iso)
+                            } else {
+                                CellCodes::binary(stack, |_, hi| hi >= iso)
+                            }
+                        }
+                        (None, Mode::Blend) => {
+                            let cls = &self.classes.classifier;
+                            let visible = |lo, hi| cls.may_be_visible(lo, hi);
+                            if half { CellCodes::binary_half(stack, visible) } else { CellCodes::binary(stack, visible) }
+                        }
+                    });
+                    self.axes.codes[axis] = Some((codes_key, codes));
+                    self.axes.build_times.cell_codes[axis] = ms(t);
+                }
+                let t = Instant::now();
+                let codes = &self.axes.codes[axis].as_ref().expect("built above").1;
+                let mask = self.pool.install(|| match key.word {
+                    WordSize::U32 => AnyMask::W32(BinaryMask::from_codes(codes, key.cell)),
+                    WordSize::U64 => AnyMask::W64(BinaryMask::from_codes(codes, key.cell)),
+                });
+                self.axes.masks[axis] = Some(AxisMask { key, mask });
+                self.axes.build_times.masks[axis] = ms(t);
+            }
+            // the mask carries the settings' CPU level to its shear kernels and to
+            // the ray loop's bit scan (`render_binary`); a mask outlives a settings change
+            if let Some(m) = self.axes.masks[axis].as_mut() {
+                m.mask.set_cpu_level(self.settings.cpu);
+            }
+        }
+        if self.settings.method.is_rle() {
+            self.ensure_rle(axis, false);
+        }
+        Ok(t.elapsed().as_secs_f64() * 1e3)
+    }
+
+    /// The pre-classified state of `axis`: the classification, and (for
+    /// [`Method::Rle`]) the encoding of the axis's slices — the cartesian
+    /// stack, or the interleaved BCC slices when `bcc` (the classification
+    /// key tells the two apart).
+    pub(super) fn ensure_rle(&mut self, axis: usize, bcc: bool) {
+        let key = self.rle_key();
+        if !self.axes.rle.is_for(key) {
+            let cls = self.preclass_classifier().into_owned();
+            if self.settings.deluxe.post {
+                // the encoding keeps the cells any tissue preset of the mode may show
+                let visible: Vec<&Classifier> = match (&self.classes.tissues, self.settings.mode) {
+                    (Some(ts), Mode::Iso) => ts.iso_cls.iter().collect(),
+                    (Some(ts), Mode::Blend) => ts.blend_cls.iter().collect(),
+                    (None, _) => vec![&cls],
+                };
+                self.axes.rle.reset_post(key, self.rle_enc_key(), &cls, &visible, self.volume.spacing());
+            } else {
+                self.axes.rle.reset(key, &cls, self.volume.spacing());
+            }
+            // focus+context: the focus tissue's classification of the mode
+            let focus = match (&self.classes.tissues, self.focus_tissue(), self.settings.mode) {
+                (Some(ts), Some(f), Mode::Iso) => Some(&ts.iso_cls[f]),
+                (Some(ts), Some(f), Mode::Blend) => Some(&ts.blend_cls[f]),
+                _ => None,
+            };
+            self.axes.rle.set_focus(focus, self.volume.spacing());
+        }
+        if self.settings.method.encodes_runs() {
+            // (an encoding, or a pointer table over another axis's: see RleCache::ensure_axis)
+            let t = Instant::now();
+            let rle = &mut self.axes.rle;
+            // (asked first: a frame whose encoding is current sends no job to the pool)
+            let built = if bcc {
+                let src = self.axes.bcc[axis].as_ref().expect("BCC slices built above");
+                !rle.is_current(src) && self.pool.install(|| rle.ensure_axis(src))
+            } else {
+                let stack = self.axes.stacks[axis].as_ref().expect("stack built above");
+                !rle.is_current(stack) && self.pool.install(|| rle.ensure_axis(stack))
+            };
+            if built {
+                self.axes.build_times.rle[axis] = t.elapsed().as_secs_f64() * 1e3;
+            }
+        }
+    }
+
+    /// Builds the stack and mask of every axis now (so frames measure only shear,
+    /// render and warp). Returns the milliseconds spent. An axis beyond the
+    /// memory limits is skipped; a frame that needs it returns the error.
+    pub fn prepare_all_axes(&mut self) -> f64 {
+        (0..3).map(|a| self.ensure_axis(a).unwrap_or(0.0)).sum()
+    }
+
+    /// Builds the stack and mask of principal axis `axis` (0..3) now if they are
+    /// missing or stale, so a later view along it does not pay for it. Returns the
+    /// milliseconds spent (0 when current), or the error when the axis is beyond
+    /// the memory limits.
+    pub fn prepare_axis(&mut self, axis: usize) -> Result<f64> {
+        self.ensure_axis(axis.min(2))
+    }
+
+    /// Builds principal axis `axis` ahead of need, but only if it fits the
+    /// memory budget beside everything held now: unlike [`Renderer::prepare_axis`]
+    /// it never frees another axis to make room (a prefetch that evicted the
+    /// axis on screen would make the next frame rebuild it). Returns whether
+    /// the axis is built now.
+    pub fn prefetch_axis(&mut self, axis: usize) -> Result<bool> {
+        let axis = axis.min(2);
+        if !self.fits_budget(axis) {
+            return Ok(false);
+        }
+        self.ensure_axis(axis).map(|_| true)
+    }
 }

@@ -56,6 +56,28 @@ impl Method {
             Method::BruteRle => "brute-rle",
         }
     }
+
+    /// A raycast path ([`Method::Binary`], [`Method::Brute`]): classifies
+    /// after interpolation, and may shade by normal codes.
+    pub fn is_raycast(self) -> bool {
+        matches!(self, Method::Binary | Method::Brute)
+    }
+
+    /// A pre-classified path ([`Method::Rle`], [`Method::BruteRle`]): keeps a
+    /// classification per view in an [`crate::encode::rle::RleCache`].
+    pub fn is_rle(self) -> bool {
+        matches!(self, Method::Rle | Method::BruteRle)
+    }
+
+    /// The path that walks a sheared binary mask ([`Method::Binary`]).
+    pub fn uses_mask(self) -> bool {
+        self == Method::Binary
+    }
+
+    /// The path that run-length encodes the slices ([`Method::Rle`]).
+    pub fn encodes_runs(self) -> bool {
+        self == Method::Rle
+    }
 }
 
 /// Word width of the packed mask.
@@ -327,7 +349,7 @@ pub(super) fn check_deluxe(s: &Settings) -> Result<()> {
     let unsupported = |what: &str| Err(Error::value("settings", format!("{what} is not available with --method {}", s.method.name())));
     // the BCC grid: the pre-classified paths (parallel projection; the
     // renderer refuses a perspective BCC frame)
-    if s.lattice == Lattice::Bcc && !matches!(s.method, Method::Rle | Method::BruteRle) {
+    if s.lattice == Lattice::Bcc && !s.method.is_rle() {
         return unsupported("the BCC grid (--grid bcc)");
     }
     if s.lattice == Lattice::Bcc && s.rle_reuse {

@@ -1,0 +1,184 @@
+//! The per-method frame paths: compositing one frame plan by the settings' [`Method`].
+
+use super::axes::{AnyMask, missing};
+use super::{FrameStats, Lattice, Method, Normals, Renderer, Settings};
+
+use std::time::Instant;
+
+use crate::classify::Classifier;
+use crate::classify::shade_table::{ShadeTable, headlight_object};
+use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary, render_brute, volume_rect, volume_rect_with_mids};
+use crate::composite::{Intermediate, Mode, Rect};
+use crate::data::normals::NormalStack;
+use crate::data::slices::SliceStack;
+use crate::encode::depth::{Matcher, binary_matcher};
+use crate::encode::mask::ShearWork;
+use crate::encode::walk::Drift;
+use crate::error::Result;
+use crate::view::plan::{FramePlan, MapKind};
+
+impl Renderer {
+    /// Composites one frame plan into the intermediate image by the
+    /// renderer's method (its axis's structures must exist: see
+    /// [`Renderer::ensure_axis`]), then runs `then_warp` on it (in the same
+    /// job on the pool), adding the shear, render and warp times and the
+    /// rays to `stats`. The one per-plan step of every frame: a parallel or
+    /// one-pyramid frame has one plan, a split perspective frame one per
+    /// pyramid.
+    pub(super) fn composite_plan(
+        &mut self,
+        plan: &FramePlan,
+        stats: &mut FrameStats,
+        then_warp: impl FnOnce(&Intermediate) + Send,
+    ) -> Result<()> {
+        let axis = plan.view.axis;
+        let mode = self.settings.mode;
+        let focus = self.focus_tissue();
+        if mode == Mode::Blend {
+            match &mut self.classes.tissues {
+                Some(ts) => {
+                    ts.blend_cls[ts.current].set_sample_ratio(plan.opacity_ratio);
+                    if let Some(f) = focus {
+                        ts.blend_cls[f].set_sample_ratio(plan.opacity_ratio);
+                    }
+                }
+                None => self.classes.classifier.set_sample_ratio(plan.opacity_ratio),
+            }
+        }
+        // the BCC grid's interleaved slices (RLE paths only), else the cartesian stack
+        let bcc = self.axes.bcc[axis].as_ref().filter(|_| self.settings.lattice == Lattice::Bcc);
+        let stack = match bcc {
+            Some(b) => &b.stack,
+            None => self.axes.stacks[axis].as_ref().expect("ensure_axis builds the stack"),
+        };
+        let (cls, iso, matcher): (&Classifier, f32, &Matcher) = match (&self.classes.tissues, mode) {
+            (Some(ts), Mode::Iso) => (&ts.iso_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
+            (Some(ts), Mode::Blend) => (&ts.blend_cls[ts.current], ts.thresholds[ts.current], &ts.matchers[ts.current]),
+            (None, _) => (&self.classes.classifier, self.classes.iso, binary_matcher()),
+        };
+        // focus+context: the focus tissue's classifier and iso value; the walks
+        // visit the union of both tissues' codes, the lower threshold's matcher
+        // (thresholds ascend, tissue i is "code ≥ i + 1")
+        let (focus, matcher): (Option<(&Classifier, f32)>, &Matcher) = match (&self.classes.tissues, focus) {
+            (Some(ts), Some(f)) => {
+                let fc = if mode == Mode::Iso { &ts.iso_cls[f] } else { &ts.blend_cls[f] };
+                (Some((fc, ts.thresholds[f])), &ts.matchers[f.min(ts.current)])
+            }
+            _ => (None, matcher),
+        };
+        let settings = self.settings;
+        let (inter, masks, rle) = (&mut self.inter, &mut self.axes.masks, &mut self.axes.rle);
+        let (normals, shade) = (&self.axes.normals, &mut self.shade);
+        // one job on the pool per plan: shear and render run inside it
+        let result: Result<()> = self.pool.install(|| {
+            let t = Instant::now();
+            let rect: Option<Rect> = match settings.method {
+                Method::Binary => {
+                    let m = masks[axis].as_mut().ok_or_else(|| missing("the sheared mask", axis))?;
+                    let w: ShearWork = match &mut m.mask {
+                        AnyMask::W32(m) => m.shear_to(&plan.shear),
+                        AnyMask::W64(m) => m.shear_to(&plan.shear),
+                    };
+                    if plan.kind == MapKind::ScaleTranslate {
+                        // what the diverging rays' walks skip blocks by (rays
+                        // that do not drift read the shear's fractions only)
+                        let tables = !Drift::for_plan(plan).is_still();
+                        match &mut m.mask {
+                            AnyMask::W32(m) => m.update_occupancy(matcher, &plan.shear, tables),
+                            AnyMask::W64(m) => m.update_occupancy(matcher, &plan.shear, tables),
+                        }
+                    }
+                    (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);
+                    let scaled = plan.kind == MapKind::ScaleTranslate;
+                    let rect = match &m.mask {
+                        _ if !settings.occupied_rect => volume_rect(plan, stack.cells()),
+                        // the mask's occupied columns are the translated rays'; a
+                        // scaled plan's rays meet the occupied cells elsewhere
+                        AnyMask::W32(m) if scaled => occupied_scaled_rays(plan, m, stack.cells()),
+                        AnyMask::W64(m) if scaled => occupied_scaled_rays(plan, m, stack.cells()),
+                        AnyMask::W32(m) => m.occupied_rays(plan.grid.size),
+                        AnyMask::W64(m) => m.occupied_rays(plan.grid.size),
+                    };
+                    stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
+                    let t = Instant::now();
+                    inter.prepare(plan.grid.size);
+                    let ctx = ray_context(stack, cls, plan, iso, focus, settings, normals[axis].as_ref(), shade);
+                    match &m.mask {
+                        AnyMask::W32(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
+                        AnyMask::W64(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
+                    }
+                    stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
+                    rect
+                }
+                Method::Brute => {
+                    let rect = volume_rect(plan, stack.cells());
+                    stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
+                    let t = Instant::now();
+                    inter.prepare(plan.grid.size);
+                    let ctx = ray_context(stack, cls, plan, iso, focus, settings, normals[axis].as_ref(), shade);
+                    render_brute(&ctx, rect, inter);
+                    stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
+                    rect
+                }
+                Method::Rle | Method::BruteRle => {
+                    // the per-view tables, corrected to the plan's sample spacing (half
+                    // the slices' with Deluxe I); iso opacities are 0 or 1, so iso needs no correction
+                    let ratio = if mode == Mode::Blend { plan.sample_ratio() } else { 1.0 };
+                    rle.prepare_view(plan, ratio, settings.shading);
+                    let rect = match settings.method {
+                        Method::Rle => {
+                            rle.axis_for(plan).ok_or_else(|| missing("the run-length encoding", axis))?;
+                            rle.rect(plan)
+                        }
+                        _ => volume_rect_with_mids(plan, stack.cells()),
+                    };
+                    stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
+                    let t = Instant::now();
+                    inter.prepare(plan.grid.size);
+                    match (settings.method, bcc) {
+                        (Method::Rle, _) => rle.render(plan, settings.ert, rect, inter),
+                        (_, Some(b)) => rle.render_brute(b, plan, settings.ert, rect, inter),
+                        (_, None) => rle.render_brute(stack, plan, settings.ert, rect, inter),
+                    }
+                    stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
+                    rect
+                }
+            };
+            stats.rays += rect.map_or(0, |r| ((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1)) as u64);
+            // the warp in the same job (one job sent into the pool per plan)
+            let t = Instant::now();
+            then_warp(inter);
+            stats.warp_ms += t.elapsed().as_secs_f64() * 1e3;
+            Ok(())
+        });
+        result
+    }
+}
+
+/// The rays' context of a frame of `plan`: the classification, iso value and
+/// material, with table shading when the settings ask for it and the normal
+/// codes exist (the shade table brought up to date for the view).
+#[allow(clippy::too_many_arguments)]
+fn ray_context<'a>(
+    stack: &'a SliceStack,
+    cls: &'a Classifier,
+    plan: &'a FramePlan,
+    iso: f32,
+    focus: Option<(&'a Classifier, f32)>,
+    settings: Settings,
+    normals: Option<&'a NormalStack>,
+    shade: &'a mut ShadeTable,
+) -> RayContext<'a> {
+    let mut ctx =
+        RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert).with_intermediate(plan.intermediate());
+    if let Some((fc, fiso)) = focus {
+        ctx = ctx.with_focus(fc, fiso);
+    }
+    match (settings.normals, normals) {
+        (Normals::Codes, Some(ns)) => {
+            shade.update(headlight_object(&plan.view), settings.shading);
+            ctx.with_normals(ns, shade)
+        }
+        _ => ctx,
+    }
+}

@@ -183,7 +183,7 @@ impl Renderer {
     /// (for example a convex mesh's [`crate::geometry::MeshClip`] keeping its
     /// inside, drawn with each frame's camera and set again per frame): as
     /// [`Renderer::set_focus`], the samples each ray's interval
-    /// ([`FramePlan::apply_focus`]) holds are classified by tissue preset
+    /// ([`FramePlan::apply_focus`](crate::view::plan::FramePlan::apply_focus)) holds are classified by tissue preset
     /// `tissue`. The same `Arc` set again keeps the frame's key (nothing is
     /// redrawn for a tissue switch); a limiter that cuts holes (an outside
     /// region) is refused: a focus is one interval per ray.

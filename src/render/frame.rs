@@ -57,7 +57,7 @@ pub(super) static NEXT_STAMP: std::sync::atomic::AtomicU64 = std::sync::atomic::
 impl Renderer {
     /// Sets the projection of the following frames (checked: a field of view
     /// in (0°, 180°), an eye distance finite and > 0). A perspective frame
-    /// renders with [`Method::Rle`] or [`Method::BruteRle`]; the raycast paths
+    /// renders with [`Method::Rle`](super::Method::Rle) or [`Method::BruteRle`](super::Method::BruteRle); the raycast paths
     /// refuse it with an error.
     pub fn set_projection(&mut self, projection: Projection) -> Result<()> {
         projection.check()?;

@@ -2,14 +2,16 @@
 //!
 //! Owns [`Renderer`], which holds the volume, the classification (one transfer
 //! function, or a set of tissue presets sharing one threshold-coded mask), one
-//! [`SliceStack`], one [`NormalStack`] (table shading) and one sheared mask per principal axis (each built only when a
+//! [`SliceStack`](crate::data::slices::SliceStack), one
+//! [`NormalStack`](crate::data::normals::NormalStack) (table shading) and one
+//! sheared mask per principal axis (each built only when a
 //! view first needs it, and rebuilt only when the classification or cell size
 //! changes), the reusable intermediate image and per-slice parameters, and a rayon
 //! pool of the requested size. [`Renderer::render`] runs one frame and reports how
 //! long each stage took. The output is the same for any thread count: every pixel
 //! is computed by exactly one task from the same inputs. The pre-classified paths
 //! ([`Method::Rle`], [`Method::BruteRle`]) keep their classification and per-axis
-//! run-length encodings in a [`RleCache`], encoded lazily like the masks and
+//! run-length encodings in a [`RleCache`](crate::encode::rle::RleCache), encoded lazily like the masks and
 //! re-encoded when the classification (transfer function, iso value, tissue or
 //! mode) changes.
 

@@ -75,8 +75,24 @@ fn peak_rss_mib() -> u64 {
         .map_or(0, |kb| kb / 1024)
 }
 
-/// Runs `cases()` inputs through `run`, checks time and memory, prints the figures.
+/// Runs `cases()` volume inputs through `run` (see [`fuzz_with`]); a volume
+/// that loads holds as many voxels as its dims say.
 fn fuzz<S: Strategy>(name: &str, strategy: S, run: impl Fn(S::Value) -> shearwarp::Result<Volume>) {
+    fuzz_with(name, strategy, run, |v| {
+        let d = v.dims();
+        prop_assert_eq!(v.len(), d[0] * d[1] * d[2]);
+        Ok(())
+    });
+}
+
+/// Runs `cases()` inputs through `run`, checks every input's time, `check`s
+/// what loads, checks the peak memory and prints the figures.
+fn fuzz_with<S: Strategy, T>(
+    name: &str,
+    strategy: S,
+    run: impl Fn(S::Value) -> shearwarp::Result<T>,
+    check: impl Fn(&T) -> Result<(), TestCaseError>,
+) {
     let (n, ok, slowest) = (Cell::new(0u64), Cell::new(0u64), Cell::new(Duration::ZERO));
     let start = Instant::now();
     let result = runner().run(&strategy, |input| {
@@ -86,10 +102,9 @@ fn fuzz<S: Strategy>(name: &str, strategy: S, run: impl Fn(S::Value) -> shearwar
         n.set(n.get() + 1);
         slowest.set(slowest.get().max(dt));
         prop_assert!(dt < max_case(), "one input took {dt:?}");
-        if let Ok(v) = r {
+        if let Ok(loaded) = r {
             ok.set(ok.get() + 1);
-            let d = v.dims();
-            prop_assert_eq!(v.len(), d[0] * d[1] * d[2]);
+            check(&loaded)?;
         }
         Ok(())
     });
@@ -678,38 +693,14 @@ fn seeds_are_valid_files() {
 
 // ------------------------------------------------------------ meshes
 
-/// Like [`fuzz`], for a mesh reader: `Ok` meshes must index their own vertices.
+/// [`fuzz_with`] for meshes: a mesh that loads has triangles, each naming
+/// vertices it has.
 fn fuzz_mesh<S: Strategy>(name: &str, strategy: S, run: impl Fn(S::Value) -> shearwarp::Result<shearwarp::geometry::mesh::Mesh>) {
-    let (n, ok, slowest) = (Cell::new(0u64), Cell::new(0u64), Cell::new(Duration::ZERO));
-    let start = Instant::now();
-    let result = runner().run(&strategy, |input| {
-        let t = Instant::now();
-        let r = run(input);
-        let dt = t.elapsed();
-        n.set(n.get() + 1);
-        slowest.set(slowest.get().max(dt));
-        prop_assert!(dt < max_case(), "one input took {dt:?}");
-        if let Ok(m) = r {
-            ok.set(ok.get() + 1);
-            prop_assert!(!m.triangles.is_empty());
-            prop_assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.vertices.len()));
-        }
+    fuzz_with(name, strategy, run, |m| {
+        prop_assert!(!m.triangles.is_empty());
+        prop_assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.vertices.len()));
         Ok(())
     });
-    let secs = start.elapsed().as_secs_f64();
-    let rss = peak_rss_mib();
-    println!(
-        "io_fuzz {name}: {} inputs ({} loaded, {} rejected) in {secs:.2} s, slowest {:.1} ms, peak RSS {rss} MiB",
-        n.get(),
-        ok.get(),
-        n.get() - ok.get(),
-        slowest.get().as_secs_f64() * 1e3
-    );
-    if let Err(e) = result {
-        panic!("{name}: {e}");
-    }
-    assert!(n.get() >= cases() as u64, "{name}: only {} inputs ran", n.get());
-    assert!(rss < MAX_RSS_MIB, "{name}: peak RSS {rss} MiB");
 }
 
 /// The budget the mesh fuzz loads within (the command line passes `--max-memory`).

@@ -14,20 +14,13 @@
 //! - [`scene`]: the meshes and clip regions of the command line, per frame;
 //! - [`viewer`] (feature `viewer`): `shearwarp view`, the interactive window.
 
-/// Prints a line to stdout; a closed pipe (`shearwarp … | head`) ends the
-/// program quietly instead of panicking like `println!`.
+/// Prints a line to stdout through [`output::print_text`]: a closed pipe
+/// (`shearwarp … | head`) ends the program quietly instead of panicking like
+/// `println!`, a failed write is an error naming standard output.
 macro_rules! say {
-    ($($t:tt)*) => {{
-        use std::io::Write;
-        let mut out = std::io::stdout().lock();
-        if let Err(e) = writeln!(out, $($t)*) {
-            if e.kind() == std::io::ErrorKind::BrokenPipe {
-                std::process::exit(0);
-            }
-            // (a write failure, as for every output: exit 2, the destination named)
-            return Err(shearwarp::Error::file("standard output", format!("cannot write: {e}")).into());
-        }
-    }};
+    ($($t:tt)*) => {
+        crate::app::output::print_text(&format!("{}\n", format_args!($($t)*)))?
+    };
 }
 
 /// Returns a [`Usage`] error from the current function.

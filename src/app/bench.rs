@@ -34,7 +34,7 @@ use clap::Args;
 
 use crate::app::Usage;
 use crate::app::args::VolumeArgs;
-use crate::app::peers::{self, MODEL_SHADING, Peer, PeerCamera, PeerView};
+use crate::app::peers::{self, MODEL_SHADING, Peer, PeerCamera, PeerModel, PeerSchedule, PeerView};
 use shearwarp::accuracy::metrics::{DepthError, ImageError, compare, depth_error};
 use shearwarp::accuracy::reference::{ReferenceImage, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
 use shearwarp::accuracy::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_depth};
@@ -885,7 +885,9 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                     let pviews: Vec<PeerView> =
                         shown.iter().map(|(v, _)| PeerView { name: peers::file_safe(&v.name), rotation: v.rotation }).collect();
                     let reps = cmd.reps * cmd.rounds;
-                    match peers::run(peer, den, &pviews, pcam, threshold, cmd.ert, cmd.threads, cmd.warmup, reps, &dir.join(&name)) {
+                    let model = PeerModel { threshold, ert: cmd.ert };
+                    let schedule = PeerSchedule { threads: cmd.threads, warmup: cmd.warmup, reps };
+                    match peers::run(peer, den, &pviews, pcam, model, schedule, &dir.join(&name)) {
                         Ok(run) => {
                             for ((view, rf), (ms, img)) in shown.iter().zip(run.frames) {
                                 report.records.push(Record {

@@ -152,6 +152,23 @@ pub struct PeerCamera {
     pub perspective: Option<(f64, f64)>,
 }
 
+/// The classification model a peer renders with: the opaque ramp from
+/// `threshold` and early ray termination at `ert` (VTK's is fixed at 0.9922).
+#[derive(Clone, Copy, Debug)]
+pub struct PeerModel {
+    pub threshold: f32,
+    pub ert: f32,
+}
+
+/// How a peer is timed: `threads` (0: the peer's default; VolPack is
+/// single-threaded), `warmup` untimed and `reps` timed renders of each view.
+#[derive(Clone, Copy, Debug)]
+pub struct PeerSchedule {
+    pub threads: usize,
+    pub warmup: usize,
+    pub reps: usize,
+}
+
 /// A peer's run over the views: per view the median frame time over the timed
 /// renders, and the frame.
 pub struct PeerRun {
@@ -196,25 +213,21 @@ fn volpack_harness() -> Result<PathBuf> {
     Ok(bin)
 }
 
-/// Runs `peer` on the `.den` volume `den` over `views` (`warmup` untimed and
-/// `reps` timed renders each) with `threads` threads (0: the peer's default;
-/// VolPack is single-threaded), the model at `threshold` and early ray
-/// termination at `ert` (VTK's is fixed at 0.9922); frames go to `dir`. An
-/// error says why the peer cannot run here (not installed, no display, a
-/// perspective VolPack cannot do, a failed render).
-#[allow(clippy::too_many_arguments)]
+/// Runs `peer` on the `.den` volume `den` over `views` with the `model`,
+/// timed by `schedule`; frames go to `dir`. An error says why the peer cannot
+/// run here (not installed, no display, a perspective VolPack cannot do, a
+/// failed render).
 pub fn run(
     peer: Peer,
     den: &Path,
     views: &[PeerView],
     cam: PeerCamera,
-    threshold: f32,
-    ert: f32,
-    threads: usize,
-    warmup: usize,
-    reps: usize,
+    model: PeerModel,
+    schedule: PeerSchedule,
     dir: &Path,
 ) -> Result<PeerRun> {
+    let PeerModel { threshold, ert } = model;
+    let PeerSchedule { threads, warmup, reps } = schedule;
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let list: Vec<serde_json::Value> =
         views.iter().map(|v| serde_json::json!({ "name": v.name, "matrix": user_matrix(v.rotation) })).collect();

@@ -210,21 +210,25 @@ fn tf_of(sel: u64) -> TransferFunction {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The settings of one RLE case: everything but the method.
+fn case(mode: Mode, deluxe: Deluxe, threads: usize, ert: f32) -> Settings {
+    Settings { mode, ert, threads, deluxe, ..Settings::default() }
+}
+
+/// The case rendered by the RLE path and its brute force (`base`'s method is
+/// replaced by each in turn).
 fn rle_pair(
     vol: &Volume,
     tf: &TransferFunction,
-    mode: Mode,
-    deluxe: Deluxe,
+    base: Settings,
     rot: DMat3,
     persp: Option<(f64, f64)>,
     planes: Option<&[ClipPlane]>,
-    threads: usize,
-    ert: f32,
 ) -> Option<[(Image, Vec<[f32; 4]>); 2]> {
     let mut out = Vec::new();
+    let mode = base.mode;
     for method in [Method::Rle, Method::BruteRle] {
-        let s = Settings { method, mode, ert, threads, deluxe, ..Settings::default() };
+        let s = Settings { method, ..base };
         let mut r = Renderer::new(vol.clone(), tf, s).unwrap();
         if mode == Mode::Iso {
             r.set_iso(70.0).unwrap();
@@ -269,7 +273,7 @@ proptest! {
         let planes: Vec<ClipPlane> = ClipPlane::new([a, b, c], d).ok().into_iter().filter(|_| clip).collect();
         let planes = (!planes.is_empty()).then_some(&planes[..]);
         let persp = persp.then_some((fov, dist));
-        let got = rle_pair(&vol, &tf, mode, deluxe, rot, persp, planes, 2, ert);
+        let got = rle_pair(&vol, &tf, case(mode, deluxe, 2, ert), rot, persp, planes);
         prop_assert!(got.is_some() || persp.is_some(), "a parallel view failed");
         if let Some([(ri, rpx), (bi, bpx)]) = got {
             prop_assert!(same_bits(&rpx, &bpx), "{} {:?}: intermediate images differ", deluxe.label(), persp);
@@ -285,8 +289,8 @@ fn deluxe_rle_is_deterministic_across_thread_counts() {
     let tf = tf_of(1);
     for deluxe in [I, P, IP] {
         let rot = DMat3::from_euler(EulerRot::XYZ, 0.5, -0.8, 0.3);
-        let one = rle_pair(&vol, &tf, Mode::Blend, deluxe, rot, Some((40.0, 1.5)), None, 1, 1.0).unwrap();
-        let three = rle_pair(&vol, &tf, Mode::Blend, deluxe, rot, Some((40.0, 1.5)), None, 3, 1.0).unwrap();
+        let one = rle_pair(&vol, &tf, case(Mode::Blend, deluxe, 1, 1.0), rot, Some((40.0, 1.5)), None).unwrap();
+        let three = rle_pair(&vol, &tf, case(Mode::Blend, deluxe, 3, 1.0), rot, Some((40.0, 1.5)), None).unwrap();
         assert!(same_bits(&one[0].1, &three[0].1) && same_bits(&one[1].1, &three[1].1), "{}", deluxe.label());
         assert!(one[0].0.coverage() > 0.05, "{}: empty image", deluxe.label());
     }
@@ -414,7 +418,7 @@ fn deluxe_i_brute_force_keeps_midpoints_outside_both_slices() {
     let tf = tf_of(30226927442339151);
     let rot = DMat3::from_euler(EulerRot::XYZ, 0.0, -2.1050138258659707, 1.0014697563744366);
     for ert in [0.3, 1.0] {
-        let [(ri, rpx), (bi, bpx)] = rle_pair(&vol, &tf, Mode::Iso, I, rot, Some((20.0, 0.7604588208701587)), None, 1, ert).unwrap();
+        let [(ri, rpx), (bi, bpx)] = rle_pair(&vol, &tf, case(Mode::Iso, I, 1, ert), rot, Some((20.0, 0.7604588208701587)), None).unwrap();
         assert!(rpx.iter().any(|p| p[3] > 0.0), "the view shows something");
         assert!(same_bits(&rpx, &bpx), "ert {ert}: intermediate images differ");
         assert!(same_bits(&ri.data, &bi.data), "ert {ert}: final images differ");

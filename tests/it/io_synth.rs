@@ -392,9 +392,17 @@ fn nifti_rejections_are_clear() {
 
 // ---------------------------------------------------------------- DICOM
 
-/// One CT slice: `values` are stored pixel values (u16), HU = value - 1024.
-#[allow(clippy::too_many_arguments)]
-fn ct_slice(path: &Path, series: &str, instance: u32, rows: u16, cols: u16, z: f64, values: &[u16], ts: &str) {
+/// Where a CT slice sits: its series, instance number and position z (mm).
+struct SliceAt<'a> {
+    series: &'a str,
+    instance: u32,
+    z: f64,
+}
+
+/// One CT slice of `rows` × `cols` at `at`: `values` are stored pixel values
+/// (u16), HU = value - 1024.
+fn ct_slice(path: &Path, at: SliceAt, [rows, cols]: [u16; 2], values: &[u16], ts: &str) {
+    let SliceAt { series, instance, z } = at;
     let el = |tag, vr, v: PrimitiveValue| DataElement::new(tag, vr, v);
     let obj = InMemDicomObject::from_element_iter([
         el(tags::SOP_CLASS_UID, VR::UI, uids::CT_IMAGE_STORAGE.into()),
@@ -439,7 +447,7 @@ fn ct_series(dir: &Path, ts: &str) -> Vec<PathBuf> {
         .enumerate()
         .map(|(i, &k)| {
             let p = dir.join(format!("img{i:02}.dcm"));
-            ct_slice(&p, "1.2.3.4", 10 + k as u32, 3, 4, k as f64 * 2.5, &ct_values(4, 3, k), ts);
+            ct_slice(&p, SliceAt { series: "1.2.3.4", instance: 10 + k as u32, z: k as f64 * 2.5 }, [3, 4], &ct_values(4, 3, k), ts);
             p
         })
         .collect()
@@ -478,14 +486,26 @@ fn dicom_pixel_data_must_match_rows_and_columns() {
         for (rows, cols) in [(16u16, 15u16), (15, 16), (16, 17)] {
             let dir = tempfile::tempdir().unwrap();
             for k in 0..3 {
-                ct_slice(&dir.path().join(format!("s{k}.dcm")), "1.2.3.9", k + 1, rows, cols, k as f64, &ct_values(16, 16, k as usize), ts);
+                ct_slice(
+                    &dir.path().join(format!("s{k}.dcm")),
+                    SliceAt { series: "1.2.3.9", instance: k + 1, z: k as f64 },
+                    [rows, cols],
+                    &ct_values(16, 16, k as usize),
+                    ts,
+                );
             }
             let e = load_err(dir.path());
             assert!(e.contains(".dcm") && e.contains("pixel data holds 512 bytes") && e.contains(&format!("Columns {cols}")), "{e}");
         }
         let dir = tempfile::tempdir().unwrap();
         for k in 0..3 {
-            ct_slice(&dir.path().join(format!("s{k}.dcm")), "1.2.3.9", k + 1, 16, 16, k as f64, &ct_values(16, 16, k as usize), ts);
+            ct_slice(
+                &dir.path().join(format!("s{k}.dcm")),
+                SliceAt { series: "1.2.3.9", instance: k + 1, z: k as f64 },
+                [16, 16],
+                &ct_values(16, 16, k as usize),
+                ts,
+            );
         }
         assert_eq!(load(dir.path(), &LoadOptions::default()).unwrap().dims(), [16, 16, 3]);
     }
@@ -497,25 +517,25 @@ fn dicom_rejections_are_clear() {
     // Mixed slice sizes: the error names the odd file.
     let dir = tempfile::tempdir().unwrap();
     ct_series(dir.path(), ts);
-    ct_slice(&dir.path().join("odd.dcm"), "1.2.3.4", 99, 5, 4, 10.0, &ct_values(4, 5, 0), ts);
+    ct_slice(&dir.path().join("odd.dcm"), SliceAt { series: "1.2.3.4", instance: 99, z: 10.0 }, [5, 4], &ct_values(4, 5, 0), ts);
     let e = load_err(dir.path());
     assert!(e.contains("odd.dcm") && e.contains("slice size"), "{e}");
     // Duplicated position.
     let dir = tempfile::tempdir().unwrap();
     ct_series(dir.path(), ts);
-    ct_slice(&dir.path().join("dup.dcm"), "1.2.3.4", 98, 3, 4, 5.0, &ct_values(4, 3, 0), ts);
+    ct_slice(&dir.path().join("dup.dcm"), SliceAt { series: "1.2.3.4", instance: 98, z: 5.0 }, [3, 4], &ct_values(4, 3, 0), ts);
     let e = load_err(dir.path());
     assert!(e.contains("same position"), "{e}");
     // A gap (missing slice).
     let dir = tempfile::tempdir().unwrap();
     ct_series(dir.path(), ts);
-    ct_slice(&dir.path().join("far.dcm"), "1.2.3.4", 97, 3, 4, 20.0, &ct_values(4, 3, 0), ts);
+    ct_slice(&dir.path().join("far.dcm"), SliceAt { series: "1.2.3.4", instance: 97, z: 20.0 }, [3, 4], &ct_values(4, 3, 0), ts);
     let e = load_err(dir.path());
     assert!(e.contains("inconsistent slice positions"), "{e}");
     // Two series in one directory.
     let dir = tempfile::tempdir().unwrap();
     ct_series(dir.path(), ts);
-    ct_slice(&dir.path().join("other.dcm"), "9.9.9", 1, 3, 4, 0.0, &ct_values(4, 3, 0), ts);
+    ct_slice(&dir.path().join("other.dcm"), SliceAt { series: "9.9.9", instance: 1, z: 0.0 }, [3, 4], &ct_values(4, 3, 0), ts);
     let e = load_err(dir.path());
     assert!(e.contains("2 DICOM series"), "{e}");
     // ... but naming a file of the other series loads it alone.
@@ -697,7 +717,13 @@ fn dicom_missing_slice_names_its_neighbours() {
     let dir = tempfile::tempdir().unwrap();
     let ts = dicom_dictionary_std::uids::EXPLICIT_VR_LITTLE_ENDIAN;
     for k in (0..8).filter(|&k| k != 3) {
-        ct_slice(&dir.path().join(format!("k{k}.dcm")), "1.2.3.5", 10 + k, 3, 4, k as f64 * 2.5, &ct_values(4, 3, 0), ts);
+        ct_slice(
+            &dir.path().join(format!("k{k}.dcm")),
+            SliceAt { series: "1.2.3.5", instance: 10 + k, z: k as f64 * 2.5 },
+            [3, 4],
+            &ct_values(4, 3, 0),
+            ts,
+        );
     }
     let e = load_err(dir.path());
     assert!(e.contains("k4.dcm") && e.contains("k2.dcm"), "{e}");

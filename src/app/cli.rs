@@ -83,6 +83,23 @@ pub struct RenderCmd {
     /// Print the frame's statistics as JSON.
     #[arg(long)]
     pub json: bool,
+    /// How the still frame samples where the output magnifies the
+    /// intermediate image (zoom, the eye near the volume).
+    #[arg(long, value_enum, default_value = "matched")]
+    pub sampling: StillSampling,
+}
+
+/// The sampling of a still frame.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StillSampling {
+    /// As many rays per voxel as the output magnifies (Deluxe M): no
+    /// intermediate pixel is drawn wider than an output pixel, so a zoomed or
+    /// close-up surface shows no steps. Where the output does not magnify,
+    /// the same frame as `voxel`.
+    Matched,
+    /// One ray per voxel (or per --quality), as a rotation frame: faster,
+    /// steps where the output magnifies.
+    Voxel,
 }
 
 /// Eye axes to rotate about.
@@ -256,6 +273,10 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let dims = vol.dims();
     let cam = cmd.render.camera(vol.frame())?;
     let (mut r, scene) = cmd.render.renderer_and_scene(vol)?;
+    if cmd.sampling == StillSampling::Matched {
+        let s = r.settings();
+        r.set_settings(Settings { deluxe: shearwarp::Deluxe { matched: true, ..s.deluxe }, ..s })?;
+    }
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let build_ms = prepare_first(&mut r, &cam)?;
     let (stats, geometry) = scene.render(&mut r, &cam, &mut img)?;
@@ -270,7 +291,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
-            "projection": projection_json(r.projection()), "quality": r.quality(), "deluxe": r.settings().deluxe.label(), "grid": r.settings().lattice.name(),
+            "projection": projection_json(r.projection()), "quality": r.quality(), "sampling": cmd.sampling.to_possible_value().map(|v| v.get_name().to_string()), "deluxe": r.settings().deluxe.label(), "grid": r.settings().lattice.name(),
             "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": build_ms + stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,

@@ -263,3 +263,44 @@ fn quality_box_footprint_sees_every_voxel() {
     assert!(totals[0].iter().all(|&x| x > 0.0) && spread(&totals[0]) < 1.001, "box: {:?}", totals[0]);
     assert!(totals[1].contains(&0.0) || spread(&totals[1]) > 1.5, "bilinear: {:?}", totals[1]);
 }
+
+/// A still `render` never magnifies its intermediate image: by default a
+/// zoomed frame is byte for byte the frame rendered with matched sampling
+/// (`--deluxe M`), finer than the one-ray-per-voxel frame (`--sampling
+/// voxel`, which keeps the steps); a frame that does not magnify is the same
+/// either way. Binary and RLE, parallel and perspective.
+#[test]
+fn still_render_samples_matched_where_the_output_magnifies() {
+    use assert_cmd::Command;
+    let dir = tempfile::tempdir().unwrap();
+    let render = |name: &str, extra: &[&str]| -> (Vec<u8>, serde_json::Value) {
+        let png = dir.path().join(format!("{name}.png"));
+        let out = Command::cargo_bin("shearwarp")
+            .unwrap()
+            .args(["render", "--phantom", "head", "--phantom-dims", "24,24,24", "--tissue", "bone", "--json", "-o"])
+            .arg(&png)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
+        (std::fs::read(&png).unwrap(), serde_json::from_slice(&out.stdout).unwrap())
+    };
+    for (case, view) in [
+        ("binary", &["--size", "192"][..]),
+        ("rle", &["--size", "192", "--method", "rle"][..]),
+        ("perspective", &["--size", "128", "--method", "rle", "--perspective", "50", "--eye-distance", "0.8"][..]),
+    ] {
+        let (still, j) = render(&format!("{case}-still"), view);
+        let (matched, _) = render(&format!("{case}-matched"), &[view, &["--sampling", "voxel", "--deluxe", "M"]].concat());
+        let (voxel, jv) = render(&format!("{case}-voxel"), &[view, &["--sampling", "voxel"]].concat());
+        assert_eq!(still, matched, "{case}: the still frame is not the matched frame");
+        assert_ne!(still, voxel, "{case}: a magnified frame rendered as one ray per voxel");
+        assert!(j["rays"].as_f64().unwrap() > 2.0 * jv["rays"].as_f64().unwrap(), "{case}: {} rays against {}", j["rays"], jv["rays"]);
+        assert_eq!(j["sampling"], "matched");
+        assert_eq!(jv["sampling"], "voxel");
+    }
+    // minified: one ray per voxel already covers every output pixel
+    let (still, _) = render("small-still", &["--size", "12"]);
+    let (voxel, _) = render("small-voxel", &["--size", "12", "--sampling", "voxel"]);
+    assert_eq!(still, voxel, "a frame that does not magnify changed");
+}

@@ -55,9 +55,10 @@ use crate::classify::Classifier;
 use crate::classify::shading::Shading;
 use crate::composite::Mode;
 use crate::data::bcc::BccLattice;
+use crate::data::normals::{decode_normal, encode_normal};
 use crate::data::volume::Volume;
 use crate::error::{Error, Result};
-use crate::render::{Lattice, Renderer};
+use crate::render::{Lattice, Normals, Renderer};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::Image;
 
@@ -402,6 +403,40 @@ impl ReferenceRenderer {
         front.lerp(back, fz)
     }
 
+    /// The unit normal (world space, down the density) the linear
+    /// reconstruction shades a point with: [`ReferenceRenderer::gradient`]
+    /// mapped to world space, or with `codes` the trilinear blend of the
+    /// corners' decoded normal codes ([`crate::data::normals`]), each turned
+    /// to the gradient's side. NaN where the gradient is zero.
+    pub fn shading_normal(&self, p: DVec3, codes: bool) -> DVec3 {
+        let sp = DVec3::new(self.spacing[0] as f64, self.spacing[1] as f64, self.spacing[2] as f64);
+        let g = self.gradient(p) / sp;
+        if !(g.length() > 0.0) {
+            return DVec3::NAN;
+        }
+        if !codes {
+            return -g.normalize();
+        }
+        let (x0, x1, fx) = locate(p.x, self.dims[0]);
+        let (y0, y1, fy) = locate(p.y, self.dims[1]);
+        let (z0, z1, fz) = locate(p.z, self.dims[2]);
+        let mut sum = DVec3::ZERO;
+        for (x, wx) in [(x0, 1.0 - fx), (x1, fx)] {
+            for (y, wy) in [(y0, 1.0 - fy), (y1, fy)] {
+                for (z, wz) in [(z0, 1.0 - fz), (z1, fz)] {
+                    let c = self.gradient_at(x, y, z) / sp;
+                    let code = encode_normal([c.x as f32, c.y as f32, c.z as f32]);
+                    // (a zero gradient's code shades as facing the viewer: it adds no direction)
+                    if let Some(n) = decode_normal(code) {
+                        let n = DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
+                        sum += wx * wy * wz * if n.dot(g) < 0.0 { -n } else { n };
+                    }
+                }
+            }
+        }
+        if sum.length() > 0.0 { -sum.normalize() } else { DVec3::NAN }
+    }
+
     /// Block of a point inside the box.
     #[inline(always)]
     fn block_of(&self, p: DVec3) -> [usize; 3] {
@@ -627,6 +662,14 @@ impl Tracer<'_> {
 /// fractional slice ([`Factorization::sheared_to_voxel`]; under perspective,
 /// [`PerspectiveView::sheared_to_voxel`]).
 pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>> {
+    let (points, rays) = fast_path_hits(renderer, camera)?;
+    Ok(points.iter().map(|p| p.map_or(f64::NAN, |p| rays.depth_of(p))).collect())
+}
+
+/// The voxel-space point of the iso hit of `renderer`'s last frame (rendered
+/// with `camera`) per output pixel (`None` where no hit), found as
+/// [`fast_path_depth`] describes, and the rays of the frame.
+pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Option<DVec3>>, Rays)> {
     let plan = renderer.last_plan().ok_or_else(|| Error::value("fast path depth", "the renderer has not rendered a frame yet"))?;
     let (dims, spacing, proj) = (renderer.dims(), renderer.spacing(), renderer.projection());
     // a perspective frame's camera (scaled by its field of view) and view
@@ -663,7 +706,7 @@ pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>>
     }
     let [w, h] = camera.size;
     let (grid, pad) = (plan.grid.size, plan.grid.pad as f64);
-    let mut out = vec![f64::NAN; w * h];
+    let mut out: Vec<Option<DVec3>> = vec![None; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
         for (u, o) in row.iter_mut().enumerate() {
             let Some([a, b]) = plan.warp.to_sheared(u as f64, v as f64) else { continue };
@@ -692,11 +735,33 @@ pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>>
                     // the plan's sheared point is the view's, shifted
                     (Some(pv), _) => pv.sheared_to_voxel(a + shift[0], b + shift[1], ksum / wsum),
                 };
-                *o = rays.depth_of(DVec3::from_array(voxel));
+                *o = Some(DVec3::from_array(voxel));
             }
         }
     });
-    Ok(out)
+    Ok((out, rays))
+}
+
+/// The normal the renderer shades the iso hit of its last frame with, per
+/// output pixel: unit, in world space (the volume's axes scaled by its
+/// spacing), pointing down the density (NaN where no hit). It is the
+/// renderer's own shading model evaluated at its own hit
+/// ([`fast_path_hits`]), since the frame keeps colours and depths but no
+/// normals: the linear reconstruction's gradient there — the trilinear blend
+/// of the eight corners' central differences, what the binary and brute
+/// paths shade with under [`Normals::Gradient`] (their blend of the
+/// bilinear gradients of the two slices around the crossing is this blend)
+/// — or, under [`Normals::Codes`], the same blend of the corners' decoded
+/// normal codes (each turned to the gradient's side), the direction whose
+/// shade the blend of the corners' shade entries approximates.
+/// `model` must be the [`ReferenceRenderer`] of the renderer's volume.
+pub fn fast_path_normals(renderer: &Renderer, camera: &Camera, model: &ReferenceRenderer) -> Result<Vec<DVec3>> {
+    if model.dims != renderer.dims() || model.spacing != renderer.spacing() {
+        return Err(Error::value("fast path normals", "the model volume is not the renderer's"));
+    }
+    let (points, _) = fast_path_hits(renderer, camera)?;
+    let codes = renderer.settings().normals == Normals::Codes;
+    Ok(points.par_iter().map(|p| p.map_or(DVec3::NAN, |p| model.shading_normal(p, codes))).collect())
 }
 
 #[cfg(test)]

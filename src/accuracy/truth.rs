@@ -164,21 +164,26 @@ pub struct SurfaceTruth {
     pub normal: Vec<DVec3>,
 }
 
-/// The first hit and surface normal of `phantom`'s iso-surface along every
-/// ray of `camera` under `projection`, for the volume `phantom.grid`
-/// sampled, stored with `spacing` (the volume's spacing: the phantom's own,
-/// or another one given to the volume later, which stretches the shape as it
-/// stretches the rendered volume). `near` is the perspective near clip in
-/// voxels ([`crate::accuracy::reference::ReferenceOptions::near`]).
+/// The first hit and surface normal of `phantom`'s iso-surface at `iso`
+/// (its surface at [`Shape::iso`]; another level of the same density
+/// otherwise) along every ray of `camera` under `projection`, for the volume
+/// `phantom.grid` sampled, stored with `spacing` (the volume's spacing: the
+/// phantom's own, or another one given to the volume later, which stretches
+/// the shape as it stretches the rendered volume). `near` is the perspective
+/// near clip in voxels ([`crate::accuracy::reference::ReferenceOptions::near`]).
 pub fn surface_truth(
     phantom: &AnalyticPhantom,
     spacing: [f32; 3],
     camera: &Camera,
     projection: &Projection,
+    iso: f64,
     near: f64,
 ) -> Result<SurfaceTruth> {
     if !(near.is_finite() && near >= 0.0) {
         return Err(Error::value("truth near clip", format!("{near} (must be finite and ≥ 0)")));
+    }
+    if !iso.is_finite() {
+        return Err(Error::value("iso value", format!("{iso}")));
     }
     let dims = phantom.grid.dims;
     let rays = Rays::with_projection(camera, projection, dims, spacing)?;
@@ -187,7 +192,8 @@ pub fn surface_truth(
     let shape = phantom.shape;
     let sg = DVec3::from_array(grid.spacing);
     let sv = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
-    let iso = shape.iso() as f64;
+    // (the closed forms hold for the shape's own surface only)
+    let closed = iso == shape.iso() as f64;
     let f = |v: DVec3| shape.density(grid.to_physical(v));
     let [w, h] = rays.size();
     let mut depth = vec![f64::NAN; w * h];
@@ -212,7 +218,7 @@ pub fn surface_truth(
                     _ => None,
                 };
                 match shape {
-                    Shape::Ball { .. } | Shape::Ellipsoid { .. } => t.filter(|&t| t >= t0 && t <= t1).map(|t| (t, true)),
+                    Shape::Ball { .. } | Shape::Ellipsoid { .. } if closed => t.filter(|&t| t >= t0 && t <= t1).map(|t| (t, true)),
                     _ => {
                         let dt = if speed > 0.0 { SURFACE_BRACKET_MM / speed } else { f64::INFINITY };
                         march(&f, o, d, t0, t1, entry, iso, dt, shape.lipschitz() * speed).map(|t| (t, true))

@@ -1365,11 +1365,11 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
         let ncol = if with_normals { " normal err vs analytic (°): mean | p99 (worst view) |" } else { "" };
         let _ = writeln!(
             s,
-            "| variant | reconstruction | frame ms | cold shear ms | RMSE (mean) | PSNR dB (worst) | max abs | SSIM (mean) | silhouette (max) |{dcol}{ncol} Pareto |"
+            "| variant | frame ms | cold shear ms | RMSE (mean) | PSNR dB (worst) | max abs | SSIM (mean) | silhouette (max) | reconstruction |{dcol}{ncol} Pareto |"
         );
         let _ = writeln!(
             s,
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|{}{}---|",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---|{}{}---|",
             if depth_what.is_some() { "---:|---:|" } else { "" },
             if with_normals { "---:|---:|" } else { "" }
         );
@@ -1384,9 +1384,8 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
             }
             let _ = writeln!(
                 s,
-                "| {} | {} | {:.3} | {} | {:.5} | {} | {:.4} | {:.5} | {:.5} |{dc} {} |",
+                "| {} | {:.3} | {} | {:.5} | {} | {:.4} | {:.5} | {:.5} | {} |{dc} {} |",
                 x.variant,
-                x.reconstruction,
                 x.frame_ms,
                 fmt_opt(Some(x.cold_shear_ms), 3),
                 x.rmse_mean,
@@ -1394,6 +1393,7 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
                 x.max_abs,
                 x.ssim_mean,
                 x.silhouette_max,
+                x.reconstruction,
                 if x.pareto { "★" } else { "" }
             );
         }

@@ -183,7 +183,8 @@ impl Grid {
     /// The grid of `spacing` over the box of `extent` mm (per axis, between
     /// the first and the last voxel centre): `⌊extent / spacing⌋ + 1` voxels
     /// per axis, centred (so the box covered is at most one spacing shorter
-    /// than `extent` when the spacing does not divide it).
+    /// than `extent` when the spacing does not divide it). The spacing is
+    /// kept at `f32` precision, the volume's.
     pub fn new(extent: [f64; 3], spacing: [f64; 3]) -> Result<Self> {
         for a in 0..3 {
             let s = spacing[a];
@@ -201,7 +202,8 @@ impl Grid {
         let dims = check_dims(n).map_err(|e| {
             Error::value("phantom spacing", format!("{:?} mm over {:?} mm gives {}×{}×{} voxels: {e}", spacing, extent, n[0], n[1], n[2]))
         })?;
-        Ok(Grid { dims, spacing })
+        // (at the precision the volume stores its spacing, so the volume and its truth are one shape)
+        Ok(Grid { dims, spacing: spacing.map(|s| s as f32 as f64) })
     }
 
     /// The physical position (mm from the centre) of voxel `(i, j, k)`.

@@ -421,7 +421,7 @@ impl ReferenceRenderer {
     pub fn blended_normal(&self, p: DVec3, codes: bool) -> DVec3 {
         let sp = DVec3::new(self.spacing[0] as f64, self.spacing[1] as f64, self.spacing[2] as f64);
         let g = self.gradient(p) / sp;
-        if !codes || !(g.length() > 0.0) {
+        if !codes || g.length() <= 0.0 || g.is_nan() {
             return g;
         }
         let (x0, x1, fx) = locate(p.x, self.dims[0]);

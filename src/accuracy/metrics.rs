@@ -20,8 +20,15 @@
 //!   ([`SILHOUETTE_ALPHA`] = 0.5, i.e. "mostly covered").
 //! * [`depth_error`] — iso-surface depth error in voxels (mean, 99th percentile
 //!   and maximum of `|depth − truth|`) over the pixels hit in both, plus the
-//!   counts hit in only one of them.
+//!   counts hit in only one of them (the silhouette of the surface).
+//! * [`normal_error`] — the angle in degrees between two unit normals per
+//!   pixel (mean, 99th percentile and maximum) over the pixels where both are
+//!   defined; [`surface_error`] measures depth and normal against a
+//!   [`SurfaceTruth`] at once.
 
+use glam::DVec3;
+
+use crate::accuracy::truth::SurfaceTruth;
 use crate::error::{Error, Result};
 use crate::warp::Image;
 
@@ -192,13 +199,65 @@ pub fn depth_error(test: &[f64], truth: &[f64], unit: f64) -> Result<DepthError>
             (false, false) => {}
         }
     }
+    let (mean, p99, max) = spread(&mut errs);
+    Ok(DepthError { both: errs.len(), only_test, only_truth, mean, p99, max })
+}
+
+/// Mean, 99th percentile (nearest rank) and maximum of `errs` (sorted in
+/// place; NaN for none).
+fn spread(errs: &mut [f64]) -> (f64, f64, f64) {
     if errs.is_empty() {
-        return Ok(DepthError { both: 0, only_test, only_truth, mean: f64::NAN, p99: f64::NAN, max: f64::NAN });
+        return (f64::NAN, f64::NAN, f64::NAN);
     }
     errs.sort_by(f64::total_cmp);
     let n = errs.len();
     let rank = ((0.99 * n as f64).ceil() as usize).clamp(1, n);
-    Ok(DepthError { both: n, only_test, only_truth, mean: errs.iter().sum::<f64>() / n as f64, p99: errs[rank - 1], max: errs[n - 1] })
+    (errs.iter().sum::<f64>() / n as f64, errs[rank - 1], errs[n - 1])
+}
+
+/// Normal-angle error against the truth, in degrees.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct NormalError {
+    /// Pixels where both normals are defined.
+    pub both: usize,
+    /// Mean, 99th percentile (nearest rank) and maximum angle in degrees
+    /// (NaN when no pixel has both).
+    pub mean_deg: f64,
+    pub p99_deg: f64,
+    pub max_deg: f64,
+}
+
+/// The angle between `a` and `b` in degrees (`atan2(|a × b|, a · b)`,
+/// accurate at small angles; any lengths).
+pub fn angle_deg(a: DVec3, b: DVec3) -> f64 {
+    a.cross(b).length().atan2(a.dot(b)).to_degrees()
+}
+
+/// Compares per-pixel normals (any non-zero length; a NaN or zero vector is
+/// "none"): the angle between them where both are defined.
+pub fn normal_error(test: &[DVec3], truth: &[DVec3]) -> Result<NormalError> {
+    if test.len() != truth.len() {
+        return Err(Error::value("normal comparison", format!("sizes differ: {} vs {} pixels", test.len(), truth.len())));
+    }
+    let ok = |v: &DVec3| v.is_finite() && v.length_squared() > 0.0;
+    let mut errs: Vec<f64> = test.iter().zip(truth).filter(|(a, b)| ok(a) && ok(b)).map(|(&a, &b)| angle_deg(a, b)).collect();
+    let (mean_deg, p99_deg, max_deg) = spread(&mut errs);
+    Ok(NormalError { both: errs.len(), mean_deg, p99_deg, max_deg })
+}
+
+/// Depth and normal error of one image against the analytic surface.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct SurfaceError {
+    /// In voxels of `unit` (see [`depth_error`]); `only_test` and
+    /// `only_truth` are the silhouette.
+    pub depth: DepthError,
+    pub normal: NormalError,
+}
+
+/// [`depth_error`] and [`normal_error`] of a tested depth map and normal map
+/// against `truth`, depths in voxels of `unit`.
+pub fn surface_error(depth: &[f64], normal: &[DVec3], truth: &SurfaceTruth, unit: f64) -> Result<SurfaceError> {
+    Ok(SurfaceError { depth: depth_error(depth, &truth.depth, unit)?, normal: normal_error(normal, &truth.normal)? })
 }
 
 #[cfg(test)]
@@ -308,6 +367,22 @@ mod tests {
         assert_eq!(depth_error(&t, &z, 1.0).unwrap().p99, 98.0);
         assert!(depth_error(&[f64::NAN], &[1.0], 1.0).unwrap().mean.is_nan());
         assert!(depth_error(&[1.0], &[1.0, 2.0], 1.0).is_err());
+    }
+
+    #[test]
+    fn normal_errors() {
+        let x = DVec3::X;
+        let tilt = |deg: f64| DVec3::new(deg.to_radians().cos(), deg.to_radians().sin(), 0.0) * 3.0;
+        let truth = [x, x, x, x, DVec3::NAN];
+        let test = [x, tilt(10.0), tilt(90.0), DVec3::ZERO, x];
+        let e = normal_error(&test, &truth).unwrap();
+        assert_eq!(e.both, 3);
+        assert!((e.mean_deg - 100.0 / 3.0).abs() < 1e-9 && (e.max_deg - 90.0).abs() < 1e-9 && (e.p99_deg - 90.0).abs() < 1e-9, "{e:?}");
+        // opposite normals are 180° apart; small angles stay accurate
+        assert!((angle_deg(x, -x) - 180.0).abs() < 1e-12);
+        assert!((angle_deg(x, tilt(1e-6)) - 1e-6).abs() < 1e-15);
+        assert!(normal_error(&[x], &[]).is_err());
+        assert!(normal_error(&[DVec3::NAN], &[x]).unwrap().mean_deg.is_nan());
     }
 
     #[test]

@@ -55,9 +55,10 @@ use crate::classify::Classifier;
 use crate::classify::shading::Shading;
 use crate::composite::Mode;
 use crate::data::bcc::BccLattice;
+use crate::data::normals::{decode_normal, encode_normal};
 use crate::data::volume::Volume;
 use crate::error::{Error, Result};
-use crate::render::{Lattice, Renderer};
+use crate::render::{Lattice, Normals, Renderer};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::Image;
 
@@ -402,6 +403,47 @@ impl ReferenceRenderer {
         front.lerp(back, fz)
     }
 
+    /// The unit normal (world space, down the density) the linear
+    /// reconstruction shades a hit with, a fraction `frac` of the way
+    /// between the points `slices` of its ray: the linear blend of
+    /// [`ReferenceRenderer::blended_normal`] at the two. NaN where it is zero.
+    pub fn shading_normal(&self, slices: [DVec3; 2], frac: f64, codes: bool) -> DVec3 {
+        let a = self.blended_normal(slices[0], codes);
+        let n = if frac > 0.0 { a.lerp(self.blended_normal(slices[1], codes), frac) } else { a };
+        if n.length() > 0.0 { -n.normalize() } else { DVec3::NAN }
+    }
+
+    /// The gradient the linear reconstruction shades point `p` with, in world
+    /// space (up the density, not normalized): [`ReferenceRenderer::gradient`]
+    /// divided by the spacing, or with `codes` the same trilinear blend of the
+    /// corners' decoded normal codes ([`crate::data::normals`]), each unit
+    /// and turned to the gradient's side.
+    pub fn blended_normal(&self, p: DVec3, codes: bool) -> DVec3 {
+        let sp = DVec3::new(self.spacing[0] as f64, self.spacing[1] as f64, self.spacing[2] as f64);
+        let g = self.gradient(p) / sp;
+        if !codes || g.length() <= 0.0 || g.is_nan() {
+            return g;
+        }
+        let (x0, x1, fx) = locate(p.x, self.dims[0]);
+        let (y0, y1, fy) = locate(p.y, self.dims[1]);
+        let (z0, z1, fz) = locate(p.z, self.dims[2]);
+        let mut sum = DVec3::ZERO;
+        for (x, wx) in [(x0, 1.0 - fx), (x1, fx)] {
+            for (y, wy) in [(y0, 1.0 - fy), (y1, fy)] {
+                for (z, wz) in [(z0, 1.0 - fz), (z1, fz)] {
+                    let c = self.gradient_at(x, y, z) / sp;
+                    let code = encode_normal([c.x as f32, c.y as f32, c.z as f32]);
+                    // (a zero gradient's code shades as facing the viewer: it adds no direction)
+                    if let Some(n) = decode_normal(code) {
+                        let n = DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
+                        sum += wx * wy * wz * if n.dot(g) < 0.0 { -n } else { n };
+                    }
+                }
+            }
+        }
+        sum
+    }
+
     /// Block of a point inside the box.
     #[inline(always)]
     fn block_of(&self, p: DVec3) -> [usize; 3] {
@@ -627,6 +669,25 @@ impl Tracer<'_> {
 /// fractional slice ([`Factorization::sheared_to_voxel`]; under perspective,
 /// [`PerspectiveView::sheared_to_voxel`]).
 pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>> {
+    let (points, rays) = fast_path_hits(renderer, camera)?;
+    Ok(points.iter().map(|p| p.map_or(f64::NAN, |p| rays.depth_of(p.point))).collect())
+}
+
+/// Where a fast path's iso hit is, for one output pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastHit {
+    /// The hit, in voxel coordinates.
+    pub point: DVec3,
+    /// The pixel's ray in the slices before and after the hit (both the hit
+    /// when it lies on a slice), and the hit's fraction of the way between them.
+    pub slices: [DVec3; 2],
+    pub frac: f64,
+}
+
+/// The iso hit of `renderer`'s last frame (rendered with `camera`) per output
+/// pixel (`None` where no hit), found as [`fast_path_depth`] describes, and
+/// the rays of the frame.
+pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Option<FastHit>>, Rays)> {
     let plan = renderer.last_plan().ok_or_else(|| Error::value("fast path depth", "the renderer has not rendered a frame yet"))?;
     let (dims, spacing, proj) = (renderer.dims(), renderer.spacing(), renderer.projection());
     // a perspective frame's camera (scaled by its field of view) and view
@@ -663,7 +724,8 @@ pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>>
     }
     let [w, h] = camera.size;
     let (grid, pad) = (plan.grid.size, plan.grid.pad as f64);
-    let mut out = vec![f64::NAN; w * h];
+    let mut out: Vec<Option<FastHit>> = vec![None; w * h];
+    let slices = dims[f.axis];
     out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
         for (u, o) in row.iter_mut().enumerate() {
             let Some([a, b]) = plan.warp.to_sheared(u as f64, v as f64) else { continue };
@@ -683,20 +745,55 @@ pub fn fast_path_depth(renderer: &Renderer, camera: &Camera) -> Result<Vec<f64>>
                 }
             }
             if wsum >= 0.5 {
-                let voxel = match (&pv, &bcc) {
-                    (None, None) => f.sheared_to_voxel(a, b, ksum / wsum),
-                    (None, Some(lattice)) => {
-                        let [da, db] = BccLattice::SHEARED_SHIFT;
-                        lattice.slice_volume_to_voxel(dims, f.axis, f.sheared_to_voxel(a - da, b - db, ksum / wsum))
-                    }
-                    // the plan's sheared point is the view's, shifted
-                    (Some(pv), _) => pv.sheared_to_voxel(a + shift[0], b + shift[1], ksum / wsum),
+                let at = |k: f64| {
+                    DVec3::from_array(match (&pv, &bcc) {
+                        (None, None) => f.sheared_to_voxel(a, b, k),
+                        (None, Some(lattice)) => {
+                            let [da, db] = BccLattice::SHEARED_SHIFT;
+                            lattice.slice_volume_to_voxel(dims, f.axis, f.sheared_to_voxel(a - da, b - db, k))
+                        }
+                        // the plan's sheared point is the view's, shifted
+                        (Some(pv), _) => pv.sheared_to_voxel(a + shift[0], b + shift[1], k),
+                    })
                 };
-                *o = rays.depth_of(DVec3::from_array(voxel));
+                let k = ksum / wsum;
+                // the slices around the hit along the pixel's ray (the BCC grid's interleaved
+                // slices are not the volume's: there, the hit point alone)
+                let (k0, frac) = match &bcc {
+                    None => {
+                        let k0 = k.floor().min(slices.saturating_sub(2) as f64).max(0.0);
+                        (k0, (k - k0).clamp(0.0, 1.0))
+                    }
+                    Some(_) => (k, 0.0),
+                };
+                let slices = if frac > 0.0 { [at(k0), at(k0 + 1.0)] } else { [at(k); 2] };
+                *o = Some(FastHit { point: at(k), slices, frac });
             }
         }
     });
-    Ok(out)
+    Ok((out, rays))
+}
+
+/// The normal the renderer shades the iso hit of its last frame with, per
+/// output pixel: unit, in world space (the volume's axes scaled by its
+/// spacing), pointing down the density (NaN where no hit). It is the
+/// renderer's own shading model evaluated at its own hit
+/// ([`fast_path_hits`]), since the frame keeps colours and depths but no
+/// normals: the linear reconstruction's gradient — the bilinear blends of
+/// the central differences where the pixel's ray crosses the slices before
+/// and after the hit, interpolated linearly between them, what the binary
+/// and brute paths shade with under [`Normals::Gradient`] — or, under
+/// [`Normals::Codes`], the same blend of the corners' decoded normal codes
+/// (each turned to the gradient's side), the direction whose shade their
+/// blend of the corners' shade entries approximates. `model` must be the
+/// [`ReferenceRenderer`] of the renderer's volume.
+pub fn fast_path_normals(renderer: &Renderer, camera: &Camera, model: &ReferenceRenderer) -> Result<Vec<DVec3>> {
+    if model.dims != renderer.dims() || model.spacing != renderer.spacing() {
+        return Err(Error::value("fast path normals", "the model volume is not the renderer's"));
+    }
+    let (points, _) = fast_path_hits(renderer, camera)?;
+    let codes = renderer.settings().normals == Normals::Codes;
+    Ok(points.par_iter().map(|p| p.map_or(DVec3::NAN, |h| model.shading_normal(h.slices, h.frac, codes))).collect())
 }
 
 #[cfg(test)]
@@ -739,6 +836,69 @@ mod tests {
                             assert!(lo <= d && d <= hi, "voxel ({x},{y},{z}) block ({bx},0,{bz})");
                         }
                     }
+                }
+            }
+        }
+    }
+
+    /// The normal model of [`fast_path_normals`] is the renderer's: under
+    /// gradient shading, every intermediate pixel the binary and brute paths
+    /// hit shades exactly as the model's normal at its hit point does; under
+    /// normal codes, within the codes' quantization.
+    #[test]
+    fn the_shading_normal_model_reproduces_the_fast_paths_shading() {
+        use crate::render::{Method, Settings};
+        let vol = crate::data::phantom::sphere([36, 30, 40]).unwrap();
+        let vol = {
+            let mut v = vol;
+            v.set_spacing([0.8, 1.0, 1.7]).unwrap();
+            v
+        };
+        let model = ReferenceRenderer::new(&vol);
+        let tf = TransferFunction::threshold(100.0, [0.9, 0.8, 0.7]);
+        for (normals, tol) in [(Normals::Gradient, 1e-5f32), (Normals::Codes, 0.03)] {
+            for method in [Method::Binary, Method::Brute] {
+                let settings = Settings { method, mode: Mode::Iso, normals, threads: 1, ..Settings::default() };
+                let mut r = Renderer::new(vol.clone(), &tf, settings).unwrap();
+                r.set_iso(100.0).unwrap();
+                let scene = Scene::from_renderer(&r);
+                let rgb = scene.classifier.classify(100.0);
+                for (k, deg) in [(0usize, 20.0), (1, 35.0), (2, -50.0)] {
+                    let cam = Camera {
+                        rotation: rotate_eye(rotate_eye(DMat3::IDENTITY, 0, 30.0 * k as f64), 1, deg),
+                        zoom: None,
+                        size: [64, 64],
+                    };
+                    let mut img = Image::new(64, 64);
+                    r.render(&cam, &mut img).unwrap();
+                    let plan = r.last_plan().unwrap();
+                    let light = cam.rotation.row(2);
+                    let inter = r.intermediate();
+                    let [w, h] = inter.size;
+                    let mut seen = 0;
+                    let mut worst = 0f32;
+                    for q in 0..h {
+                        for p in 0..w {
+                            let depth = inter.depth_at(p, q);
+                            if !depth.is_finite() {
+                                continue;
+                            }
+                            let (a, b) =
+                                ((p as f64 - plan.grid.pad as f64) * plan.grid.pitch, (q as f64 - plan.grid.pad as f64) * plan.grid.pitch);
+                            let k0 = (depth as f64).floor().min(vol.dims()[plan.view.axis] as f64 - 2.0);
+                            let at = |k: f64| DVec3::from_array(plan.view.sheared_to_voxel(a, b, k));
+                            let n = model.shading_normal([at(k0), at(k0 + 1.0)], depth as f64 - k0, normals == Normals::Codes);
+                            let ndl = n.dot(light).abs().min(1.0) as f32;
+                            let want = scene.shading.shade([rgb.r, rgb.g, rgb.b], ndl);
+                            let got = inter.rgba[q * w + p];
+                            for c in 0..3 {
+                                worst = worst.max((got[c] - want[c]).abs());
+                            }
+                            seen += 1;
+                        }
+                    }
+                    assert!(seen > 300, "{seen}");
+                    assert!(worst <= tol, "{normals:?} {method:?} view {k}: {worst}");
                 }
             }
         }

@@ -18,24 +18,36 @@
 //! Both are restricted to the rendered domain, the box of voxel centres: a ray
 //! that enters the box already inside the surface hits at its entry, as the
 //! renderers do.
+//!
+//! [`surface_truth`] is the general form, for every phantom with an analytic
+//! surface ([`AnalyticPhantom`]: the ball, Marschner–Lobb, the ellipsoid and
+//! the torus, sampled at any spacing) in both projections: per pixel the
+//! first-hit depth *and* the unit surface normal in world space (the volume's
+//! axes in mm, as [`crate::view`] places it; NaN where the ray misses, and
+//! where it enters the box already inside, whose hit is a face of the box,
+//! not the surface). The ball and the ellipsoid intersect in closed form;
+//! the torus and Marschner–Lobb are marched with the shape's Lipschitz bound
+//! and refined by bisection.
 
 use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::accuracy::reference::Rays;
 use crate::data::phantom::{marschner_lobb_value, sphere_geometry};
+use crate::data::shapes::{AnalyticPhantom, Shape};
 use crate::error::{Error, Result};
-use crate::view::Camera;
+use crate::view::{Camera, Projection};
 
 /// Default floor of the bracketing step of [`marschner_lobb_depth`], in the
 /// signal's normalised units (the cube is `[−1, 1]³`; 41³ samples it every
 /// 0.05): only a crossing thinner than this along the ray can be missed.
 pub const ML_BRACKET_STEP: f64 = 1e-4;
 
-/// A Lipschitz bound of [`marschner_lobb_value`] in normalised units:
-/// `|∂ρ/∂r| ≤ α·2π f_M·(π/2) / (2(1 + α)) = 6π²/10 ≈ 5.922` (with `|∇r| = 1`)
-/// and `|∂ρ/∂z| ≤ (π/2) / (2(1 + α)) ≈ 0.628`, so `|∇ρ| ≤ 5.955`; rounded up.
-pub const ML_LIPSCHITZ: f64 = 6.0;
+pub use crate::data::shapes::ML_LIPSCHITZ;
+
+/// Floor of [`surface_truth`]'s marching step, in mm of the phantom: only a
+/// crossing thinner than this along a ray can be missed.
+pub const SURFACE_BRACKET_MM: f64 = 1e-3;
 
 /// Bisection iterations (the bracket shrinks far below 1e-12).
 const BISECTIONS: u32 = 64;
@@ -137,6 +149,145 @@ pub fn first_crossing(rays: &Rays, f: impl Fn(DVec3) -> f64 + Sync, iso: f64, dt
             (ta, fa) = (tb, fb);
         }
     })
+}
+
+/// The analytic surface seen by one camera: per pixel, row-major.
+#[derive(Clone, Debug)]
+pub struct SurfaceTruth {
+    /// First-hit depth in the convention of [`crate::accuracy::reference`]
+    /// (world units along the view from the plane through the volume centre;
+    /// NaN where the ray misses).
+    pub depth: Vec<f64>,
+    /// Unit normal of the surface at the hit, in world space (the volume's
+    /// axes, scaled by its spacing), pointing outwards (down the density);
+    /// NaN where the ray misses or the hit is the box's entry face.
+    pub normal: Vec<DVec3>,
+}
+
+/// The first hit and surface normal of `phantom`'s iso-surface at `iso`
+/// (its surface at [`Shape::iso`]; another level of the same density
+/// otherwise) along every ray of `camera` under `projection`, for the volume
+/// `phantom.grid` sampled, stored with `spacing` (the volume's spacing: the
+/// phantom's own, or another one given to the volume later, which stretches
+/// the shape as it stretches the rendered volume). `near` is the perspective
+/// near clip in voxels ([`crate::accuracy::reference::ReferenceOptions::near`]).
+pub fn surface_truth(
+    phantom: &AnalyticPhantom,
+    spacing: [f32; 3],
+    camera: &Camera,
+    projection: &Projection,
+    iso: f64,
+    near: f64,
+) -> Result<SurfaceTruth> {
+    if !(near.is_finite() && near >= 0.0) {
+        return Err(Error::value("truth near clip", format!("{near} (must be finite and ≥ 0)")));
+    }
+    if !iso.is_finite() {
+        return Err(Error::value("iso value", format!("{iso}")));
+    }
+    let dims = phantom.grid.dims;
+    let rays = Rays::with_projection(camera, projection, dims, spacing)?;
+    let perspective = projection.is_perspective();
+    let grid = phantom.grid;
+    let shape = phantom.shape;
+    let sg = DVec3::from_array(grid.spacing);
+    let sv = DVec3::new(spacing[0] as f64, spacing[1] as f64, spacing[2] as f64);
+    // (the closed forms hold for the shape's own surface only)
+    let closed = iso == shape.iso() as f64;
+    let f = |v: DVec3| shape.density(grid.to_physical(v));
+    let [w, h] = rays.size();
+    let mut depth = vec![f64::NAN; w * h];
+    let mut normal = vec![DVec3::NAN; w * h];
+    depth.par_chunks_mut(w).zip(normal.par_chunks_mut(w)).enumerate().for_each(|(v, (drow, nrow))| {
+        for u in 0..w {
+            let (o, d) = rays.ray(u as f64, v as f64);
+            let Some((t0, t1)) = rays.clip_ray(o, d) else { continue };
+            let t0 = if perspective { t0.max(near / d.abs().max_element()) } else { t0 };
+            if t0 > t1 {
+                continue;
+            }
+            // mm of the phantom per world unit along the ray
+            let speed = (d * sg).length();
+            let entry = f(o + t0 * d);
+            let hit = if entry >= iso {
+                Some((t0, false))
+            } else {
+                let t = match shape {
+                    Shape::Ball { radius } => quadric_hit(grid.to_physical(o), d * sg, DVec3::splat(radius)),
+                    Shape::Ellipsoid { radii } => quadric_hit(grid.to_physical(o), d * sg, DVec3::from_array(radii)),
+                    _ => None,
+                };
+                match shape {
+                    Shape::Ball { .. } | Shape::Ellipsoid { .. } if closed => t.filter(|&t| t >= t0 && t <= t1).map(|t| (t, true)),
+                    _ => {
+                        let dt = if speed > 0.0 { SURFACE_BRACKET_MM / speed } else { f64::INFINITY };
+                        march(&f, o, d, t0, t1, entry, iso, dt, shape.lipschitz() * speed).map(|t| (t, true))
+                    }
+                }
+            };
+            let Some((t, on_surface)) = hit else { continue };
+            let p = o + t * d;
+            drow[u] = if perspective { rays.depth_of(p) } else { t };
+            if on_surface {
+                // ∂ρ/∂(world) = ∇ρ ⊙ (phantom spacing) ⊘ (volume spacing); outwards = −∇ρ
+                let g = shape.gradient(grid.to_physical(p)) * sg / sv;
+                nrow[u] = if g.length() > 0.0 { -g.normalize() } else { DVec3::NAN };
+            }
+        }
+    });
+    Ok(SurfaceTruth { depth, normal })
+}
+
+/// The smaller root `t` of `|(p0 + t·d) ⊘ r| = 1`: where the line enters the
+/// ellipsoid of semi-axes `r` (`None` when it misses).
+fn quadric_hit(p0: DVec3, d: DVec3, r: DVec3) -> Option<f64> {
+    let (p, d) = (p0 / r, d / r);
+    let (a, b, c) = (d.dot(d), 2.0 * d.dot(p), p.dot(p) - 1.0);
+    if a <= 0.0 {
+        return None;
+    }
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return None;
+    }
+    let q = -0.5 * (b + b.signum() * disc.sqrt());
+    let (r0, r1) = if q == 0.0 { (0.0, 0.0) } else { (q / a, c / q) };
+    Some(r0.min(r1))
+}
+
+/// The first crossing of `f = iso` along `o + t·d` in `[t0, t1]` from a point
+/// below iso at `t0` (`f0 = f(o + t0·d)`): steps of `max(dt, (iso − f)/lipschitz)`,
+/// then bisection.
+#[allow(clippy::too_many_arguments)]
+fn march(f: &impl Fn(DVec3) -> f64, o: DVec3, d: DVec3, t0: f64, t1: f64, f0: f64, iso: f64, dt: f64, lipschitz: f64) -> Option<f64> {
+    let (mut ta, mut fa) = (t0, f0);
+    if !dt.is_finite() {
+        return None;
+    }
+    loop {
+        let safe = if lipschitz > 0.0 { (iso - fa) / lipschitz } else { 0.0 };
+        let tb = (ta + dt.max(safe)).min(t1);
+        let fb = f(o + tb * d);
+        if fb >= iso {
+            let (mut lo, mut hi) = (ta, tb);
+            for _ in 0..BISECTIONS {
+                let m = 0.5 * (lo + hi);
+                if m <= lo || m >= hi {
+                    break;
+                }
+                if f(o + m * d) >= iso {
+                    hi = m;
+                } else {
+                    lo = m;
+                }
+            }
+            return Some(hi);
+        }
+        if tb >= t1 {
+            return None;
+        }
+        (ta, fa) = (tb, fb);
+    }
 }
 
 /// Evaluates `hit(origin)` for every pixel's ray in parallel over rows.

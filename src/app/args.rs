@@ -38,9 +38,18 @@ pub struct VolumeArgs {
     /// Built-in phantom (used when no file is given).
     #[arg(long, value_enum, default_value = "head")]
     pub phantom: Phantom,
-    /// Phantom size X,Y,Z (default: head 128,128,113; sphere 128³; marschner-lobb 41³).
+    /// Phantom size X,Y,Z (default: head 128,128,113; sphere 128³; marschner-lobb 41³;
+    /// cube 64³; engine, ellipsoid and torus 128³).
     #[arg(long, value_parser = parse_dims)]
     pub phantom_dims: Option<[usize; 3]>,
+    /// Sample the phantom's analytic shape at this voxel spacing X,Y,Z in mm
+    /// (e.g. 1,1,3 or clinical thick slices 0.6,0.6,5): the same physical
+    /// shape (its size at spacing 1 is --phantom-dims), ⌊size / spacing⌋ + 1
+    /// voxels per axis, and the volume's spacing set to match, so every view
+    /// shows it at its true proportions. Sphere, marschner-lobb, ellipsoid and
+    /// torus only (the phantoms with an analytic surface).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_phantom_spacing)]
+    pub phantom_spacing: Option<[f64; 3]>,
     /// Raw voxel file (same as FILE with --format raw; needs --dims and --type unless it has a JSON sidecar).
     #[arg(long, value_name = "FILE", conflicts_with = "file")]
     pub raw: Option<PathBuf>,
@@ -230,6 +239,14 @@ fn parse_spacing(s: &str) -> std::result::Result<[f32; 3], String> {
     Ok(d)
 }
 
+fn parse_phantom_spacing(s: &str) -> std::result::Result<[f64; 3], String> {
+    let d: [f64; 3] = parse_triple(s, "numbers")?;
+    if d.iter().any(|x| !x.is_finite() || *x <= 0.0) {
+        return Err(format!("the phantom spacing must be three finite numbers of mm > 0, got {s}"));
+    }
+    Ok(d)
+}
+
 /// `--opacity`: a blend-mode transfer function from (density, opacity) control
 /// points, in a constant bone-white colour.
 #[derive(Clone, Debug, PartialEq)]
@@ -295,6 +312,31 @@ impl VolumeArgs {
         Ok((vol, name))
     }
 
+    /// The analytic shape of the phantom as loaded (`None` for a file, and
+    /// for a phantom without one unless `--phantom-spacing` asks to resample
+    /// it, which is an error naming the phantom).
+    pub fn analytic(&self) -> Result<Option<shearwarp::data::shapes::AnalyticPhantom>> {
+        if self.file.is_some() || self.raw.is_some() || self.den.is_some() {
+            if self.phantom_spacing.is_some() {
+                usage!(
+                    "--phantom-spacing samples a built-in phantom; it does not apply to a volume file (--spacing sets a file's spacing)"
+                );
+            }
+            return Ok(None);
+        }
+        let p = self.phantom;
+        let dims = self.phantom_dims.unwrap_or_else(|| p.default_dims());
+        match p.analytic(dims, self.phantom_spacing) {
+            Ok(None) if self.phantom_spacing.is_some() => usage!(
+                "--phantom-spacing: the {} phantom has no analytic shape to sample at another spacing \
+                 (sphere, marschner-lobb, ellipsoid and torus do)",
+                p.name()
+            ),
+            Ok(a) => Ok(a),
+            Err(e) => usage!("--phantom-spacing: {e}"),
+        }
+    }
+
     fn load_inner(&self) -> Result<(Volume, String)> {
         let (path, format) = match (&self.file, &self.raw, &self.den) {
             (Some(p), _, _) => (Some(p), self.format),
@@ -322,21 +364,24 @@ impl VolumeArgs {
             None => {
                 let p = self.phantom;
                 let dims = self.phantom_dims.unwrap_or_else(|| p.default_dims());
+                // (a phantom without an analytic shape, or a spacing too fine to allocate: named)
+                self.analytic()?;
                 // checked before a byte is allocated
-                let bytes = p.bytes(dims).unwrap_or(u64::MAX);
+                let bytes = p.bytes_sampled(dims, self.phantom_spacing).unwrap_or(u64::MAX);
                 if let Some(b) = crate::app::budget().filter(|&b| bytes > b) {
                     let f = shearwarp::fmt::fmt_bytes;
+                    let d = self.analytic()?.map_or(dims, |a| a.grid.dims);
                     usage!(
                         "{} phantom {}×{}×{}: its voxels need {}, over the memory budget of {} (--max-memory)",
                         p.name(),
-                        dims[0],
-                        dims[1],
-                        dims[2],
+                        d[0],
+                        d[1],
+                        d[2],
                         f(bytes),
                         f(b)
                     );
                 }
-                p.build(dims)?
+                p.build_sampled(dims, self.phantom_spacing)?
             }
         };
         if let Some(sp) = self.spacing {
@@ -361,7 +406,10 @@ impl VolumeArgs {
         }
         let name = match path {
             Some(p) => p.display().to_string(),
-            None => format!("{} phantom", self.phantom.name()),
+            None => match self.phantom_spacing {
+                Some(s) => format!("{} phantom at {}×{}×{} mm", self.phantom.name(), s[0], s[1], s[2]),
+                None => format!("{} phantom", self.phantom.name()),
+            },
         };
         Ok((vol, name))
     }

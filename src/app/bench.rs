@@ -13,10 +13,19 @@
 //! * the **error against the reference** ([`shearwarp::accuracy::reference`], same camera,
 //!   pixel for pixel): RMSE, PSNR, maximum absolute error, SSIM and the
 //!   silhouette error of [`shearwarp::accuracy::metrics`];
-//! * in iso mode, the **iso depth error** in voxels against the analytic truth
-//!   ([`shearwarp::accuracy::truth`]) when the volume is the sphere phantom at
-//!   [`SPHERE_ISO`] or the Marschner–Lobb phantom, else against the reference's
-//!   depth.
+//! * in iso mode, the **iso depth error** in voxels of the finest spacing
+//!   against the analytic truth ([`shearwarp::accuracy::truth::surface_truth`])
+//!   when the volume is a phantom with an analytic surface (the sphere,
+//!   Marschner–Lobb, the ellipsoid, the torus, at any `--phantom-spacing`),
+//!   in both projections, else against the reference's depth; against the
+//!   analytic truth also the **normal-angle error** in degrees between the
+//!   normal the variant shades with ([`fast_path_normals`]) and the
+//!   surface's, and the silhouette (pixels hit in only one of them). Every
+//!   row names the `reconstruction` of its iso hit ([`reconstruction`]).
+//!
+//! `--suite surfaces` runs the surface cases ([`SUITE_SURFACES`]) one after
+//! the other and adds a table of depth and normal error and frame time per
+//! case and variant.
 //!
 //! Results go out as Markdown tables (one row per variant, aggregated over the
 //! views), CSV and JSON (one record per variant and view), and a plot of time
@@ -35,13 +44,13 @@ use clap::Args;
 use crate::app::Usage;
 use crate::app::args::VolumeArgs;
 use crate::app::peers::{self, MODEL_SHADING, Peer, PeerCamera, PeerModel, PeerSchedule, PeerView};
-use shearwarp::accuracy::metrics::{DepthError, ImageError, compare, depth_error};
-use shearwarp::accuracy::reference::{ReferenceImage, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth};
-use shearwarp::accuracy::truth::{ML_BRACKET_STEP, marschner_lobb_depth, sphere_depth};
+use shearwarp::accuracy::metrics::{DepthError, ImageError, NormalError, compare, depth_error, normal_error};
+use shearwarp::accuracy::reference::{ReferenceImage, ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth, fast_path_normals};
+use shearwarp::accuracy::truth::surface_truth;
 use shearwarp::classify::presets;
 use shearwarp::classify::shading::Shading;
 use shearwarp::composite::Mode;
-use shearwarp::data::phantom::{Phantom, SPHERE_ISO};
+use shearwarp::data::phantom::Phantom;
 use shearwarp::data::volume::Volume;
 use shearwarp::encode::depth::Search;
 use shearwarp::render::{Deluxe, FrameStats, Lattice, Method, Renderer, Settings, WordSize};
@@ -49,7 +58,7 @@ use shearwarp::view::{Camera, Factorization, NamedView, Projection, View, standa
 use shearwarp::warp::Image;
 
 /// `shearwarp bench`.
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Clone)]
 pub struct BenchCmd {
     #[command(flatten)]
     pub volume: VolumeArgs,
@@ -62,7 +71,7 @@ pub struct BenchCmd {
     /// Tissue preset (as for `render`; default: the first of the volume's presets).
     #[arg(long)]
     pub tissue: Option<String>,
-    /// Iso value (default: 100 for the sphere phantom, 0.5 for Marschner–Lobb, else the tissue's threshold).
+    /// Iso value (default: 100 for the sphere, ellipsoid and torus phantoms, 0.5 for Marschner–Lobb, else the tissue's threshold).
     #[arg(long, allow_negative_numbers = true)]
     pub iso: Option<f32>,
     /// Timed repetitions per view and round (the median over all rounds is reported).
@@ -155,9 +164,58 @@ pub struct BenchCmd {
     /// holds the RLE path's BCC variants beside the cartesian ones.
     #[arg(long = "grid", value_name = "GRID", value_enum)]
     pub grid: Option<shearwarp::Lattice>,
+    /// Run a list of cases instead of one volume: `surfaces` measures iso
+    /// mode against the analytic surface on the sphere (128³) and
+    /// Marschner–Lobb (41³) phantoms, each at isotropic and 1×1×3 spacing,
+    /// and the ellipsoid at 0.6×0.6×5 (thick slices): depth error in voxels
+    /// of the finest spacing, normal-angle error in degrees and frame time per
+    /// case and variant, beside each case's own tables. The variants are
+    /// --only's, by default the binary iso preview and the RLE path; the
+    /// volume options do not apply.
+    #[arg(long, value_enum)]
+    pub suite: Option<Suite>,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
+}
+
+/// A list of benchmark cases (`--suite`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Suite {
+    /// The analytic surfaces at isotropic and thick-slice spacings (the cases of `SUITE_SURFACES`).
+    Surfaces,
+}
+
+/// One case of a suite: a phantom, its size at spacing 1 and the spacing it
+/// is sampled at (`None`: its own).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Case {
+    pub name: &'static str,
+    pub phantom: Phantom,
+    pub dims: [usize; 3],
+    pub spacing: Option<[f64; 3]>,
+}
+
+/// The cases of `--suite surfaces`: the ball and Marschner–Lobb at their
+/// standard sizes, isotropic and with slices three times thicker than the
+/// pixels, and a smooth shape at a clinical thick-slice spacing.
+pub const SUITE_SURFACES: [Case; 5] = [
+    Case { name: "ball 128³", phantom: Phantom::Sphere, dims: [128; 3], spacing: None },
+    Case { name: "ball 1×1×3", phantom: Phantom::Sphere, dims: [128; 3], spacing: Some([1.0, 1.0, 3.0]) },
+    Case { name: "marschner-lobb 41³", phantom: Phantom::MarschnerLobb, dims: [41; 3], spacing: None },
+    Case { name: "marschner-lobb 1×1×3", phantom: Phantom::MarschnerLobb, dims: [41; 3], spacing: Some([1.0, 1.0, 3.0]) },
+    Case { name: "ellipsoid 0.6×0.6×5", phantom: Phantom::Ellipsoid, dims: [128; 3], spacing: Some([0.6, 0.6, 5.0]) },
+];
+
+/// The variants a suite runs when `--only` names none: the binary iso
+/// preview and the RLE path.
+pub const SUITE_VARIANTS: [&str; 2] = ["binary-c1-u64-bitscan", "rle"];
+
+/// How a variant reconstructs the iso hit between samples: `linear` (the
+/// crossing on the straight line between two slices, the normal the
+/// trilinear gradient or the corners' codes), today for every variant.
+pub fn reconstruction(_settings: &Settings) -> &'static str {
+    "linear"
 }
 
 /// A named render variant of the benchmark matrix.
@@ -324,6 +382,10 @@ pub struct Record {
     /// `analytic` or `reference` (iso mode only).
     pub depth_truth: Option<&'static str>,
     pub depth: Option<DepthError>,
+    /// How the iso hit is reconstructed ([`reconstruction`]).
+    pub reconstruction: &'static str,
+    /// The shading normal's angle to the analytic surface's (iso mode, analytic truth only).
+    pub normal: Option<NormalError>,
 }
 
 /// One variant aggregated over the views.
@@ -343,6 +405,16 @@ pub struct Summary {
     /// Depth error over all pixels hit in both, pooled over views (mean), and the worst view's 99th percentile.
     pub depth_mean_vox: Option<f64>,
     pub depth_p99_vox: Option<f64>,
+    /// How the iso hit is reconstructed ([`reconstruction`]).
+    pub reconstruction: &'static str,
+    /// Against the analytic truth only: the worst view's 99th percentile of
+    /// the depth error, in voxels of the finest spacing.
+    pub depth_p99: Option<f64>,
+    /// Against the analytic truth only: the normal-angle error in degrees,
+    /// pooled over the views (mean) and the worst view's 99th percentile and maximum.
+    pub normal_deg_mean: Option<f64>,
+    pub normal_deg_p99: Option<f64>,
+    pub normal_deg_max: Option<f64>,
     /// On the Pareto front of (frame time, mean RMSE) within its mode.
     pub pareto: bool,
 }
@@ -355,6 +427,7 @@ struct Acc {
     axis: usize,
     error: Option<ImageError>,
     depth: Option<(&'static str, DepthError)>,
+    normal: Option<NormalError>,
     /// Why this variant cannot render this view (it is left out of the records).
     skipped: Option<String>,
 }
@@ -364,6 +437,8 @@ struct RefFrame {
     image: ReferenceImage,
     /// The depth the fast paths are compared with, and what it is.
     truth: Option<(Vec<f64>, &'static str)>,
+    /// The analytic surface's normals (analytic truth only).
+    normals: Option<Vec<glam::DVec3>>,
 }
 
 fn usage(msg: String) -> anyhow::Error {
@@ -459,6 +534,12 @@ impl BenchCmd {
         v.den.as_deref().or(v.file.as_deref().filter(|f| {
             matches!(v.format, Some(shearwarp::data::io::Format::Den)) || f.extension().is_some_and(|e| e.eq_ignore_ascii_case("den"))
         }))
+    }
+
+    /// The analytic surface of the volume (a phantom that has one), at the
+    /// spacing it is sampled at.
+    fn analytic(&self) -> Result<Option<shearwarp::data::shapes::AnalyticPhantom>> {
+        self.volume.analytic()
     }
 
     /// The phantom the volume was built from (None for files).
@@ -600,8 +681,39 @@ pub struct ReferenceRecord {
     pub truth_ms: f64,
 }
 
+/// One row of a suite's table: a case and a variant.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SuiteRow {
+    pub case: String,
+    pub dims: [usize; 3],
+    pub spacing: [f32; 3],
+    pub variant: String,
+    pub reconstruction: &'static str,
+    /// Depth error in voxels of the finest spacing (mean pooled over views, worst view's p99) and the p99 in mm.
+    pub depth_mean: Option<f64>,
+    pub depth_p99: Option<f64>,
+    pub depth_p99_mm: Option<f64>,
+    pub normal_deg_mean: Option<f64>,
+    pub normal_deg_p99: Option<f64>,
+    pub frame_ms: f64,
+    pub rmse_mean: f64,
+}
+
+/// Everything a suite measured: each case's report and the table over them.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SuiteReport {
+    pub suite: &'static str,
+    pub size: usize,
+    pub threads: usize,
+    pub table: Vec<SuiteRow>,
+    pub cases: Vec<Report>,
+}
+
 /// Runs `shearwarp bench`.
 pub fn run(cmd: &BenchCmd) -> Result<()> {
+    if let Some(suite) = cmd.suite {
+        return run_suite(cmd, suite);
+    }
     cmd.check()?;
     shearwarp::render::checks::check_threads(cmd.threads)?;
     let (vol, name) = cmd.volume.load()?;
@@ -624,12 +736,148 @@ pub fn run(cmd: &BenchCmd) -> Result<()> {
     Ok(())
 }
 
+/// The command of one case of a suite: `cmd` on the case's phantom, iso
+/// mode, the suite's variants unless `--only` names some.
+pub fn case_command(cmd: &BenchCmd, case: &Case) -> BenchCmd {
+    let mut c = cmd.clone();
+    c.suite = None;
+    c.volume.phantom = case.phantom;
+    c.volume.phantom_dims = Some(case.dims);
+    c.volume.phantom_spacing = case.spacing;
+    c.modes = vec![Mode::Iso];
+    if c.only.is_empty() {
+        c.only = SUITE_VARIANTS.iter().map(|s| s.to_string()).collect();
+    }
+    c
+}
+
+/// Runs `--suite`: every case, then the table over them.
+fn run_suite(cmd: &BenchCmd, suite: Suite) -> Result<()> {
+    let v = &cmd.volume;
+    if v.file.is_some()
+        || v.raw.is_some()
+        || v.den.is_some()
+        || v.phantom_spacing.is_some()
+        || v.phantom_dims.is_some()
+        || v.spacing.is_some()
+    {
+        return Err(usage(
+            "--suite chooses its own volumes: leave out the volume file, --phantom-dims, --phantom-spacing and --spacing".into(),
+        ));
+    }
+    if !cmd.peers.is_empty() {
+        return Err(usage("--suite measures iso mode; --peers measures blend mode".into()));
+    }
+    let cases: &[Case] = match suite {
+        Suite::Surfaces => &SUITE_SURFACES,
+    };
+    let mut rep = SuiteReport {
+        suite: "surfaces",
+        size: cmd.size,
+        threads: if cmd.threads == 0 { rayon::current_num_threads() } else { cmd.threads },
+        table: vec![],
+        cases: vec![],
+    };
+    for case in cases {
+        let c = case_command(cmd, case);
+        c.check()?;
+        shearwarp::render::checks::check_threads(c.threads)?;
+        let (vol, name) = c.volume.load()?;
+        crate::app::args::renderable(&name, &vol)?;
+        let r = measure(&c, vol, name)?;
+        let unit = r.spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
+        for x in &r.summary {
+            rep.table.push(SuiteRow {
+                case: case.name.into(),
+                dims: r.dims,
+                spacing: r.spacing,
+                variant: x.variant.clone(),
+                reconstruction: x.reconstruction,
+                depth_mean: x.depth_p99.and(x.depth_mean_vox),
+                depth_p99: x.depth_p99,
+                depth_p99_mm: x.depth_p99.map(|p| p * unit),
+                normal_deg_mean: x.normal_deg_mean,
+                normal_deg_p99: x.normal_deg_p99,
+                frame_ms: x.frame_ms,
+                rmse_mean: x.rmse_mean,
+            });
+        }
+        rep.cases.push(r);
+    }
+    if let Some(p) = &cmd.csv {
+        let body: String = rep
+            .cases
+            .iter()
+            .map(to_csv)
+            .enumerate()
+            .map(|(i, c)| if i == 0 { c } else { c.lines().skip(1).map(|l| format!("{l}\n")).collect() })
+            .collect();
+        crate::app::output::write_text(p, &body)?;
+    }
+    if let Some(p) = &cmd.json_out {
+        crate::app::output::write_text(p, &serde_json::to_string_pretty(&rep)?)?;
+    }
+    if cmd.json {
+        crate::app::output::print_text(&(serde_json::to_string_pretty(&rep)? + "\n"))?;
+    } else {
+        let mut s = suite_markdown(&rep);
+        for r in &rep.cases {
+            s.push_str(&to_markdown(r, cmd.per_view));
+        }
+        crate::app::output::print_text(&s)?;
+    }
+    Ok(())
+}
+
+/// The suite's table as Markdown.
+pub fn suite_markdown(rep: &SuiteReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "# shearwarp bench --suite {}: {}×{} px, {} threads\n\n\
+         Depth error in voxels of the finest spacing (mean over every pixel hit in both, pooled over the views; p99 of the worst view) \
+         against the analytic surface; normal error: the angle between the normal each variant shades with and the surface's, in degrees; \
+         frame time: the median over the views.\n",
+        rep.suite, rep.size, rep.size, rep.threads
+    );
+    let _ = writeln!(
+        s,
+        "| case | dims | spacing | variant | reconstruction | depth mean | depth p99 | p99 mm | normal ° mean | normal ° p99 | frame ms | RMSE |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    for r in &rep.table {
+        let _ = writeln!(
+            s,
+            "| {} | {}×{}×{} | {}×{}×{} | {} | {} | {} | {} | {} | {} | {} | {:.3} | {:.5} |",
+            r.case,
+            r.dims[0],
+            r.dims[1],
+            r.dims[2],
+            r.spacing[0],
+            r.spacing[1],
+            r.spacing[2],
+            r.variant,
+            r.reconstruction,
+            fmt_opt(r.depth_mean, 3),
+            fmt_opt(r.depth_p99, 3),
+            fmt_opt(r.depth_p99_mm, 3),
+            fmt_opt(r.normal_deg_mean, 2),
+            fmt_opt(r.normal_deg_p99, 2),
+            r.frame_ms,
+            r.rmse_mean
+        );
+    }
+    let _ = writeln!(s);
+    s
+}
+
 /// Runs the matrix and returns the report (no output).
 pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
     let dims = vol.dims();
     let spacing = vol.spacing();
     let unit = spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
-    let phantom = cmd.phantom();
+    let analytic = cmd.analytic()?.filter(|a| a.grid.dims == dims);
     let views = standard_views(NamedView::Anterior.rotation(), cmd.random_views, cmd.seed);
     let modes: Vec<Mode> = {
         let mut m: Vec<Mode> = cmd
@@ -741,14 +989,12 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                 report.model_floor.push(ModelFloor { view: view.name.clone(), rmse: e.rmse, ssim: e.ssim });
             }
             let t = Instant::now();
-            let analytic = match (mode, phantom) {
-                _ if proj.is_perspective() => None,
-                (Mode::Iso, Some(Phantom::Sphere)) if iso == SPHERE_ISO => Some(sphere_depth(dims, spacing, &cam)?),
-                (Mode::Iso, Some(Phantom::MarschnerLobb)) => Some(marschner_lobb_depth(dims, spacing, &cam, iso as f64, ML_BRACKET_STEP)?),
+            let surface = match (mode, &analytic) {
+                (Mode::Iso, Some(a)) => Some(surface_truth(a, spacing, &cam, proj, iso as f64, ropts.near)?),
                 _ => None,
             };
             let truth_ms = t.elapsed().as_secs_f64() * 1e3;
-            let ref_depth = analytic.as_ref().map(|a| depth_error(&image.depth, a, unit)).transpose()?;
+            let ref_depth = surface.as_ref().map(|a| depth_error(&image.depth, &a.depth, unit)).transpose()?;
             report.reference.push(ReferenceRecord {
                 mode: mode.name(),
                 view: if proj.is_perspective() { format!("{} (perspective)", view.name) } else { view.name.clone() },
@@ -757,12 +1003,12 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                 depth: ref_depth,
                 truth_ms,
             });
-            let truth = match (mode, analytic) {
-                (Mode::Iso, Some(a)) => Some((a, "analytic")),
-                (Mode::Iso, None) => Some((image.depth.clone(), "reference")),
-                _ => None,
+            let (truth, normals) = match (mode, surface) {
+                (Mode::Iso, Some(a)) => (Some((a.depth, "analytic")), Some(a.normal)),
+                (Mode::Iso, None) => (Some((image.depth.clone(), "reference")), None),
+                _ => (None, None),
             };
-            refs.push(Ok(RefFrame { image, truth }));
+            refs.push(Ok(RefFrame { image, truth, normals }));
             pb.inc(1);
         }
         // frames alternate between two images: a renderer skips a frame identical to
@@ -831,6 +1077,9 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                                 Err(e) => return Err(e.into()),
                             }
                         }
+                        if let (Some(truth), Some(_)) = (&rf.normals, &a.depth) {
+                            a.normal = Some(normal_error(&fast_path_normals(&r, &cam, &refr)?, truth)?);
+                        }
                     }
                     pb.inc(1);
                 }
@@ -857,6 +1106,8 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                     error: a.error.context("error measured in round 0")?,
                     depth_truth: a.depth.map(|d| d.0),
                     depth: a.depth.map(|d| d.1),
+                    reconstruction: reconstruction(&variant.settings),
+                    normal: a.normal,
                 });
             }
         }
@@ -903,6 +1154,8 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                                     error: compare(&img, &rf.image.image)?,
                                     depth_truth: None,
                                     depth: None,
+                                    reconstruction: "peer",
+                                    normal: None,
                                 });
                             }
                         }
@@ -1018,6 +1271,10 @@ pub fn summarize(records: &[Record]) -> Vec<Summary> {
             let n = rs.len() as f64;
             let depths: Vec<&DepthError> = rs.iter().filter_map(|r| r.depth.as_ref()).filter(|d| d.both > 0).collect();
             let hits: usize = depths.iter().map(|d| d.both).sum();
+            let analytic: Vec<&DepthError> =
+                rs.iter().filter(|r| r.depth_truth == Some("analytic")).filter_map(|r| r.depth.as_ref()).filter(|d| d.both > 0).collect();
+            let normals: Vec<&NormalError> = rs.iter().filter_map(|r| r.normal.as_ref()).filter(|n| n.both > 0).collect();
+            let nhits: usize = normals.iter().map(|n| n.both).sum();
             Summary {
                 mode,
                 variant,
@@ -1030,6 +1287,11 @@ pub fn summarize(records: &[Record]) -> Vec<Summary> {
                 silhouette_max: rs.iter().map(|r| r.error.silhouette).fold(0.0, f64::max),
                 depth_mean_vox: (hits > 0).then(|| depths.iter().map(|d| d.mean * d.both as f64).sum::<f64>() / hits as f64),
                 depth_p99_vox: (hits > 0).then(|| depths.iter().map(|d| d.p99).fold(0.0, f64::max)),
+                reconstruction: rs[0].reconstruction,
+                depth_p99: (!analytic.is_empty()).then(|| analytic.iter().map(|d| d.p99).fold(0.0, f64::max)),
+                normal_deg_mean: (nhits > 0).then(|| normals.iter().map(|n| n.mean_deg * n.both as f64).sum::<f64>() / nhits as f64),
+                normal_deg_p99: (nhits > 0).then(|| normals.iter().map(|n| n.p99_deg).fold(0.0, f64::max)),
+                normal_deg_max: (nhits > 0).then(|| normals.iter().map(|n| n.max_deg).fold(0.0, f64::max)),
                 pareto: false,
             }
         })
@@ -1101,20 +1363,30 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
             Some(w) => format!(" depth err vs {w} (vox): mean | p99 (worst view) |"),
             None => String::new(),
         };
+        let with_normals = rows.iter().any(|x| x.normal_deg_mean.is_some());
+        let ncol = if with_normals { " normal err vs analytic (°): mean | p99 (worst view) |" } else { "" };
         let _ = writeln!(
             s,
-            "| variant | frame ms | cold shear ms | RMSE (mean) | PSNR dB (worst) | max abs | SSIM (mean) | silhouette (max) |{dcol} Pareto |"
+            "| variant | frame ms | cold shear ms | RMSE (mean) | PSNR dB (worst) | max abs | SSIM (mean) | silhouette (max) | reconstruction |{dcol}{ncol} Pareto |"
         );
-        let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|{}---|", if depth_what.is_some() { "---:|---:|" } else { "" });
+        let _ = writeln!(
+            s,
+            "|---|---:|---:|---:|---:|---:|---:|---:|---|{}{}---|",
+            if depth_what.is_some() { "---:|---:|" } else { "" },
+            if with_normals { "---:|---:|" } else { "" }
+        );
         for x in rows {
-            let dc = if depth_what.is_some() {
+            let mut dc = if depth_what.is_some() {
                 format!(" {} | {} |", fmt_opt(x.depth_mean_vox, 3), fmt_opt(x.depth_p99_vox, 3))
             } else {
                 String::new()
             };
+            if with_normals {
+                dc += &format!(" {} | {} |", fmt_opt(x.normal_deg_mean, 2), fmt_opt(x.normal_deg_p99, 2));
+            }
             let _ = writeln!(
                 s,
-                "| {} | {:.3} | {} | {:.5} | {} | {:.4} | {:.5} | {:.5} |{dc} {} |",
+                "| {} | {:.3} | {} | {:.5} | {} | {:.4} | {:.5} | {:.5} | {} |{dc} {} |",
                 x.variant,
                 x.frame_ms,
                 fmt_opt(Some(x.cold_shear_ms), 3),
@@ -1123,6 +1395,7 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
                 x.max_abs,
                 x.ssim_mean,
                 x.silhouette_max,
+                x.reconstruction,
                 if x.pareto { "★" } else { "" }
             );
         }
@@ -1195,13 +1468,13 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
         if per_view {
             let _ = writeln!(
                 s,
-                "| variant | view | axis | frame ms | cold shear ms | RMSE | PSNR dB | SSIM | silhouette | depth mean | depth p99 |"
+                "| variant | view | axis | frame ms | cold shear ms | RMSE | PSNR dB | SSIM | silhouette | depth mean | depth p99 | normal ° mean | normal ° p99 |"
             );
-            let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+            let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
             for r in rep.records.iter().filter(|r| r.mode == mode) {
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {} | {:.3} | {} | {:.5} | {} | {:.5} | {:.5} | {} | {} |",
+                    "| {} | {} | {} | {:.3} | {} | {:.5} | {} | {:.5} | {:.5} | {} | {} | {} | {} |",
                     r.variant,
                     r.view,
                     ["x", "y", "z"][r.axis.min(2)],
@@ -1212,7 +1485,9 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
                     r.error.ssim,
                     r.error.silhouette,
                     fmt_opt(r.depth.map(|d| d.mean), 3),
-                    fmt_opt(r.depth.map(|d| d.p99), 3)
+                    fmt_opt(r.depth.map(|d| d.p99), 3),
+                    fmt_opt(r.normal.map(|n| n.mean_deg), 2),
+                    fmt_opt(r.normal.map(|n| n.p99_deg), 2)
                 );
             }
             let _ = writeln!(s);
@@ -1239,12 +1514,14 @@ fn csv_field(s: &str) -> String {
 pub fn to_csv(rep: &Report) -> String {
     let mut s = String::from(
         "volume,dims,mode,variant,view,axis,frame_ms,shear_ms,render_ms,warp_ms,cold_shear_ms,rmse,psnr,max_abs,ssim,silhouette,\
-         depth_truth,depth_mean_vox,depth_p99_vox,depth_max_vox,depth_both,depth_only_test,depth_only_truth\n",
+         depth_truth,depth_mean_vox,depth_p99_vox,depth_max_vox,depth_both,depth_only_test,depth_only_truth,\
+         reconstruction,normal_mean_deg,normal_p99_deg,normal_max_deg\n",
     );
     let d = rep.dims;
     for r in &rep.records {
         let dep = |f: fn(&DepthError) -> f64| r.depth.map(|x| f(&x)).filter(|v| v.is_finite()).map(|v| v.to_string()).unwrap_or_default();
         let cnt = |f: fn(&DepthError) -> usize| r.depth.map(|x| f(&x).to_string()).unwrap_or_default();
+        let nrm = |f: fn(&NormalError) -> f64| r.normal.map(|x| f(&x)).filter(|v| v.is_finite()).map(|v| v.to_string()).unwrap_or_default();
         let fields = [
             csv_field(&rep.volume),
             format!("{}x{}x{}", d[0], d[1], d[2]),
@@ -1269,6 +1546,10 @@ pub fn to_csv(rep: &Report) -> String {
             cnt(|x| x.both),
             cnt(|x| x.only_test),
             cnt(|x| x.only_truth),
+            r.reconstruction.to_string(),
+            nrm(|x| x.mean_deg),
+            nrm(|x| x.p99_deg),
+            nrm(|x| x.max_deg),
         ];
         s.push_str(&fields.join(","));
         s.push('\n');
@@ -1477,6 +1758,8 @@ mod tests {
             error: ImageError { rmse: e, psnr: shearwarp::accuracy::metrics::psnr(e), max_abs: e, ssim: 1.0, silhouette: 0.0 },
             depth_truth: None,
             depth: None,
+            reconstruction: "linear",
+            normal: None,
         };
         let s = summarize(&[rec("fast", 1.0, 0.1), rec("slow-good", 5.0, 0.01), rec("dominated", 6.0, 0.05), rec("tie", 1.0, 0.1)]);
         let front: Vec<&str> = s.iter().filter(|x| x.pareto).map(|x| x.variant.as_str()).collect();
@@ -1501,6 +1784,8 @@ mod tests {
             error: ImageError { rmse: e, psnr: shearwarp::accuracy::metrics::psnr(e), max_abs: e, ssim: 1.0, silhouette: 0.0 },
             depth_truth: None,
             depth: None,
+            reconstruction: "linear",
+            normal: None,
         };
         let s = summarize(&[
             rec("rle", 1.0, 0.04, false),

@@ -38,6 +38,8 @@ Examples:
   shearwarp info brain.nii.gz                          # dims, spacing, histogram, thresholds
   shearwarp render --perspective 40 --eye-distance 1.5 -o persp.png   # perspective
   shearwarp view                                       # interactive window: drag to rotate, keys 1-4 tissues
+  shearwarp render --phantom ellipsoid --phantom-spacing 0.6,0.6,5 --iso 100 -o thick.png  # analytic shape, thick slices
+  shearwarp bench --suite surfaces --size 512 --threads 1  # depth and normal error against the analytic surfaces
   shearwarp render --raw ct.raw --dims 512,512,48 --type i16 --spacing 0.57,0.57,5 -o ct.png";
 
 /// Fast CPU volume rendering with the binary shear-warp fast rotator.

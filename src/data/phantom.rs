@@ -24,6 +24,7 @@ use std::str::FromStr;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::data::shapes::{self, AnalyticPhantom, Grid, SMOOTH_ISO};
 use crate::data::volume::{Volume, VoxelData, check_dims};
 use crate::error::{Error, Result};
 
@@ -46,11 +47,18 @@ pub enum Phantom {
     /// The engine-like block (`f32`): two materials, bores,
     /// a shaft and bolts.
     Engine,
+    /// A smooth ellipsoid (`f32`): semi-axes 0.4, 0.32 and 0.26 of the
+    /// box, a `tanh` edge; analytic surface at 100.
+    Ellipsoid,
+    /// A smooth torus about the z axis (`f32`): its flat top and bottom lie
+    /// along the slices; analytic surface at 100.
+    Torus,
 }
 
 impl Phantom {
     /// Every phantom, in a stable order.
-    pub const ALL: [Phantom; 5] = [Phantom::Head, Phantom::Sphere, Phantom::MarschnerLobb, Phantom::Cube, Phantom::Engine];
+    pub const ALL: [Phantom; 7] =
+        [Phantom::Head, Phantom::Sphere, Phantom::MarschnerLobb, Phantom::Cube, Phantom::Engine, Phantom::Ellipsoid, Phantom::Torus];
 
     /// Parses `head`, `sphere`, `marschner-lobb` (also `marschner_lobb`,
     /// `marschnerlobb` and `ml`), ignoring case and surrounding blanks.
@@ -61,7 +69,11 @@ impl Phantom {
             "marschner-lobb" | "marschner_lobb" | "marschnerlobb" | "ml" => Ok(Phantom::MarschnerLobb),
             "cube" => Ok(Phantom::Cube),
             "engine" => Ok(Phantom::Engine),
-            other => Err(Error::value("phantom", format!("'{other}' (expected head, sphere, marschner-lobb, cube or engine)"))),
+            "ellipsoid" => Ok(Phantom::Ellipsoid),
+            "torus" => Ok(Phantom::Torus),
+            other => {
+                Err(Error::value("phantom", format!("'{other}' (expected head, sphere, marschner-lobb, cube, engine, ellipsoid or torus)")))
+            }
         }
     }
 
@@ -73,6 +85,8 @@ impl Phantom {
             Phantom::MarschnerLobb => "marschner-lobb",
             Phantom::Cube => "cube",
             Phantom::Engine => "engine",
+            Phantom::Ellipsoid => "ellipsoid",
+            Phantom::Torus => "torus",
         }
     }
 
@@ -85,18 +99,20 @@ impl Phantom {
             Phantom::MarschnerLobb => Some(ML_ISO),
             Phantom::Cube => Some(CUBE_ISO),
             Phantom::Engine => Some(ENGINE_ISO),
+            Phantom::Ellipsoid | Phantom::Torus => Some(SMOOTH_ISO),
         }
     }
 
     /// The default grid size: head 128×128×113, sphere 128³, Marschner–Lobb
-    /// 41³, cube 64³ and engine 128³ (the Shear-Warp Deluxe paper's sizes).
+    /// 41³, cube 64³ and engine 128³ (the Shear-Warp Deluxe paper's sizes),
+    /// ellipsoid and torus 128³.
     pub fn default_dims(self) -> [usize; 3] {
         match self {
             Phantom::Head => [128, 128, 113],
             Phantom::Sphere => [128, 128, 128],
             Phantom::MarschnerLobb => [41, 41, 41],
             Phantom::Cube => [64, 64, 64],
-            Phantom::Engine => [128, 128, 128],
+            Phantom::Engine | Phantom::Ellipsoid | Phantom::Torus => [128, 128, 128],
         }
     }
 
@@ -110,12 +126,86 @@ impl Phantom {
     }
 
     pub fn build(self, dims: [usize; 3]) -> Result<Volume> {
+        if let Some(a) = self.analytic(dims, None)?.filter(|_| matches!(self, Phantom::Ellipsoid | Phantom::Torus)) {
+            return a.build();
+        }
         match self {
             Phantom::Head => head(dims),
             Phantom::Sphere => sphere(dims),
             Phantom::MarschnerLobb => marschner_lobb(dims),
             Phantom::Cube => cube(dims),
             Phantom::Engine => engine(dims),
+            Phantom::Ellipsoid | Phantom::Torus => unreachable!("built from their analytic shape above"),
+        }
+    }
+
+    /// True for the phantoms with an analytic surface ([`Phantom::analytic`]).
+    pub fn has_analytic_surface(self) -> bool {
+        matches!(self, Phantom::Sphere | Phantom::MarschnerLobb | Phantom::Ellipsoid | Phantom::Torus)
+    }
+
+    /// The analytic shape of the phantom at `dims` and the grid it is
+    /// sampled on (`None` for the head, cube and engine, which have none).
+    ///
+    /// `dims` sets the physical box: `dims − 1` mm per axis, the phantom's
+    /// size at spacing 1 (Marschner–Lobb: the cube of its largest axis, as
+    /// [`marschner_lobb`] builds it). `spacing` samples that box at another
+    /// spacing in mm ([`Grid::new`]: `⌊extent / spacing⌋ + 1` voxels per
+    /// axis); `None` keeps the phantom's own sampling, whose voxels
+    /// [`Phantom::build`] makes.
+    pub fn analytic(self, dims: [usize; 3], spacing: Option<[f64; 3]>) -> Result<Option<AnalyticPhantom>> {
+        let d = check_dims(dims.map(|n| n as u64))?;
+        let extent = d.map(|n| (n - 1) as f64);
+        let (shape, extent, own) = match self {
+            Phantom::Sphere => (shapes::Shape::Ball { radius: sphere_geometry(d).1 }, extent, [1.0; 3]),
+            Phantom::MarschnerLobb => {
+                let m = d.iter().copied().max().unwrap_or(1);
+                let e = (m - 1) as f64;
+                let own = d.map(|n| if n <= 1 || m <= 1 { 1.0 } else { ((m - 1) as f32 / (n - 1) as f32) as f64 });
+                (shapes::Shape::MarschnerLobb { half: e / 2.0 }, [e; 3], own)
+            }
+            Phantom::Ellipsoid => {
+                let radii = [0.4 * extent[0], 0.32 * extent[1], 0.26 * extent[2]];
+                (shapes::Shape::Ellipsoid { radii }, extent, [1.0; 3])
+            }
+            Phantom::Torus => {
+                let m = extent[0].min(extent[1]);
+                (shapes::Shape::Torus { major: 0.25 * m, minor: 0.12 * m.min(extent[2] / 0.3) }, extent, [1.0; 3])
+            }
+            Phantom::Head | Phantom::Cube | Phantom::Engine => return Ok(None),
+        };
+        let grid = match spacing {
+            None => Grid { dims: d, spacing: own },
+            Some(s) => Grid::new(extent, s)?,
+        };
+        Ok(Some(AnalyticPhantom { shape, grid }))
+    }
+
+    /// Builds the phantom at `dims`, or, with `spacing`, its analytic shape
+    /// over the same physical box sampled at that spacing (mm):
+    /// [`Phantom::analytic`]. A phantom without an analytic shape cannot be
+    /// resampled (an error naming it).
+    pub fn build_sampled(self, dims: [usize; 3], spacing: Option<[f64; 3]>) -> Result<Volume> {
+        match spacing {
+            None => self.build(dims),
+            Some(_) => match self.analytic(dims, spacing)? {
+                Some(a) => a.build(),
+                None => Err(Error::value(
+                    "phantom spacing",
+                    format!(
+                        "the {} phantom has no analytic shape to sample at another spacing (sphere, marschner-lobb, ellipsoid and torus do)",
+                        self.name()
+                    ),
+                )),
+            },
+        }
+    }
+
+    /// Voxel bytes of [`Phantom::build_sampled`] (`None` on overflow or bad input).
+    pub fn bytes_sampled(self, dims: [usize; 3], spacing: Option<[f64; 3]>) -> Option<u64> {
+        match spacing {
+            None => self.bytes(dims),
+            Some(_) => self.analytic(dims, spacing).ok().flatten().and_then(|a| a.bytes()),
         }
     }
 }

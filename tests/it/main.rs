@@ -34,5 +34,6 @@ mod readme;
 mod rle;
 mod rle_reuse;
 mod stress;
+mod surface_truth;
 mod switch_cost;
 mod tissues;

@@ -182,7 +182,7 @@ pub struct BenchCmd {
 /// A list of benchmark cases (`--suite`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Suite {
-    /// The analytic surfaces at isotropic and thick-slice spacings (the cases of `SUITE_SURFACES`).
+    /// The analytic surfaces at isotropic and thick-slice spacings.
     Surfaces,
 }
 

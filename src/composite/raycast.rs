@@ -84,7 +84,7 @@ pub struct RayResult {
     pub depth: f32,
 }
 
-const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN };
+pub(crate) const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN };
 
 /// A located sample of Deluxe I: slice `k`, or (`mid`) the midpoint between
 /// slices `k` and `k + 1`, in cell `(ci, cj)` at weights `(wi, wj)`.
@@ -186,7 +186,7 @@ impl Cells for ByteCells<'_> {
 /// monomorphized copy of the row loop per layout, no branch per access).
 macro_rules! with_cells {
     ($ctx:expr, |$v:ident| $body:expr) => {
-        match ($ctx.packed(), $ctx.normals.and_then(|(ns, _)| ns.bytes_cells())) {
+        match ($ctx.packed(), $ctx.bytes_cells()) {
             (Some($v), _) => $body,
             (None, Some($v)) => $body,
             (None, None) => {
@@ -196,6 +196,7 @@ macro_rules! with_cells {
         }
     };
 }
+pub(crate) use with_cells;
 
 impl<'a> RayContext<'a> {
     /// Sets up the rays of one frame of `plan` (whose slices must be `stack`'s).
@@ -315,6 +316,22 @@ impl<'a> RayContext<'a> {
     /// The cells of this context kept apart (the f32 stack and the codes).
     pub fn split(&self) -> Split<'a> {
         Split { stack: self.stack, codes: self.normals.map_or(&[][..], |(ns, _)| ns.codes()) }
+    }
+
+    /// The 8-bit densities and codes of this context's normal codes, if it
+    /// holds them.
+    pub fn bytes_cells(&self) -> Option<ByteCells<'a>> {
+        self.normals.and_then(|(ns, _)| ns.bytes_cells())
+    }
+
+    /// The shade table of table shading (`None`: gradient shading).
+    pub fn table(&self) -> Option<&'a ShadeTable> {
+        self.normals.map(|(_, t)| t)
+    }
+
+    /// Cells per slice along `i` and `j`.
+    pub fn cell_counts(&self) -> [u32; 2] {
+        self.cells
     }
 
     /// The packed cells of this context's normal codes, if they are packed.
@@ -1284,7 +1301,7 @@ fn brute_rows<V: Cells, R: Ray>(
 
 /// Runs `row(q, p0, rgba, depth)` for every row `q` of `rect` in parallel, with
 /// the row's pixels `p0..=p1` of the colour and depth planes; seals `rect`.
-fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(usize, usize, &mut [[f32; 4]], &mut [f32]) + Sync) {
+pub(crate) fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(usize, usize, &mut [[f32; 4]], &mut [f32]) + Sync) {
     out.seal(rect);
     let Some(r) = rect else { return };
     let w = out.size[0];

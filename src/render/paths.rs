@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use crate::classify::Classifier;
 use crate::classify::shade_table::{ShadeTable, headlight_object};
+use crate::composite::lean::LeanFrame;
 use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary, render_brute, volume_rect, volume_rect_with_mids};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::normals::NormalStack;
@@ -69,6 +70,11 @@ impl Renderer {
         let settings = self.settings;
         let (inter, masks, rle) = (&mut self.inter, &mut self.axes.masks, &mut self.axes.rle);
         let (normals, shade) = (&self.axes.normals, &mut self.shade);
+        let lean = &mut self.lean;
+        // the lean binary iso frame, chosen once for the frame from its plan
+        let lean_frame = self.lean_on
+            && settings.method == Method::Binary
+            && LeanFrame::applies(plan, mode, settings.normals == Normals::Codes && normals[axis].is_some(), settings.search);
         // one job on the pool per plan: shear and render run inside it
         let result: Result<()> = self.pool.install(|| {
             let t = Instant::now();
@@ -103,11 +109,14 @@ impl Renderer {
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
                     let ctx = ray_context(stack, cls, plan, iso, focus, settings, normals[axis].as_ref(), shade);
-                    match &m.mask {
-                        AnyMask::W32(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
-                        AnyMask::W64(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
+                    match (&m.mask, lean_frame) {
+                        (AnyMask::W32(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
+                        (AnyMask::W64(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
+                        (AnyMask::W32(m), false) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
+                        (AnyMask::W64(m), false) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                     }
                     stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
+                    stats.lean = lean_frame;
                     rect
                 }
                 Method::Brute => {

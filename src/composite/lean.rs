@@ -39,12 +39,12 @@
 
 use crate::classify::shade_table::ShadeTable;
 use crate::classify::shading::apply_shade;
-use crate::composite::raycast::{Cells, MISS, RayContext, RayResult, render_rows};
+use crate::composite::raycast::{Cells, MISS, RayContext, RayResult, RowOut, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::slices::bilinear;
 use crate::encode::depth::{Matcher, Search, Word};
 use crate::encode::mask::BinaryMask;
-use crate::view::plan::{FramePlan, MapKind};
+use crate::view::plan::{FramePlan, Grid, MapKind};
 
 /// Rays per group: the first candidates of a group are found and their voxels
 /// prefetched before the group is traced (the general path's
@@ -90,6 +90,15 @@ struct Frame<'a, W: Word> {
     slots: usize,
     log_nb: u32,
     prefetch: bool,
+}
+
+/// Ray `(p, q)` of the intermediate image and its base stack index
+/// `rb = p + n₀·q` (its cell in slice entry `e` starts at `rb + e.base`).
+#[derive(Clone, Copy, Debug)]
+struct LeanRay {
+    p: usize,
+    q: usize,
+    rb: usize,
 }
 
 /// A ray's walk over its depth row: the word being consumed, its remaining
@@ -169,30 +178,18 @@ impl LeanFrame {
             prefetch,
         };
         let avx2 = mask.cpu_level().has_avx2();
+        // at cell size 1 a ray's column is its own cells' (no dilation): a
+        // matching bit at slice k is a cell of the volume, so its visit needs
+        // no in-volume test (the grid's margin is the mask's, module docs)
+        let exact = mask.cell_size() == 1 && ctx.plan.grid.pad == Grid::parallel(ctx.stack.cells(), n[2]).pad;
         super::raycast::with_cells!(ctx, |v| {
-            render_rows(rect, out, |q, p0, crow, drow| {
-                let row = RowStart::new(mask, q, p0);
-                match (ctx.ascending, avx2) {
-                    (true, false) => lean_row::<W, _, true>(&f, &v, row, q, p0, crow, drow),
-                    (false, false) => lean_row::<W, _, false>(&f, &v, row, q, p0, crow, drow),
-                    #[cfg(target_arch = "x86_64")]
-                    // SAFETY: the mask's CPU level has AVX2; a mask's level is
-                    // capped to at most `kernels::detected()`, which is `Avx2`
-                    // only when `is_x86_feature_detected!` found lzcnt and bmi1
-                    // on this CPU at run time, all that `lean_row_lzcnt`
-                    // requires; its body is the safe `lean_row`.
-                    (true, true) => unsafe { lean_row_lzcnt::<W, _, true>(&f, &v, row, q, p0, crow, drow) },
-                    #[cfg(target_arch = "x86_64")]
-                    // SAFETY: as above.
-                    (false, true) => unsafe { lean_row_lzcnt::<W, _, false>(&f, &v, row, q, p0, crow, drow) },
-                    #[cfg(not(target_arch = "x86_64"))]
-                    (asc, true) => {
-                        if asc {
-                            lean_row::<W, _, true>(&f, &v, row, q, p0, crow, drow)
-                        } else {
-                            lean_row::<W, _, false>(&f, &v, row, q, p0, crow, drow)
-                        }
-                    }
+            render_rows(rect, out, |out| {
+                let row = RowStart::new(mask, out.q, out.p0);
+                match (ctx.ascending, exact) {
+                    (true, true) => lean_row_at::<W, _, true, false>(&f, &v, avx2, row, out),
+                    (false, true) => lean_row_at::<W, _, false, false>(&f, &v, avx2, row, out),
+                    (true, false) => lean_row_at::<W, _, true, true>(&f, &v, avx2, row, out),
+                    (false, false) => lean_row_at::<W, _, false, true>(&f, &v, avx2, row, out),
                 }
             })
         });
@@ -264,13 +261,19 @@ impl<W: Word> Frame<'_, W> {
         k
     }
 
-    /// The stack index of ray `(p, q)`'s cell in slice entry `e`, if the ray
-    /// meets the slice inside the volume (`rb = p + n₀·q`).
+    /// Ray `(p, q)`.
     #[inline(always)]
-    fn cell(&self, e: &SliceEntry, p: usize, q: usize, rb: usize) -> Option<usize> {
-        let ci = p as i32 + e.di;
-        let cj = q as i32 + e.dj;
-        ((ci as u32) < self.cells[0] && (cj as u32) < self.cells[1]).then(|| rb.wrapping_add_signed(e.base))
+    fn ray(&self, p: usize, q: usize) -> LeanRay {
+        LeanRay { p, q, rb: p + self.n0 * q }
+    }
+
+    /// The stack index of `ray`'s cell in slice entry `e`, if the ray meets
+    /// the slice inside the volume.
+    #[inline(always)]
+    fn cell(&self, e: &SliceEntry, ray: LeanRay) -> Option<usize> {
+        let ci = ray.p as i32 + e.di;
+        let cj = ray.q as i32 + e.dj;
+        ((ci as u32) < self.cells[0] && (cj as u32) < self.cells[1]).then(|| ray.rb.wrapping_add_signed(e.base))
     }
 
     /// Hints the cache to fetch what a ray reads from its first candidate at
@@ -288,18 +291,20 @@ impl<W: Word> Frame<'_, W> {
         }
     }
 
-    /// Traces ray `(p, q)` from its settled walk: the first candidate whose
-    /// sample reaches the iso value, refined and shaded.
+    /// Traces `ray` from its settled walk: the first candidate whose sample
+    /// reaches the iso value, refined and shaded. Without `CHECKED` every
+    /// candidate is a cell of the volume (cell size 1) and is not tested.
     #[inline(always)]
-    fn trace<V: Cells, const ASC: bool>(&self, v: &V, mut walk: Walk<W>, p: usize, q: usize) -> RayResult {
-        let rb = p + self.n0 * q;
+    fn trace<V: Cells, const ASC: bool, const CHECKED: bool>(&self, v: &V, mut walk: Walk<W>, ray: LeanRay) -> RayResult {
         loop {
             let k = self.take::<ASC>(&mut walk);
             let e = &self.slices[k];
-            if let Some(b) = self.cell(e, p, q, rb) {
+            debug_assert!(CHECKED || self.cell(e, ray).is_some(), "a candidate outside the volume at cell size 1");
+            let b = if CHECKED { self.cell(e, ray) } else { Some(ray.rb.wrapping_add_signed(e.base)) };
+            if let Some(b) = b {
                 let d = bilinear(v.densities(b), e.wi, e.wj);
                 if d >= self.iso {
-                    return self.hit::<V, ASC>(v, k, b, e, d, p, q, rb);
+                    return self.hit::<V, ASC>(v, ray, k, b, d);
                 }
             }
             if !self.settle::<ASC>(&mut walk) {
@@ -312,23 +317,12 @@ impl<W: Word> Frame<'_, W> {
     /// against the slice before it in walking order and shaded by the blend
     /// of both slices' shade entries, as [`RayContext`]'s general hit.
     #[inline(never)]
-    #[allow(clippy::too_many_arguments)]
-    fn hit<V: Cells, const ASC: bool>(
-        &self,
-        v: &V,
-        k: usize,
-        b: usize,
-        e: &SliceEntry,
-        d: f32,
-        p: usize,
-        q: usize,
-        rb: usize,
-    ) -> RayResult {
-        let iso = self.iso;
+    fn hit<V: Cells, const ASC: bool>(&self, v: &V, ray: LeanRay, k: usize, b: usize, d: f32) -> RayResult {
+        let (iso, e) = (self.iso, &self.slices[k]);
         let kp = if ASC { k.checked_sub(1) } else { Some(k + 1).filter(|&kp| kp < self.slices.len()) };
         let before = kp.and_then(|kp| {
             let ep = &self.slices[kp];
-            let bp = self.cell(ep, p, q, rb)?;
+            let bp = self.cell(ep, ray)?;
             let dp = bilinear(v.densities(bp), ep.wi, ep.wj);
             (dp < iso).then(|| (kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), bp, ep))
         });
@@ -343,19 +337,29 @@ impl<W: Word> Frame<'_, W> {
     }
 }
 
+/// One row of the lean frame by the copy compiled for the CPU level (`avx2`:
+/// the mask's level, [`BinaryMask::cpu_level`], has AVX2).
+#[inline(always)]
+fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, avx2: bool, row: RowStart, out: RowOut) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: the mask's CPU level has AVX2; a mask's level is capped to
+        // at most `kernels::detected()`, which is `Avx2` only when
+        // `is_x86_feature_detected!` found lzcnt and bmi1 on this CPU at run
+        // time, all that `lean_row_lzcnt` requires; its body is the safe
+        // `lean_row`.
+        unsafe { lean_row_lzcnt::<W, V, ASC, CHECKED>(f, v, row, out) };
+        return;
+    }
+    let _ = avx2;
+    lean_row::<W, V, ASC, CHECKED>(f, v, row, out)
+}
+
 /// One row of the lean frame: in groups of [`GROUP`] rays, first every ray's
 /// first candidate (its voxels prefetched), then the traces.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn lean_row<W: Word, V: Cells, const ASC: bool>(
-    f: &Frame<W>,
-    v: &V,
-    mut row: RowStart,
-    q: usize,
-    p0: usize,
-    crow: &mut [[f32; 4]],
-    drow: &mut [f32],
-) {
+fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, mut row: RowStart, out: RowOut) {
+    let RowOut { q, p0, rgba: crow, depth: drow } = out;
     let mut walks: [Option<Walk<W>>; GROUP] = [None; GROUP];
     let mut last_line = usize::MAX;
     for (g, (cg, dg)) in crow.chunks_mut(GROUP).zip(drow.chunks_mut(GROUP)).enumerate() {
@@ -366,8 +370,7 @@ fn lean_row<W: Word, V: Cells, const ASC: bool>(
                 && let Some(w) = walk
             {
                 let k0 = f.peek::<ASC>(w);
-                let p = pg + dp;
-                if let Some(b) = f.cell(&f.slices[k0], p, q, p + f.n0 * q) {
+                if let Some(b) = f.cell(&f.slices[k0], f.ray(pg + dp, q)) {
                     f.prefetch_at::<V, ASC>(v, b, &mut last_line);
                 }
             }
@@ -380,7 +383,7 @@ fn lean_row<W: Word, V: Cells, const ASC: bool>(
         for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter()).enumerate() {
             let res = match *walk {
                 None => MISS,
-                Some(w) => f.trace::<V, ASC>(v, w, pg + dp, q),
+                Some(w) => f.trace::<V, ASC, CHECKED>(v, w, f.ray(pg + dp, q)),
             };
             *c = res.rgba;
             *d = res.depth;
@@ -392,16 +395,7 @@ fn lean_row<W: Word, V: Cells, const ASC: bool>(
 /// bit scans). Callers must hold a CPU level with AVX2 that is at most
 /// [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
 #[cfg(target_arch = "x86_64")]
-#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "lzcnt,bmi1")]
-unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool>(
-    f: &Frame<W>,
-    v: &V,
-    row: RowStart,
-    q: usize,
-    p0: usize,
-    crow: &mut [[f32; 4]],
-    drow: &mut [f32],
-) {
-    lean_row::<W, V, ASC>(f, v, row, q, p0, crow, drow)
+unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, row: RowStart, out: RowOut) {
+    lean_row::<W, V, ASC, CHECKED>(f, v, row, out)
 }

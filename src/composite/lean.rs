@@ -23,6 +23,11 @@
 //!   every slot whose code matches), so one-bit masks and threshold codes
 //!   walk alike: a bit scan, the slot (the bit position over the code width)
 //!   and one bit cleared.
+//! - **No test per visit at cell size 1**: a ray's depth row is then its
+//!   own cells' column (no dilation, [`crate::encode::mask`]), so a matching
+//!   bit is a cell of the volume; with super cells a visit tests its cell
+//!   against the slice's extent (two integer compares), as does every
+//!   refinement's previous-slice read.
 //! - **A compact state per ray**: the group of rays whose first candidates are
 //!   found (and their voxels prefetched) before they are traced keeps a word
 //!   index, the remaining bits and the slice of the word's first slot.

@@ -16,6 +16,7 @@
 //!   Shear-Warp Deluxe P), with the intermediate samples between slices of
 //!   a half-step plan (Deluxe I).
 
+pub mod lean;
 pub mod raycast;
 pub mod slices;
 

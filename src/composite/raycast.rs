@@ -34,7 +34,7 @@ use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
 use crate::encode::mask::BlockOccupancy;
-use crate::encode::walk::{ColumnWalk, Drift, StillWalk};
+use crate::encode::walk::{ColumnWalk, Drift, SliceSpan, StillWalk};
 use crate::view::plan::{FramePlan, MapKind, SliceMap, floor_i64};
 
 /// Everything a ray needs, borrowed for one frame.
@@ -84,7 +84,18 @@ pub struct RayResult {
     pub depth: f32,
 }
 
-const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN };
+pub(crate) const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN };
+
+/// A located slice sample: slice `k`, cell `(ci, cj)`, in-cell weights
+/// `(wi, wj)`.
+#[derive(Clone, Copy, Debug)]
+struct At {
+    k: usize,
+    ci: usize,
+    cj: usize,
+    wi: f32,
+    wj: f32,
+}
 
 /// A located sample of Deluxe I: slice `k`, or (`mid`) the midpoint between
 /// slices `k` and `k + 1`, in cell `(ci, cj)` at weights `(wi, wj)`.
@@ -186,7 +197,7 @@ impl Cells for ByteCells<'_> {
 /// monomorphized copy of the row loop per layout, no branch per access).
 macro_rules! with_cells {
     ($ctx:expr, |$v:ident| $body:expr) => {
-        match ($ctx.packed(), $ctx.normals.and_then(|(ns, _)| ns.bytes_cells())) {
+        match ($ctx.packed(), $ctx.bytes_cells()) {
             (Some($v), _) => $body,
             (None, Some($v)) => $body,
             (None, None) => {
@@ -196,6 +207,7 @@ macro_rules! with_cells {
         }
     };
 }
+pub(crate) use with_cells;
 
 impl<'a> RayContext<'a> {
     /// Sets up the rays of one frame of `plan` (whose slices must be `stack`'s).
@@ -317,6 +329,22 @@ impl<'a> RayContext<'a> {
         Split { stack: self.stack, codes: self.normals.map_or(&[][..], |(ns, _)| ns.codes()) }
     }
 
+    /// The 8-bit densities and codes of this context's normal codes, if it
+    /// holds them.
+    pub fn bytes_cells(&self) -> Option<ByteCells<'a>> {
+        self.normals.and_then(|(ns, _)| ns.bytes_cells())
+    }
+
+    /// The shade table of table shading (`None`: gradient shading).
+    pub fn table(&self) -> Option<&'a ShadeTable> {
+        self.normals.map(|(_, t)| t)
+    }
+
+    /// Cells per slice along `i` and `j`.
+    pub fn cell_counts(&self) -> [u32; 2] {
+        self.cells
+    }
+
     /// The packed cells of this context's normal codes, if they are packed.
     pub fn packed(&self) -> Option<PackedCells<'a>> {
         self.normals.and_then(|(ns, _)| ns.packed())
@@ -328,10 +356,10 @@ impl<'a> RayContext<'a> {
         bilinear(v.densities(self.stack.index(ci, cj, k)), wi, wj)
     }
 
-    /// The shaded colour of `rgb` at a sample (either shading model).
-    #[allow(clippy::too_many_arguments)]
+    /// The shaded colour of `rgb` at the sample `at` (either shading model).
     #[inline(always)]
-    fn shade_sample<V: Cells>(&self, v: &V, rgb: [f32; 3], ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 3] {
+    fn shade_sample<V: Cells>(&self, v: &V, rgb: [f32; 3], at: At) -> [f32; 3] {
+        let At { k, ci, cj, wi, wj } = at;
         match self.normals {
             Some((_, table)) => apply_shade(rgb, table.blend(v.codes(self.stack.index(ci, cj, k)), wi, wj)),
             None => {
@@ -522,7 +550,7 @@ impl<'a> RayContext<'a> {
                 let d = self.density_pt(v, p);
                 let at = if F && Self::in_focus_pt(k, mid, foc) { (self.focus_iso, self.focus_iso_rgb) } else { (self.iso, self.iso_rgb) };
                 if d >= at.0 {
-                    return self.iso_hit_half(v, ray, p, d, lo, hi, at);
+                    return self.iso_hit_half(v, ray, p, d, [lo, hi], at);
                 }
             }
         }
@@ -543,7 +571,6 @@ impl<'a> RayContext<'a> {
     /// [`RayContext::iso_hit`] with Deluxe I: the hit refined against the
     /// sample before it (a slice or a midpoint, half a slice away), against
     /// the hit's iso value and in its iso colour (`(iso, iso_rgb)`).
-    #[allow(clippy::too_many_arguments)]
     #[inline(never)]
     fn iso_hit_half<V: Cells, R: Ray>(
         &self,
@@ -551,8 +578,7 @@ impl<'a> RayContext<'a> {
         ray: R,
         p: Pt,
         d: f32,
-        lo: usize,
-        hi: usize,
+        [lo, hi]: [usize; 2],
         (iso, iso_rgb): (f32, [f32; 3]),
     ) -> RayResult {
         let before = self.prev_pt(p.k, p.mid, lo, hi).and_then(|(kp, mp)| {
@@ -600,7 +626,7 @@ impl<'a> RayContext<'a> {
             }
             let alpha = ray.opacity(alpha);
             let c = cls.classify(d);
-            composite(&mut acc, self.shade_sample(v, [c.r, c.g, c.b], ci, cj, k, wi, wj), alpha);
+            composite(&mut acc, self.shade_sample(v, [c.r, c.g, c.b], At { k, ci, cj, wi, wj }), alpha);
         }
         RayResult { rgba: acc, depth: f32::NAN }
     }
@@ -624,7 +650,7 @@ impl<'a> RayContext<'a> {
             let iso = if F { self.iso_at(k, foc).0 } else { self.iso };
             if d >= iso {
                 let at = if F { self.iso_at(k, foc) } else { (self.iso, self.iso_rgb) };
-                return self.iso_hit(v, ray, k, ci, cj, wi, wj, d, lo, hi, at);
+                return self.iso_hit(v, ray, At { k, ci, cj, wi, wj }, d, [lo, hi], at);
             }
         }
         MISS
@@ -636,24 +662,12 @@ impl<'a> RayContext<'a> {
         if self.ascending { (k > lo).then(|| k - 1) } else { (k < hi).then_some(k + 1) }
     }
 
-    /// Refines a hit at slice `k` against the previous slice in walking order and
-    /// shades it.
-    #[allow(clippy::too_many_arguments)]
+    /// Refines a hit `at` (of density `d`) against the previous slice in
+    /// walking order within the ray's slices `[lo, hi]` and shades it, by the
+    /// iso value and colour `(iso, iso_rgb)`.
     #[inline(never)]
-    fn iso_hit<V: Cells, R: Ray>(
-        &self,
-        v: &V,
-        ray: R,
-        k: usize,
-        ci: usize,
-        cj: usize,
-        wi: f32,
-        wj: f32,
-        d: f32,
-        lo: usize,
-        hi: usize,
-        (iso, iso_rgb): (f32, [f32; 3]),
-    ) -> RayResult {
+    fn iso_hit<V: Cells, R: Ray>(&self, v: &V, ray: R, at: At, d: f32, [lo, hi]: [usize; 2], (iso, iso_rgb): (f32, [f32; 3])) -> RayResult {
+        let At { k, ci, cj, wi, wj } = at;
         // the sample before the hit, when it is below the hit's iso value: the
         // surface crosses between the two slices at fraction t
         let before = self.prev_slice(k, lo, hi).and_then(|kp| {
@@ -869,7 +883,6 @@ impl<I: Iterator<Item = usize>> Iterator for SkipHole<I> {
 /// [`Search::Bitscan`] at the mask's CPU level ([`BinaryMask::cpu_level`], the
 /// renderer's [`crate::render::Settings::cpu`]) `Avx2` the row loop runs a copy
 /// compiled for `lzcnt`/`tzcnt`; at `Scalar` the plain build's (the same image).
-#[allow(clippy::too_many_arguments)]
 pub fn render_binary<W: Word>(
     ctx: &RayContext,
     mask: &BinaryMask<W>,
@@ -879,73 +892,87 @@ pub fn render_binary<W: Word>(
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
+    let walker = Walker { search, m, prefetch };
     with_cells!(ctx, |v| match ctx.plan.limited() {
-        false => binary_rows::<W, _, false>(ctx, &v, mask, search, m, prefetch, rect, out),
-        true => binary_rows::<W, _, true>(ctx, &v, mask, search, m, prefetch, rect, out),
+        false => binary_rows::<W, _, false>(ctx, &v, mask, walker, rect, out),
+        true => binary_rows::<W, _, true>(ctx, &v, mask, walker, rect, out),
     })
 }
 
+/// How the rows of [`render_binary`] find their rays' candidates: the depth
+/// search, the matcher of the codes the walks visit, and whether each group's
+/// first candidates are prefetched.
+#[derive(Clone, Copy)]
+struct Walker<'m> {
+    search: Search,
+    m: &'m Matcher,
+    prefetch: bool,
+}
+
+/// One row of the intermediate image as a row loop writes it: row `q`, and
+/// its pixels `p0, p0 + 1, …` of the colour and depth planes.
+pub(crate) struct RowOut<'r> {
+    pub q: usize,
+    pub p0: usize,
+    pub rgba: &'r mut [[f32; 4]],
+    pub depth: &'r mut [f32],
+}
+
 /// [`render_binary`] for one cell layout, with (`LIMITED`) or without ray limits.
-#[allow(clippy::too_many_arguments)]
 fn binary_rows<W: Word, V: Cells, const LIMITED: bool>(
     ctx: &RayContext,
     v: &V,
     mask: &BinaryMask<W>,
-    search: Search,
-    m: &Matcher,
-    prefetch: bool,
+    walker: Walker,
     rect: Option<Rect>,
     out: &mut Intermediate,
 ) {
+    let Walker { search, m, .. } = walker;
     match ctx.plan.kind {
-        MapKind::Translate => render_rows(rect, out, |q, p0, crow, drow| {
-            let mut src = Columns::new(ctx, mask, search, m, q, p0);
-            binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
+        MapKind::Translate => render_rows(rect, out, |row| {
+            let mut src = Columns::new(ctx, mask, search, m, row.q, row.p0);
+            binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, walker, &mut src, row)
         }),
         MapKind::ScaleTranslate => {
             let drift = Drift::for_plan(ctx.plan);
             if drift.is_still() {
                 // a parallel plan at another pixel pitch: no ray drifts
-                return render_rows(rect, out, |q, p0, crow, drow| {
-                    let mut src = Still { ctx, mask, occ: mask.occupancy(), search, m, q, drift };
-                    binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
+                return render_rows(rect, out, |row| {
+                    let mut src = Still { ctx, mask, occ: mask.occupancy(), search, m, q: row.q, drift };
+                    binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, walker, &mut src, row)
                 });
             }
-            render_rows(rect, out, |q, p0, crow, drow| {
-                let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q, drift, blocks: None };
-                binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, search, &mut src, prefetch, q, p0, crow, drow)
+            render_rows(rect, out, |row| {
+                let mut src = Diverging { ctx, mask, occ: mask.occupancy(), search, m, q: row.q, drift, blocks: None };
+                binary_row_dispatch::<W, V, LIMITED, _>(ctx, v, mask, walker, &mut src, row)
             })
         }
     }
 }
 
 /// One row of [`render_binary`], by the copy compiled for the CPU level.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn binary_row_dispatch<W: Word, V: Cells, const LIMITED: bool, S: RaySource>(
     ctx: &RayContext,
     v: &V,
     mask: &BinaryMask<W>,
-    search: Search,
+    walker: Walker,
     src: &mut S,
-    prefetch: bool,
-    q: usize,
-    p0: usize,
-    crow: &mut [[f32; 4]],
-    drow: &mut [f32],
+    row: RowOut,
 ) {
+    let prefetch = walker.prefetch;
     #[cfg(target_arch = "x86_64")]
-    if search == Search::Bitscan && mask.cpu_level().has_avx2() {
+    if walker.search == Search::Bitscan && mask.cpu_level().has_avx2() {
         // SAFETY: the mask's CPU level has AVX2 here; a mask's level is always
         // capped to at most `kernels::detected()`, which is `Avx2` only when
         // `is_x86_feature_detected!` found lzcnt and bmi1 on this CPU at run
         // time, which is all `binary_row_lzcnt` requires; its body is the safe
         // `binary_row`.
-        unsafe { binary_row_lzcnt::<V, LIMITED, S>(ctx, v, src, prefetch, q, p0, crow, drow) };
+        unsafe { binary_row_lzcnt::<V, LIMITED, S>(ctx, v, src, prefetch, row) };
         return;
     }
-    let _ = (mask, search);
-    binary_row::<V, LIMITED, S>(ctx, v, src, prefetch, q, p0, crow, drow);
+    let _ = mask;
+    binary_row::<V, LIMITED, S>(ctx, v, src, prefetch, row);
 }
 
 /// Where a row of [`render_binary`] gets its rays, each with the walk over its
@@ -1059,7 +1086,8 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
         // (the blocks outside the group's hold no candidate of this ray)
         let (first, last) = if ctx.ascending { (b, e) } else { (e, b) };
         (lo, hi) = (lo.max(first * len), hi.min(last * len + len - 1));
-        let mut it = ColumnWalk::new(self.mask, self.occ, &self.drift, ray.at, lo, hi, ctx.ascending, self.search, self.m);
+        let span = SliceSpan { lo, hi, ascending: ctx.ascending };
+        let mut it = ColumnWalk::new(self.mask, self.occ, &self.drift, ray.at, span, self.search, self.m);
         let walk = it.peek().map(|k0| (it, k0));
         (ray, walk)
     }
@@ -1075,7 +1103,7 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
         let at = [[a0[0].min(a1[0]), a0[0].max(a1[0])], [a0[1].min(a1[1]), a0[1].max(a1[1])]];
         // the plan's slices hold every ray's own range
         let [lo, hi] = plan.k_range;
-        let first = |lo, hi, ascending| self.occ.first_block(self.mask, &plan.shear, &plan.scaled, at, lo, hi, ascending);
+        let first = |lo, hi, ascending| self.occ.first_block(self.mask, &plan.shear, &plan.scaled, at, SliceSpan { lo, hi, ascending });
         let asc = self.ctx.ascending;
         self.blocks = first(lo, hi, asc).map(|b| {
             // the last, from the back up to the first
@@ -1108,7 +1136,8 @@ impl<'a, W: Word> RaySource for Still<'a, W> {
         let ctx = self.ctx;
         let ray = ctx.scaled_ray(p, self.q);
         let [lo, hi] = ctx.plan.ray_range(p, self.q);
-        let mut it = StillWalk::new(self.mask, self.occ, &self.drift, ray.at, lo, hi, ctx.ascending, self.search, self.m);
+        let span = SliceSpan { lo, hi, ascending: ctx.ascending };
+        let mut it = StillWalk::new(self.mask, self.occ, &self.drift, ray.at, span, self.search, self.m);
         let first = it.peek();
         (ray, first.map(|k0| (it, k0)))
     }
@@ -1178,18 +1207,9 @@ fn trace_ray<V: Cells, R: Ray, const LIMITED: bool>(
 /// One row of [`render_binary`] (inlined into both compiled copies): in groups
 /// of [`PREFETCH_GROUP`] rays, first every ray's first candidate (prefetched),
 /// then the walks.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn binary_row<V: Cells, const LIMITED: bool, S: RaySource>(
-    ctx: &RayContext,
-    v: &V,
-    src: &mut S,
-    prefetch: bool,
-    q: usize,
-    p0: usize,
-    crow: &mut [[f32; 4]],
-    drow: &mut [f32],
-) {
+fn binary_row<V: Cells, const LIMITED: bool, S: RaySource>(ctx: &RayContext, v: &V, src: &mut S, prefetch: bool, row: RowOut) {
+    let RowOut { q, p0, rgba: crow, depth: drow } = row;
     // each ray's walk, positioned at its first candidate between the phases
     let mut walks: [Option<S::Walk>; PREFETCH_GROUP] = std::array::from_fn(|_| None);
     let mut last_line = usize::MAX;
@@ -1229,19 +1249,9 @@ fn binary_row<V: Cells, const LIMITED: bool, S: RaySource>(
 /// `bsr`/`bsf` plus a zero test. Callers must hold a CPU level with AVX2 that is
 /// at most [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
 #[cfg(target_arch = "x86_64")]
-#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "lzcnt,bmi1")]
-unsafe fn binary_row_lzcnt<V: Cells, const LIMITED: bool, S: RaySource>(
-    ctx: &RayContext,
-    v: &V,
-    src: &mut S,
-    prefetch: bool,
-    q: usize,
-    p0: usize,
-    crow: &mut [[f32; 4]],
-    drow: &mut [f32],
-) {
-    binary_row::<V, LIMITED, S>(ctx, v, src, prefetch, q, p0, crow, drow)
+unsafe fn binary_row_lzcnt<V: Cells, const LIMITED: bool, S: RaySource>(ctx: &RayContext, v: &V, src: &mut S, prefetch: bool, row: RowOut) {
+    binary_row::<V, LIMITED, S>(ctx, v, src, prefetch, row)
 }
 
 /// The brute-force reference: every slice of every ray of `rect` (within the
@@ -1262,8 +1272,9 @@ fn brute_rows<V: Cells, R: Ray>(
     out: &mut Intermediate,
     ray: impl Fn(usize, usize) -> R + Sync,
 ) {
-    render_rows(rect, out, |q, p0, crow, drow| {
-        for (dp, (c, d)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
+    render_rows(rect, out, |row| {
+        let RowOut { q, p0, rgba, depth } = row;
+        for (dp, (c, d)) in rgba.iter_mut().zip(depth.iter_mut()).enumerate() {
             let p = p0 + dp;
             let [lo, hi] = ctx.plan.ray_range(p, q);
             let r = ray(p, q);
@@ -1282,9 +1293,9 @@ fn brute_rows<V: Cells, R: Ray>(
     });
 }
 
-/// Runs `row(q, p0, rgba, depth)` for every row `q` of `rect` in parallel, with
-/// the row's pixels `p0..=p1` of the colour and depth planes; seals `rect`.
-fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(usize, usize, &mut [[f32; 4]], &mut [f32]) + Sync) {
+/// Runs `row` for every row `q` of `rect` in parallel, with the row's pixels
+/// `p0..=p1` of the colour and depth planes; seals `rect`.
+pub(crate) fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(RowOut) + Sync) {
     out.seal(rect);
     let Some(r) = rect else { return };
     let w = out.size[0];
@@ -1292,7 +1303,7 @@ fn render_rows(rect: Option<Rect>, out: &mut Intermediate, row: impl Fn(usize, u
     // slice the rows first: rayon's parallel `skip` would heap-allocate a job per frame
     let rows = r.q0 * w..(r.q1 + 1) * w;
     rgba[rows.clone()].par_chunks_mut(w).zip(depth[rows].par_chunks_mut(w)).enumerate().for_each(|(dq, (crow, drow))| {
-        row(r.q0 + dq, r.p0, &mut crow[r.p0..=r.p1], &mut drow[r.p0..=r.p1]);
+        row(RowOut { q: r.q0 + dq, p0: r.p0, rgba: &mut crow[r.p0..=r.p1], depth: &mut drow[r.p0..=r.p1] });
     });
 }
 

@@ -533,16 +533,35 @@ pub struct ByteCells<'a> {
 }
 
 impl ByteCells<'_> {
-    /// The four corner densities of the cell at stack index `b` (order of [`SliceStack::bilinear`]).
+    /// The bytes of the two voxel pairs of the cell at stack index `b`: its
+    /// first row's two voxels and its second row's (three bytes a voxel, so
+    /// each pair is six contiguous bytes; one bounds check each).
     #[inline(always)]
-    pub fn densities(&self, b: usize) -> [f32; 4] {
-        cell_corners(self.cells, b, self.n0).map(|c| c[0] as f32)
+    fn pairs(&self, b: usize) -> [[u8; 6]; 2] {
+        let bytes = self.cells.as_flattened();
+        let pair = |v: usize| -> [u8; 6] {
+            let mut out = [0; 6];
+            out.copy_from_slice(&bytes[3 * v..3 * v + 6]);
+            out
+        };
+        [pair(b), pair(b + self.n0)]
     }
 
-    /// The four corner codes of the cell at stack index `b`.
+    /// The four corner densities of the cell at stack index `b` (order of
+    /// [`SliceStack::bilinear`]): the first byte of each voxel, read from the
+    /// cell's two rows without moving the codes.
+    #[inline(always)]
+    pub fn densities(&self, b: usize) -> [f32; 4] {
+        let [t, u] = self.pairs(b);
+        [t[0], t[3], u[0], u[3]].map(f32::from)
+    }
+
+    /// The four corner codes of the cell at stack index `b` (each voxel's
+    /// second and third bytes, little-endian).
     #[inline(always)]
     pub fn codes(&self, b: usize) -> [u16; 4] {
-        cell_corners(self.cells, b, self.n0).map(code_of)
+        let [t, u] = self.pairs(b);
+        [[t[1], t[2]], [t[4], t[5]], [u[1], u[2]], [u[4], u[5]]].map(u16::from_le_bytes)
     }
 
     /// Hints the cache to fetch both rows of the cell at stack index `b`.

@@ -34,6 +34,7 @@ use crate::data::slices::SliceStack;
 pub use crate::encode::cells::{CellCodes, PackedCodes};
 use crate::encode::depth::{Matcher, Word, slot_shift};
 use crate::encode::shift::*;
+use crate::encode::walk::SliceSpan;
 use crate::kernels::{self, CpuLevel};
 use crate::view::plan::{Rect, ScaledMap, floor_i64};
 use crate::view::shear::ShearState;
@@ -804,8 +805,7 @@ impl BlockOccupancy {
         self.len
     }
 
-    /// The first block, in walking order, over slices `[lo, hi]` (index
-    /// order) in which a ray of a group may meet a matching column: every ray
+    /// The first block, in walking order, over the slices of `span` in which a ray of a group may meet a matching column: every ray
     /// through a sheared point of `[at[0][0], at[0][1]] × [at[1][0], at[1][1]]`
     /// (min, max per axis) under the slices' `scaled` maps, against `mask` in
     /// `shear` (the mask and shear this table was built for). `None`: no ray
@@ -815,17 +815,15 @@ impl BlockOccupancy {
     /// block it skips has no candidate for any of them: a group of rays pays
     /// for the empty blocks in front of its surface once instead of once per
     /// ray.
-    #[allow(clippy::too_many_arguments)]
     pub fn first_block<W: Word>(
         &self,
         mask: &BinaryMask<W>,
         shear: &ShearState,
         scaled: &[ScaledMap],
         at: [[f64; 2]; 2],
-        lo: usize,
-        hi: usize,
-        ascending: bool,
+        span: SliceSpan,
     ) -> Option<usize> {
+        let SliceSpan { lo, hi, ascending } = span;
         let (lo, hi) = (lo.max(self.slices[0]), hi.min(self.slices[1]));
         if lo > hi || self.rect.is_none() {
             return None;

@@ -159,6 +159,15 @@ fn take_first<W: Word>(cur: &mut W, ascending: bool, search: Search, log_nb: u32
     (bit >> log_nb) as usize
 }
 
+/// The slices a walk covers: `[lo, hi]` in index order (none when
+/// `lo > hi`), walked from `lo` up (`ascending`) or from `hi` down.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SliceSpan {
+    pub lo: usize,
+    pub hi: usize,
+    pub ascending: bool,
+}
+
 /// The slices of one ray of a scaled plan whose mask codes match, front to back
 /// (a superset of the slices whose sample may be visible; see the module docs).
 pub struct ColumnWalk<'a, W: Word> {
@@ -197,22 +206,20 @@ pub struct ColumnWalk<'a, W: Word> {
 }
 
 impl<'a, W: Word> ColumnWalk<'a, W> {
-    /// The walk of the ray through sheared point `at` over slices `[lo, hi]`
-    /// (index order; none when `lo > hi`) of a mask whose drift is `drift`,
+    /// The walk of the ray through sheared point `at` over the slices of
+    /// `span` of a mask whose drift is `drift`,
     /// skipping blocks by `occ` (built for this mask, shear and matcher).
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub fn new(
         mask: &'a BinaryMask<W>,
         occ: &'a BlockOccupancy,
         drift: &Drift,
         at: [f64; 2],
-        lo: usize,
-        hi: usize,
-        ascending: bool,
+        span: SliceSpan,
         search: Search,
         m: &'a Matcher,
     ) -> Self {
+        let SliceSpan { lo, hi, ascending } = span;
         let log_nb = m.width().trailing_zeros();
         // only the slices with a non-zero code
         let (lo, hi) = (lo.max(occ.slices[0]), hi.min(occ.slices[1]));
@@ -433,22 +440,20 @@ pub struct StillWalk<'a, W: Word> {
 }
 
 impl<'a, W: Word> StillWalk<'a, W> {
-    /// The walk of the ray through sheared point `at` over slices `[lo, hi]`
-    /// (index order; none when `lo > hi`) of a mask whose rays do not drift
+    /// The walk of the ray through sheared point `at` over the slices of
+    /// `span` of a mask whose rays do not drift
     /// (`drift`: [`Drift::is_still`]), its columns chosen by `occ`'s fractions.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub fn new(
         mask: &'a BinaryMask<W>,
         occ: &'a BlockOccupancy,
         drift: &Drift,
         at: [f64; 2],
-        lo: usize,
-        hi: usize,
-        ascending: bool,
+        span: SliceSpan,
         search: Search,
         m: &'a Matcher,
     ) -> Self {
+        let SliceSpan { lo, hi, ascending } = span;
         let log_nb = m.width().trailing_zeros();
         let (lo, hi) = (lo.max(occ.slices[0]), hi.min(occ.slices[1]));
         let (u, _) = drift.of(at);

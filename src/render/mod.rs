@@ -42,6 +42,7 @@ use crate::classify::presets::Tissue;
 use crate::classify::shade_table::ShadeTable;
 use crate::classify::{Classifier, TransferFunction};
 use crate::composite::Intermediate;
+use crate::composite::lean::LeanFrame;
 use crate::data::bcc::BccLattice;
 use crate::data::volume::Volume;
 use crate::encode::depth::Matcher;
@@ -89,6 +90,10 @@ pub struct Renderer {
     /// The shade table of the raycast paths' table shading (kept across frames,
     /// rebuilt when the light direction or the material changes).
     shade: ShadeTable,
+    /// The lean binary iso frame's per-slice table (kept across frames), and
+    /// whether the frames it covers take it.
+    lean: LeanFrame,
+    lean_on: bool,
     inter: Intermediate,
     pool: rayon::ThreadPool,
 }
@@ -111,6 +116,8 @@ impl Renderer {
             frame: FrameSetup::default(),
             pyramids: Pyramids::default(),
             shade: ShadeTable::default(),
+            lean: LeanFrame::default(),
+            lean_on: true,
             inter: Intermediate::default(),
             pool,
         })
@@ -175,6 +182,13 @@ impl Renderer {
     /// The volume's smallest and largest density.
     pub fn value_range(&self) -> (f32, f32) {
         self.range
+    }
+
+    /// Whether the binary frames the lean path covers take it
+    /// ([`crate::composite::lean`]; `true`, the default) or the general ray
+    /// loop (`false`): the same image either way, a knob for comparisons.
+    pub fn set_lean_frame(&mut self, on: bool) {
+        self.lean_on = on;
     }
 
     /// Current settings.

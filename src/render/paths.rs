@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use crate::classify::Classifier;
 use crate::classify::shade_table::{ShadeTable, headlight_object};
+use crate::composite::lean::LeanFrame;
 use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary, render_brute, volume_rect, volume_rect_with_mids};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::normals::NormalStack;
@@ -67,8 +68,14 @@ impl Renderer {
             _ => (None, matcher),
         };
         let settings = self.settings;
+        let classes = FrameClasses { cls, iso, focus };
         let (inter, masks, rle) = (&mut self.inter, &mut self.axes.masks, &mut self.axes.rle);
         let (normals, shade) = (&self.axes.normals, &mut self.shade);
+        let lean = &mut self.lean;
+        // the lean binary iso frame, chosen once for the frame from its plan
+        let lean_frame = self.lean_on
+            && settings.method == Method::Binary
+            && LeanFrame::applies(plan, mode, settings.normals == Normals::Codes && normals[axis].is_some(), settings.search);
         // one job on the pool per plan: shear and render run inside it
         let result: Result<()> = self.pool.install(|| {
             let t = Instant::now();
@@ -102,12 +109,15 @@ impl Renderer {
                     stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
-                    let ctx = ray_context(stack, cls, plan, iso, focus, settings, normals[axis].as_ref(), shade);
-                    match &m.mask {
-                        AnyMask::W32(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
-                        AnyMask::W64(m) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
+                    let ctx = ray_context(stack, plan, classes, settings, normals[axis].as_ref(), shade);
+                    match (&m.mask, lean_frame) {
+                        (AnyMask::W32(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
+                        (AnyMask::W64(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
+                        (AnyMask::W32(m), false) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
+                        (AnyMask::W64(m), false) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                     }
                     stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
+                    stats.lean = lean_frame;
                     rect
                 }
                 Method::Brute => {
@@ -115,7 +125,7 @@ impl Renderer {
                     stats.shear_ms += t.elapsed().as_secs_f64() * 1e3;
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
-                    let ctx = ray_context(stack, cls, plan, iso, focus, settings, normals[axis].as_ref(), shade);
+                    let ctx = ray_context(stack, plan, classes, settings, normals[axis].as_ref(), shade);
                     render_brute(&ctx, rect, inter);
                     stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
                     rect
@@ -155,20 +165,28 @@ impl Renderer {
     }
 }
 
+/// What a frame's samples are classified by: the classifier and iso value
+/// of the current tissue (or the one transfer function), and of the focus
+/// tissue when there is one.
+#[derive(Clone, Copy)]
+struct FrameClasses<'a> {
+    cls: &'a Classifier,
+    iso: f32,
+    focus: Option<(&'a Classifier, f32)>,
+}
+
 /// The rays' context of a frame of `plan`: the classification, iso value and
 /// material, with table shading when the settings ask for it and the normal
 /// codes exist (the shade table brought up to date for the view).
-#[allow(clippy::too_many_arguments)]
 fn ray_context<'a>(
     stack: &'a SliceStack,
-    cls: &'a Classifier,
     plan: &'a FramePlan,
-    iso: f32,
-    focus: Option<(&'a Classifier, f32)>,
+    classes: FrameClasses<'a>,
     settings: Settings,
     normals: Option<&'a NormalStack>,
     shade: &'a mut ShadeTable,
 ) -> RayContext<'a> {
+    let FrameClasses { cls, iso, focus } = classes;
     let mut ctx =
         RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert).with_intermediate(plan.intermediate());
     if let Some((fc, fiso)) = focus {

@@ -1,0 +1,406 @@
+//! The lean binary iso frame: the common case of the binary rotator
+//! (parallel projection, iso mode, normal-code shading) without the
+//! generality it does not use.
+//!
+//! A frame takes this path when its plan translates every slice
+//! ([`MapKind::Translate`]), composites every slice with no per-ray limits,
+//! focus interval or intermediate samples, the mode is [`Mode::Iso`], the
+//! rays shade by normal codes and the depth search is the bit scan
+//! ([`LeanFrame::applies`]). The renderer decides once per frame; every other
+//! frame takes the general ray loop of [`super::raycast`].
+//!
+//! What makes it lean:
+//! - **A per-slice table** ([`SliceEntry`]): in parallel projection every ray
+//!   of slice `k` shares the integer offset of its cell and the bilinear
+//!   weights, so the table holds per slice the stack-index offset of ray
+//!   `(0, 0)`'s cell, the cell shift along both in-slice axes (for the
+//!   in-volume test) and the weights. A ray keeps its own base index
+//!   `p + n₀·q`; a visit is one bit scan, one table entry, one in-volume test
+//!   on two integers and the cell's four densities.
+//! - **A walk with no direction branch**: the walk over a depth row is
+//!   compiled once per direction (`ASC`), and a word's matching slots are
+//!   found once when the word is loaded ([`Matcher::hits`]: the top bit of
+//!   every slot whose code matches), so one-bit masks and threshold codes
+//!   walk alike: a bit scan, the slot (the bit position over the code width)
+//!   and one bit cleared.
+//! - **No test per visit at cell size 1**: a ray's depth row is then its
+//!   own cells' column (no dilation, [`crate::encode::mask`]), so a matching
+//!   bit is a cell of the volume; with super cells a visit tests its cell
+//!   against the slice's extent (two integer compares), as does every
+//!   refinement's previous-slice read.
+//! - **A compact state per ray**: the group of rays whose first candidates are
+//!   found (and their voxels prefetched) before they are traced keeps a word
+//!   index, the remaining bits and the slice of the word's first slot.
+//!
+//! Invariants (what keeps the image the general path's, bit for bit):
+//! - the candidate slices are the general walk's ([`crate::encode::depth::SetBits`]
+//!   with the same matcher), in the same order;
+//! - a sample's cell and weights are [`super::raycast::GridRay`]'s (the same
+//!   [`crate::view::plan::SliceMap`]; the same `(ci, cj) ∈ cells` test);
+//! - the density, the refinement against the previous slice in walking order,
+//!   the depth and the shade are computed by the same functions in the same
+//!   order ([`bilinear`], [`ShadeTable::blend`], [`apply_shade`]), so every
+//!   float operation is the general path's.
+
+use crate::classify::shade_table::ShadeTable;
+use crate::classify::shading::apply_shade;
+use crate::composite::raycast::{Cells, MISS, RayContext, RayResult, RowOut, render_rows};
+use crate::composite::{Intermediate, Mode, Rect};
+use crate::data::slices::bilinear;
+use crate::encode::depth::{Matcher, Search, Word};
+use crate::encode::mask::BinaryMask;
+use crate::view::plan::{FramePlan, Grid, MapKind};
+
+/// Rays per group: the first candidates of a group are found and their voxels
+/// prefetched before the group is traced (the general path's
+/// [`super::raycast::PREFETCH_GROUP`]).
+const GROUP: usize = super::raycast::PREFETCH_GROUP;
+
+/// One slice of the per-slice table of a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SliceEntry {
+    /// Stack index of the first voxel of ray `(0, 0)`'s cell in this slice
+    /// (`di + n₀·dj + n₀n₁·k`, possibly negative): ray `(p, q)`'s is this plus
+    /// `p + n₀·q`.
+    pub base: isize,
+    /// The cell of ray `(p, q)` is `(p + di, q + dj)`.
+    pub di: i32,
+    pub dj: i32,
+    /// The bilinear weights every ray of the slice shares.
+    pub wi: f32,
+    pub wj: f32,
+}
+
+/// The per-slice table of the lean frame, kept across frames (refilled per
+/// frame without allocating once it has grown to the longest axis).
+#[derive(Clone, Debug, Default)]
+pub struct LeanFrame {
+    slices: Vec<SliceEntry>,
+}
+
+/// What a row of the lean frame reads, borrowed for one frame.
+struct Frame<'a, W: Word> {
+    slices: &'a [SliceEntry],
+    words: &'a [W],
+    m: &'a Matcher,
+    table: &'a ShadeTable,
+    iso: f32,
+    iso_rgb: [f32; 3],
+    /// Cells per slice along `i` and `j`.
+    cells: [u32; 2],
+    /// Voxels per row and per slice of the stack.
+    n0: usize,
+    n01: usize,
+    /// Slices per word and `log2` of the code width.
+    slots: usize,
+    log_nb: u32,
+    prefetch: bool,
+}
+
+/// Ray `(p, q)` of the intermediate image and its base stack index
+/// `rb = p + n₀·q` (its cell in slice entry `e` starts at `rb + e.base`).
+#[derive(Clone, Copy, Debug)]
+struct LeanRay {
+    p: usize,
+    q: usize,
+    rb: usize,
+}
+
+/// A ray's walk over its depth row: the word being consumed, its remaining
+/// matching slots (top bits, [`Matcher::hits`]), the slice of its first slot
+/// and how many words are left after it in walking order.
+#[derive(Clone, Copy, Debug)]
+struct Walk<W: Word> {
+    w: usize,
+    cur: W,
+    kbase: usize,
+    left: usize,
+}
+
+impl LeanFrame {
+    /// Whether a frame of `plan` in `mode`, shaded by normal codes (`codes`),
+    /// with depth search `search`, takes the lean path.
+    pub fn applies(plan: &FramePlan, mode: Mode, codes: bool, search: Search) -> bool {
+        plan.kind == MapKind::Translate
+            && mode == Mode::Iso
+            && codes
+            && search == Search::Bitscan
+            && !plan.limited()
+            && plan.focus.is_none()
+            && !plan.intermediate()
+    }
+
+    /// The table of the frame of `ctx`.
+    fn fill(&mut self, ctx: &RayContext) {
+        let n = ctx.stack.n;
+        let (n0, n01) = (n[0] as isize, (n[0] * n[1]) as isize);
+        let pad = ctx.pad;
+        self.slices.clear();
+        self.slices.extend(ctx.maps.iter().enumerate().map(|(k, s)| {
+            let (di, dj) = (s.floor[0] - pad, s.floor[1] - pad);
+            SliceEntry { base: di as isize + n0 * dj as isize + n01 * k as isize, di, dj, wi: s.weight[0], wj: s.weight[1] }
+        }));
+    }
+
+    /// The table of the last frame rendered.
+    pub fn slices(&self) -> &[SliceEntry] {
+        &self.slices
+    }
+
+    /// Renders the rays of `rect` of a frame for which [`LeanFrame::applies`]
+    /// holds (`ctx` shades by normal codes) through the sheared `mask` and
+    /// its matcher `m`, into `out`; marks `rect` valid. The same image as
+    /// [`super::raycast::render_binary`] of the same frame, bit for bit.
+    pub fn render<W: Word>(
+        &mut self,
+        ctx: &RayContext,
+        mask: &BinaryMask<W>,
+        m: &Matcher,
+        prefetch: bool,
+        rect: Option<Rect>,
+        out: &mut Intermediate,
+    ) {
+        assert!(
+            LeanFrame::applies(ctx.plan, ctx.mode, ctx.table().is_some(), Search::Bitscan) && !ctx.intermediate(),
+            "a frame the lean path does not cover"
+        );
+        assert_eq!(m.width(), mask.code_width(), "a matcher of another code width");
+        let Some(table) = ctx.table() else { return };
+        self.fill(ctx);
+        let n = ctx.stack.n;
+        let f = Frame {
+            slices: &self.slices,
+            words: mask.words(),
+            m,
+            table,
+            iso: ctx.iso,
+            iso_rgb: ctx.iso_rgb,
+            cells: ctx.cell_counts(),
+            n0: n[0],
+            n01: n[0] * n[1],
+            slots: (W::BITS >> m.width().trailing_zeros()) as usize,
+            log_nb: m.width().trailing_zeros(),
+            prefetch,
+        };
+        let avx2 = mask.cpu_level().has_avx2();
+        // at cell size 1 a ray's column is its own cells' (no dilation): a
+        // matching bit at slice k is a cell of the volume, so its visit needs
+        // no in-volume test (the grid's margin is the mask's, module docs)
+        let exact = mask.cell_size() == 1 && ctx.plan.grid.pad == Grid::parallel(ctx.stack.cells(), n[2]).pad;
+        super::raycast::with_cells!(ctx, |v| {
+            render_rows(rect, out, |out| {
+                let row = RowStart::new(mask, out.q, out.p0);
+                match (ctx.ascending, exact) {
+                    (true, true) => lean_row_at::<W, _, true, false>(&f, &v, avx2, row, out),
+                    (false, true) => lean_row_at::<W, _, false, false>(&f, &v, avx2, row, out),
+                    (true, false) => lean_row_at::<W, _, true, true>(&f, &v, avx2, row, out),
+                    (false, false) => lean_row_at::<W, _, false, true>(&f, &v, avx2, row, out),
+                }
+            })
+        });
+    }
+}
+
+/// Where the depth rows of one row of rays start: the first ray's column
+/// (`start`, the index of its first word), the words per row, the super-cell
+/// size and how many rays read the first column.
+#[derive(Clone, Copy, Debug)]
+struct RowStart {
+    start: usize,
+    nw: usize,
+    s: usize,
+    left: usize,
+}
+
+impl RowStart {
+    fn new<W: Word>(mask: &BinaryMask<W>, q: usize, p0: usize) -> Self {
+        let (sp, left) = mask.column_run(p0);
+        let sq = mask.ray_column(p0, q).1;
+        RowStart { start: mask.row_start(sp, sq), nw: mask.words_per_row(), s: mask.cell_size(), left }
+    }
+}
+
+impl<W: Word> Frame<'_, W> {
+    /// The walk of the depth row starting at word `start`, at its first
+    /// matching slot (`None`: no candidate).
+    #[inline(always)]
+    fn first<const ASC: bool>(&self, start: usize, nw: usize) -> Option<Walk<W>> {
+        let (w, kbase) = if ASC { (start, 0) } else { (start + nw - 1, (nw - 1) * self.slots) };
+        let cur = self.m.hits(self.words[w]);
+        let mut walk = Walk { w, cur, kbase, left: nw - 1 };
+        self.settle::<ASC>(&mut walk).then_some(walk)
+    }
+
+    /// Moves `walk` past words with no matching slot; false at the row's end.
+    #[inline(always)]
+    fn settle<const ASC: bool>(&self, walk: &mut Walk<W>) -> bool {
+        while walk.cur == W::ZERO {
+            if walk.left == 0 {
+                return false;
+            }
+            walk.left -= 1;
+            if ASC {
+                walk.w += 1;
+                walk.kbase += self.slots;
+            } else {
+                walk.w -= 1;
+                walk.kbase -= self.slots;
+            }
+            walk.cur = self.m.hits(self.words[walk.w]);
+        }
+        true
+    }
+
+    /// The slice of the walk's next candidate (the walk must be settled).
+    #[inline(always)]
+    fn peek<const ASC: bool>(&self, walk: &Walk<W>) -> usize {
+        let pos = if ASC { walk.cur.lz() } else { W::BITS - 1 - walk.cur.tz() };
+        walk.kbase + (pos >> self.log_nb) as usize
+    }
+
+    /// Takes the walk's next candidate (the walk must be settled).
+    #[inline(always)]
+    fn take<const ASC: bool>(&self, walk: &mut Walk<W>) -> usize {
+        let k = self.peek::<ASC>(walk);
+        walk.cur = if ASC { walk.cur & !(W::MSB >> walk.cur.lz()) } else { walk.cur.clear_lowest() };
+        k
+    }
+
+    /// Ray `(p, q)`.
+    #[inline(always)]
+    fn ray(&self, p: usize, q: usize) -> LeanRay {
+        LeanRay { p, q, rb: p + self.n0 * q }
+    }
+
+    /// The stack index of `ray`'s cell in slice entry `e`, if the ray meets
+    /// the slice inside the volume.
+    #[inline(always)]
+    fn cell(&self, e: &SliceEntry, ray: LeanRay) -> Option<usize> {
+        let ci = ray.p as i32 + e.di;
+        let cj = ray.q as i32 + e.dj;
+        ((ci as u32) < self.cells[0] && (cj as u32) < self.cells[1]).then(|| ray.rb.wrapping_add_signed(e.base))
+    }
+
+    /// Hints the cache to fetch what a ray reads from its first candidate at
+    /// stack index `b` on: the cell there, at the slice before it (a hit's
+    /// refinement) and the densities at the slice after it (the next visit
+    /// when the first misses), as [`RayContext::prefetch`] does.
+    #[inline(always)]
+    fn prefetch_at<V: Cells, const ASC: bool>(&self, v: &V, b: usize, last: &mut usize) {
+        if b >> 4 != *last {
+            *last = b >> 4;
+            let (before, after) = if ASC { (b.wrapping_sub(self.n01), b + self.n01) } else { (b + self.n01, b.wrapping_sub(self.n01)) };
+            v.prefetch(b);
+            v.prefetch(before);
+            v.prefetch_densities(after);
+        }
+    }
+
+    /// Traces `ray` from its settled walk: the first candidate whose sample
+    /// reaches the iso value, refined and shaded. Without `CHECKED` every
+    /// candidate is a cell of the volume (cell size 1) and is not tested.
+    #[inline(always)]
+    fn trace<V: Cells, const ASC: bool, const CHECKED: bool>(&self, v: &V, mut walk: Walk<W>, ray: LeanRay) -> RayResult {
+        loop {
+            let k = self.take::<ASC>(&mut walk);
+            let e = &self.slices[k];
+            debug_assert!(CHECKED || self.cell(e, ray).is_some(), "a candidate outside the volume at cell size 1");
+            let b = if CHECKED { self.cell(e, ray) } else { Some(ray.rb.wrapping_add_signed(e.base)) };
+            if let Some(b) = b {
+                let d = bilinear(v.densities(b), e.wi, e.wj);
+                if d >= self.iso {
+                    return self.hit::<V, ASC>(v, ray, k, b, d);
+                }
+            }
+            if !self.settle::<ASC>(&mut walk) {
+                return MISS;
+            }
+        }
+    }
+
+    /// The iso hit at slice `k` (stack index `b`, density `d`): refined
+    /// against the slice before it in walking order and shaded by the blend
+    /// of both slices' shade entries, as [`RayContext`]'s general hit.
+    #[inline(never)]
+    fn hit<V: Cells, const ASC: bool>(&self, v: &V, ray: LeanRay, k: usize, b: usize, d: f32) -> RayResult {
+        let (iso, e) = (self.iso, &self.slices[k]);
+        let kp = if ASC { k.checked_sub(1) } else { Some(k + 1).filter(|&kp| kp < self.slices.len()) };
+        let before = kp.and_then(|kp| {
+            let ep = &self.slices[kp];
+            let bp = self.cell(ep, ray)?;
+            let dp = bilinear(v.densities(bp), ep.wi, ep.wj);
+            (dp < iso).then(|| (kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), bp, ep))
+        });
+        let depth = before.map_or(k as f32, |(kp, t, _, _)| kp as f32 + (k as f32 - kp as f32) * t);
+        let mut s = self.table.blend(v.codes(b), e.wi, e.wj);
+        if let Some((_, t, bp, ep)) = before {
+            let sp = self.table.blend(v.codes(bp), ep.wi, ep.wj);
+            s = [0, 1].map(|a| sp[a] + (s[a] - sp[a]) * t);
+        }
+        let rgb = apply_shade(self.iso_rgb, s);
+        RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
+    }
+}
+
+/// One row of the lean frame by the copy compiled for the CPU level (`avx2`:
+/// the mask's level, [`BinaryMask::cpu_level`], has AVX2).
+#[inline(always)]
+fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, avx2: bool, row: RowStart, out: RowOut) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: the mask's CPU level has AVX2; a mask's level is capped to
+        // at most `kernels::detected()`, which is `Avx2` only when
+        // `is_x86_feature_detected!` found lzcnt and bmi1 on this CPU at run
+        // time, all that `lean_row_lzcnt` requires; its body is the safe
+        // `lean_row`.
+        unsafe { lean_row_lzcnt::<W, V, ASC, CHECKED>(f, v, row, out) };
+        return;
+    }
+    let _ = avx2;
+    lean_row::<W, V, ASC, CHECKED>(f, v, row, out)
+}
+
+/// One row of the lean frame: in groups of [`GROUP`] rays, first every ray's
+/// first candidate (its voxels prefetched), then the traces.
+#[inline(always)]
+fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, mut row: RowStart, out: RowOut) {
+    let RowOut { q, p0, rgba: crow, depth: drow } = out;
+    let mut walks: [Option<Walk<W>>; GROUP] = [None; GROUP];
+    let mut last_line = usize::MAX;
+    for (g, (cg, dg)) in crow.chunks_mut(GROUP).zip(drow.chunks_mut(GROUP)).enumerate() {
+        let pg = p0 + g * GROUP;
+        for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
+            *walk = f.first::<ASC>(row.start, row.nw);
+            if f.prefetch
+                && let Some(w) = walk
+            {
+                let k0 = f.peek::<ASC>(w);
+                if let Some(b) = f.cell(&f.slices[k0], f.ray(pg + dp, q)) {
+                    f.prefetch_at::<V, ASC>(v, b, &mut last_line);
+                }
+            }
+            row.left -= 1;
+            if row.left == 0 {
+                row.start += row.nw;
+                row.left = row.s;
+            }
+        }
+        for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter()).enumerate() {
+            let res = match *walk {
+                None => MISS,
+                Some(w) => f.trace::<V, ASC, CHECKED>(v, w, f.ray(pg + dp, q)),
+            };
+            *c = res.rgba;
+            *d = res.depth;
+        }
+    }
+}
+
+/// [`lean_row`] compiled with `lzcnt`/`tzcnt` (single instructions for the
+/// bit scans). Callers must hold a CPU level with AVX2 that is at most
+/// [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "lzcnt,bmi1")]
+unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, row: RowStart, out: RowOut) {
+    lean_row::<W, V, ASC, CHECKED>(f, v, row, out)
+}

@@ -221,7 +221,7 @@ pub fn surface_truth(
                     Shape::Ball { .. } | Shape::Ellipsoid { .. } if closed => t.filter(|&t| t >= t0 && t <= t1).map(|t| (t, true)),
                     _ => {
                         let dt = if speed > 0.0 { SURFACE_BRACKET_MM / speed } else { f64::INFINITY };
-                        march(&f, o, d, t0, t1, entry, iso, dt, shape.lipschitz() * speed).map(|t| (t, true))
+                        march(&f, (o, d), [t0, t1], entry, Steps { iso, dt, lipschitz: shape.lipschitz() * speed }).map(|t| (t, true))
                     }
                 }
             };
@@ -255,11 +255,20 @@ fn quadric_hit(p0: DVec3, d: DVec3, r: DVec3) -> Option<f64> {
     Some(r0.min(r1))
 }
 
-/// The first crossing of `f = iso` along `o + t·d` in `[t0, t1]` from a point
-/// below iso at `t0` (`f0 = f(o + t0·d)`): steps of `max(dt, (iso − f)/lipschitz)`,
-/// then bisection.
-#[allow(clippy::too_many_arguments)]
-fn march(f: &impl Fn(DVec3) -> f64, o: DVec3, d: DVec3, t0: f64, t1: f64, f0: f64, iso: f64, dt: f64, lipschitz: f64) -> Option<f64> {
+/// How [`march`] steps toward the crossing of `iso`: by at least `dt`, and
+/// by as much as a density of this Lipschitz bound allows.
+#[derive(Clone, Copy, Debug)]
+struct Steps {
+    iso: f64,
+    dt: f64,
+    lipschitz: f64,
+}
+
+/// The first crossing of `f = iso` along `o + t·d` (`line = (o, d)`) in
+/// `[t0, t1]` from a point below iso at `t0` (`f0 = f(o + t0·d)`): steps of
+/// `max(dt, (iso − f)/lipschitz)`, then bisection.
+fn march(f: &impl Fn(DVec3) -> f64, (o, d): (DVec3, DVec3), [t0, t1]: [f64; 2], f0: f64, steps: Steps) -> Option<f64> {
+    let Steps { iso, dt, lipschitz } = steps;
     let (mut ta, mut fa) = (t0, f0);
     if !dt.is_finite() {
         return None;

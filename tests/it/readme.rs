@@ -107,7 +107,8 @@ fn shrink(args: &mut Vec<String>, reads_a_file: bool) {
         }
         "bench" => {
             set_flag(args, "--size", "32");
-            if !reads_a_file {
+            // a suite picks its own volumes
+            if !reads_a_file && !args.iter().any(|a| a == "--suite") {
                 set_flag(args, "--phantom-dims", "24,24,24");
             }
             set_flag(args, "--reps", "1");

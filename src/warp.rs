@@ -869,7 +869,7 @@ mod tests {
         }
         // the run itself, against a scan
         for _ in 0..4000 {
-            let (p, dp, n) = (next(5 * one), next(2 * one), (next(30) + 31) as i64);
+            let (p, dp, n) = (next(5 * one), next(2 * one), next(30) + 31);
             let [a, b] = linear_run(p, dp, [0, 3 * one], n);
             let inside: Vec<i64> = (0..n).filter(|t| (0..3 * one).contains(&(p + t * dp))).collect();
             let want = if inside.is_empty() { 0 } else { inside.len() as i64 };

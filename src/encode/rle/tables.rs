@@ -220,7 +220,10 @@ mod tests {
                     let c = [xs[(i + j) % xs.len()] * a, xs[(i * 3 + 1) % xs.len()] * a, -xs[j] * 0.1, a];
                     let (got, want) = (shade_voxel(c, d, s), formula(c, d, s));
                     for l in 0..4 {
-                        assert!(got[l].to_bits() == want[l].to_bits() || (got[l].is_nan() && want[l].is_nan()), "{c:?} {d} {s}: {got:?} vs {want:?}");
+                        assert!(
+                            got[l].to_bits() == want[l].to_bits() || (got[l].is_nan() && want[l].is_nan()),
+                            "{c:?} {d} {s}: {got:?} vs {want:?}"
+                        );
                     }
                     n += 1;
                 }

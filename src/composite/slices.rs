@@ -359,7 +359,8 @@ fn composite_row<S: Sampler, const LIM: bool>(
     mut bot: Cursor,
     mut top: Cursor,
     [ci_lo, ci_hi]: [u32; 2],
-    row: &SliceRow<S>,
+    t: &S,
+    row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
 ) {
@@ -383,7 +384,7 @@ fn composite_row<S: Sampler, const LIM: bool>(
             ci = nx - 1;
             continue;
         }
-        ci = span::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], row, px, links);
+        ci = span::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], t, row, px, links);
         if ci > ci_hi {
             return;
         }
@@ -403,11 +404,14 @@ fn span<S: Sampler, const LIM: bool>(
     bot: &mut Cursor,
     top: &mut Cursor,
     [mut ci, ci_hi]: [u32; 2],
-    row: &SliceRow<S>,
+    t: &S,
+    row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
 ) -> u32 {
-    let (off, smp, lim, t) = (row.off, &row.smp, row.lim, row.smp.t);
+    // the row's weights as a local copy: the loops below keep them in registers
+    let (off, w, lim) = (row.off, row.w, row.lim);
+    let smp = &SliceSamples { w: &w, ert: row.ert };
     let (vb, vt) = (bot.at(ci), top.at(ci));
     let [b, tp] = t.column(t.get_or_missing(vb), t.get_or_missing(vt));
     let mut left = Left { b, t: tp, any: vb.is_some() || vt.is_some() };
@@ -429,9 +433,9 @@ fn span<S: Sampler, const LIM: bool>(
         let bv = if bin { &bot.vox[bot.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let tv = if tin { &top.vox[top.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let (want, done) = match (bin, tin) {
-            (true, true) => (n, segment::<S, true, true, LIM>(p, l, bv, tv, &mut left, smp, lm)),
-            (true, false) => (n, segment::<S, true, false, LIM>(p, l, bv, &[], &mut left, smp, lm)),
-            (false, true) => (n, segment::<S, false, true, LIM>(p, l, &[], tv, &mut left, smp, lm)),
+            (true, true) => (n, segment::<S, true, true, LIM>(p, l, [bv, tv], &mut left, t, smp, lm)),
+            (true, false) => (n, segment::<S, true, false, LIM>(p, l, [bv, &[]], &mut left, t, smp, lm)),
+            (false, true) => (n, segment::<S, false, true, LIM>(p, l, [&[], tv], &mut left, t, smp, lm)),
             (false, false) => {
                 if !left.any {
                     return ci; // all four voxels transparent: back to run skipping
@@ -441,7 +445,7 @@ fn span<S: Sampler, const LIM: bool>(
                     holes: if LIM && !lm.holes.is_empty() { &lm.holes[..1] } else { &[][..] },
                     k: lm.k,
                 };
-                (1, segment::<S, false, false, LIM>(&mut p[..1], &mut l[..1], &[], &[], &mut left, smp, lm1))
+                (1, segment::<S, false, false, LIM>(&mut p[..1], &mut l[..1], [&[], &[]], &mut left, t, smp, lm1))
             }
         };
         ci += done as u32;
@@ -464,21 +468,23 @@ struct BoxRow<'w, 'c> {
     wj: &'w [f32; MAXW],
 }
 
-/// How a translated slice's samples are made and composited: the slice's
-/// cell weights (one for all its pixels), the sampler, the early ray
+/// How a translated slice's samples are weighted and composited: the
+/// slice's cell weights (one for all its pixels) and the early ray
 /// termination threshold.
-struct SliceSamples<'a, S> {
+struct SliceSamples<'a> {
     w: &'a Weights,
-    t: &'a S,
     ert: f32,
 }
 
 /// One intermediate row of a translated slice ([`composite_row`]): cell
-/// column `ci` lands on the row's pixel `ci + off`; its samples
-/// ([`SliceSamples`]) and its pixels' ray limits.
-struct SliceRow<'a, S> {
+/// column `ci` lands on the row's pixel `ci + off`; the slice's cell
+/// weights `w`, the termination threshold `ert`, the pixels' ray limits.
+/// (The sampler travels beside it, as its own argument: the traversal's
+/// inner loops then read its tables' addresses once.)
+struct SliceRow<'a> {
     off: isize,
-    smp: SliceSamples<'a, S>,
+    w: Weights,
+    ert: f32,
     lim: Limits<'a>,
 }
 
@@ -592,13 +598,13 @@ impl RowComposite<'_> {
 fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
     px: &mut [[f32; 4]],
     links: &mut [u32],
-    bv: &[RleVoxel],
-    tv: &[RleVoxel],
+    [bv, tv]: [&[RleVoxel]; 2],
     left: &mut Left,
-    smp: &SliceSamples<S>,
+    t: &S,
+    smp: &SliceSamples,
     lim: Limits,
 ) -> usize {
-    let (w, t, ert) = (smp.w, smp.t, smp.ert);
+    let (w, ert) = (smp.w, smp.ert);
     // exact lengths, so the loop below needs no bounds checks
     let n = px.len();
     let links = &mut links[..n];
@@ -664,7 +670,7 @@ fn mid_run<S: Sampler, const SHIFT: bool>(
     // exact lengths, so the loop below needs no bounds checks
     let n = px.len();
     let links = &mut links[..n];
-    let vox = run.vox.map(|v| &v[..n]);
+    let (vox, imap) = (run.vox.map(|v| &v[..n]), run.imap);
     #[inline(always)]
     fn column<S: Sampler>(t: &S, vox: &[&[RleVoxel]; 4], s: usize) -> S::MidColumn {
         t.mid_column(t.voxel(vox[0][s]), t.voxel(vox[1][s]), t.voxel(vox[2][s]), t.voxel(vox[3][s]))
@@ -680,7 +686,7 @@ fn mid_run<S: Sampler, const SHIFT: bool>(
         let w = if SHIFT {
             w
         } else {
-            let (cn, wn) = run.imap.cell(run.x + s as i64);
+            let (cn, wn) = imap.cell(run.x + s as i64);
             if cn != run.c as i64 + s as i64 {
                 done = s;
                 break;
@@ -881,24 +887,25 @@ impl<S: Sampler> RleFrame<'_, S> {
                         focus_runs(fl.row(q_first + row), [k as u32; 2], first as i64 + op, hi as i64 + op, |x0, x1, f| {
                             let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
                             let (lo, hi, t) = ((x0 - op) as u32, (x1 - op) as u32, if f { ft } else { self.tables });
-                            let smp = SliceSamples { w: &w, t, ert: self.ert };
+                            let ert = self.ert;
                             match limits {
-                                None => composite_row::<S, false>(cb, ct, [lo, hi], &SliceRow { off, smp, lim: Limits::NONE }, prow, lrow),
+                                None => {
+                                    composite_row::<S, false>(cb, ct, [lo, hi], t, &SliceRow { off, w, ert, lim: Limits::NONE }, prow, lrow)
+                                }
                                 Some(l) => {
                                     let lim = Limits::of(l, q_first + row, r, k);
-                                    composite_row::<S, true>(cb, ct, [lo, hi], &SliceRow { off, smp, lim }, prow, lrow)
+                                    composite_row::<S, true>(cb, ct, [lo, hi], t, &SliceRow { off, w, ert, lim }, prow, lrow)
                                 }
                             }
                         })
                     }
                     (None, _, _) => {
-                        let smp = SliceSamples { w: &w, t: self.tables, ert: self.ert };
-                        composite_row::<S, false>(cb, ct, [first as u32, hi as u32], &SliceRow { off, smp, lim: Limits::NONE }, prow, lrow)
+                        let sr = SliceRow { off, w, ert: self.ert, lim: Limits::NONE };
+                        composite_row::<S, false>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow)
                     }
                     (Some(l), _, _) => {
-                        let smp = SliceSamples { w: &w, t: self.tables, ert: self.ert };
-                        let lim = Limits::of(l, q_first + row, r, k);
-                        composite_row::<S, true>(cb, ct, [first as u32, hi as u32], &SliceRow { off, smp, lim }, prow, lrow)
+                        let sr = SliceRow { off, w, ert: self.ert, lim: Limits::of(l, q_first + row, r, k) };
+                        composite_row::<S, true>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow)
                     }
                 }
             }

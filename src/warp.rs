@@ -239,9 +239,12 @@ pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T
     let origin = [plan.grid.pad as f64; 2];
     let w = out.width;
     let valid = inter.valid;
+    // (an intermediate image with a valid rectangle holds at least 2 × 2 pixels)
+    let taps = valid.map(|_| Taps::new(inter));
+    let avx = crate::kernels::level().has_avx2();
     out.data.par_chunks_mut(w).zip(out.spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
         let (old0, old1) = (span.0 as usize, span.1 as usize);
-        let Some(r) = valid else {
+        let (Some(r), Some(taps)) = (valid, &taps) else {
             row[old0..old1].fill(T::CLEAR);
             *span = (0, 0);
             return;
@@ -267,19 +270,194 @@ pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T
         // whose left/top edge is at least 1, so p, q > 0 here. Coordinates step in
         // 32.32 fixed point: exact integer parts, no float→int conversion per pixel,
         // drift below 1e-6 pixel over a row.
-        let iw = inter.size[0];
-        let (ih, rgba) = (inter.size[1], &inter.rgba);
         // p(u) = round(pb·2³²) + u·round(pa·2³²): a function of u alone, so the same
         // pixel gets the same coordinate whatever span (valid rectangle) it is in
         let (dp, dq) = ((pa * FIX_ONE).round() as i64, (qa * FIX_ONE).round() as i64);
-        let (mut p, mut q) = ((pb * FIX_ONE).round() as i64 + u0 as i64 * dp, (qb * FIX_ONE).round() as i64 + u0 as i64 * dq);
-        for px in row[u0..u1].iter_mut() {
-            let (x0, y0) = (((p >> 32) as usize).min(iw - 2), ((q >> 32) as usize).min(ih - 2));
-            *px = bilinear(rgba, iw, [x0, y0], [frac32(p), frac32(q)]);
-            p += dp;
-            q += dq;
-        }
+        let (p, q) = ((pb * FIX_ONE).round() as i64 + u0 as i64 * dp, (qb * FIX_ONE).round() as i64 + u0 as i64 * dq);
+        affine_row(&mut row[u0..u1], taps, [p, q], [dp, dq], avx);
     });
+}
+
+/// The intermediate image as the warps read it: its pixels, its width and its
+/// height, at least 2 × 2 (so every tap's cell has a right and a lower
+/// neighbour).
+struct Taps<'a> {
+    rgba: &'a [[f32; 4]],
+    iw: usize,
+    ih: usize,
+}
+
+impl<'a> Taps<'a> {
+    /// The taps of `inter`, which holds at least 2 × 2 pixels (any image
+    /// with a valid rectangle does).
+    fn new(inter: &'a Intermediate) -> Self {
+        let [iw, ih] = inter.size;
+        assert!(iw >= 2 && ih >= 2 && inter.rgba.len() >= iw * ih, "intermediate image of {iw} × {ih} pixels");
+        Taps { rgba: &inter.rgba, iw, ih }
+    }
+
+    /// The bilinear sample at 32.32 fixed-point `(p, q)`, its cell clamped
+    /// into the image: `(p >> 32, q >> 32)` capped at `(iw − 2, ih − 2)` (a
+    /// negative coordinate's cell, read as unsigned, caps there too).
+    #[inline(always)]
+    fn clamped<T: Texel>(&self, p: i64, q: i64) -> T {
+        let (x0, y0) = (((p >> 32) as usize).min(self.iw - 2), ((q >> 32) as usize).min(self.ih - 2));
+        bilinear(self.rgba, self.iw, [x0, y0], [frac32(p), frac32(q)])
+    }
+}
+
+/// The pixels `row` of an affine warp's row span: pixel `t` takes the
+/// bilinear sample at 32.32 fixed-point `start + t · step` (its cell clamped
+/// into the image, [`Taps::clamped`]). The run of pixels whose cells lie in
+/// the image as they are, found once for the row ([`linear_run`]), is
+/// resampled without clamps or bounds tests ([`interior`], four pixels at
+/// a time with AVX when `avx`: [`interior_avx`]); the pixels on either side
+/// of it (if any) through the clamp. The same numbers every way.
+#[inline(never)]
+fn affine_row<T: Texel>(row: &mut [T], taps: &Taps, [p, q]: [i64; 2], [dp, dq]: [i64; 2], avx: bool) {
+    let n = row.len() as i64;
+    // cells x0 = p >> 32 in 0 ..= iw − 2 and y0 likewise: 0 ≤ p < (iw − 1)·2³²
+    let [a0, b0] = linear_run(p, dp, [0, (taps.iw as i64 - 1) << 32], n);
+    let [a1, b1] = linear_run(q, dq, [0, (taps.ih as i64 - 1) << 32], n);
+    let (a, b) = (a0.max(a1), b0.min(b1).max(a0.max(a1)));
+    let at = |t: i64| (p + t * dp, q + t * dq);
+    for (t, px) in row.iter_mut().enumerate().take(a as usize) {
+        let (p, q) = at(t as i64);
+        *px = taps.clamped(p, q);
+    }
+    let run = &mut row[a as usize..b as usize];
+    #[cfg(target_arch = "x86_64")]
+    if avx {
+        // SAFETY: `avx` is set only where the CPU runs AVX2 (so AVX), and every
+        // pixel of `run` has its cell inside the image ([`linear_run`])
+        unsafe { interior_avx(run, taps, at(a), [dp, dq]) };
+    } else {
+        interior(run, taps, at(a), [dp, dq]);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = avx;
+        interior(run, taps, at(a), [dp, dq]);
+    }
+    for (t, px) in row.iter_mut().enumerate().skip(b as usize) {
+        let (p, q) = at(t as i64);
+        *px = taps.clamped(p, q);
+    }
+}
+
+/// The pixels `t` of `0..n` whose coordinate `p + t · dp` lies in `[lo, hi)`:
+/// one run `[a, b)` (`a = b` when none), the coordinate being linear in `t`.
+fn linear_run(p: i64, dp: i64, [lo, hi]: [i64; 2], n: i64) -> [i64; 2] {
+    // floor and ceiling of a / b for b ≠ 0
+    let floor = |a: i64, b: i64| {
+        let d = a / b;
+        if a % b != 0 && (a < 0) != (b < 0) { d - 1 } else { d }
+    };
+    let ceil = |a: i64, b: i64| -floor(-a, b);
+    let [a, b] = match dp.signum() {
+        0 if lo <= p && p < hi => [0, n],
+        0 => [0, 0],
+        // t·dp ≥ lo − p ⇔ t ≥ ⌈(lo − p)/dp⌉; t·dp < hi − p ⇔ t < ⌈(hi − p)/dp⌉
+        1 => [ceil(lo - p, dp), ceil(hi - p, dp)],
+        // dp < 0: t·dp < hi − p ⇔ t > (hi − p)/dp; t·dp ≥ lo − p ⇔ t ≤ (lo − p)/dp
+        _ => [floor(hi - p, dp) + 1, floor(lo - p, dp) + 1],
+    };
+    let a = a.clamp(0, n);
+    [a, b.clamp(a, n)]
+}
+
+/// The bilinear samples of `row` at 32.32 fixed-point `start + t · step`,
+/// every one's cell inside the image (`p >> 32 ≤ iw − 2`, `q >> 32 ≤ ih − 2`,
+/// both coordinates non-negative: what [`linear_run`] found): what
+/// [`Taps::clamped`] gives there, bit for bit, without its clamps and bounds
+/// tests.
+#[inline(always)]
+fn interior<T: Texel>(row: &mut [T], taps: &Taps, (mut p, mut q): (i64, i64), [dp, dq]: [i64; 2]) {
+    let (iw, base) = (taps.iw, taps.rgba.as_ptr());
+    for px in row.iter_mut() {
+        debug_assert!(p >= 0 && q >= 0 && (p >> 32) as usize <= iw - 2 && (q >> 32) as usize <= taps.ih - 2);
+        let i = (q >> 32) as usize * iw + (p >> 32) as usize;
+        // SAFETY: the caller's run keeps 0 ≤ p >> 32 ≤ iw − 2 and
+        // 0 ≤ q >> 32 ≤ ih − 2, so the last tap, i + iw + 1, is at most
+        // (ih − 2)·iw + iw − 2 + iw + 1 = ih·iw − 1, inside `rgba`
+        // (`Taps::new` checked rgba.len() ≥ iw·ih). Exercised by every
+        // affine warp and by `affine_rows_equal_the_clamped_taps`.
+        *px = unsafe { bilinear_raw(base.add(i), iw, [frac32(p), frac32(q)]) };
+        p += dp;
+        q += dq;
+    }
+}
+
+/// [`interior`] with AVX, four pixels a step: the four pixels' in-cell
+/// weights at once (the fractions' low 32 bits step in 32-bit lanes and
+/// convert exactly as [`frac32`] does), each pixel's top and bottom pairs of
+/// taps read as one 8-float vector each and weighted `[1 − fx, fx]` in one
+/// multiply. Every sum and product is [`lerp2`]'s, in its order: the same
+/// bits.
+///
+/// # Safety
+/// The CPU runs AVX, and every pixel's cell lies inside the image (as for
+/// [`interior`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn interior_avx<T: Texel>(row: &mut [T], taps: &Taps, (mut p, mut q): (i64, i64), [dp, dq]: [i64; 2]) {
+    use std::arch::x86_64::*;
+    let (iw, base) = (taps.iw, taps.rgba.as_ptr());
+    let quads = row.len() / 4;
+    // the low 32 bits of p + t·dp, t = 0..4, stepping by 4·dp (wrapping: the
+    // low bits of a sum are the sum of the low bits)
+    let lanes = |x: i64, d: i64| _mm_setr_epi32(x as i32, (x + d) as i32, (x + 2 * d) as i32, (x + 3 * d) as i32);
+    let (mut plo, mut qlo) = (lanes(p, dp), lanes(q, dq));
+    let (pstep, qstep) = (_mm_set1_epi32((4 * dp) as i32), _mm_set1_epi32((4 * dq) as i32));
+    let (one, scale) = (_mm_set1_ps(1.0), _mm_set1_ps(1.0 / FIX_ONE as f32));
+    // an unsigned 32-bit lane as f32, rounded once as `u32 as f32` is: its
+    // high and low halves convert exactly, their sum rounds
+    let to_f32 = |v: __m128i| {
+        let hi = _mm_mul_ps(_mm_cvtepi32_ps(_mm_srli_epi32::<16>(v)), _mm_set1_ps(65536.0));
+        _mm_add_ps(hi, _mm_cvtepi32_ps(_mm_and_si128(v, _mm_set1_epi32(0xFFFF))))
+    };
+    // pixel k's x weights: lanes 0–3 its 1 − fx, lanes 4–7 its fx
+    let (sel_even, sel_odd) = (_mm256_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1), _mm256_setr_epi32(2, 2, 2, 2, 3, 3, 3, 3));
+    for quad in row.chunks_exact_mut(4).take(quads) {
+        let fx = _mm_mul_ps(to_f32(plo), scale);
+        let fy = _mm_mul_ps(to_f32(qlo), scale);
+        let (gx, gy) = (_mm_sub_ps(one, fx), _mm_sub_ps(one, fy));
+        // [1 − fx₀, fx₀, 1 − fx₁, fx₁] and the same for pixels 2 and 3, in both halves
+        let (lo, hi) = (_mm_unpacklo_ps(gx, fx), _mm_unpackhi_ps(gx, fx));
+        let (lo, hi) = (_mm256_set_m128(lo, lo), _mm256_set_m128(hi, hi));
+        let wx = [
+            _mm256_permutevar_ps(lo, sel_even),
+            _mm256_permutevar_ps(lo, sel_odd),
+            _mm256_permutevar_ps(hi, sel_even),
+            _mm256_permutevar_ps(hi, sel_odd),
+        ];
+        macro_rules! pixel {
+            ($k:literal, $sel:literal) => {{
+                // SAFETY: (the caller's contract) the cell's pixels i, i + 1,
+                // i + iw and i + iw + 1 lie inside the image: the two pairs
+                // are 8 consecutive floats each, read unaligned
+                let (top, bot) = unsafe {
+                    let cell = base.add((q >> 32) as usize * iw + (p >> 32) as usize) as *const f32;
+                    (_mm256_loadu_ps(cell), _mm256_loadu_ps(cell.add(4 * iw)))
+                };
+                let (tw, bw) = (_mm256_mul_ps(top, wx[$k]), _mm256_mul_ps(bot, wx[$k]));
+                let t = _mm_add_ps(_mm256_castps256_ps128(tw), _mm256_extractf128_ps::<1>(tw));
+                let b = _mm_add_ps(_mm256_castps256_ps128(bw), _mm256_extractf128_ps::<1>(bw));
+                let s = _mm_add_ps(_mm_mul_ps(t, _mm_shuffle_ps::<$sel>(gy, gy)), _mm_mul_ps(b, _mm_shuffle_ps::<$sel>(fy, fy)));
+                quad[$k] = T::from_rgba(Vec4::from(s));
+                p += dp;
+                q += dq;
+            }};
+        }
+        pixel!(0, 0x00);
+        pixel!(1, 0x55);
+        pixel!(2, 0xAA);
+        pixel!(3, 0xFF);
+        plo = _mm_add_epi32(plo, pstep);
+        qlo = _mm_add_epi32(qlo, qstep);
+    }
+    // SAFETY: the caller's contract, for the last pixels
+    interior(&mut row[quads * 4..], taps, (p, q), [dp, dq]);
 }
 
 /// The span of `u` in `(lo, hi)` where a row's back-projection lies in front of
@@ -512,8 +690,28 @@ fn frac32(p: i64) -> f32 {
 fn bilinear<T: Texel>(rgba: &[[f32; 4]], iw: usize, [x0, y0]: [usize; 2], [fx, fy]: [f32; 2]) -> T {
     let i = y0 * iw + x0;
     let (top, bot) = (&rgba[i..i + 2], &rgba[i + iw..i + iw + 2]);
-    let t = Vec4::from_array(top[0]).lerp(Vec4::from_array(top[1]), fx);
-    let b = Vec4::from_array(bot[0]).lerp(Vec4::from_array(bot[1]), fx);
+    lerp2(top[0], top[1], bot[0], bot[1], [fx, fy])
+}
+
+/// [`bilinear`] at `cell` (the cell's top-left pixel, row stride `iw`)
+/// without bounds tests.
+///
+/// # Safety
+/// `cell`, `cell + 1`, `cell + iw` and `cell + iw + 1` are pixels of one
+/// image.
+#[inline(always)]
+unsafe fn bilinear_raw<T: Texel>(cell: *const [f32; 4], iw: usize, f: [f32; 2]) -> T {
+    // SAFETY: the caller's contract
+    unsafe { lerp2(*cell, *cell.add(1), *cell.add(iw), *cell.add(iw + 1), f) }
+}
+
+/// The bilinear blend of a cell's top pair `(t0, t1)` and bottom pair
+/// `(b0, b1)` at in-cell weights `[fx, fy]`: along x in both rows, then
+/// along y (each `a·(1 − s) + b·s`).
+#[inline(always)]
+fn lerp2<T: Texel>(t0: [f32; 4], t1: [f32; 4], b0: [f32; 4], b1: [f32; 4], [fx, fy]: [f32; 2]) -> T {
+    let t = Vec4::from_array(t0).lerp(Vec4::from_array(t1), fx);
+    let b = Vec4::from_array(b0).lerp(Vec4::from_array(b1), fx);
     T::from_rgba(t.lerp(b, fy))
 }
 
@@ -621,6 +819,65 @@ mod tests {
             assert!(seen > 1000, "homography {i}: {seen} pixels checked");
         }
         assert!(worst > 0.0);
+    }
+
+    /// [`affine_row`] (the run without clamps and the clamped pixels on its
+    /// sides) gives every pixel exactly what [`Taps::clamped`] gives it:
+    /// rows that start, end, enter or leave the image on either side along
+    /// either axis, steps of both signs and zero, coordinates on cell edges.
+    #[test]
+    fn affine_rows_equal_the_clamped_taps() {
+        let (iw, ih) = (7usize, 5usize);
+        let mut inter = Intermediate::default();
+        inter.prepare([iw, ih]);
+        for (i, c) in inter.rgba.iter_mut().enumerate() {
+            *c = [i as f32 * 0.37, (i * i % 11) as f32, 1.0 / (1.0 + i as f32), (i % 3) as f32 * 0.5];
+        }
+        let taps = Taps::new(&inter);
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = |m: i64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed % (2 * m as u64 + 1)) as i64 - m
+        };
+        let one = 1i64 << 32;
+        for case in 0..4000 {
+            let n = 1 + (next(20) + 20) as usize;
+            let start = [next(9 * one), next(7 * one)];
+            // steps of up to a pixel, some exactly zero or whole
+            let step = [0, 1].map(|a| match case % 5 {
+                0 if a == 0 => 0,
+                1 => next(2) * one / 2,
+                _ => next(one),
+            });
+            // the scalar run and (where the CPU has it) the AVX one
+            for avx in [false, crate::kernels::detected().has_avx2()] {
+                let mut got = vec![[f32::NAN; 4]; n];
+                affine_row(&mut got, &taps, start, step, avx);
+                for (t, g) in got.iter().enumerate() {
+                    let want: [f32; 4] = taps.clamped(start[0] + t as i64 * step[0], start[1] + t as i64 * step[1]);
+                    assert_eq!(g.map(f32::to_bits), want.map(f32::to_bits), "case {case} (avx {avx}): pixel {t} of {start:?} + t·{step:?}");
+                }
+                let mut got8 = vec![[0u8; 4]; n];
+                affine_row(&mut got8, &taps, start, step, avx);
+                for (t, g) in got8.iter().enumerate() {
+                    let want: [u8; 4] = taps.clamped(start[0] + t as i64 * step[0], start[1] + t as i64 * step[1]);
+                    assert_eq!(*g, want, "case {case} (avx {avx}): 8-bit pixel {t}");
+                }
+            }
+        }
+        // the run itself, against a scan
+        for _ in 0..4000 {
+            let (p, dp, n) = (next(5 * one), next(2 * one), next(30) + 31);
+            let [a, b] = linear_run(p, dp, [0, 3 * one], n);
+            let inside: Vec<i64> = (0..n).filter(|t| (0..3 * one).contains(&(p + t * dp))).collect();
+            let want = if inside.is_empty() { 0 } else { inside.len() as i64 };
+            assert_eq!(b - a, want, "{p} + t·{dp}");
+            if want > 0 {
+                assert_eq!([a, b], [inside[0], inside[0] + want]);
+            }
+        }
     }
 
     /// Every value the 8-bit texel can meet: NaN, ±∞, out of range, and both

@@ -354,21 +354,17 @@ fn find(links: &mut [u32], x: usize) -> usize {
 /// Alternates two skips: opaque pixels through the links, transparent voxels
 /// through the runs. Between them, [`span`] composites the pixels that touch
 /// some non-transparent voxel.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn composite_row<S: Sampler, const LIM: bool>(
     mut bot: Cursor,
     mut top: Cursor,
-    ci_lo: u32,
-    ci_hi: u32,
-    off: isize,
-    w: &Weights,
+    [ci_lo, ci_hi]: [u32; 2],
     t: &S,
-    ert: f32,
+    row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
-    lim: Limits,
 ) {
+    let off = row.off;
     let mut ci = ci_lo;
     loop {
         // skip opaque pixels through the links
@@ -388,7 +384,7 @@ fn composite_row<S: Sampler, const LIM: bool>(
             ci = nx - 1;
             continue;
         }
-        ci = span::<S, LIM>(&mut bot, &mut top, ci, ci_hi, off, w, t, ert, px, links, lim);
+        ci = span::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], t, row, px, links);
         if ci > ci_hi {
             return;
         }
@@ -403,21 +399,19 @@ fn composite_row<S: Sampler, const LIM: bool>(
 /// same kind of run, so each is a plain loop over one or two voxel slices
 /// ([`segment`]). The right column of one pixel is the left column of the next,
 /// so each voxel is shaded once per row.
-#[allow(clippy::too_many_arguments)]
 #[inline(never)] // one small function per span keeps the loops' state in registers
 fn span<S: Sampler, const LIM: bool>(
     bot: &mut Cursor,
     top: &mut Cursor,
-    mut ci: u32,
-    ci_hi: u32,
-    off: isize,
-    w: &Weights,
+    [mut ci, ci_hi]: [u32; 2],
     t: &S,
-    ert: f32,
+    row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
-    lim: Limits,
 ) -> u32 {
+    // the row's weights as a local copy: the loops below keep them in registers
+    let (off, w, lim) = (row.off, row.w, row.lim);
+    let smp = &SliceSamples { w: &w, ert: row.ert };
     let (vb, vt) = (bot.at(ci), top.at(ci));
     let [b, tp] = t.column(t.get_or_missing(vb), t.get_or_missing(vt));
     let mut left = Left { b, t: tp, any: vb.is_some() || vt.is_some() };
@@ -439,9 +433,9 @@ fn span<S: Sampler, const LIM: bool>(
         let bv = if bin { &bot.vox[bot.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let tv = if tin { &top.vox[top.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let (want, done) = match (bin, tin) {
-            (true, true) => (n, segment::<S, true, true, LIM>(p, l, bv, tv, &mut left, w, t, ert, lm)),
-            (true, false) => (n, segment::<S, true, false, LIM>(p, l, bv, &[], &mut left, w, t, ert, lm)),
-            (false, true) => (n, segment::<S, false, true, LIM>(p, l, &[], tv, &mut left, w, t, ert, lm)),
+            (true, true) => (n, segment::<S, true, true, LIM>(p, l, [bv, tv], &mut left, t, smp, lm)),
+            (true, false) => (n, segment::<S, true, false, LIM>(p, l, [bv, &[]], &mut left, t, smp, lm)),
+            (false, true) => (n, segment::<S, false, true, LIM>(p, l, [&[], tv], &mut left, t, smp, lm)),
             (false, false) => {
                 if !left.any {
                     return ci; // all four voxels transparent: back to run skipping
@@ -451,7 +445,7 @@ fn span<S: Sampler, const LIM: bool>(
                     holes: if LIM && !lm.holes.is_empty() { &lm.holes[..1] } else { &[][..] },
                     k: lm.k,
                 };
-                (1, segment::<S, false, false, LIM>(&mut p[..1], &mut l[..1], &[], &[], &mut left, w, t, ert, lm1))
+                (1, segment::<S, false, false, LIM>(&mut p[..1], &mut l[..1], [&[], &[]], &mut left, t, smp, lm1))
             }
         };
         ci += done as u32;
@@ -472,6 +466,26 @@ struct BoxRow<'w, 'c> {
     hi: i64,
     curs: [Cursor<'c>; MAXW],
     wj: &'w [f32; MAXW],
+}
+
+/// How a translated slice's samples are weighted and composited: the
+/// slice's cell weights (one for all its pixels) and the early ray
+/// termination threshold.
+struct SliceSamples<'a> {
+    w: &'a Weights,
+    ert: f32,
+}
+
+/// One intermediate row of a translated slice ([`composite_row`]): cell
+/// column `ci` lands on the row's pixel `ci + off`; the slice's cell
+/// weights `w`, the termination threshold `ert`, the pixels' ray limits.
+/// (The sampler travels beside it, as its own argument: the traversal's
+/// inner loops then read its tables' addresses once.)
+struct SliceRow<'a> {
+    off: isize,
+    w: Weights,
+    ert: f32,
+    lim: Limits<'a>,
 }
 
 /// The left column of the next pixel: its two voxels' colours (through
@@ -580,19 +594,17 @@ impl RowComposite<'_> {
 /// `bv` / `tv` (bottom / top scanline; `B` / `T` false: transparent, the slice
 /// is unused), skipping (`LIM`) pixels whose ray limits exclude the slice.
 /// Stops before the first opaque pixel; returns how many it did.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
     px: &mut [[f32; 4]],
     links: &mut [u32],
-    bv: &[RleVoxel],
-    tv: &[RleVoxel],
+    [bv, tv]: [&[RleVoxel]; 2],
     left: &mut Left,
-    w: &Weights,
     t: &S,
-    ert: f32,
+    smp: &SliceSamples,
     lim: Limits,
 ) -> usize {
+    let (w, ert) = (smp.w, smp.ert);
     // exact lengths, so the loop below needs no bounds checks
     let n = px.len();
     let links = &mut links[..n];
@@ -625,29 +637,30 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
 }
 
 /// A run of midpoints for [`mid_run`]: between slices `k` and `k + 1`,
-/// pixels from `x` (the row's cell weight `wj`), their cells from `c`, their
-/// right columns `vox` (four scanlines' voxels from column `c + 1`, in
-/// [`RleFrame::mid_row`]'s order, all of one length).
+/// pixels from `x` (the row's cell weight `wj`, the pixels' cells by
+/// `imap`), their cells from `c`, their right columns `vox` (four
+/// scanlines' voxels from column `c + 1`, in [`RleFrame::mid_row`]'s order,
+/// all of one length).
 struct MidRun<'v> {
     k: usize,
     x: i64,
     c: u32,
     vox: [&'v [RleVoxel]; 4],
     wj: f32,
+    imap: MidMap,
 }
 
 /// Composites the midpoints of a [`MidRun`] into `px` / `links` (the
 /// run's pixels; `rc` from its first), the first cell's left column
 /// `left`, at weights `w` (`SHIFT`: a translated plan's row, every pixel
 /// the next cell at one weight; else each pixel's cell and weight from
-/// `imap`, stopping at one whose cell does not follow on). Stops before an
-/// opaque pixel. Returns how many it did and the last one's columns.
-#[allow(clippy::too_many_arguments)]
+/// the run's `imap`, stopping at one whose cell does not follow on). Stops
+/// before an opaque pixel. Returns how many it did and the last one's
+/// columns.
 #[inline(always)]
 fn mid_run<S: Sampler, const SHIFT: bool>(
     t: &S,
     rc: &RowComposite,
-    imap: MidMap,
     run: &MidRun,
     left: S::MidColumn,
     w: &Weights,
@@ -657,7 +670,7 @@ fn mid_run<S: Sampler, const SHIFT: bool>(
     // exact lengths, so the loop below needs no bounds checks
     let n = px.len();
     let links = &mut links[..n];
-    let vox = run.vox.map(|v| &v[..n]);
+    let (vox, imap) = (run.vox.map(|v| &v[..n]), run.imap);
     #[inline(always)]
     fn column<S: Sampler>(t: &S, vox: &[&[RleVoxel]; 4], s: usize) -> S::MidColumn {
         t.mid_column(t.voxel(vox[0][s]), t.voxel(vox[1][s]), t.voxel(vox[2][s]), t.voxel(vox[3][s]))
@@ -698,21 +711,21 @@ fn clear_rows(px: &mut [[f32; 4]], depth: &mut [f32], gw: usize, r: &Rect) {
     }
 }
 
-/// Composites `rle` into `rect` of the intermediate image (every pixel of `rect`
-/// written, transparent where nothing composited; depth NaN) and seals it.
+/// Composites `rle` into `frame.rect` of the intermediate image (every pixel
+/// of the rectangle written, transparent where nothing composited; depth
+/// NaN) and seals it, with `tables` (and `focus`'s sampler inside the plan's
+/// focus intervals).
 /// `links` is scratch space, sized for the whole grid on first use and reused
 /// across frames.
-#[allow(clippy::too_many_arguments)]
 pub fn render_rle<S: Sampler>(
     rle: &RleVolume,
     tables: &S,
     focus: Option<&S>,
-    plan: &FramePlan,
-    ert: f32,
-    rect: Option<Rect>,
+    frame: SliceFrame,
     links: &mut Vec<u32>,
     out: &mut Intermediate,
 ) {
+    let SliceFrame { plan, ert, rect } = frame;
     out.seal(rect);
     let Some(r) = rect else { return };
     let gw = out.size[0];
@@ -731,6 +744,41 @@ pub fn render_rle<S: Sampler>(
     let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];
     let bands = px.par_chunks_mut(gw * BAND).zip(depth.par_chunks_mut(gw * BAND)).zip(links[..rows * lw].par_chunks_mut(lw * BAND));
     bands.enumerate().for_each(|(b, ((px, depth), links))| fr.band(r.q0 + b * BAND, px, depth, links));
+}
+
+/// What a frame of the slice traversal composites: the plan's view, the
+/// early ray termination threshold (a pixel whose opacity reaches `ert`
+/// takes no more samples) and the rectangle of the intermediate image
+/// written (`None`: nothing is visible).
+#[derive(Clone, Copy, Debug)]
+pub struct SliceFrame<'a> {
+    pub plan: &'a FramePlan,
+    pub ert: f32,
+    pub rect: Option<Rect>,
+}
+
+/// One intermediate row of a scaled slice ([`RleFrame::scaled_row`]):
+/// slice `k`, row `q`, its cells' scanlines `s` and `s + 1` at row weight
+/// `wj`, no cell past `hi` holding a non-transparent voxel.
+struct ScaledRow {
+    k: usize,
+    q: usize,
+    s: usize,
+    hi: i64,
+    wj: f32,
+}
+
+/// One intermediate row of midpoints between slices `k` and `k + 1`
+/// ([`RleFrame::mid_row`]): row `q`, columns by `imap`, the four scanlines
+/// `scan` under it at row weight `wj`, no cell past `hi` holding a
+/// non-transparent voxel.
+struct MidRow {
+    k: usize,
+    q: usize,
+    imap: MidMap,
+    scan: [usize; 4],
+    hi: i64,
+    wj: f32,
 }
 
 /// The per-frame constants of [`render_rle`].
@@ -839,21 +887,25 @@ impl<S: Sampler> RleFrame<'_, S> {
                         focus_runs(fl.row(q_first + row), [k as u32; 2], first as i64 + op, hi as i64 + op, |x0, x1, f| {
                             let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
                             let (lo, hi, t) = ((x0 - op) as u32, (x1 - op) as u32, if f { ft } else { self.tables });
+                            let ert = self.ert;
                             match limits {
-                                None => composite_row::<S, false>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, Limits::NONE),
+                                None => {
+                                    composite_row::<S, false>(cb, ct, [lo, hi], t, &SliceRow { off, w, ert, lim: Limits::NONE }, prow, lrow)
+                                }
                                 Some(l) => {
                                     let lim = Limits::of(l, q_first + row, r, k);
-                                    composite_row::<S, true>(cb, ct, lo, hi, off, &w, t, self.ert, prow, lrow, lim)
+                                    composite_row::<S, true>(cb, ct, [lo, hi], t, &SliceRow { off, w, ert, lim }, prow, lrow)
                                 }
                             }
                         })
                     }
                     (None, _, _) => {
-                        composite_row::<S, false>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, Limits::NONE)
+                        let sr = SliceRow { off, w, ert: self.ert, lim: Limits::NONE };
+                        composite_row::<S, false>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow)
                     }
                     (Some(l), _, _) => {
-                        let lim = Limits::of(l, q_first + row, r, k);
-                        composite_row::<S, true>(cb, ct, first as u32, hi as u32, off, &w, self.tables, self.ert, prow, lrow, lim)
+                        let sr = SliceRow { off, w, ert: self.ert, lim: Limits::of(l, q_first + row, r, k) };
+                        composite_row::<S, true>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow)
                     }
                 }
             }
@@ -917,15 +969,16 @@ impl<S: Sampler> RleFrame<'_, S> {
                 // focus+context: each run of pixels in / out of the focus with its sampler
                 (Some(_), Some(fl)) => focus_runs(fl.row(q), [k as u32; 2], x0, x1, |a, b, f| {
                     let fr = if f { self.focused() } else { *self };
-                    fr.scaled_row(k, q, s, [a, b], [lo, hi], wj, prow, lrow);
+                    fr.scaled_row(&ScaledRow { k, q, s, hi, wj }, [a, b], prow, lrow);
                 }),
-                _ => self.scaled_row(k, q, s, [x0, x1], [lo, hi], wj, prow, lrow),
+                _ => self.scaled_row(&ScaledRow { k, q, s, hi, wj }, [x0, x1], prow, lrow),
             }
         }
     }
 
-    /// The pixels `x0 ..= x1` of row `q` of [`RleFrame::scaled_slice`]
-    /// (scanlines `s`, `s + 1`; cells `lo ..= hi` hold non-transparent voxels).
+    /// The pixels `x0 ..= x1` of a row of [`RleFrame::scaled_slice`]
+    /// ([`ScaledRow`]: its scanlines, its weight, where its non-transparent
+    /// cells end).
     ///
     /// Two loops: the outer one skips opaque pixels (the links) and
     /// transparent columns (the cursors), and reads a cell's voxels through
@@ -935,19 +988,9 @@ impl<S: Sampler> RleFrame<'_, S> {
     /// right column is the next cell's left one when they are adjacent; a
     /// magnified slice's pixels may share a cell). Each sample is the
     /// bilinear blend of its cell, composited by the row's [`RowComposite`].
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn scaled_row(
-        &self,
-        k: usize,
-        q: usize,
-        s: usize,
-        [x0, x1]: [i64; 2],
-        [_lo, hi]: [i64; 2],
-        wj: f32,
-        prow: &mut [[f32; 4]],
-        lrow: &mut [u32],
-    ) {
+    fn scaled_row(&self, row: &ScaledRow, [x0, x1]: [i64; 2], prow: &mut [[f32; 4]], lrow: &mut [u32]) {
+        let &ScaledRow { k, q, s, hi, wj } = row;
         let (r, rle, plan, t) = (&self.r, self.rle, self.plan, self.tables);
         let p0 = r.p0 as i64;
         let map = plan.axis_map(k, 0);
@@ -1219,17 +1262,17 @@ impl<S: Sampler> RleFrame<'_, S> {
                 // focus+context: each run of pixels whose midpoint is in / out of the focus with its sampler
                 (Some(_), Some(fl)) => focus_runs(fl.row(q), [k as u32, k as u32 + 1], x0, x1, |a, b, f| {
                     let fr = if f { self.focused() } else { *self };
-                    fr.mid_row(k, q, imap, scan, [a, b], hi, wj, prow, lrow);
+                    fr.mid_row(&MidRow { k, q, imap, scan, hi, wj }, [a, b], prow, lrow);
                 }),
-                _ => self.mid_row(k, q, imap, scan, [x0, x1], hi, wj, prow, lrow),
+                _ => self.mid_row(&MidRow { k, q, imap, scan, hi, wj }, [x0, x1], prow, lrow),
             }
         }
     }
 
-    /// The pixels `x0 ..= x1` of row `q` of [`RleFrame::mid_slice`]
-    /// (columns by `imap`, the slices' [`FramePlan::mid_map`]; scanlines
-    /// `scan`: slice `k`'s two under the row, then slice `k + 1`'s; no cell
-    /// past `hi` holds a non-transparent voxel).
+    /// The pixels `x0 ..= x1` of a row of [`RleFrame::mid_slice`]
+    /// ([`MidRow`]: columns by `imap`, the slices' [`FramePlan::mid_map`];
+    /// scanlines `scan`: slice `k`'s two under the row, then slice `k + 1`'s;
+    /// no cell past `hi` holds a non-transparent voxel).
     ///
     /// A midpoint's cell is two columns of four voxels each; a column is
     /// read once ([`Sampler::mid_column`]) and is the left column of the next
@@ -1237,20 +1280,9 @@ impl<S: Sampler> RleFrame<'_, S> {
     /// follow each other and their right columns lie inside all four
     /// scanlines' current runs (most of a row), [`mid_run`] composites
     /// them in a plain loop over the runs' voxels.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn mid_row(
-        &self,
-        k: usize,
-        q: usize,
-        imap: MidMap,
-        scan: [usize; 4],
-        [x0, x1]: [i64; 2],
-        hi: i64,
-        wj: f32,
-        prow: &mut [[f32; 4]],
-        lrow: &mut [u32],
-    ) {
+    fn mid_row(&self, row: &MidRow, [x0, x1]: [i64; 2], prow: &mut [[f32; 4]], lrow: &mut [u32]) {
+        let &MidRow { k, q, imap, scan, hi, wj } = row;
         let (rle, t) = (self.rle, self.tables);
         let p0 = self.r.p0 as i64;
         let rc = self.row_composite(q);
@@ -1324,12 +1356,12 @@ impl<S: Sampler> RleFrame<'_, S> {
                 let n = ((x1 - x) as u64).min((e_min - c1) as u64) as usize;
                 let vox = cur.map(|cu| &cu.vox[cu.base.wrapping_add(c1) as usize..][..n]);
                 let xs = (x + 1 - p0) as usize;
-                let run = MidRun { k, x: x + 1, c: cell.0 + 1, vox, wj };
+                let run = MidRun { k, x: x + 1, c: cell.0 + 1, vox, wj, imap };
                 let rc = rc.skip(xs);
                 let (p, l) = (&mut prow[xs..xs + n], &mut lrow[xs..xs + n]);
                 let (done, last) = match imap {
-                    MidMap::Shift { .. } => mid_run::<S, true>(t, &rc, imap, &run, cell.1[1], &weights(wi), p, l),
-                    MidMap::Map(_) => mid_run::<S, false>(t, &rc, imap, &run, cell.1[1], &weights(wi), p, l),
+                    MidMap::Shift { .. } => mid_run::<S, true>(t, &rc, &run, cell.1[1], &weights(wi), p, l),
+                    MidMap::Map(_) => mid_run::<S, false>(t, &rc, &run, cell.1[1], &weights(wi), p, l),
                 };
                 if done > 0 {
                     cell = (cell.0 + done as u32, last);
@@ -1365,18 +1397,16 @@ impl<S: Sampler> RleFrame<'_, S> {
 /// pixel whose slice-`k` sample is in its interval reads the voxels
 /// classified by the focus's (a second buffer of two slices), and so does
 /// a Deluxe I midpoint whose two slices both are ([`FramePlan::in_focus_mid`]).
-#[allow(clippy::too_many_arguments)]
 pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
     stack: &V,
     pre: &Preclass,
     tables: &S,
     focus: Option<(&Preclass, &S)>,
-    plan: &FramePlan,
-    ert: f32,
-    rect: Option<Rect>,
+    frame: SliceFrame,
     slice_buf: &mut Vec<[f32; 4]>,
     out: &mut Intermediate,
 ) {
+    let SliceFrame { plan, ert, rect } = frame;
     out.seal(rect);
     let Some(r) = rect else { return };
     let [ni, nj, _] = stack.slices().n;
@@ -1494,11 +1524,11 @@ impl RleCache {
         match (self.axes[plan.view.axis].as_ref().filter(|e| e.perm == plan.view.perm), &self.post_tables) {
             (Some(rle), Some(pt)) if self.post.is_some() => {
                 let ft = self.focus_post_tables.as_deref().filter(|_| focused);
-                render_rle(rle, pt.as_ref(), ft, plan, ert, rect, &mut self.links, out)
+                render_rle(rle, pt.as_ref(), ft, SliceFrame { plan, ert, rect }, &mut self.links, out)
             }
             (Some(rle), _) => {
                 let ft = Some(&self.focus_tables).filter(|_| focused);
-                render_rle(rle, &self.tables, ft, plan, ert, rect, &mut self.links, out)
+                render_rle(rle, &self.tables, ft, SliceFrame { plan, ert, rect }, &mut self.links, out)
             }
             (None, _) => out.seal(None),
         }
@@ -1517,11 +1547,11 @@ impl RleCache {
         match (&self.pre, &self.post_tables) {
             (Some(pre), Some(pt)) if self.post.is_some() => {
                 let focus = self.focus.as_ref().zip(self.focus_post_tables.as_deref());
-                render_brute_preclassified(stack, pre, pt.as_ref(), focus, plan, ert, rect, &mut self.slice_buf, out)
+                render_brute_preclassified(stack, pre, pt.as_ref(), focus, SliceFrame { plan, ert, rect }, &mut self.slice_buf, out)
             }
             (Some(pre), _) => {
                 let focus = self.focus.as_ref().map(|f| (f, &self.focus_tables));
-                render_brute_preclassified(stack, pre, &self.tables, focus, plan, ert, rect, &mut self.slice_buf, out)
+                render_brute_preclassified(stack, pre, &self.tables, focus, SliceFrame { plan, ert, rect }, &mut self.slice_buf, out)
             }
             (None, _) => out.seal(None),
         }

@@ -116,38 +116,11 @@ pub fn first_crossing(rays: &Rays, f: impl Fn(DVec3) -> f64 + Sync, iso: f64, dt
     let d = rays.direction();
     per_pixel(rays, |o| {
         let (t0, t1) = rays.clip(o)?;
-        let mut fa = f(o + t0 * d);
+        let fa = f(o + t0 * d);
         if fa >= iso {
             return Some(t0);
         }
-        if !dt.is_finite() {
-            return None;
-        }
-        let mut ta = t0;
-        loop {
-            let safe = if lipschitz > 0.0 { (iso - fa) / lipschitz } else { 0.0 };
-            let tb = (ta + dt.max(safe)).min(t1);
-            let fb = f(o + tb * d);
-            if fb >= iso {
-                let (mut lo, mut hi) = (ta, tb);
-                for _ in 0..BISECTIONS {
-                    let m = 0.5 * (lo + hi);
-                    if m <= lo || m >= hi {
-                        break;
-                    }
-                    if f(o + m * d) >= iso {
-                        hi = m;
-                    } else {
-                        lo = m;
-                    }
-                }
-                return Some(hi);
-            }
-            if tb >= t1 {
-                return None;
-            }
-            (ta, fa) = (tb, fb);
-        }
+        march(&f, (o, d), [t0, t1], fa, Steps { iso, dt, lipschitz })
     })
 }
 

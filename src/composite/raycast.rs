@@ -34,7 +34,8 @@ use crate::data::slices::{SliceStack, bilinear};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
 use crate::encode::mask::BlockOccupancy;
-use crate::encode::walk::{ColumnWalk, Drift, SliceSpan, StillWalk};
+use crate::encode::mask::SliceSpan;
+use crate::encode::walk::{ColumnWalk, Drift, StillWalk};
 use crate::view::plan::{FramePlan, MapKind, SliceMap, floor_i64};
 
 /// Everything a ray needs, borrowed for one frame.

@@ -25,6 +25,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::data::shapes::{self, AnalyticPhantom, Grid, SMOOTH_ISO};
+pub use crate::data::shapes::{ML_ALPHA, ML_FM, ML_ISO, SPHERE_ISO, marschner_lobb_value};
 use crate::data::volume::{Volume, VoxelData, check_dims};
 use crate::error::{Error, Result};
 
@@ -246,10 +247,6 @@ fn build_slices<T: Copy + Default + Send>(dims: [usize; 3], fill: impl Fn(usize,
 // Sphere
 // ---------------------------------------------------------------------------
 
-/// The iso-value whose iso-surface in [`sphere`] is exactly the sphere of
-/// [`sphere_geometry`].
-pub const SPHERE_ISO: f32 = 100.0;
-
 /// Centre and radius, in voxel units, of the sphere phantom at `dims`.
 ///
 /// The centre is the middle of the grid, `((nx−1)/2, (ny−1)/2, (nz−1)/2)`, and
@@ -384,25 +381,6 @@ pub fn engine(dims: [usize; 3]) -> Result<Volume> {
 // ---------------------------------------------------------------------------
 // Marschner–Lobb
 // ---------------------------------------------------------------------------
-
-/// The usual iso-value for rendering the Marschner–Lobb signal.
-pub const ML_ISO: f32 = 0.5;
-/// Marschner–Lobb modulation frequency `f_M`.
-pub const ML_FM: f64 = 6.0;
-/// Marschner–Lobb modulation amplitude `α`.
-pub const ML_ALPHA: f64 = 0.25;
-
-/// The continuous Marschner–Lobb (1994) test signal on `[−1, 1]³`:
-///
-/// `ρ(x,y,z) = (1 − sin(πz/2) + α(1 + ρr(√(x²+y²)))) / (2(1 + α))` with
-/// `ρr(r) = cos(2π f_M cos(πr/2))`, `f_M` = [`ML_FM`] and `α` = [`ML_ALPHA`].
-/// Its range is `[0, 1]`.
-pub fn marschner_lobb_value(x: f64, y: f64, z: f64) -> f64 {
-    use std::f64::consts::{FRAC_PI_2, TAU};
-    let r = (x * x + y * y).sqrt();
-    let rho_r = (TAU * ML_FM * (FRAC_PI_2 * r).cos()).cos();
-    (1.0 - (FRAC_PI_2 * z).sin() + ML_ALPHA * (1.0 + rho_r)) / (2.0 * (1.0 + ML_ALPHA))
-}
 
 /// Normalised coordinate of grid index `i` on an axis of `n` samples:
 /// `−1 + 2i/(n−1)`, or 0 when the axis has a single sample.

@@ -34,7 +34,6 @@ use crate::data::slices::SliceStack;
 pub use crate::encode::cells::{CellCodes, PackedCodes};
 use crate::encode::depth::{Matcher, Word, slot_shift};
 use crate::encode::shift::*;
-use crate::encode::walk::SliceSpan;
 use crate::kernels::{self, CpuLevel};
 use crate::view::plan::{Rect, ScaledMap, floor_i64};
 use crate::view::shear::ShearState;
@@ -904,6 +903,15 @@ pub(crate) fn columns<W: Word>(mask: &BinaryMask<W>, frac: &[f64; 4], ax: usize,
     let (c0, c1) = if s == 1 { (h0 + pad, h1 + pad) } else { ((h0 - s + 1).div_euclid(s) + pad, h1.div_euclid(s) + pad) };
     let (c0, c1) = (c0.max(0), c1.min(mask.grid()[ax] as i64 - 1));
     (c0 <= c1).then_some((c0 as usize, c1 as usize))
+}
+
+/// The slices a walk covers: `[lo, hi]` in index order (none when
+/// `lo > hi`), walked from `lo` up (`ascending`) or from `hi` down.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SliceSpan {
+    pub lo: usize,
+    pub hi: usize,
+    pub ascending: bool,
 }
 
 #[cfg(test)]

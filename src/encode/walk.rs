@@ -65,7 +65,7 @@
 
 use crate::encode::depth::{Matcher, Search, Word, lz, tz};
 
-use crate::encode::mask::{BinaryMask, BlockOccupancy, columns};
+use crate::encode::mask::{BinaryMask, BlockOccupancy, SliceSpan, columns};
 use crate::view::plan::{FramePlan, ScaledMap, floor_i64};
 use crate::view::shear::ShearState;
 
@@ -157,15 +157,6 @@ fn take_first<W: Word>(cur: &mut W, ascending: bool, search: Search, log_nb: u32
     // clear it (the top bit of its slot)
     *cur &= !(W::MSB >> bit);
     (bit >> log_nb) as usize
-}
-
-/// The slices a walk covers: `[lo, hi]` in index order (none when
-/// `lo > hi`), walked from `lo` up (`ascending`) or from `hi` down.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct SliceSpan {
-    pub lo: usize,
-    pub hi: usize,
-    pub ascending: bool,
 }
 
 /// The slices of one ray of a scaled plan whose mask codes match, front to back

@@ -266,12 +266,6 @@ impl<W: Word> Frame<'_, W> {
         k
     }
 
-    /// Ray `(p, q)`.
-    #[inline(always)]
-    fn ray(&self, p: usize, q: usize) -> LeanRay {
-        LeanRay { p, q, rb: p + self.n0 * q }
-    }
-
     /// The stack index of `ray`'s cell in slice entry `e`, if the ray meets
     /// the slice inside the volume.
     #[inline(always)]
@@ -332,14 +326,37 @@ impl<W: Word> Frame<'_, W> {
             (dp < iso).then(|| (kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), bp, ep))
         });
         let depth = before.map_or(k as f32, |(kp, t, _, _)| kp as f32 + (k as f32 - kp as f32) * t);
-        let mut s = self.table.blend(v.codes(b), e.wi, e.wj);
-        if let Some((_, t, bp, ep)) = before {
-            let sp = self.table.blend(v.codes(bp), ep.wi, ep.wj);
-            s = [0, 1].map(|a| sp[a] + (s[a] - sp[a]) * t);
-        }
+        let s = match before {
+            None => self.table.blend(v.codes(b), e.wi, e.wj),
+            Some((_, t, bp, ep)) => {
+                // both slices' blends in one 4-lane vector: [s, sp]
+                let s = blend_pair(self.table, v.codes(b), [e.wi, e.wj], v.codes(bp), [ep.wi, ep.wj]);
+                [0, 1].map(|a| s[2 + a] + (s[a] - s[2 + a]) * t)
+            }
+        };
         let rgb = apply_shade(self.iso_rgb, s);
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }
+}
+
+/// [`ShadeTable::blend`] of two cells at once, lane for lane the same float
+/// operations: lanes 0–1 the entry of `codes` at weights `w`, lanes 2–3 that of
+/// `codes_p` at `wp`.
+#[inline(always)]
+fn blend_pair(table: &ShadeTable, codes: [u16; 4], w: [f32; 2], codes_p: [u16; 4], wp: [f32; 2]) -> [f32; 4] {
+    let e = |i: usize| {
+        let (a, b) = (table.get(codes[i]), table.get(codes_p[i]));
+        [a[0], a[1], b[0], b[1]]
+    };
+    let (e00, e10, e01, e11) = (e(0), e(1), e(2), e(3));
+    let (wi, wj) = ([w[0], w[0], wp[0], wp[0]], [w[1], w[1], wp[1], wp[1]]);
+    let mut out = [0f32; 4];
+    for l in 0..4 {
+        let top = e00[l] + (e10[l] - e00[l]) * wi[l];
+        let bot = e01[l] + (e11[l] - e01[l]) * wi[l];
+        out[l] = top + (bot - top) * wj[l];
+    }
+    out
 }
 
 /// One row of the lean frame by the copy compiled for the CPU level (`avx2`:
@@ -361,21 +378,24 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Fram
 }
 
 /// One row of the lean frame: in groups of [`GROUP`] rays, first every ray's
-/// first candidate (its voxels prefetched), then the traces.
+/// first candidate (its voxels prefetched), then the traces. A ray's base
+/// index is the row's plus its offset along the row.
 #[inline(always)]
 fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, mut row: RowStart, out: RowOut) {
     let RowOut { q, p0, rgba: crow, depth: drow } = out;
     let mut walks: [Option<Walk<W>>; GROUP] = [None; GROUP];
     let mut last_line = usize::MAX;
+    // ray (p0 + dp, q)'s base index is the row's plus dp
+    let rb0 = p0 + f.n0 * q;
+    let ray = |dp: usize| LeanRay { p: p0 + dp, q, rb: rb0 + dp };
     for (g, (cg, dg)) in crow.chunks_mut(GROUP).zip(drow.chunks_mut(GROUP)).enumerate() {
-        let pg = p0 + g * GROUP;
         for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
             *walk = f.first::<ASC>(row.start, row.nw);
             if f.prefetch
                 && let Some(w) = walk
             {
                 let k0 = f.peek::<ASC>(w);
-                if let Some(b) = f.cell(&f.slices[k0], f.ray(pg + dp, q)) {
+                if let Some(b) = f.cell(&f.slices[k0], ray(g * GROUP + dp)) {
                     f.prefetch_at::<V, ASC>(v, b, &mut last_line);
                 }
             }
@@ -388,7 +408,7 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W
         for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter()).enumerate() {
             let res = match *walk {
                 None => MISS,
-                Some(w) => f.trace::<V, ASC, CHECKED>(v, w, f.ray(pg + dp, q)),
+                Some(w) => f.trace::<V, ASC, CHECKED>(v, w, ray(g * GROUP + dp)),
             };
             *c = res.rgba;
             *d = res.depth;

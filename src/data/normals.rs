@@ -535,16 +535,16 @@ pub struct ByteCells<'a> {
 impl ByteCells<'_> {
     /// The bytes of the two voxel pairs of the cell at stack index `b`: its
     /// first row's two voxels and its second row's (three bytes a voxel, so
-    /// each pair is six contiguous bytes; one bounds check each).
+    /// each pair is six contiguous bytes). One bounds check for both: the
+    /// bytes from the first pair's start to the second's end, whose first and
+    /// last six are the pairs.
     #[inline(always)]
     fn pairs(&self, b: usize) -> [[u8; 6]; 2] {
-        let bytes = self.cells.as_flattened();
-        let pair = |v: usize| -> [u8; 6] {
-            let mut out = [0; 6];
-            out.copy_from_slice(&bytes[3 * v..3 * v + 6]);
-            out
-        };
-        [pair(b), pair(b + self.n0)]
+        let cell = &self.cells.as_flattened()[3 * b..3 * (b + self.n0) + 6];
+        match (cell.first_chunk::<6>(), cell.last_chunk::<6>()) {
+            (Some(t), Some(u)) => [*t, *u],
+            _ => unreachable!("a cell's bytes hold at least one pair"),
+        }
     }
 
     /// The four corner densities of the cell at stack index `b` (order of

@@ -35,11 +35,12 @@
 //! * **Shading.** [`Shading`] with the headlight; the gradient is the trilinear
 //!   blend of the central differences at the eight corners (one-sided at the
 //!   borders), the 3-D form of the fast paths' bilinear blend. Under
-//!   [`Reconstruction::Cubic`], the gradient of the same reconstruction
-//!   along z (the cubic's derivative), and in x and y the central
-//!   differences blended bilinearly in each slice and by the cubic's
-//!   weights across slices: continuous across slices, so the normal has no
-//!   ring at a slice.
+//!   [`Reconstruction::Cubic`], the gradient of the cubic B-spline smoothing
+//!   of the same four slices: along z the derivative of the B-spline, in x
+//!   and y the central differences blended bilinearly in each slice and by
+//!   the B-spline's weights across slices — C² across slices, so the normal
+//!   has no ring at a slice (why the B-spline and not Catmull–Rom's own
+//!   derivative: [`crate::kernels::reconstruct`]).
 //! * **Iso mode.** The first sample whose density is ≥ iso, refined by bisection
 //!   on the reconstructed density between it and the previous sample (no refinement
 //!   when the entry point is already inside); shaded opaque in the iso colour.
@@ -447,15 +448,17 @@ impl ReferenceRenderer {
         reconstruct::eval(zs.map(slice), fz)
     }
 
-    /// [`Reconstruction::Cubic`]'s gradient at `p` (voxel units): along z the
-    /// derivative of the cubic of [`ReferenceRenderer::density_cubic`]; in x
-    /// and y the corners' central differences, bilinear in each slice and
-    /// blended across the four slices by the cubic's weights.
+    /// [`Reconstruction::Cubic`]'s gradient at `p` (voxel units), the
+    /// gradient of the cubic B-spline smoothing of the four slices of
+    /// [`ReferenceRenderer::density_cubic`]: along z the B-spline's
+    /// derivative of the bilinear samples; in x and y the corners' central
+    /// differences, bilinear in each slice and blended across the four
+    /// slices by the B-spline's weights.
     pub fn gradient_cubic(&self, p: DVec3) -> DVec3 {
         let (x0, x1, fx) = locate(p.x, self.dims[0]);
         let (y0, y1, fy) = locate(p.y, self.dims[1]);
         let (zs, fz) = self.cubic_slices(p.z);
-        let (w, dw) = (reconstruct::catmull_rom(fz), reconstruct::catmull_rom_derivative(fz));
+        let (w, dw) = (reconstruct::b_spline(fz), reconstruct::b_spline_derivative(fz));
         let mut g = DVec3::ZERO;
         for (j, &z) in zs.iter().enumerate() {
             let value = lerp(lerp(self.at(x0, y0, z), self.at(x1, y0, z), fx), lerp(self.at(x0, y1, z), self.at(x1, y1, z), fx), fy);

@@ -96,7 +96,8 @@ pub struct BenchCmd {
     pub ref_step: f64,
     /// How the reference reconstructs densities between slices: `linear`
     /// (trilinear) or `cubic` (Catmull–Rom through four z slices, bilinear
-    /// in-plane). The render variants stay linear; their image and depth
+    /// in-plane; the normal from their cubic B-spline smoothing). The render
+    /// variants stay linear; their image and depth
     /// errors are measured against this reference, and the suite's table
     /// gets one `reference` row per case with its own depth and normal error.
     #[arg(long, value_enum, default_value = "linear")]

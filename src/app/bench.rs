@@ -720,6 +720,9 @@ pub struct SuiteReport {
     pub size: usize,
     pub threads: usize,
     pub table: Vec<SuiteRow>,
+    /// Per case, the reference's own row (variant `reference`, its
+    /// `--reconstruction`), against the analytic truth.
+    pub reference: Vec<SuiteRow>,
     pub cases: Vec<Report>,
 }
 
@@ -824,6 +827,7 @@ fn run_suite(cmd: &BenchCmd, suite: Suite) -> Result<()> {
         size: cmd.size,
         threads: if cmd.threads == 0 { rayon::current_num_threads() } else { cmd.threads },
         table: vec![],
+        reference: vec![],
         cases: vec![],
     };
     for case in cases {
@@ -835,7 +839,7 @@ fn run_suite(cmd: &BenchCmd, suite: Suite) -> Result<()> {
         let r = measure(&c, vol, name)?;
         let unit = r.spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
         if let Some(row) = reference_row(case, &r, unit) {
-            rep.table.push(row);
+            rep.reference.push(row);
         }
         for x in &r.summary {
             rep.table.push(SuiteRow {
@@ -897,7 +901,17 @@ pub fn suite_markdown(rep: &SuiteReport) -> String {
         "| case | dims | spacing | variant | reconstruction | depth mean | depth p99 | p99 mm | normal ° mean | normal ° p99 | frame ms | RMSE |"
     );
     let _ = writeln!(s, "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
-    for r in &rep.table {
+    // each case's reference row first, then its variants
+    let rows = rep.reference.iter().map(|r| (r.case.as_str(), 0, r)).chain(rep.table.iter().map(|r| (r.case.as_str(), 1, r)));
+    let order: Vec<&str> = rep.table.iter().chain(&rep.reference).map(|r| r.case.as_str()).fold(vec![], |mut v, c| {
+        if !v.contains(&c) {
+            v.push(c);
+        }
+        v
+    });
+    let mut rows: Vec<(&str, i32, &SuiteRow)> = rows.collect();
+    rows.sort_by_key(|&(c, k, _)| (order.iter().position(|&o| o == c), k));
+    for (_, _, r) in rows {
         let _ = writeln!(
             s,
             "| {} | {}×{}×{} | {}×{}×{} | {} | {} | {} | {} | {} | {} | {} | {:.3} | {:.5} |",

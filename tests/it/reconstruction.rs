@@ -215,3 +215,34 @@ fn the_cubic_reference_stays_within_measured_margins() {
         assert!(c[0] <= l[0] && c[1] <= l[1], "{phantom:?}: depth cubic {c:?} vs linear {l:?}");
     }
 }
+
+/// `bench --reconstruction cubic`: the suite's reference rows name the cubic
+/// and carry its depth and normal error; the render variants stay linear.
+/// The fast paths do not take the option yet, so `render` refuses it.
+#[test]
+fn bench_takes_the_reconstruction_and_render_refuses_it() {
+    let out = assert_cmd::Command::cargo_bin("shearwarp")
+        .unwrap()
+        .args(["bench", "--suite", "surfaces", "--size", "24", "--reps", "1", "--rounds", "1", "--random-views", "0"])
+        .args(["--only", "binary-c1-u64-bitscan", "--ref-step", "0.5", "--reconstruction", "cubic", "--json", "--quiet"])
+        .assert()
+        .success();
+    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    let refs = json["reference"].as_array().unwrap();
+    assert_eq!(refs.len(), 5);
+    for r in refs {
+        assert_eq!(r["variant"], "reference");
+        assert_eq!(r["reconstruction"], "cubic");
+        for k in ["depth_mean", "depth_p99", "normal_deg_mean", "normal_deg_p99"] {
+            assert!(r[k].as_f64().is_some_and(|v| v >= 0.0), "{k}: {r}");
+        }
+    }
+    for r in json["table"].as_array().unwrap() {
+        assert_eq!(r["reconstruction"], "linear");
+    }
+    assert_cmd::Command::cargo_bin("shearwarp")
+        .unwrap()
+        .args(["render", "--phantom", "sphere", "--reconstruction", "cubic", "-o", "unused.png"])
+        .assert()
+        .code(2);
+}

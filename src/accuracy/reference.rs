@@ -16,9 +16,14 @@
 //!   zero-thickness sheet (iso: a hit where the density reaches iso; blend: one
 //!   sample). The fast paths render a flat axis as one slab (or nothing), so the
 //!   comparison is not meaningful there.
-//! * **Density.** Trilinear interpolation of the voxels in double precision,
-//!   clamped to the range of the eight corners (as the fast paths clamp their
-//!   bilinear samples; mathematically a no-op).
+//! * **Density.** Under [`Reconstruction::Linear`] (the default), trilinear
+//!   interpolation of the voxels in double precision, clamped to the range of
+//!   the eight corners (as the fast paths clamp their bilinear samples;
+//!   mathematically a no-op). Under [`Reconstruction::Cubic`], bilinear in
+//!   each z slice and the Catmull–Rom cubic through the four slices around
+//!   the point along z, the volume's slice axis ([`crate::kernels::reconstruct`];
+//!   not clamped: the cubic may overshoot its samples by an eighth of their
+//!   spread).
 //! * **Samples.** Along each ray at `t₀, t₀ + Δ, t₀ + 2Δ, …` from the ray's entry
 //!   `t₀` into the box, `Δ = step · min(spacing)` in world units;
 //!   [`DEFAULT_STEP`] is 0.05 voxel.
@@ -29,10 +34,17 @@
 //!   reference's spacing.
 //! * **Shading.** [`Shading`] with the headlight; the gradient is the trilinear
 //!   blend of the central differences at the eight corners (one-sided at the
-//!   borders), the 3-D form of the fast paths' bilinear blend.
+//!   borders), the 3-D form of the fast paths' bilinear blend. Under
+//!   [`Reconstruction::Cubic`], the gradient of the cubic B-spline smoothing
+//!   of the same four slices: along z the derivative of the B-spline, in x
+//!   and y the central differences blended bilinearly in each slice and by
+//!   the B-spline's weights across slices — C² across slices, so the normal
+//!   has no ring at a slice (why the B-spline and not Catmull–Rom's own
+//!   derivative: [`crate::kernels::reconstruct`]).
 //! * **Iso mode.** The first sample whose density is ≥ iso, refined by bisection
-//!   on the trilinear density between it and the previous sample (no refinement
+//!   on the reconstructed density between it and the previous sample (no refinement
 //!   when the entry point is already inside); shaded opaque in the iso colour.
+//!   [`ReferenceImage::normal`] is the unit normal it is shaded with.
 //!   The hit's depth is reported in world units along the view, measured from
 //!   the plane through the volume centre (`depth = −e.z`, larger is farther).
 //! * **Blend mode.** Front-to-back "over" until the accumulated opacity reaches
@@ -42,7 +54,9 @@
 //! The only shortcut is exact: blocks of 8³ cells whose corner range cannot be
 //! visible (iso: every corner below iso; blend: the classifier proves the range
 //! transparent) are stepped over, which skips only samples whose opacity is 0 or
-//! whose density is below iso. Rows are rendered in parallel (rayon) and every
+//! whose density is below iso. Under [`Reconstruction::Cubic`] a block's range
+//! is that of its neighbours along z as well (the cubic's support), widened
+//! by the cubic's overshoot ([`reconstruct::widened`]). Rows are rendered in parallel (rayon) and every
 //! pixel depends on its ray alone, so the output is deterministic.
 //!
 //! [`fast_path_depth`] converts a fast path's intermediate iso depth (fractional
@@ -58,6 +72,7 @@ use crate::data::bcc::BccLattice;
 use crate::data::normals::{decode_normal, encode_normal};
 use crate::data::volume::Volume;
 use crate::error::{Error, Result};
+use crate::kernels::reconstruct::{self, Reconstruction};
 use crate::render::{Lattice, Normals, Renderer};
 use crate::view::{Camera, Factorization, PerspectiveView, Projection};
 use crate::warp::Image;
@@ -88,11 +103,19 @@ pub struct ReferenceOptions {
     /// front of the eye along each pyramid's axis), so the same camera sees
     /// the same part of the volume when the eye is inside it. 0: from the eye.
     pub near: f64,
+    /// How densities between slices are reconstructed (linear: trilinear).
+    pub reconstruction: Reconstruction,
 }
 
 impl Default for ReferenceOptions {
     fn default() -> Self {
-        ReferenceOptions { step: DEFAULT_STEP, opacity_cutoff: DEFAULT_OPACITY_CUTOFF, threads: 0, near: crate::render::NEAR_SLICES }
+        ReferenceOptions {
+            step: DEFAULT_STEP,
+            opacity_cutoff: DEFAULT_OPACITY_CUTOFF,
+            threads: 0,
+            near: crate::render::NEAR_SLICES,
+            reconstruction: Reconstruction::Linear,
+        }
     }
 }
 
@@ -147,6 +170,10 @@ pub struct ReferenceImage {
     /// Iso hit depth per pixel: world units along the view from the plane
     /// through the volume centre (NaN where no hit, and always NaN in blend mode).
     pub depth: Vec<f64>,
+    /// The unit normal the iso hit is shaded with per pixel, in world space
+    /// (the volume's axes scaled by its spacing), pointing down the density
+    /// (NaN where no hit or the gradient vanishes, and always NaN in blend mode).
+    pub normal: Vec<DVec3>,
     /// Density samples evaluated (a measure of work).
     pub samples: u64,
 }
@@ -403,6 +430,63 @@ impl ReferenceRenderer {
         front.lerp(back, fz)
     }
 
+    /// The four slices `z₀ − 1 … z₀ + 2` (clamped) around `p.z` and the
+    /// fraction of the way from `z₀` to `z₀ + 1`.
+    fn cubic_slices(&self, z: f64) -> ([usize; 4], f64) {
+        let (z0, z1, fz) = locate(z, self.dims[2]);
+        let last = self.dims[2] - 1;
+        ([z0.saturating_sub(1), z0, z1, (z1 + 1).min(last)], fz)
+    }
+
+    /// [`Reconstruction::Cubic`]'s density at `p`: bilinear in each z slice,
+    /// Catmull–Rom across the four slices around `p.z`.
+    pub fn density_cubic(&self, p: DVec3) -> f64 {
+        let (x0, x1, fx) = locate(p.x, self.dims[0]);
+        let (y0, y1, fy) = locate(p.y, self.dims[1]);
+        let (zs, fz) = self.cubic_slices(p.z);
+        let slice = |z| lerp(lerp(self.at(x0, y0, z), self.at(x1, y0, z), fx), lerp(self.at(x0, y1, z), self.at(x1, y1, z), fx), fy);
+        reconstruct::eval(zs.map(slice), fz)
+    }
+
+    /// [`Reconstruction::Cubic`]'s gradient at `p` (voxel units), the
+    /// gradient of the cubic B-spline smoothing of the four slices of
+    /// [`ReferenceRenderer::density_cubic`]: along z the B-spline's
+    /// derivative of the bilinear samples; in x and y the corners' central
+    /// differences, bilinear in each slice and blended across the four
+    /// slices by the B-spline's weights.
+    pub fn gradient_cubic(&self, p: DVec3) -> DVec3 {
+        let (x0, x1, fx) = locate(p.x, self.dims[0]);
+        let (y0, y1, fy) = locate(p.y, self.dims[1]);
+        let (zs, fz) = self.cubic_slices(p.z);
+        let (w, dw) = (reconstruct::b_spline(fz), reconstruct::b_spline_derivative(fz));
+        let mut g = DVec3::ZERO;
+        for (j, &z) in zs.iter().enumerate() {
+            let value = lerp(lerp(self.at(x0, y0, z), self.at(x1, y0, z), fx), lerp(self.at(x0, y1, z), self.at(x1, y1, z), fx), fy);
+            let c = |x, y| self.gradient_at(x, y, z);
+            let cd = c(x0, y0).lerp(c(x1, y0), fx).lerp(c(x0, y1).lerp(c(x1, y1), fx), fy);
+            g += DVec3::new(w[j] * cd.x, w[j] * cd.y, dw[j] * value);
+        }
+        if self.dims[2] < 2 { DVec3::new(g.x, g.y, 0.0) } else { g }
+    }
+
+    /// Density under `recon`.
+    #[inline(always)]
+    pub fn density_with(&self, recon: Reconstruction, p: DVec3) -> f64 {
+        match recon {
+            Reconstruction::Linear => self.density(p),
+            Reconstruction::Cubic => self.density_cubic(p),
+        }
+    }
+
+    /// Gradient (voxel units) under `recon`.
+    #[inline(always)]
+    pub fn gradient_with(&self, recon: Reconstruction, p: DVec3) -> DVec3 {
+        match recon {
+            Reconstruction::Linear => self.gradient(p),
+            Reconstruction::Cubic => self.gradient_cubic(p),
+        }
+    }
+
     /// The unit normal (world space, down the density) the linear
     /// reconstruction shades a hit with, a fraction `frac` of the way
     /// between the points `slices` of its ray: the linear blend of
@@ -482,12 +566,30 @@ impl ReferenceRenderer {
         let sp = DVec3::new(self.spacing[0] as f64, self.spacing[1] as f64, self.spacing[2] as f64);
         let min_sp = sp.min_element();
         let cls = &scene.classifier;
-        let visible: Vec<bool> = self
-            .ranges
-            .iter()
-            .map(|&(lo, hi)| match scene.mode {
-                Mode::Iso => hi >= scene.iso,
-                Mode::Blend => cls.may_be_visible(lo, hi),
+        let recon = opts.reconstruction;
+        let [nbx, nby, nbz] = self.nblocks;
+        let visible: Vec<bool> = (0..self.ranges.len())
+            .map(|i| {
+                let (lo, hi) = match recon {
+                    Reconstruction::Linear => self.ranges[i],
+                    Reconstruction::Cubic => {
+                        // the cubic reaches one slice beyond the block along z, and overshoots
+                        let bz = i / (nbx * nby);
+                        let (mut lo, mut hi) = self.ranges[i];
+                        for b in [bz.wrapping_sub(1), bz + 1].into_iter().filter(|&b| b < nbz) {
+                            let (l, h) = self.ranges[i - bz * nbx * nby + b * nbx * nby];
+                            (lo, hi) = (lo.min(l), hi.max(h));
+                        }
+                        // (rounded outwards to f32)
+                        let (l, h) = reconstruct::widened(lo as f64, hi as f64);
+                        let (l, h) = (l - l.abs() * 1e-6, h + h.abs() * 1e-6);
+                        ((l as f32).min(lo), (h as f32).max(hi))
+                    }
+                };
+                match scene.mode {
+                    Mode::Iso => hi >= scene.iso,
+                    Mode::Blend => cls.may_be_visible(lo, hi),
+                }
             })
             .collect();
         let light = rays.rot.row(2);
@@ -504,20 +606,25 @@ impl ReferenceRenderer {
             light_m: light / sp,
             light_s: DVec3::ONE / sp,
             iso_rgb: [iso_c.r, iso_c.g, iso_c.b],
+            recon,
+            spacing: sp,
         };
         let [w, h] = camera.size;
         let mut data = vec![[0f32; 4]; w * h];
         let mut depth = vec![f64::NAN; w * h];
-        let run = |data: &mut [[f32; 4]], depth: &mut [f64]| -> u64 {
+        let mut normal = vec![DVec3::NAN; w * h];
+        let run = |data: &mut [[f32; 4]], depth: &mut [f64], normal: &mut [DVec3]| -> u64 {
             data.par_chunks_mut(w)
                 .zip(depth.par_chunks_mut(w))
+                .zip(normal.par_chunks_mut(w))
                 .enumerate()
-                .map(|(v, (row, drow))| {
+                .map(|(v, ((row, drow), nrow))| {
                     let mut n = 0;
                     for u in 0..w {
                         let r = tracer.trace(u as f64, v as f64);
                         row[u] = r.0;
                         drow[u] = r.1;
+                        nrow[u] = r.3;
                         n += r.2;
                     }
                     n
@@ -525,15 +632,15 @@ impl ReferenceRenderer {
                 .sum()
         };
         let samples = if opts.threads == 0 {
-            run(&mut data, &mut depth)
+            run(&mut data, &mut depth, &mut normal)
         } else {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(opts.threads)
                 .build()
                 .map_err(|e| Error::Other(format!("cannot start {} worker threads: {e}", opts.threads)))?;
-            pool.install(|| run(&mut data, &mut depth))
+            pool.install(|| run(&mut data, &mut depth, &mut normal))
         };
-        Ok(ReferenceImage { image: Image::from_data(w, h, data), depth, samples })
+        Ok(ReferenceImage { image: Image::from_data(w, h, data), depth, normal, samples })
     }
 }
 
@@ -553,6 +660,9 @@ struct Tracer<'a> {
     light_m: DVec3,
     light_s: DVec3,
     iso_rgb: [f32; 3],
+    recon: Reconstruction,
+    /// Voxel spacing (world units per voxel).
+    spacing: DVec3,
 }
 
 impl Tracer<'_> {
@@ -562,16 +672,17 @@ impl Tracer<'_> {
         if len > 1e-300 { (g.dot(self.light_m).abs() / len).min(1.0) as f32 } else { 1.0 }
     }
 
-    /// Colour, depth and sample count of the ray through pixel `(u, v)`.
-    fn trace(&self, u: f64, v: f64) -> ([f32; 4], f64, u64) {
+    /// Colour, depth, sample count and iso normal of the ray through pixel `(u, v)`.
+    fn trace(&self, u: f64, v: f64) -> ([f32; 4], f64, u64, DVec3) {
+        let none = DVec3::NAN;
         let (o, d) = self.rays.ray(u, v);
         let Some((t0, t1)) = self.rays.clip_ray(o, d) else {
-            return ([0.0; 4], f64::NAN, 0);
+            return ([0.0; 4], f64::NAN, 0, none);
         };
         // a perspective ray starts at the near clip
         let t0 = if self.rays.eye.is_some() { t0.max(self.near / d.abs().max_element()) } else { t0 };
         if t0 > t1 {
-            return ([0.0; 4], f64::NAN, 0);
+            return ([0.0; 4], f64::NAN, 0, none);
         }
         let vol = self.vol;
         let hi = DVec3::new(vol.dims[0] as f64 - 1.0, vol.dims[1] as f64 - 1.0, vol.dims[2] as f64 - 1.0);
@@ -599,17 +710,20 @@ impl Tracer<'_> {
             let end = if rel.is_finite() { (rel.floor().max(0.0) as u64).clamp(i, last) } else { last };
             for j in i..=end {
                 let (t, p) = at(j);
-                let dens = vol.density(p);
+                let dens = vol.density_with(self.recon, p);
                 samples += 1;
                 match self.scene.mode {
                     Mode::Iso => {
                         if dens >= self.scene.iso as f64 {
                             let (th, ph) = if j == 0 { (t, p) } else { self.bisect(at(j - 1).0, t, o, d, hi) };
-                            let ndl = self.ndl(vol.gradient(ph));
+                            let grad = vol.gradient_with(self.recon, ph);
+                            let ndl = self.ndl(grad);
                             let [r, g, b] = self.scene.shading.shade(self.iso_rgb, ndl);
                             // the depth convention: along the view from the plane through the centre
                             let depth = if self.rays.eye.is_some() { self.rays.depth_of(ph) } else { th };
-                            return ([r, g, b, 1.0], depth, samples);
+                            let world = grad / self.spacing;
+                            let n = if world.length() > 0.0 { -world.normalize() } else { none };
+                            return ([r, g, b, 1.0], depth, samples, n);
                         }
                     }
                     Mode::Blend => {
@@ -620,21 +734,21 @@ impl Tracer<'_> {
                         }
                         let a = if a >= 1.0 { 1.0 } else { 1.0 - (1.0 - a).powf(self.ratio) };
                         let c = self.scene.classifier.classify(df);
-                        let rgb = self.scene.shading.shade([c.r, c.g, c.b], self.ndl(vol.gradient(p)));
+                        let rgb = self.scene.shading.shade([c.r, c.g, c.b], self.ndl(vol.gradient_with(self.recon, p)));
                         let tr = (1.0 - acc[3]) * a;
                         for k in 0..3 {
                             acc[k] += tr * rgb[k] as f64;
                         }
                         acc[3] += tr;
                         if acc[3] >= self.cutoff {
-                            return (acc.map(|x| x as f32), f64::NAN, samples);
+                            return (acc.map(|x| x as f32), f64::NAN, samples, none);
                         }
                     }
                 }
             }
             i = end + 1;
         }
-        (acc.map(|x| x as f32), f64::NAN, samples)
+        (acc.map(|x| x as f32), f64::NAN, samples, none)
     }
 
     /// Bisection for the iso crossing in `[ta, tb]` (density below iso at `ta`,
@@ -647,7 +761,7 @@ impl Tracer<'_> {
             if tm <= ta || tm >= tb {
                 break;
             }
-            if self.vol.density(p(tm)) >= iso {
+            if self.vol.density_with(self.recon, p(tm)) >= iso {
                 tb = tm;
             } else {
                 ta = tm;

@@ -53,6 +53,7 @@ use shearwarp::composite::Mode;
 use shearwarp::data::phantom::Phantom;
 use shearwarp::data::volume::Volume;
 use shearwarp::encode::depth::Search;
+use shearwarp::kernels::Reconstruction;
 use shearwarp::render::{Deluxe, FrameStats, Lattice, Method, Renderer, Settings, WordSize};
 use shearwarp::view::{Camera, Factorization, NamedView, Projection, View, standard_views};
 use shearwarp::warp::Image;
@@ -93,6 +94,14 @@ pub struct BenchCmd {
     /// Reference step along each ray, in voxels of the smallest spacing.
     #[arg(long, default_value_t = shearwarp::accuracy::reference::DEFAULT_STEP)]
     pub ref_step: f64,
+    /// How the reference reconstructs densities between slices: `linear`
+    /// (trilinear) or `cubic` (Catmull–Rom through four z slices, bilinear
+    /// in-plane; the normal from their cubic B-spline smoothing). The render
+    /// variants stay linear; their image and depth
+    /// errors are measured against this reference, and the suite's table
+    /// gets one `reference` row per case with its own depth and normal error.
+    #[arg(long, value_enum, default_value = "linear")]
+    pub reconstruction: Reconstruction,
     /// Only these variants (comma-separated): a variant's exact name selects
     /// just that variant; any other string selects every variant containing it.
     #[arg(long, value_delimiter = ',')]
@@ -676,8 +685,13 @@ pub struct ReferenceRecord {
     pub view: String,
     pub ms: f64,
     pub samples: u64,
+    /// How the reference reconstructs densities between slices (`--reconstruction`).
+    pub reconstruction: &'static str,
     /// Depth error of the reference against the analytic truth (when there is one).
     pub depth: Option<DepthError>,
+    /// Angle between the normal the reference shades its iso hit with and the
+    /// analytic surface's (when there is one).
+    pub normal: Option<NormalError>,
     pub truth_ms: f64,
 }
 
@@ -706,6 +720,9 @@ pub struct SuiteReport {
     pub size: usize,
     pub threads: usize,
     pub table: Vec<SuiteRow>,
+    /// Per case, the reference's own row (variant `reference`, its
+    /// `--reconstruction`), against the analytic truth.
+    pub reference: Vec<SuiteRow>,
     pub cases: Vec<Report>,
 }
 
@@ -751,6 +768,40 @@ pub fn case_command(cmd: &BenchCmd, case: &Case) -> BenchCmd {
     c
 }
 
+/// The suite row of a case's reference (iso mode, parallel views, against the
+/// analytic truth): depth and normal error pooled over the views as the
+/// variants' rows pool them (mean over every pixel, p99 of the worst view),
+/// its median time per view as the frame time, and no image error (0).
+fn reference_row(case: &Case, r: &Report, unit: f64) -> Option<SuiteRow> {
+    let refs: Vec<&ReferenceRecord> =
+        r.reference.iter().filter(|x| x.mode == Mode::Iso.name() && !x.view.ends_with("(perspective)")).collect();
+    let first = refs.first()?;
+    let depths: Vec<&DepthError> = refs.iter().filter_map(|x| x.depth.as_ref()).filter(|d| d.both > 0).collect();
+    let normals: Vec<&NormalError> = refs.iter().filter_map(|x| x.normal.as_ref()).filter(|n| n.both > 0).collect();
+    let pooled = |pairs: Vec<(f64, usize)>| {
+        let n: usize = pairs.iter().map(|p| p.1).sum();
+        (n > 0).then(|| pairs.iter().map(|&(m, k)| m * k as f64).sum::<f64>() / n as f64)
+    };
+    let worst = |v: Vec<f64>| v.into_iter().reduce(f64::max);
+    let depth_p99 = worst(depths.iter().map(|d| d.p99).collect());
+    let mut ms: Vec<f64> = refs.iter().map(|x| x.ms).collect();
+    ms.sort_by(f64::total_cmp);
+    Some(SuiteRow {
+        case: case.name.into(),
+        dims: r.dims,
+        spacing: r.spacing,
+        variant: "reference".into(),
+        reconstruction: first.reconstruction,
+        depth_mean: pooled(depths.iter().map(|d| (d.mean, d.both)).collect()),
+        depth_p99,
+        depth_p99_mm: depth_p99.map(|p| p * unit),
+        normal_deg_mean: pooled(normals.iter().map(|n| (n.mean_deg, n.both)).collect()),
+        normal_deg_p99: worst(normals.iter().map(|n| n.p99_deg).collect()),
+        frame_ms: ms[ms.len() / 2],
+        rmse_mean: 0.0,
+    })
+}
+
 /// Runs `--suite`: every case, then the table over them.
 fn run_suite(cmd: &BenchCmd, suite: Suite) -> Result<()> {
     let v = &cmd.volume;
@@ -776,6 +827,7 @@ fn run_suite(cmd: &BenchCmd, suite: Suite) -> Result<()> {
         size: cmd.size,
         threads: if cmd.threads == 0 { rayon::current_num_threads() } else { cmd.threads },
         table: vec![],
+        reference: vec![],
         cases: vec![],
     };
     for case in cases {
@@ -786,6 +838,9 @@ fn run_suite(cmd: &BenchCmd, suite: Suite) -> Result<()> {
         crate::app::args::renderable(&name, &vol)?;
         let r = measure(&c, vol, name)?;
         let unit = r.spacing.iter().fold(f32::MAX, |a, &b| a.min(b)) as f64;
+        if let Some(row) = reference_row(case, &r, unit) {
+            rep.reference.push(row);
+        }
         for x in &r.summary {
             rep.table.push(SuiteRow {
                 case: case.name.into(),
@@ -846,7 +901,17 @@ pub fn suite_markdown(rep: &SuiteReport) -> String {
         "| case | dims | spacing | variant | reconstruction | depth mean | depth p99 | p99 mm | normal ° mean | normal ° p99 | frame ms | RMSE |"
     );
     let _ = writeln!(s, "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
-    for r in &rep.table {
+    // each case's reference row first, then its variants
+    let rows = rep.reference.iter().map(|r| (r.case.as_str(), 0, r)).chain(rep.table.iter().map(|r| (r.case.as_str(), 1, r)));
+    let order: Vec<&str> = rep.table.iter().chain(&rep.reference).map(|r| r.case.as_str()).fold(vec![], |mut v, c| {
+        if !v.contains(&c) {
+            v.push(c);
+        }
+        v
+    });
+    let mut rows: Vec<(&str, i32, &SuiteRow)> = rows.collect();
+    rows.sort_by_key(|&(c, k, _)| (order.iter().position(|&o| o == c), k));
+    for (_, _, r) in rows {
         let _ = writeln!(
             s,
             "| {} | {}×{}×{} | {}×{}×{} | {} | {} | {} | {} | {} | {} | {} | {:.3} | {:.5} |",
@@ -892,7 +957,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
         m
     };
     let refr = ReferenceRenderer::new(&vol);
-    let ropts = ReferenceOptions { step: cmd.ref_step, threads: cmd.threads, ..Default::default() };
+    let ropts = ReferenceOptions { step: cmd.ref_step, threads: cmd.threads, reconstruction: cmd.reconstruction, ..Default::default() };
     let camera = |v: &View| Camera { rotation: v.rotation, zoom: None, size: [cmd.size, cmd.size] };
 
     let per_mode: Vec<(Mode, Vec<Variant>)> = modes
@@ -995,12 +1060,15 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
             };
             let truth_ms = t.elapsed().as_secs_f64() * 1e3;
             let ref_depth = surface.as_ref().map(|a| depth_error(&image.depth, &a.depth, unit)).transpose()?;
+            let ref_normal = surface.as_ref().map(|a| normal_error(&image.normal, &a.normal)).transpose()?;
             report.reference.push(ReferenceRecord {
                 mode: mode.name(),
                 view: if proj.is_perspective() { format!("{} (perspective)", view.name) } else { view.name.clone() },
                 ms,
                 samples: image.samples,
+                reconstruction: cmd.reconstruction.name(),
                 depth: ref_depth,
+                normal: ref_normal,
                 truth_ms,
             });
             let (truth, normals) = match (mode, surface) {

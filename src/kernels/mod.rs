@@ -16,8 +16,15 @@
 //! `SHEARWARP_CPU=scalar`). Objects that pick kernels ([`crate::render::Settings::cpu`],
 //! [`crate::encode::mask::BinaryMask::set_cpu_level`]) default to [`level`] and
 //! can be set lower, never above what the CPU has.
+//!
+//! [`reconstruct`] holds the reconstruction kernels between slices (linear,
+//! Catmull–Rom) with the bound a cell must pass to possibly hold an iso value.
 
 use std::sync::OnceLock;
+
+pub mod reconstruct;
+
+pub use reconstruct::Reconstruction;
 
 use crate::error::{Error, Result};
 

@@ -32,6 +32,7 @@ mod perspective_binary;
 mod plan;
 mod quality;
 mod readme;
+mod reconstruction;
 mod rle;
 mod rle_reuse;
 mod stress;

@@ -1,0 +1,286 @@
+//! Reconstruction along the slice axis: how a density between two slices is
+//! made from the slices around it.
+//!
+//! [`Reconstruction::Linear`] is the straight line between the two slices
+//! that bracket a point (the trilinear interpolant, with bilinear slices).
+//! Its iso-surface bends at every slice and its gradient jumps there, so a
+//! surface nearly parallel to thick slices shows one ring per slice.
+//!
+//! [`Reconstruction::Cubic`] is the Catmull–Rom spline through four slices:
+//! between slices `k` and `k + 1`, at fraction `t ∈ [0, 1]`, with the four
+//! samples `p₀ … p₃` of slices `k − 1 … k + 2` (indices clamped to the
+//! volume, so a border repeats its slice),
+//!
+//! ```text
+//! f(t) = w₀(t)·p₀ + w₁(t)·p₁ + w₂(t)·p₂ + w₃(t)·p₃
+//! w₀ = (−t³ + 2t² − t)/2     w₁ = (3t³ − 5t² + 2)/2
+//! w₂ = (−3t³ + 4t² + t)/2    w₃ = (t³ − t²)/2
+//! ```
+//!
+//! ([`catmull_rom`]; its derivative [`catmull_rom_derivative`]). It
+//! interpolates (`f(0) = p₁`, `f(1) = p₂`), its first derivative is
+//! continuous across slices (C¹: the iso-surface and its normal do not bend
+//! at a slice), and it reproduces every polynomial of degree ≤ 2 in the
+//! slice index exactly (approximation order 3). In-plane the slices stay
+//! bilinear.
+//!
+//! Why two kernels, chosen by measurement against the analytic surfaces
+//! (the reference renderer, ball at 1×1×3 and ellipsoid at 0.6×0.6×5 mm):
+//! the density, hence the iso crossing, is Catmull–Rom's, because it
+//! interpolates — the cubic B-spline ([`b_spline`]) smooths the slices and
+//! moves the iso-surface where the profile is curved (`f''·h²/6`: on the
+//! thick-slice ball it doubled linear's depth error, mean 0.045 against
+//! 0.024 voxels). The normal is the gradient of the B-spline smoothing of
+//! the same slices, because Catmull–Rom's derivative passes the aliasing of
+//! an edge thinner than the slices (its iso-surface is wavy with the slice
+//! period): with Catmull–Rom's own gradient the ellipsoid's normal error was
+//! 2.5° mean and 10.6° p99 (linear: 3.5° and 11.5°), with the B-spline's
+//! 0.86° and 3.6°. The B-spline is C² with non-negative weights, so that
+//! normal is continuous across slices and needs no bound of its own.
+//!
+//! # The bound a skipping structure needs
+//!
+//! The weights `w₁, w₂ ≥ 0` and `w₀, w₃ ≤ 0` on `[0, 1]`, they sum to 1, and
+//! the negative mass `s(t) = −(w₀ + w₃) = t(1 − t)/2` is at most `1/8`
+//! (at `t = ½`). So with `M = max(p₁, p₂)` (the *inner* slices) and
+//! `m = min(p₀, p₃)` (the *outer* ones),
+//!
+//! ```text
+//! f(t) ≤ (1 + s)·M − s·m ≤ M + max(0, M − m)/8
+//! f(t) ≥ (1 + s)·m' − s·M' ≥ m' − max(0, M' − m')/8    (m' = min(p₁, p₂), M' = max(p₀, p₃))
+//! ```
+//!
+//! ([`upper_bound`], [`lower_bound`]). With bilinear slices every sample of
+//! slice `j` lies in the range of that slice's four in-plane corners, so a
+//! cell between slices `k` and `k + 1` can reach an iso value only if
+//! `upper_bound(max of the 8 inner corners, min of the 8 outer corners) ≥ iso`
+//! ([`cell_may_reach`]) — the conservative test that keeps a binary mask
+//! lossless under this reconstruction. The coarser `1.125·max − 0.125·min`
+//! over all 16 corners follows from it.
+//!
+//! # The hit and the normal
+//!
+//! [`crossing`] finds the first `t ∈ [0, 1]` where the cubic through four
+//! samples reaches an iso value: the segment is split at the roots of `f'`
+//! into monotone pieces and the first piece that rises through iso is
+//! bisected, so no crossing between two samples is lost, whatever the
+//! samples. The normal of a hit is the gradient of the B-spline smoothing of
+//! the same four slices: along the slice axis `Σ b'ⱼ(t)·pⱼ` (`b` the
+//! [`b_spline`] weights), in-plane the central differences of the four
+//! slices (bilinear in each) blended with the weights `bⱼ(t)` — C² along the
+//! slice axis, exact on densities linear and quadratic along it (the
+//! smoothing adds only a constant to a quadratic), with no quantization.
+
+/// How densities between slices are reconstructed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Reconstruction {
+    /// The straight line between the two bracketing slices (trilinear).
+    #[default]
+    Linear,
+    /// The Catmull–Rom cubic through four slices along the slice axis,
+    /// bilinear in-plane; the normal from the cubic B-spline smoothing of
+    /// the same slices (see the module docs).
+    Cubic,
+}
+
+impl Reconstruction {
+    /// The name the CLI and reports use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Reconstruction::Linear => "linear",
+            Reconstruction::Cubic => "cubic",
+        }
+    }
+}
+
+/// The largest negative weight mass of the Catmull–Rom kernel on `[0, 1]`
+/// (`max t(1 − t)/2`): how far past its samples the cubic can overshoot, as a
+/// fraction of their spread.
+pub const OVERSHOOT: f64 = 0.125;
+
+/// The Catmull–Rom weights of slices `k − 1 … k + 2` at fraction `t` between `k` and `k + 1`.
+#[inline(always)]
+pub fn catmull_rom(t: f64) -> [f64; 4] {
+    let (t2, t3) = (t * t, t * t * t);
+    [0.5 * (-t3 + 2.0 * t2 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0), 0.5 * (-3.0 * t3 + 4.0 * t2 + t), 0.5 * (t3 - t2)]
+}
+
+/// The derivatives `dwⱼ/dt` of [`catmull_rom`]'s weights.
+#[inline(always)]
+pub fn catmull_rom_derivative(t: f64) -> [f64; 4] {
+    let t2 = t * t;
+    [0.5 * (-3.0 * t2 + 4.0 * t - 1.0), 0.5 * (9.0 * t2 - 10.0 * t), 0.5 * (-9.0 * t2 + 8.0 * t + 1.0), 0.5 * (3.0 * t2 - 2.0 * t)]
+}
+
+/// The uniform cubic B-spline weights of slices `k − 1 … k + 2` at fraction
+/// `t` between `k` and `k + 1`: non-negative, C², reproducing degree ≤ 1, not
+/// interpolating (it smooths): the weights [`Reconstruction::Cubic`]'s
+/// normal is blended with.
+#[inline(always)]
+pub fn b_spline(t: f64) -> [f64; 4] {
+    let (u, t2, t3) = (1.0 - t, t * t, t * t * t);
+    [u * u * u / 6.0, (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0, (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0, t3 / 6.0]
+}
+
+/// The derivatives `dwⱼ/dt` of [`b_spline`]'s weights.
+#[inline(always)]
+pub fn b_spline_derivative(t: f64) -> [f64; 4] {
+    let (u, t2) = (1.0 - t, t * t);
+    [-0.5 * u * u, 0.5 * (3.0 * t2 - 4.0 * t), 0.5 * (-3.0 * t2 + 2.0 * t + 1.0), 0.5 * t2]
+}
+
+/// The cubic through `p` at `t`.
+#[inline(always)]
+pub fn eval(p: [f64; 4], t: f64) -> f64 {
+    let w = catmull_rom(t);
+    w[0] * p[0] + w[1] * p[1] + w[2] * p[2] + w[3] * p[3]
+}
+
+/// Its derivative along `t` (per slice).
+#[inline(always)]
+pub fn slope(p: [f64; 4], t: f64) -> f64 {
+    let w = catmull_rom_derivative(t);
+    w[0] * p[0] + w[1] * p[1] + w[2] * p[2] + w[3] * p[3]
+}
+
+/// The most the cubic can reach on `[0, 1]` when its inner samples are at most
+/// `inner_max` and its outer ones at least `outer_min` (see the module docs).
+#[inline(always)]
+pub fn upper_bound(inner_max: f64, outer_min: f64) -> f64 {
+    inner_max + OVERSHOOT * (inner_max - outer_min).max(0.0)
+}
+
+/// The least the cubic can reach on `[0, 1]` when its inner samples are at
+/// least `inner_min` and its outer ones at most `outer_max`.
+#[inline(always)]
+pub fn lower_bound(inner_min: f64, outer_max: f64) -> f64 {
+    inner_min - OVERSHOOT * (outer_max - inner_min).max(0.0)
+}
+
+/// Whether a cell between two slices can hold a density ≥ `iso` under
+/// [`Reconstruction::Cubic`], from the maximum of its inner slices' corners
+/// and the minimum of its outer slices' corners (conservative: false only
+/// when no point of the cell reaches `iso`).
+#[inline(always)]
+pub fn cell_may_reach(inner_max: f64, outer_min: f64, iso: f64) -> bool {
+    upper_bound(inner_max, outer_min) >= iso
+}
+
+/// The range the cubic can take over `[0, 1]` when all four samples lie in
+/// `[lo, hi]`: `[lo − (hi − lo)/8, hi + (hi − lo)/8]`.
+#[inline(always)]
+pub fn widened(lo: f64, hi: f64) -> (f64, f64) {
+    let spread = (hi - lo).max(0.0);
+    (lo - OVERSHOOT * spread, hi + OVERSHOOT * spread)
+}
+
+/// The polynomial coefficients `[c₀, c₁, c₂, c₃]` (`f(t) = Σ cᵢ·tⁱ`) of the cubic through `p`.
+#[inline(always)]
+pub fn coefficients(p: [f64; 4]) -> [f64; 4] {
+    [p[1], 0.5 * (p[2] - p[0]), p[0] - 2.5 * p[1] + 2.0 * p[2] - 0.5 * p[3], 0.5 * (-p[0] + 3.0 * p[1] - 3.0 * p[2] + p[3])]
+}
+
+/// Bisection steps of [`crossing`] (the bracket shrinks below 2⁻⁶⁰ of a slice).
+const BISECTIONS: u32 = 60;
+
+/// The first `t ∈ [0, 1]` where the cubic through `p` is `≥ iso` (0 when it
+/// starts there), or `None` when it stays below on the whole segment.
+///
+/// The segment is cut at the roots of the derivative into at most three
+/// monotone pieces; the first piece whose end reaches iso holds the first
+/// crossing, which bisection brackets to f64 precision (the result is the
+/// bracket's upper end, where the cubic is ≥ iso).
+pub fn crossing(p: [f64; 4], iso: f64) -> Option<f64> {
+    let c = coefficients(p);
+    let f = |t: f64| ((c[3] * t + c[2]) * t + c[1]) * t + c[0];
+    if f(0.0) >= iso {
+        return Some(0.0);
+    }
+    // roots of f' = 3c₃t² + 2c₂t + c₁ inside (0, 1), in order
+    let mut cuts = [0.0f64, 1.0, 1.0, 1.0];
+    let mut n = 1;
+    let (a, b, cc) = (3.0 * c[3], 2.0 * c[2], c[1]);
+    let mut push = |r: f64| {
+        if r > 0.0 && r < 1.0 {
+            cuts[n] = r;
+            n += 1;
+        }
+    };
+    if a.abs() > 1e-300 {
+        let disc = b * b - 4.0 * a * cc;
+        if disc >= 0.0 {
+            let q = -0.5 * (b + b.signum() * disc.sqrt());
+            let (r0, r1) = if q == 0.0 { (0.0, 0.0) } else { (q / a, cc / q) };
+            push(r0.min(r1));
+            push(r0.max(r1));
+        }
+    } else if b.abs() > 1e-300 {
+        push(-cc / b);
+    }
+    cuts[n] = 1.0;
+    cuts[..=n].sort_by(f64::total_cmp);
+    for w in cuts[..=n].windows(2) {
+        let (mut lo, mut hi) = (w[0], w[1]);
+        if f(hi) < iso {
+            continue;
+        }
+        // f(lo) < iso ≤ f(hi) (lo is 0 or a piece's start below iso)
+        for _ in 0..BISECTIONS {
+            let m = 0.5 * (lo + hi);
+            if m <= lo || m >= hi {
+                break;
+            }
+            if f(m) >= iso {
+                hi = m;
+            } else {
+                lo = m;
+            }
+        }
+        return Some(hi);
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weights_partition_unity_and_interpolate() {
+        for i in 0..=100 {
+            let t = i as f64 / 100.0;
+            let w = catmull_rom(t);
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-14);
+            assert!(catmull_rom_derivative(t).iter().sum::<f64>().abs() < 1e-14);
+            assert!(w[0] <= 0.0 && w[3] <= 0.0 && w[1] >= 0.0 && w[2] >= 0.0);
+            assert!((-(w[0] + w[3]) - t * (1.0 - t) / 2.0).abs() < 1e-14);
+        }
+        assert_eq!(catmull_rom(0.0), [0.0, 1.0, 0.0, 0.0]);
+        assert_eq!(catmull_rom(1.0), [0.0, 0.0, 1.0, 0.0]);
+    }
+
+    #[test]
+    fn coefficients_match_the_weights() {
+        let p = [3.0, -1.0, 4.0, 1.5];
+        for i in 0..=10 {
+            let t = i as f64 / 10.0;
+            let c = coefficients(p);
+            let poly = c[0] + c[1] * t + c[2] * t * t + c[3] * t * t * t;
+            assert!((poly - eval(p, t)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn crossing_of_a_line_and_of_a_bump() {
+        // samples of x at -1, 0, 1, 2: f(t) = t
+        assert!((crossing([-1.0, 0.0, 1.0, 2.0], 0.25).unwrap() - 0.25).abs() < 1e-15);
+        assert_eq!(crossing([-1.0, 0.0, 1.0, 2.0], 1.5), None);
+        assert_eq!(crossing([5.0, 5.0, 5.0, 5.0], 1.0), Some(0.0));
+        // a bump that rises above both inner samples between them: [0, 1, 1, 0] peaks at 1.125
+        let t = crossing([0.0, 1.0, 1.0, 0.0], 1.1).unwrap();
+        assert!((eval([0.0, 1.0, 1.0, 0.0], t) - 1.1).abs() < 1e-12 && t < 0.5);
+        assert_eq!(crossing([0.0, 1.0, 1.0, 0.0], 1.13), None);
+    }
+}

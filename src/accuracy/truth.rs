@@ -284,6 +284,43 @@ fn per_pixel(rays: &Rays, hit: impl Fn(DVec3) -> Option<f64> + Sync) -> Vec<f64>
     out
 }
 
+/// The first `t ≥ t_min` where `o + t·d` meets the closed cylinder `(a, b, r)`
+/// (side or caps), if any: the analytic depth of a needle.
+pub fn cylinder_hit(o: DVec3, d: DVec3, a: DVec3, b: DVec3, r: f64, t_min: f64) -> Option<f64> {
+    let w = (b - a).normalize();
+    let len = (b - a).length();
+    let mut best: Option<f64> = None;
+    let mut take = |t: f64| {
+        if t >= t_min {
+            best = Some(best.map_or(t, |x: f64| x.min(t)))
+        }
+    };
+    // side: |(p − a) − ((p − a)·w) w| = r
+    let (oa, dp) = (o - a, d - w * d.dot(w));
+    let op = oa - w * oa.dot(w);
+    let (qa, qb, qc) = (dp.dot(dp), 2.0 * dp.dot(op), op.dot(op) - r * r);
+    let disc = qb * qb - 4.0 * qa * qc;
+    if qa > 0.0 && disc >= 0.0 {
+        for t in [(-qb - disc.sqrt()) / (2.0 * qa), (-qb + disc.sqrt()) / (2.0 * qa)] {
+            let s = (o + t * d - a).dot(w);
+            if (0.0..=len).contains(&s) {
+                take(t);
+            }
+        }
+    }
+    // caps
+    for (c, n) in [(a, -w), (b, w)] {
+        let den = d.dot(n);
+        if den != 0.0 {
+            let t = (c - o).dot(n) / den;
+            if (o + t * d - c).length() <= r {
+                take(t);
+            }
+        }
+    }
+    best
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

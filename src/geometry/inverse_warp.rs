@@ -936,6 +936,7 @@ pub fn composite_iso_over_geometry(
 mod tests {
     use super::*;
     use crate::accuracy::reference::{Rays, fast_path_depth};
+    use crate::accuracy::truth::cylinder_hit;
     use crate::composite::Mode;
     use crate::data::phantom::{SPHERE_ISO, sphere, sphere_geometry};
     use crate::geometry::sampling::sample_voxel;
@@ -944,39 +945,6 @@ mod tests {
     use crate::view::{Camera, NamedView, Projection, rotate_eye};
     use glam::DMat3;
     use std::sync::Arc;
-
-    /// The first `t ≥ t_min` where `o + t·d` enters the closed cylinder
-    /// `(a, b, r)` (side or caps), if any.
-    fn cylinder_hit(o: DVec3, d: DVec3, a: DVec3, b: DVec3, r: f64) -> Option<f64> {
-        let w = (b - a).normalize();
-        let len = (b - a).length();
-        let mut best: Option<f64> = None;
-        let mut take = |t: f64| best = Some(best.map_or(t, |x: f64| x.min(t)));
-        // side: |(p − a) − ((p − a)·w) w| = r
-        let (oa, dp) = (o - a, d - w * d.dot(w));
-        let op = oa - w * oa.dot(w);
-        let (qa, qb, qc) = (dp.dot(dp), 2.0 * dp.dot(op), op.dot(op) - r * r);
-        let disc = qb * qb - 4.0 * qa * qc;
-        if qa > 0.0 && disc >= 0.0 {
-            for t in [(-qb - disc.sqrt()) / (2.0 * qa), (-qb + disc.sqrt()) / (2.0 * qa)] {
-                let s = (o + t * d - a).dot(w);
-                if (0.0..=len).contains(&s) {
-                    take(t);
-                }
-            }
-        }
-        // caps
-        for (c, n) in [(a, -w), (b, w)] {
-            let den = d.dot(n);
-            if den != 0.0 {
-                let t = (c - o).dot(n) / den;
-                if (o + t * d - c).length() <= r {
-                    take(t);
-                }
-            }
-        }
-        best
-    }
 
     /// Visiting only the intermediate pixels that can reach the geometry's
     /// rectangle gives exactly the limits of visiting every pixel (a small
@@ -1419,7 +1387,7 @@ mod tests {
                     let oc = o - c;
                     let (a, b, cc) = (d.dot(d), oc.dot(d), oc.dot(oc) - radius * radius);
                     let ts = if b * b - a * cc >= 0.0 { Some((-b - (b * b - a * cc).sqrt()) / a) } else { None };
-                    let tn = cylinder_hit(o, d, na, nb, nr);
+                    let tn = cylinder_hit(o, d, na, nb, nr, f64::NEG_INFINITY);
                     // the volume path's own error (its silhouettes) is not the geometry's: check the
                     // pixels where the unlimited iso depth meets the analytic sphere within half a voxel
                     let sphere_depth = ts.map(|t| rays.depth_of(o + t * d));
@@ -1524,7 +1492,7 @@ mod tests {
                         let (a, b, cc) = (d.dot(d), oc.dot(d), oc.dot(oc) - radius * radius);
                         let ts = (miss < 0.0).then(|| (-b - (b * b - a * cc).sqrt()) / a);
                         let sphere_depth = ts.map(|t| rays.depth_of(o + t * d));
-                        let needle_depth = cylinder_hit(o, d, na, nb, nr).map(|t| rays.depth_of(o + t * d));
+                        let needle_depth = cylinder_hit(o, d, na, nb, nr, f64::NEG_INFINITY).map(|t| rays.depth_of(o + t * d));
                         match (sphere_depth, needle_depth) {
                             (s, Some(n)) if s.is_none_or(|s| s > n + 2.5) => {
                                 needle_px += 1;

@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use common::{bits, blobs, render, renderer};
 use glam::{DMat3, DVec3, EulerRot};
+use shearwarp::accuracy::truth::cylinder_hit;
 use shearwarp::classify::TransferFunction;
 use shearwarp::composite::Mode;
 use shearwarp::geometry::{Cull, GeometryImage, GeometryLimits, Material, Mesh, Projector, composite_over_geometry, rasterize};
@@ -219,43 +220,6 @@ fn geometry_needle_on_the_command_line() {
     }
 }
 
-/// The first `t ≥ 0` where `o + t·d` enters the closed cylinder `(a, b, r)`
-/// (side or caps), if any.
-fn cylinder_hit(o: DVec3, d: DVec3, a: DVec3, b: DVec3, r: f64) -> Option<f64> {
-    let w = (b - a).normalize();
-    let len = (b - a).length();
-    let mut best: Option<f64> = None;
-    let mut take = |t: f64| {
-        if t >= 0.0 {
-            best = Some(best.map_or(t, |x: f64| x.min(t)))
-        }
-    };
-    // side: |(p − a) − ((p − a)·w) w| = r
-    let (oa, dp) = (o - a, d - w * d.dot(w));
-    let op = oa - w * oa.dot(w);
-    let (qa, qb, qc) = (dp.dot(dp), 2.0 * dp.dot(op), op.dot(op) - r * r);
-    let disc = qb * qb - 4.0 * qa * qc;
-    if qa > 0.0 && disc >= 0.0 {
-        for t in [(-qb - disc.sqrt()) / (2.0 * qa), (-qb + disc.sqrt()) / (2.0 * qa)] {
-            let s = (o + t * d - a).dot(w);
-            if (0.0..=len).contains(&s) {
-                take(t);
-            }
-        }
-    }
-    // caps
-    for (c, n) in [(a, -w), (b, w)] {
-        let den = d.dot(n);
-        if den != 0.0 {
-            let t = (c - o).dot(n) / den;
-            if (o + t * d - c).length() <= r {
-                take(t);
-            }
-        }
-    }
-    best
-}
-
 /// The needle through the sphere phantom in a perspective frame split into
 /// Lacroute's pyramids (the eye beside the ball, inside the volume's box, a
 /// 90° field of view: `last_plans().len() > 1`), binary and brute iso with the
@@ -347,7 +311,7 @@ fn geometry_split_frame_needle_through_the_sphere_is_the_nearer_surface() {
                 let oc = o - c;
                 let (a, b, cc) = (d.dot(d), oc.dot(d), oc.dot(oc) - radius * radius);
                 let ts = if b * b - a * cc >= 0.0 { Some((-b - (b * b - a * cc).sqrt()) / a).filter(|&t| t >= 0.0) } else { None };
-                let tn = needles.iter().filter_map(|&(na, nb, nr)| cylinder_hit(o, d, na, nb, nr)).reduce(f64::min);
+                let tn = needles.iter().filter_map(|&(na, nb, nr)| cylinder_hit(o, d, na, nb, nr, 0.0)).reduce(f64::min);
                 let sphere_depth = ts.map(|t| rays.depth_of(o + t * d));
                 let own_ok = match (sphere_depth, plain[i].is_nan()) {
                     (Some(s), false) => (plain[i] - s).abs() <= 0.5,

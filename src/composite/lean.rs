@@ -44,7 +44,7 @@
 
 use crate::classify::shade_table::ShadeTable;
 use crate::classify::shading::apply_shade;
-use crate::composite::raycast::{Cells, MISS, RayContext, RayResult, RowOut, render_rows};
+use crate::composite::raycast::{Cells, MISS, RayContext, RowOut, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::slices::bilinear;
 use crate::encode::depth::{Matcher, Search, Word};
@@ -107,9 +107,10 @@ struct LeanRay {
 }
 
 /// A ray's walk over its depth row: the word being consumed, its remaining
-/// matching slots (top bits, [`Matcher::hits`]), the slice of its first slot
-/// and how many words are left after it in walking order.
-#[derive(Clone, Copy, Debug)]
+/// matching slots (top bits, [`Matcher::hits`]; none left: the ray has no
+/// candidate), the slice of its first slot and how many words are left after
+/// it in walking order.
+#[derive(Clone, Copy, Debug, Default)]
 struct Walk<W: Word> {
     w: usize,
     cur: W,
@@ -222,13 +223,14 @@ impl RowStart {
 
 impl<W: Word> Frame<'_, W> {
     /// The walk of the depth row starting at word `start`, at its first
-    /// matching slot (`None`: no candidate).
+    /// matching slot (no slot left: no candidate).
     #[inline(always)]
-    fn first<const ASC: bool>(&self, start: usize, nw: usize) -> Option<Walk<W>> {
+    fn first<const ASC: bool>(&self, start: usize, nw: usize) -> Walk<W> {
         let (w, kbase) = if ASC { (start, 0) } else { (start + nw - 1, (nw - 1) * self.slots) };
         let cur = self.m.hits(self.words[w]);
         let mut walk = Walk { w, cur, kbase, left: nw - 1 };
-        self.settle::<ASC>(&mut walk).then_some(walk)
+        self.settle::<ASC>(&mut walk);
+        walk
     }
 
     /// Moves `walk` past words with no matching slot; false at the row's end.
@@ -290,11 +292,13 @@ impl<W: Word> Frame<'_, W> {
         }
     }
 
-    /// Traces `ray` from its settled walk: the first candidate whose sample
-    /// reaches the iso value, refined and shaded. Without `CHECKED` every
-    /// candidate is a cell of the volume (cell size 1) and is not tested.
+    /// Traces `ray` from its settled walk (with a candidate) into its pixel:
+    /// the first candidate whose sample reaches the iso value, refined and
+    /// shaded; the pixel is left as it is (a miss) if there is none. Without
+    /// `CHECKED` every candidate is a cell of the volume (cell size 1) and is
+    /// not tested.
     #[inline(always)]
-    fn trace<V: Cells, const ASC: bool, const CHECKED: bool>(&self, v: &V, mut walk: Walk<W>, ray: LeanRay) -> RayResult {
+    fn trace<V: Cells, const ASC: bool, const CHECKED: bool>(&self, v: &V, mut walk: Walk<W>, ray: LeanRay, px: Pixel) {
         loop {
             let k = self.take::<ASC>(&mut walk);
             let e = &self.slices[k];
@@ -303,20 +307,21 @@ impl<W: Word> Frame<'_, W> {
             if let Some(b) = b {
                 let d = bilinear(v.densities(b), e.wi, e.wj);
                 if d >= self.iso {
-                    return self.hit::<V, ASC>(v, ray, k, b, d);
+                    return self.hit::<V, ASC>(v, ray, k, b, d, px);
                 }
             }
             if !self.settle::<ASC>(&mut walk) {
-                return MISS;
+                return;
             }
         }
     }
 
-    /// The iso hit at slice `k` (stack index `b`, density `d`): refined
-    /// against the slice before it in walking order and shaded by the blend
-    /// of both slices' shade entries, as [`RayContext`]'s general hit.
+    /// The iso hit at slice `k` (stack index `b`, density `d`) into its
+    /// pixel: refined against the slice before it in walking order and shaded
+    /// by the blend of both slices' shade entries, as [`RayContext`]'s general
+    /// hit.
     #[inline(never)]
-    fn hit<V: Cells, const ASC: bool>(&self, v: &V, ray: LeanRay, k: usize, b: usize, d: f32) -> RayResult {
+    fn hit<V: Cells, const ASC: bool>(&self, v: &V, ray: LeanRay, k: usize, b: usize, d: f32, px: Pixel) {
         let (iso, e) = (self.iso, &self.slices[k]);
         let kp = if ASC { k.checked_sub(1) } else { Some(k + 1).filter(|&kp| kp < self.slices.len()) };
         let before = kp.and_then(|kp| {
@@ -325,7 +330,8 @@ impl<W: Word> Frame<'_, W> {
             let dp = bilinear(v.densities(bp), ep.wi, ep.wj);
             (dp < iso).then(|| (kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), bp, ep))
         });
-        let depth = before.map_or(k as f32, |(kp, t, _, _)| kp as f32 + (k as f32 - kp as f32) * t);
+        // (slice indices are below 2^24: exact as f32 through u32, as through usize)
+        let depth = before.map_or(k as u32 as f32, |(kp, t, _, _)| kp as u32 as f32 + (k as u32 as f32 - kp as u32 as f32) * t);
         let s = match before {
             None => self.table.blend(v.codes(b), e.wi, e.wj),
             Some((_, t, bp, ep)) => {
@@ -335,8 +341,15 @@ impl<W: Word> Frame<'_, W> {
             }
         };
         let rgb = apply_shade(self.iso_rgb, s);
-        RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
+        *px.rgba = [rgb[0], rgb[1], rgb[2], 1.0];
+        *px.depth = depth;
     }
+}
+
+/// The colour and depth of one pixel of the intermediate image.
+struct Pixel<'a> {
+    rgba: &'a mut [f32; 4],
+    depth: &'a mut f32,
 }
 
 /// [`ShadeTable::blend`] of two cells at once, lane for lane the same float
@@ -377,24 +390,26 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Fram
     lean_row::<W, V, ASC, CHECKED>(f, v, row, out)
 }
 
-/// One row of the lean frame: in groups of [`GROUP`] rays, first every ray's
-/// first candidate (its voxels prefetched), then the traces. A ray's base
-/// index is the row's plus its offset along the row.
+/// One row of the lean frame: the row cleared to misses, then in groups of
+/// [`GROUP`] rays first every ray's first candidate (its voxels prefetched),
+/// then the traces of the rays that have one. A ray's base index is the row's
+/// plus its offset along the row.
 #[inline(always)]
 fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, mut row: RowStart, out: RowOut) {
     let RowOut { q, p0, rgba: crow, depth: drow } = out;
-    let mut walks: [Option<Walk<W>>; GROUP] = [None; GROUP];
+    crow.fill(MISS.rgba);
+    drow.fill(MISS.depth);
+    let mut walks = [Walk::<W>::default(); GROUP];
     let mut last_line = usize::MAX;
     // ray (p0 + dp, q)'s base index is the row's plus dp
     let rb0 = p0 + f.n0 * q;
     let ray = |dp: usize| LeanRay { p: p0 + dp, q, rb: rb0 + dp };
     for (g, (cg, dg)) in crow.chunks_mut(GROUP).zip(drow.chunks_mut(GROUP)).enumerate() {
-        for (dp, walk) in walks[..cg.len()].iter_mut().enumerate() {
+        let walks = &mut walks[..cg.len()];
+        for (dp, walk) in walks.iter_mut().enumerate() {
             *walk = f.first::<ASC>(row.start, row.nw);
-            if f.prefetch
-                && let Some(w) = walk
-            {
-                let k0 = f.peek::<ASC>(w);
+            if f.prefetch && walk.cur != W::ZERO {
+                let k0 = f.peek::<ASC>(walk);
                 if let Some(b) = f.cell(&f.slices[k0], ray(g * GROUP + dp)) {
                     f.prefetch_at::<V, ASC>(v, b, &mut last_line);
                 }
@@ -405,13 +420,10 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W
                 row.left = row.s;
             }
         }
-        for (dp, ((c, d), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter()).enumerate() {
-            let res = match *walk {
-                None => MISS,
-                Some(w) => f.trace::<V, ASC, CHECKED>(v, w, ray(g * GROUP + dp)),
-            };
-            *c = res.rgba;
-            *d = res.depth;
+        for (dp, ((rgba, depth), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter()).enumerate() {
+            if walk.cur != W::ZERO {
+                f.trace::<V, ASC, CHECKED>(v, *walk, ray(g * GROUP + dp), Pixel { rgba, depth });
+            }
         }
     }
 }

@@ -335,7 +335,7 @@ impl NormalStack {
     /// The 8-bit densities and codes, if this stack holds them.
     pub fn bytes_cells(&self) -> Option<ByteCells<'_>> {
         match &self.store {
-            Store::Bytes(cells) => Some(ByteCells { cells, n0: self.n[0] }),
+            Store::Bytes(cells) => Some(ByteCells::new(cells, self.n[0])),
             _ => None,
         }
     }
@@ -530,21 +530,31 @@ fn code_of(c: [u8; 3]) -> u16 {
 pub struct ByteCells<'a> {
     cells: &'a [[u8; 3]],
     n0: usize,
+    /// One past the largest index whose cell (the voxel, its right and lower
+    /// neighbours) lies in `cells`: `len − n0 − 1`, saturating.
+    end: usize,
 }
 
-impl ByteCells<'_> {
+impl<'a> ByteCells<'a> {
+    fn new(cells: &'a [[u8; 3]], n0: usize) -> Self {
+        ByteCells { cells, n0, end: cells.len().saturating_sub(n0 + 1) }
+    }
+
     /// The bytes of the two voxel pairs of the cell at stack index `b`: its
     /// first row's two voxels and its second row's (three bytes a voxel, so
-    /// each pair is six contiguous bytes). One bounds check for both: the
-    /// bytes from the first pair's start to the second's end, whose first and
-    /// last six are the pairs.
+    /// each pair is six contiguous bytes). One test for both; panics if the
+    /// cell is not in the stack.
     #[inline(always)]
     fn pairs(&self, b: usize) -> [[u8; 6]; 2] {
-        let cell = &self.cells.as_flattened()[3 * b..3 * (b + self.n0) + 6];
-        match (cell.first_chunk::<6>(), cell.last_chunk::<6>()) {
-            (Some(t), Some(u)) => [*t, *u],
-            _ => unreachable!("a cell's bytes hold at least one pair"),
-        }
+        assert!(b < self.end, "a cell outside the stack");
+        let p = self.cells.as_flattened().as_ptr();
+        // SAFETY: `b < end = len − n0 − 1` gives `b + n0 + 1 < len` (no
+        // overflow: a slice has fewer than isize::MAX / 3 voxels), so the
+        // six bytes from voxel `b` and the six from voxel `b + n0` (voxels
+        // `b, b + 1` and `b + n0, b + n0 + 1`) lie within the `3·len` bytes
+        // of `cells`; `[u8; 6]` has alignment 1. Exercised by every binary
+        // render of an 8-bit volume (tests/invariants.rs, tests/lean_frame.rs).
+        unsafe { [p.add(3 * b).cast::<[u8; 6]>().read(), p.add(3 * (b + self.n0)).cast::<[u8; 6]>().read()] }
     }
 
     /// The four corner densities of the cell at stack index `b` (order of

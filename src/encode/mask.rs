@@ -403,7 +403,7 @@ impl<W: Word> BinaryMask<W> {
             }
             w
         } else {
-            self.direct(&target)
+            self.staged(&target)
         };
         self.target = target;
         work
@@ -416,6 +416,69 @@ impl<W: Word> BinaryMask<W> {
         self.offsets_for(state, &mut target);
         let w = self.direct(&target);
         self.target = target;
+        w
+    }
+
+    /// Moves the mask to `target` in stages of powers of two: per axis, per
+    /// bit of the largest distance and per direction, the slices whose
+    /// distance has that bit move by it in one in-place pass over the occupied
+    /// rectangle ([`move_columns`], [`move_rows`]). A slice moves only towards
+    /// its target, so its bits stay between where they were and where they go
+    /// (inside the grid), and slices never share a slot: the result is the
+    /// direct shear's, word for word (tested against [`BinaryMask::shear_direct`]).
+    /// About `2·log2(distance)` passes over the rectangle instead of a scatter
+    /// of every code.
+    fn staged(&mut self, target: &[Vec<i32>; 2]) -> ShearWork {
+        let (nb, nw) = (self.nb, self.nw);
+        let mut w = ShearWork { steps: 0, direct: 1, words: 0 };
+        let mut mv = std::mem::take(&mut self.up);
+        for a in 0..2 {
+            let dist = self.off[a].iter().zip(&target[a]).map(|(o, t)| (t - o).unsigned_abs()).max().unwrap_or(0);
+            let mut t = 1u32;
+            while t <= dist {
+                for dir in [1i32, -1] {
+                    mv.fill(W::ZERO);
+                    let before = self.occupied_rect();
+                    let mut any = false;
+                    for (k, (o, &g)) in self.off[a].iter_mut().zip(&target[a]).enumerate() {
+                        let d = g - *o;
+                        if d.signum() == dir && d.unsigned_abs() & t != 0 {
+                            mv[k / (W::BITS / nb) as usize] |= crate::encode::depth::slot_mask::<W>(nb, k);
+                            *o += dir * t as i32;
+                            any = true;
+                        }
+                    }
+                    let Some(r) = Rect::union(before, self.occupied_rect()).filter(|_| any) else { continue };
+                    let gw = self.grid[0];
+                    let (ps, pe) = (r.p0, r.p1.min(gw - 1));
+                    let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
+                    if a == 0 {
+                        let (t, up, mv, avx2) = (t as usize, dir > 0, &mv[..], self.cpu.has_avx2());
+                        let tasks = rows.par_chunks_mut(gw * nw);
+                        by_column_length!(@arms nw, N, tasks.for_each(|row| {
+                                #[cfg(target_arch = "x86_64")]
+                                if avx2 {
+                                    // SAFETY: `self.cpu` is always capped to at most
+                                    // `kernels::detected()`, which is `Avx2` only when AVX2
+                                    // was detected on this CPU at run time, all the kernel
+                                    // requires; its body is the safe `move_columns_n`.
+                                    unsafe { move_columns_n_avx2::<W, N>(row, ps, pe, t, mv, up) };
+                                    return;
+                                }
+                                let _ = avx2;
+                                move_columns_n::<W, N>(row, ps, pe, t, mv, up)
+                            }),
+                            tasks.for_each(|row| move_columns(row, nw, ps, pe, t, mv, up)), [1 2 3 4]);
+                    } else {
+                        move_rows(&mut self.words, gw * nw, [ps * nw, (pe + 1) * nw], [r.q0, r.q1], t as usize, &mv, dir > 0);
+                    }
+                    w.words += ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64;
+                }
+                t <<= 1;
+            }
+        }
+        debug_assert!(self.off == *target);
+        self.up = mv;
         w
     }
 
@@ -987,6 +1050,44 @@ mod tests {
         direct.shear_direct(&s);
         assert_eq!(m.words, direct.words);
         assert_eq!(m.words, naive(&m));
+    }
+
+    /// Far moves (more than [`MAX_INCREMENTAL_STEPS`] super cells) take the
+    /// staged shear: it ends in the scatter's words for both word sizes, 1-
+    /// and 2-bit codes, super cells and long stacks, jumping between random
+    /// shears of both signs about both axes.
+    fn check_far_jumps<W: Word>(n: [usize; 3], nb: u32, s: usize) {
+        let v = blob(n, 7);
+        let st = SliceStack::new(&v, 2);
+        let codes = CellCodes::build(&st, nb, |_, hi| (hi / 40.0).min(((1u32 << nb) - 1) as f32) as u8);
+        let mut m = BinaryMask::<W>::from_codes(&codes, s);
+        let lim = ((n[2] - 1) / 2) as f64;
+        let mut seed = 11u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((seed >> 33) % 2001) as f64 / 1000.0 - 1.0
+        };
+        let mut far = 0;
+        for jump in 0..12 {
+            // along i from one side to the other (always far), along j anywhere
+            let side = if jump % 2 == 0 { 1.0 } else { -1.0 };
+            let e = [side * (0.6 + 0.4 * rnd().abs()), rnd()].map(|x| (x * lim).round());
+            let state = ShearState::from_ends(n[2], [0, 1].map(|a| [-e[a], e[a]]));
+            far += m.shear_to(&state).direct;
+            let mut d = BinaryMask::<W>::from_codes(&codes, s);
+            d.shear_direct(&state);
+            assert_eq!(m.words, d.words, "jump {jump} to {e:?}");
+        }
+        assert!(far >= 11, "only {far} of 12 jumps were far");
+    }
+
+    #[test]
+    fn far_jumps_equal_the_direct_shear() {
+        check_far_jumps::<u64>([21, 17, 130], 1, 1);
+        check_far_jumps::<u32>([21, 17, 130], 1, 1);
+        check_far_jumps::<u64>([19, 23, 90], 2, 1);
+        check_far_jumps::<u64>([24, 20, 140], 1, 2);
+        check_far_jumps::<u32>([17, 16, 75], 2, 3);
     }
 
     #[test]

@@ -280,3 +280,112 @@ mod tests {
         assert_eq!(down[0], (0b11 << 30) | (0b11 << 20));
     }
 }
+
+/// One grid row of a staged shear ([`BinaryMask`](crate::encode::mask::BinaryMask)'s
+/// far moves): the slots of `mv` move `t` columns towards larger `p` (`up`) or
+/// smaller, in place, over columns `ps..=pe` of `row` (columns of `nw` words);
+/// a slot's source past the row's ends reads as zero. Up runs from the last
+/// column down and down from the first up, so every source is read before it
+/// is written.
+pub(crate) fn move_columns<W: Word>(row: &mut [W], nw: usize, ps: usize, pe: usize, t: usize, mv: &[W], up: bool) {
+    let gw = row.len() / nw;
+    let mut column = |p: usize, src: Option<usize>| {
+        for w in 0..nw {
+            let from = src.map_or(W::ZERO, |s| row[s * nw + w]);
+            let at = &mut row[p * nw + w];
+            *at = (*at & !mv[w]) | (from & mv[w]);
+        }
+    };
+    if up {
+        for p in (ps..=pe).rev() {
+            column(p, p.checked_sub(t));
+        }
+    } else {
+        for p in ps..=pe {
+            column(p, Some(p + t).filter(|&s| s < gw));
+        }
+    }
+}
+
+/// [`move_columns`] for columns of `N` words: the columns whose source lies
+/// in the row run without a test, a column's words combined in registers.
+#[inline(always)]
+pub(crate) fn move_columns_n<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, t: usize, mv: &[W], up: bool) {
+    let mv: &[W; N] = fixed(mv);
+    let (cols, _) = row.as_chunks_mut::<N>();
+    let gw = cols.len();
+    let blend = |at: &mut [W; N], from: [W; N]| {
+        for w in 0..N {
+            at[w] = (at[w] & !mv[w]) | (from[w] & mv[w]);
+        }
+    };
+    if up {
+        // columns split..=pe read column p − t; those below t read zero
+        let split = t.clamp(ps, pe + 1);
+        for p in (split..=pe).rev() {
+            let from = cols[p - t];
+            blend(&mut cols[p], from);
+        }
+        for at in &mut cols[ps..split] {
+            blend(at, [W::ZERO; N]);
+        }
+    } else {
+        // columns ps..split read column p + t (inside the row); the rest zero
+        let split = (gw - t.min(gw)).clamp(ps, pe + 1);
+        for p in ps..split {
+            let from = cols[p + t];
+            blend(&mut cols[p], from);
+        }
+        for at in &mut cols[split..=pe] {
+            blend(at, [W::ZERO; N]);
+        }
+    }
+}
+
+/// [`move_columns_n`] compiled for AVX2. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn move_columns_n_avx2<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, t: usize, mv: &[W], up: bool) {
+    move_columns_n::<W, N>(row, ps, pe, t, mv, up)
+}
+
+/// [`move_columns`] along `j`: the slots of `mv` move `t` grid rows (of
+/// `row_len` words) towards larger `q` (`up`) or smaller, in place, over rows
+/// `q0..=q1` and words `span` of each row.
+pub(crate) fn move_rows<W: Word>(words: &mut [W], row_len: usize, span: [usize; 2], [q0, q1]: [usize; 2], t: usize, mv: &[W], up: bool) {
+    let nw = mv.len();
+    let rows = words.len() / row_len;
+    let blend = |dst: &mut [W], src: Option<&[W]>| match src {
+        Some(src) => {
+            for (d, s) in dst.chunks_exact_mut(nw).zip(src.chunks_exact(nw)) {
+                for w in 0..nw {
+                    d[w] = (d[w] & !mv[w]) | (s[w] & mv[w]);
+                }
+            }
+        }
+        None => {
+            for d in dst.chunks_exact_mut(nw) {
+                for w in 0..nw {
+                    d[w] = d[w] & !mv[w];
+                }
+            }
+        }
+    };
+    for i in 0..=q1 - q0 {
+        let q = if up { q1 - i } else { q0 + i };
+        let src = if up { q.checked_sub(t) } else { Some(q + t).filter(|&s| s < rows) };
+        let (dst, src) = match src {
+            None => (&mut words[q * row_len + span[0]..q * row_len + span[1]], None),
+            Some(s) if s < q => {
+                let (head, tail) = words.split_at_mut(q * row_len);
+                (&mut tail[span[0]..span[1]], Some(&head[s * row_len + span[0]..s * row_len + span[1]]))
+            }
+            Some(s) => {
+                let (head, tail) = words.split_at_mut(s * row_len);
+                (&mut head[q * row_len + span[0]..q * row_len + span[1]], Some(&tail[span[0]..span[1]]))
+            }
+        };
+        blend(dst, src);
+    }
+}

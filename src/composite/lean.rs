@@ -118,6 +118,22 @@ struct Walk<W: Word> {
     left: usize,
 }
 
+/// A ray of a group between the two passes: its walk after its first
+/// candidate, that candidate's slice `k` and stack index `b` (`usize::MAX`:
+/// its cell is outside the volume; `k == usize::MAX`: no candidate).
+#[derive(Clone, Copy, Debug)]
+struct Pending<W: Word> {
+    walk: Walk<W>,
+    k: usize,
+    b: usize,
+}
+
+impl<W: Word> Default for Pending<W> {
+    fn default() -> Self {
+        Pending { walk: Walk::default(), k: usize::MAX, b: usize::MAX }
+    }
+}
+
 impl LeanFrame {
     /// Whether a frame of `plan` in `mode`, shaded by normal codes (`codes`),
     /// with depth search `search`, takes the lean path.
@@ -292,42 +308,59 @@ impl<W: Word> Frame<'_, W> {
         }
     }
 
-    /// Traces `ray` from its settled walk (with a candidate) into its pixel:
-    /// the first candidate whose sample reaches the iso value, refined and
-    /// shaded; the pixel is left as it is (a miss) if there is none. Without
-    /// `CHECKED` every candidate is a cell of the volume (cell size 1) and is
-    /// not tested.
+    /// The stack index of `ray`'s cell in slice entry `e`, or `usize::MAX`
+    /// outside the volume (tested only with `CHECKED`).
     #[inline(always)]
-    fn trace<V: Cells, const ASC: bool, const CHECKED: bool>(&self, v: &V, mut walk: Walk<W>, ray: LeanRay, px: Pixel) {
+    fn cell_at<const CHECKED: bool>(&self, e: &SliceEntry, ray: LeanRay) -> usize {
+        debug_assert!(CHECKED || self.cell(e, ray).is_some(), "a candidate outside the volume at cell size 1");
+        if CHECKED { self.cell(e, ray).unwrap_or(usize::MAX) } else { ray.rb.wrapping_add_signed(e.base) }
+    }
+
+    /// Traces `ray` into its pixel from its first candidate (slice `k`,
+    /// stack index `b`, [`Pending`]) and the rest of its walk: the first
+    /// candidate whose sample reaches the iso value, refined and shaded; the
+    /// pixel is left as it is (a miss) if there is none.
+    #[inline(always)]
+    fn trace<V: Cells, const ASC: bool, const CHECKED: bool>(&self, v: &V, ray: LeanRay, mut pending: Pending<W>, px: Pixel) {
+        let (mut k, mut b) = (pending.k, pending.b);
+        // the last sample below the iso value: its slice, stack index and density
+        let mut below = Visit { k: usize::MAX, b: 0, d: 0.0 };
         loop {
-            let k = self.take::<ASC>(&mut walk);
-            let e = &self.slices[k];
-            debug_assert!(CHECKED || self.cell(e, ray).is_some(), "a candidate outside the volume at cell size 1");
-            let b = if CHECKED { self.cell(e, ray) } else { Some(ray.rb.wrapping_add_signed(e.base)) };
-            if let Some(b) = b {
+            if !CHECKED || b != usize::MAX {
+                let e = &self.slices[k];
                 let d = bilinear(v.densities(b), e.wi, e.wj);
                 if d >= self.iso {
-                    return self.hit::<V, ASC>(v, ray, k, b, d, px);
+                    return self.hit::<V, ASC>(v, ray, Visit { k, b, d }, below, px);
                 }
+                below = Visit { k, b, d };
             }
-            if !self.settle::<ASC>(&mut walk) {
+            if !self.settle::<ASC>(&mut pending.walk) {
                 return;
             }
+            k = self.take::<ASC>(&mut pending.walk);
+            b = self.cell_at::<CHECKED>(&self.slices[k], ray);
         }
     }
 
-    /// The iso hit at slice `k` (stack index `b`, density `d`) into its
-    /// pixel: refined against the slice before it in walking order and shaded
-    /// by the blend of both slices' shade entries, as [`RayContext`]'s general
-    /// hit.
+    /// The iso hit `at` (slice, stack index, density) into its pixel:
+    /// refined against the slice before it in walking order and shaded by the
+    /// blend of both slices' shade entries, as [`RayContext`]'s general hit.
+    /// `below` is the ray's last sample below the iso value: when it is the
+    /// slice before, its density is the one the refinement needs (the same
+    /// cell, weights and arithmetic) and is not sampled again.
     #[inline(never)]
-    fn hit<V: Cells, const ASC: bool>(&self, v: &V, ray: LeanRay, k: usize, b: usize, d: f32, px: Pixel) {
-        let (iso, e) = (self.iso, &self.slices[k]);
+    fn hit<V: Cells, const ASC: bool>(&self, v: &V, ray: LeanRay, at: Visit, below: Visit, px: Pixel) {
+        let (iso, Visit { k, b, d }) = (self.iso, at);
+        let e = &self.slices[k];
         let kp = if ASC { k.checked_sub(1) } else { Some(k + 1).filter(|&kp| kp < self.slices.len()) };
         let before = kp.and_then(|kp| {
             let ep = &self.slices[kp];
-            let bp = self.cell(ep, ray)?;
-            let dp = bilinear(v.densities(bp), ep.wi, ep.wj);
+            let (bp, dp) = if below.k == kp {
+                (below.b, below.d)
+            } else {
+                let bp = self.cell(ep, ray)?;
+                (bp, bilinear(v.densities(bp), ep.wi, ep.wj))
+            };
             (dp < iso).then(|| (kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), bp, ep))
         });
         // (slice indices are below 2^24: exact as f32 through u32, as through usize)
@@ -344,6 +377,14 @@ impl<W: Word> Frame<'_, W> {
         *px.rgba = [rgb[0], rgb[1], rgb[2], 1.0];
         *px.depth = depth;
     }
+}
+
+/// A sample of a ray at a candidate: slice, stack index of its cell, density.
+#[derive(Clone, Copy, Debug)]
+struct Visit {
+    k: usize,
+    b: usize,
+    d: f32,
 }
 
 /// The colour and depth of one pixel of the intermediate image.
@@ -399,20 +440,23 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W
     let RowOut { q, p0, rgba: crow, depth: drow } = out;
     crow.fill(MISS.rgba);
     drow.fill(MISS.depth);
-    let mut walks = [Walk::<W>::default(); GROUP];
+    let mut pending = [Pending::<W>::default(); GROUP];
     let mut last_line = usize::MAX;
     // ray (p0 + dp, q)'s base index is the row's plus dp
     let rb0 = p0 + f.n0 * q;
     let ray = |dp: usize| LeanRay { p: p0 + dp, q, rb: rb0 + dp };
     for (g, (cg, dg)) in crow.chunks_mut(GROUP).zip(drow.chunks_mut(GROUP)).enumerate() {
-        let walks = &mut walks[..cg.len()];
-        for (dp, walk) in walks.iter_mut().enumerate() {
-            *walk = f.first::<ASC>(row.start, row.nw);
-            if f.prefetch && walk.cur != W::ZERO {
-                let k0 = f.peek::<ASC>(walk);
-                if let Some(b) = f.cell(&f.slices[k0], ray(g * GROUP + dp)) {
+        let pending = &mut pending[..cg.len()];
+        for (dp, r) in pending.iter_mut().enumerate() {
+            let mut walk = f.first::<ASC>(row.start, row.nw);
+            r.k = usize::MAX;
+            if walk.cur != W::ZERO {
+                let k = f.take::<ASC>(&mut walk);
+                let b = f.cell_at::<CHECKED>(&f.slices[k], ray(g * GROUP + dp));
+                if f.prefetch && b != usize::MAX {
                     f.prefetch_at::<V, ASC>(v, b, &mut last_line);
                 }
+                *r = Pending { walk, k, b };
             }
             row.left -= 1;
             if row.left == 0 {
@@ -420,9 +464,9 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W
                 row.left = row.s;
             }
         }
-        for (dp, ((rgba, depth), walk)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter()).enumerate() {
-            if walk.cur != W::ZERO {
-                f.trace::<V, ASC, CHECKED>(v, *walk, ray(g * GROUP + dp), Pixel { rgba, depth });
+        for (dp, ((rgba, depth), r)) in cg.iter_mut().zip(dg.iter_mut()).zip(pending.iter()).enumerate() {
+            if r.k != usize::MAX {
+                f.trace::<V, ASC, CHECKED>(v, ray(g * GROUP + dp), *r, Pixel { rgba, depth });
             }
         }
     }

@@ -458,10 +458,16 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W
                 }
                 *r = Pending { walk, k, b };
             }
-            row.left -= 1;
-            if row.left == 0 {
+            if CHECKED {
+                row.left -= 1;
+                if row.left == 0 {
+                    row.start += row.nw;
+                    row.left = row.s;
+                }
+            } else {
+                // (cell size 1: every ray has its own column)
+                debug_assert_eq!(row.s, 1);
                 row.start += row.nw;
-                row.left = row.s;
             }
         }
         for (dp, ((rgba, depth), r)) in cg.iter_mut().zip(dg.iter_mut()).zip(pending.iter()).enumerate() {

@@ -69,6 +69,65 @@ impl ValueStats {
         ValueStats { lo, hi, lo2, hi2, n_lo, n_hi, counts: None }
     }
 
+    /// The statistics of the union of the voxels `self` and `other` were
+    /// computed over (disjoint sets of voxels of one type): the same numbers
+    /// [`ValueStats::of`] gives for the whole, without its voxels (how the
+    /// bricks of a distributed volume agree on one classification).
+    pub fn merge(&self, other: &ValueStats) -> ValueStats {
+        if let (Some((b, c)), Some((b2, c2))) = (&self.counts, &other.counts)
+            && b == b2
+            && c.len() == c2.len()
+        {
+            return Self::from_counts(*b, c.iter().zip(c2).map(|(x, y)| x + y).collect());
+        }
+        let (lo, hi) = (self.lo.min(other.lo), self.hi.max(other.hi));
+        // a part's runner-up: its own end when that end is not the whole's
+        let lo2 = |s: &ValueStats| if s.lo == lo { s.lo2 } else { s.lo };
+        let hi2 = |s: &ValueStats| if s.hi == hi { s.hi2 } else { s.hi };
+        let n_lo = |s: &ValueStats| if s.lo == lo { s.n_lo } else { 0 };
+        let n_hi = |s: &ValueStats| if s.hi == hi { s.n_hi } else { 0 };
+        ValueStats {
+            lo,
+            hi,
+            lo2: lo2(self).min(lo2(other)),
+            hi2: hi2(self).max(hi2(other)),
+            n_lo: n_lo(self) + n_lo(other),
+            n_hi: n_hi(self) + n_hi(other),
+            counts: None,
+        }
+    }
+
+    /// The statistics as bytes ([`ValueStats::from_bytes`] reads them back).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = Vec::new();
+        for x in [self.lo, self.hi, self.lo2, self.hi2] {
+            b.extend(x.to_le_bytes());
+        }
+        b.extend(self.n_lo.to_le_bytes());
+        b.extend(self.n_hi.to_le_bytes());
+        if let Some((base, c)) = &self.counts {
+            b.extend(base.to_le_bytes());
+            c.iter().for_each(|n| b.extend(n.to_le_bytes()));
+        }
+        b
+    }
+
+    /// Statistics from [`ValueStats::to_bytes`] (`None`: not such bytes).
+    pub fn from_bytes(b: &[u8]) -> Option<ValueStats> {
+        let f = |i: usize| Some(f32::from_le_bytes(b.get(4 * i..4 * i + 4)?.try_into().ok()?));
+        let u = |at: usize| Some(u64::from_le_bytes(b.get(at..at + 8)?.try_into().ok()?));
+        let (lo, hi, lo2, hi2, n_lo, n_hi) = (f(0)?, f(1)?, f(2)?, f(3)?, u(16)?, u(24)?);
+        let counts = match b.len() {
+            32 => None,
+            n if n > 36 && (n - 36) % 8 == 0 => {
+                let base = i32::from_le_bytes(b[32..36].try_into().ok()?);
+                Some((base, b[36..].chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect()))
+            }
+            _ => return None,
+        };
+        Some(ValueStats { lo, hi, lo2, hi2, n_lo, n_hi, counts })
+    }
+
     /// `bins` equal bins over `[lo, hi]`, ignoring values outside it; a value
     /// `x` falls in bin `⌊(x − lo)·bins / (hi − lo)⌋` (in f64), the last bin
     /// closed. Integer volumes answer from the counts without reading `data`.

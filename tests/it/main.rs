@@ -8,6 +8,7 @@ mod accuracy;
 mod bcc;
 mod bench_cli;
 mod bench_matrix;
+mod bricks;
 mod cli;
 mod cli_inputs;
 mod clip;

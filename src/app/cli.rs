@@ -89,6 +89,12 @@ pub struct RenderCmd {
     /// intermediate image (zoom, the eye near the volume).
     #[arg(long, value_enum, default_value = "matched")]
     pub sampling: StillSampling,
+    /// Render one volume split over the ranks of an MPI job (launch with
+    /// `mpirun -np N`; needs the build with feature `mpi`): each rank reads
+    /// and renders its own brick, rank 0 composites and writes. Parallel
+    /// projection; a still samples one ray per voxel (as `--sampling voxel`).
+    #[arg(long)]
+    pub distributed: bool,
 }
 
 /// The sampling of a still frame.
@@ -147,6 +153,12 @@ pub struct RotateCmd {
     /// Switch to the next tissue preset every N frames (0 = never).
     #[arg(long, default_value_t = 0)]
     pub cycle_tissues: usize,
+    /// Render one volume split over the ranks of an MPI job (launch with
+    /// `mpirun -np N`; needs the build with feature `mpi`): each rank reads
+    /// and renders its own brick, rank 0 composites and writes. Parallel
+    /// projection; a still samples one ray per voxel (a frame's rank 0 times it).
+    #[arg(long)]
+    pub distributed: bool,
 }
 
 /// `shearwarp info`.
@@ -262,6 +274,9 @@ fn memory_estimate(vol: &Volume, tissues: usize) -> serde_json::Value {
 
 /// Runs `shearwarp render`.
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
+    if cmd.distributed {
+        return crate::app::distributed::render(cmd);
+    }
     let kind = match crate::app::output::image_kind(&cmd.output) {
         Ok(k) => k,
         Err(why) => usage!("-o {why}"),
@@ -327,6 +342,9 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
 
 /// Runs `shearwarp rotate`.
 pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
+    if cmd.distributed {
+        return crate::app::distributed::rotate(cmd);
+    }
     let (vol, name) = cmd.volume.load()?;
     renderable(&name, &vol)?;
     let load_ms = crate::app::since_start_ms();

@@ -14,6 +14,27 @@
 //! - [`scene`]: the meshes and clip regions of the command line, per frame;
 //! - [`viewer`] (feature `viewer`): `shearwarp view`, the interactive window.
 
+/// `--distributed` in a build without the feature `mpi`: an error saying how to get it.
+#[cfg(not(feature = "mpi"))]
+pub mod distributed {
+    use anyhow::Result;
+
+    fn unavailable() -> Result<()> {
+        usage!(
+            "--distributed needs the MPI build: install Open MPI and libclang (Debian: libopenmpi-dev openmpi-bin libclang-dev), \
+             build with `cargo build --release --features mpi` and launch with `mpirun -np N shearwarp …`"
+        )
+    }
+
+    pub fn render(_: &crate::app::cli::RenderCmd) -> Result<()> {
+        unavailable()
+    }
+
+    pub fn rotate(_: &crate::app::cli::RotateCmd) -> Result<()> {
+        unavailable()
+    }
+}
+
 /// Prints a line to stdout through [`output::print_text`]: a closed pipe
 /// (`shearwarp … | head`) ends the program quietly instead of panicking like
 /// `println!`, a failed write is an error naming standard output.
@@ -33,6 +54,8 @@ macro_rules! usage {
 pub mod args;
 pub mod bench;
 pub mod cli;
+#[cfg(feature = "mpi")]
+pub mod distributed;
 pub mod output;
 pub mod peers;
 pub mod scene;

@@ -32,7 +32,7 @@ use crate::composite::{Intermediate, Mode, Rect, composite_premultiplied, termin
 use crate::data::volume::{Volume, VoxelData};
 use crate::error::{Error, Result};
 use crate::render::{BrickView, Renderer, Settings};
-use crate::view::plan::FramePlan;
+use crate::view::plan::{FramePlan, Grid};
 use crate::view::{Camera, Factorization};
 use crate::warp::{Canvas, Texel, warp};
 
@@ -246,10 +246,7 @@ impl Compositor {
     /// The frame of `camera` over a volume of `dims` and `spacing` split as
     /// `tree`, for a renderer of `settings` (parallel projection).
     pub fn new(camera: &Camera, dims: [usize; 3], spacing: [f32; 3], tree: &Tree, settings: &Settings) -> Result<Compositor> {
-        let perms = [0, 1, 2].map(|a| {
-            if settings.rle_reuse && settings.method.is_rle() { crate::view::reuse_permutation(a) } else { crate::view::permutation(a) }
-        });
-        let f = Factorization::with_permutations(camera, dims, spacing, perms)?;
+        let f = factorization(camera, dims, spacing, settings)?;
         let plan = FramePlan::parallel(&f, spacing);
         let mut inter = Intermediate::default();
         inter.prepare(plan.grid.size);
@@ -293,6 +290,22 @@ impl Compositor {
         out.prepare(camera.size[0], camera.size[1]);
         warp(&self.inter, &self.plan, out);
     }
+}
+
+/// The factorization of `camera`'s parallel view of a volume of `dims` and
+/// `spacing` that a renderer of `settings` makes.
+fn factorization(camera: &Camera, dims: [usize; 3], spacing: [f32; 3], settings: &Settings) -> Result<Factorization> {
+    let perms = [0, 1, 2].map(|a| {
+        if settings.rle_reuse && settings.method.is_rle() { crate::view::reuse_permutation(a) } else { crate::view::permutation(a) }
+    });
+    Factorization::with_permutations(camera, dims, spacing, perms)
+}
+
+/// The size of the whole volume's intermediate grid under `camera` (what
+/// [`Partial::of`] places a brick's image in), without a [`Compositor`].
+pub fn grid_of(camera: &Camera, dims: [usize; 3], spacing: [f32; 3], settings: &Settings) -> Result<[usize; 2]> {
+    let f = factorization(camera, dims, spacing, settings)?;
+    Ok(Grid::parallel([f.n[0].saturating_sub(1), f.n[1].saturating_sub(1)], f.n[2]).size)
 }
 
 /// Renders `camera`'s view of `volume` as `n` bricks in this process, one

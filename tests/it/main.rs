@@ -15,6 +15,8 @@ mod clip;
 mod deluxe_binary;
 mod deluxe_matched;
 mod deluxe_rle;
+#[cfg(feature = "mpi")]
+mod distributed;
 mod extreme_values;
 mod focus;
 mod geometry;

@@ -348,17 +348,30 @@ impl Node {
         let brick = comm.agree(brick.with_context(|| format!("reading brick {rank} (voxels {:?})", me.ghosted)));
         let load_ms = t.elapsed().as_secs_f64() * 1e3;
         // the statistics of the owned voxels, merged on rank 0, the whole volume's everywhere
-        let local = me.owned.map(|[lo, hi]| [lo, hi]);
-        let own = Brick { owned: local, ghosted: [0, 1, 2].map(|a| [local[a][0] - me.ghosted[a][0], local[a][1] - me.ghosted[a][0]]) };
-        let own_stats = own.extract(&brick).map(|o| ValueStats::of(o.data()).to_bytes());
-        let own_stats = comm.agree(own_stats.map_err(anyhow::Error::from));
-        let merged = comm.gather(own_stats).map(|all| {
+        let own_stats = comm.agree(me.owned_stats(&brick).map_err(anyhow::Error::from));
+        let merged = comm.gather(own_stats.to_bytes()).map(|all| {
             let mut it = all.iter().filter_map(|b| ValueStats::from_bytes(b));
             let first = it.next().expect("rank 0's statistics");
             it.fold(first, |a, b| a.merge(&b)).to_bytes()
         });
         let stats = comm.bcast(merged);
-        let stats = comm.agree(ValueStats::from_bytes(&stats).ok_or_else(|| anyhow!("internal: the merged statistics are malformed")));
+        let mut stats = comm.agree(ValueStats::from_bytes(&stats).ok_or_else(|| anyhow!("internal: the merged statistics are malformed")));
+        // f32 voxels: the presets' histogram, summed over the bricks
+        if let Some((bins, range)) = shearwarp::bricks::preset_histogram_range(&brick, &stats) {
+            let h = comm.agree(me.owned_histogram(&brick, bins, range).map_err(anyhow::Error::from));
+            let sum = comm.gather(h.iter().flat_map(|x| x.to_le_bytes()).collect()).map(|all| {
+                let mut total = vec![0u64; bins];
+                for b in &all {
+                    for (t, c) in total.iter_mut().zip(b.chunks_exact(8)) {
+                        *t += u64::from_le_bytes(c.try_into().expect("8 bytes"));
+                    }
+                }
+                total.iter().flat_map(|x| x.to_le_bytes()).collect()
+            });
+            let sum = comm.bcast(sum);
+            let h = sum.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
+            stats = stats.with_histogram(range[0], range[1], h);
+        }
         let brick = brick.with_stats(stats);
         let renderer = ra.renderer_and_scene(brick).map(|(mut r, _)| {
             r.set_memory_budget(crate::app::budget());

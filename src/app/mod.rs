@@ -14,6 +14,22 @@
 //! - [`scene`]: the meshes and clip regions of the command line, per frame;
 //! - [`viewer`] (feature `viewer`): `shearwarp view`, the interactive window.
 
+/// Prints a line to stdout through [`output::print_text`]: a closed pipe
+/// (`shearwarp … | head`) ends the program quietly instead of panicking like
+/// `println!`, a failed write is an error naming standard output.
+macro_rules! say {
+    ($($t:tt)*) => {
+        crate::app::output::print_text(&format!("{}\n", format_args!($($t)*)))?
+    };
+}
+
+/// Returns a [`Usage`] error from the current function.
+macro_rules! usage {
+    ($($t:tt)*) => {
+        return Err(anyhow::Error::new($crate::app::Usage(format!($($t)*))))
+    };
+}
+
 /// `--distributed` in a build without the feature `mpi`: an error saying how to get it.
 #[cfg(not(feature = "mpi"))]
 pub mod distributed {
@@ -33,22 +49,6 @@ pub mod distributed {
     pub fn rotate(_: &crate::app::cli::RotateCmd) -> Result<()> {
         unavailable()
     }
-}
-
-/// Prints a line to stdout through [`output::print_text`]: a closed pipe
-/// (`shearwarp … | head`) ends the program quietly instead of panicking like
-/// `println!`, a failed write is an error naming standard output.
-macro_rules! say {
-    ($($t:tt)*) => {
-        crate::app::output::print_text(&format!("{}\n", format_args!($($t)*)))?
-    };
-}
-
-/// Returns a [`Usage`] error from the current function.
-macro_rules! usage {
-    ($($t:tt)*) => {
-        return Err(anyhow::Error::new($crate::app::Usage(format!($($t)*))))
-    };
 }
 
 pub mod args;

@@ -29,6 +29,7 @@
 
 use crate::classify::presets::Tissue;
 use crate::composite::{Intermediate, Mode, Rect, composite_premultiplied, terminated};
+use crate::data::stats::ValueStats;
 use crate::data::volume::{Volume, VoxelData};
 use crate::error::{Error, Result};
 use crate::render::{BrickView, Renderer, Settings};
@@ -90,6 +91,45 @@ impl Brick {
         };
         Ok(Volume::new(self.size(), volume.spacing(), data)?.with_stats(volume.stats().clone()))
     }
+}
+
+/// The whole volume's value statistics from its bricks' (what makes every
+/// brick classify as one renderer of the whole volume does, the tissue
+/// presets included): each brick computes [`Brick::owned_stats`] of its
+/// held voxels, the statistics are merged ([`ValueStats::merge`]); for f32
+/// voxels, whose statistics hold no counts, each brick then computes
+/// [`Brick::owned_histogram`] over the range [`preset_histogram_range`]
+/// names, and the sum goes with the merged statistics
+/// ([`ValueStats::with_histogram`]).
+impl Brick {
+    /// The statistics of the owned voxels of `held` (this brick's held voxels).
+    pub fn owned_stats(&self, held: &Volume) -> Result<ValueStats> {
+        Ok(ValueStats::of(self.owned_part(held)?.data()))
+    }
+
+    /// The histogram of the owned voxels of `held` that the presets read
+    /// (`bins` over `[lo, hi]`, [`preset_histogram_range`]).
+    pub fn owned_histogram(&self, held: &Volume, bins: usize, [lo, hi]: [f32; 2]) -> Result<Vec<u64>> {
+        let own = self.owned_part(held)?;
+        Ok(ValueStats::of(own.data()).histogram_in(own.data(), bins, lo, hi))
+    }
+
+    /// The owned voxels of `held`, as a volume of their own.
+    fn owned_part(&self, held: &Volume) -> Result<Volume> {
+        let local = [0, 1, 2].map(|a| [self.owned[a][0] - self.ghosted[a][0], self.owned[a][1] - self.ghosted[a][0]]);
+        Brick { owned: local, ghosted: local }.extract(held)
+    }
+}
+
+/// The histogram the tissue presets read of a volume whose statistics are
+/// `whole` (bins and range), when the statistics cannot answer it without
+/// the voxels (f32 voxels); `None` when they can.
+pub fn preset_histogram_range(held: &Volume, whole: &ValueStats) -> Option<(usize, [f32; 2])> {
+    if whole.has_counts() {
+        return None;
+    }
+    let (lo, hi) = crate::classify::presets::data_range(&held.clone().with_stats(whole.clone())).working();
+    Some((crate::classify::presets::HISTOGRAM_BINS, [lo, hi]))
 }
 
 /// The k-d tree of a split: a brick, or two halves along an axis.
@@ -177,18 +217,34 @@ pub struct Partial {
 
 impl Partial {
     /// The part of `inter` a brick rendered ([`crate::render::BrickFrame`]'s
-    /// rectangle and offset), in the whole volume's grid of `size`.
+    /// rectangle and offset), in the whole volume's grid of `size`. A
+    /// rectangle may reach past that grid (a super-cell mask's occupied
+    /// rectangle is coarse): the rays there miss the volume, and are left out.
     pub fn of(inter: &Intermediate, rect: Option<Rect>, offset: [i64; 2], size: [usize; 2]) -> Result<Partial> {
         let Some(r) = rect else { return Ok(Partial::default()) };
-        let (p0, q0) = (r.p0 as i64 + offset[0], r.q0 as i64 + offset[1]);
-        let (p1, q1) = (r.p1 as i64 + offset[0], r.q1 as i64 + offset[1]);
-        if p0 < 0 || q0 < 0 || p1 >= size[0] as i64 || q1 >= size[1] as i64 {
-            return Err(Error::Other(format!("internal: a brick's rectangle {r:?} + {offset:?} leaves the {size:?} grid")));
-        }
+        let clip =
+            |lo: usize, hi: usize, off: i64, n: usize| -> [i64; 2] { [(lo as i64 + off).max(0), (hi as i64 + off).min(n as i64 - 1)] };
+        let ([p0, p1], [q0, q1]) = (clip(r.p0, r.p1, offset[0], size[0]), clip(r.q0, r.q1, offset[1], size[1]));
         let w = inter.size[0];
-        let mut rgba = Vec::with_capacity((r.p1 - r.p0 + 1) * (r.q1 - r.q0 + 1));
+        // what is left out holds nothing
+        let inside = |p: usize, q: usize| {
+            let (gp, gq) = (p as i64 + offset[0], q as i64 + offset[1]);
+            (p0..=p1).contains(&gp) && (q0..=q1).contains(&gq)
+        };
         for q in r.q0..=r.q1 {
-            rgba.extend_from_slice(&inter.rgba[q * w + r.p0..=q * w + r.p1]);
+            for p in r.p0..=r.p1 {
+                if !inside(p, q) && inter.rgba[q * w + p] != [0.0; 4] {
+                    return Err(Error::Other(format!("internal: a brick's pixel ({p}, {q}) + {offset:?} is outside the {size:?} grid")));
+                }
+            }
+        }
+        if p0 > p1 || q0 > q1 {
+            return Ok(Partial::default());
+        }
+        let mut rgba = Vec::with_capacity(((p1 - p0 + 1) * (q1 - q0 + 1)) as usize);
+        for q in q0..=q1 {
+            let row = (q - offset[1]) as usize * w;
+            rgba.extend_from_slice(&inter.rgba[row + (p0 - offset[0]) as usize..=row + (p1 - offset[0]) as usize]);
         }
         let rect = Rect { p0: p0 as usize, p1: p1 as usize, q0: q0 as usize, q1: q1 as usize };
         Ok(Partial { rect: Some(rect), rgba })

@@ -92,8 +92,10 @@ proptest! {
     }
 
     /// Blended frames (the RLE path and the raycast one) of 1–4 bricks are
-    /// within 1/255 of one renderer's (2/255 where early ray termination
-    /// stops a brick's rays on their own opacity), and the same every run.
+    /// within 1/255 of one renderer's without early ray termination, and the
+    /// same every run. With it (at 0.99) each image leaves out at most the
+    /// last 1 % of a ray's opacity, one renderer where its sum reaches 0.99,
+    /// a brick where its own does: within 1/255 + 1 % (4/255).
     #[test]
     fn blend_bricks_are_within_one_level(
         nx in 6usize..30, ny in 6usize..30, nz in 6usize..30, seed in any::<u64>(), ty in 0u8..3,
@@ -111,7 +113,7 @@ proptest! {
         let c = cam(rx, ry, rz);
         let (a, b) = both(&vol, tissue, s, &c, n);
         let worst = a.data.iter().zip(&b.data).flat_map(|(x, y)| (0..4).map(move |i| x[i].abs_diff(y[i]))).max().unwrap_or(0);
-        let bound = if ert { 2 } else { 1 };
+        let bound = if ert { 4 } else { 1 };
         prop_assert!(worst <= bound, "{n} bricks: a channel {worst}/255 off");
         let (_, again) = both(&vol, tissue, s, &c, n);
         prop_assert!(again.data == b.data, "two runs differ");
@@ -143,4 +145,43 @@ fn iso_bricks_at_axis_views_and_many_bricks() {
         }
     }
     assert!(px > 5000, "only {px} covered pixels");
+}
+
+/// The whole volume's statistics merged from its bricks' owned voxels (and,
+/// for f32 voxels, the presets' histogram summed) are the whole volume's:
+/// the same value range and the same tissue presets, for every voxel type.
+#[test]
+fn bricks_agree_on_the_whole_volumes_statistics_and_presets() {
+    use shearwarp::bricks::{preset_histogram_range, split};
+    use shearwarp::classify::presets::tissues_for;
+    for ty in 0..3 {
+        let vol = typed(&random_volume([31, 26, 35], 77 + ty as u64, [1.0; 3]), ty);
+        let want = tissues_for(&vol);
+        for n in [2, 3, 4] {
+            let (bricks, _) = split(vol.dims(), n).unwrap();
+            // each brick holds its voxels only, with its own statistics
+            let held: Vec<Volume> = bricks
+                .iter()
+                .map(|b| {
+                    let e = b.extract(&vol).unwrap();
+                    Volume::new(e.dims(), e.spacing(), e.data().clone()).unwrap()
+                })
+                .collect();
+            let parts: Vec<_> = bricks.iter().zip(&held).map(|(b, h)| b.owned_stats(h).unwrap()).collect();
+            let mut whole = parts[1..].iter().fold(parts[0].clone(), |a, b| a.merge(b));
+            assert_eq!(vol.value_range(), (whole.lo, whole.hi));
+            if let Some((bins, range)) = preset_histogram_range(&held[0], &whole) {
+                let mut sum = vec![0u64; bins];
+                for (b, h) in bricks.iter().zip(&held) {
+                    sum.iter_mut().zip(b.owned_histogram(h, bins, range).unwrap()).for_each(|(s, x)| *s += x);
+                }
+                whole = whole.with_histogram(range[0], range[1], sum);
+            }
+            for h in &held {
+                let got = tissues_for(&h.clone().with_stats(whole.clone()));
+                let key = |t: &[Tissue]| t.iter().map(|t| (t.name, t.threshold)).collect::<Vec<_>>();
+                assert_eq!(key(&got), key(&want), "type {ty}, {n} bricks");
+            }
+        }
+    }
 }

@@ -103,18 +103,25 @@ impl Renderer {
             use rayon::prelude::*;
             let pad = plan.grid.pad as i64;
             let nk = plan.slices() as i64;
-            limits.par_rows_mut().enumerate().for_each(|(q, row)| {
-                for (pp, l) in row.iter_mut().enumerate() {
-                    let mut ks = Some([own[2][0].max(0), (own[2][1] - 1).min(nk - 1)]);
-                    for (a, x) in [(0usize, pp as i64), (1, q as i64)] {
-                        // the ray's cell along `a` at slice k: monotone in k
-                        ks = ks.and_then(|ks| inside(ks, own[a], |k| x - pad + plan.maps[k as usize].floor[a] as i64));
-                    }
-                    *l = match ks {
-                        Some([k0, k1]) if before && ascending => [(k0 - 1).max(0) as u32, k1 as u32],
-                        Some([k0, k1]) if before => [k0 as u32, (k1 + 1).min(nk - 1) as u32],
-                        Some([k0, k1]) => [k0 as u32, k1 as u32],
-                        None => [1, 0],
+            let ks = [own[2][0].max(0), (own[2][1] - 1).min(nk - 1)];
+            // per grid column (row), the slices whose cell along i (j) is owned:
+            // the ray's cell at slice k is monotone in k
+            let along = |a: usize| -> Vec<Option<[i64; 2]>> {
+                (0..plan.grid.size[a] as i64).map(|x| inside(ks, own[a], |k| x - pad + plan.maps[k as usize].floor[a] as i64)).collect()
+            };
+            let (ti, tj) = (along(0), along(1));
+            limits.par_rows_mut().zip(tj.par_iter()).for_each(|(row, kj)| {
+                for (l, ki) in row.iter_mut().zip(&ti) {
+                    *l = match (ki, kj) {
+                        (Some([a0, a1]), Some([b0, b1])) if a0.max(b0) <= a1.min(b1) => {
+                            let (k0, k1) = (*a0.max(b0), *a1.min(b1));
+                            match (before, ascending) {
+                                (true, true) => [(k0 - 1).max(0) as u32, k1 as u32],
+                                (true, false) => [k0 as u32, (k1 + 1).min(nk - 1) as u32],
+                                _ => [k0 as u32, k1 as u32],
+                            }
+                        }
+                        _ => [1, 0],
                     };
                 }
             });

@@ -24,7 +24,7 @@ MPIRUN=(mpirun --oversubscribe)
 [[ $(id -u) -eq 0 ]] && MPIRUN+=(--allow-run-as-root)
 for v in "${vols[@]}"; do
     b=$(basename "$v" .den)
-    for mode in "--method binary --mode iso" "--method rle --mode blend --tissue bone"; do
+    for mode in "--method binary --mode iso" "--method rle --mode blend"; do
         tag=$(echo "$mode" | awk '{print $2 "-" $4}')
         # one process, for its peak memory (kB) and frame time
         /usr/bin/time -f "%M" -o "$OUT/$b-$tag-one.rss" "$BIN" rotate "$v" $mode --degrees "$DEGREES" --json > "$OUT/$b-$tag-one.json"
@@ -33,7 +33,7 @@ for v in "${vols[@]}"; do
             # the host's 2 cores shared: 2 threads for one rank, 1 each for more
             threads=$((n == 1 ? 2 : 1))
             "${MPIRUN[@]}" -np "$n" "$BIN" rotate "$v" $mode --degrees "$DEGREES" --threads $threads --distributed --json > "$OUT/$b-$tag-$n.json"
-            echo "$b $tag $n ranks: $(jq -c '{frames, frame_ms_median, per_rank: [.per_rank[] | {rank, render_ms, composite_ms, sent: .sent_bytes_per_frame, received: .received_bytes_per_frame, peak_mb: (.peak_rss_bytes / 1048576 | floor)}]}' "$OUT/$b-$tag-$n.json")"
+            echo "$b $tag $n ranks: $(jq -c '{frames, frame_ms_median, per_rank: [.per_rank[] | {rank, render_ms, gather_ms, composite_ms, sent: .sent_bytes_per_frame, received: .received_bytes_per_frame, peak_mb: (.peak_rss_bytes / 1048576 | floor)}]}' "$OUT/$b-$tag-$n.json")"
         done
     done
 done

@@ -275,7 +275,8 @@ fn memory_estimate(vol: &Volume, tissues: usize) -> serde_json::Value {
 /// Runs `shearwarp render`.
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     if cmd.distributed {
-        return crate::app::distributed::render(cmd);
+        let job = crate::app::RenderJob { volume: &cmd.volume, render: &cmd.render, output: &cmd.output, json: cmd.json };
+        return crate::app::distributed::render(&job);
     }
     let kind = match crate::app::output::image_kind(&cmd.output) {
         Ok(k) => k,
@@ -343,7 +344,17 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
 /// Runs `shearwarp rotate`.
 pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     if cmd.distributed {
-        return crate::app::distributed::rotate(cmd);
+        return crate::app::distributed::rotate(&crate::app::RotateJob {
+            volume: &cmd.volume,
+            render: &cmd.render,
+            axis: cmd.axis as usize,
+            degrees: cmd.degrees,
+            step_deg: &cmd.step_deg,
+            frames_dir: cmd.frames_dir.as_deref(),
+            animation: cmd.gif.is_some() || cmd.apng.is_some(),
+            json: cmd.json,
+            cycle_tissues: cmd.cycle_tissues,
+        });
     }
     let (vol, name) = cmd.volume.load()?;
     renderable(&name, &vol)?;

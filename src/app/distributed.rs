@@ -38,7 +38,7 @@ use shearwarp::view::{Camera, one_bit_step_deg, rotate_eye};
 use shearwarp::warp::Image;
 
 use crate::app::args::{RenderArgs, VolumeArgs};
-use crate::app::cli::{AxisArg, RenderCmd, RotateCmd};
+use crate::app::{RenderJob, RotateJob};
 
 /// The MPI world and what this rank sent and received.
 struct Comm {
@@ -134,6 +134,8 @@ struct Node {
     camera: Option<Camera>,
     /// Milliseconds to read this rank's brick (and, on rank 0, to scatter).
     load_ms: f64,
+    /// Rank 0: the whole volume's frame, kept from frame to frame.
+    compositor: Option<Compositor>,
 }
 
 fn voxel_bytes(v: &Volume) -> Vec<u8> {
@@ -378,7 +380,7 @@ impl Node {
             r
         });
         let renderer = comm.agree(renderer);
-        Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms }
+        Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms, compositor: None }
     }
 
     /// One frame: rank 0's camera and tissue broadcast, every brick
@@ -406,8 +408,16 @@ impl Node {
         let render_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         let parts = self.comm.gather(part.to_bytes());
+        let gather_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let comp = &mut self.compositor;
+        let (dims, spacing, tree) = (self.dims, self.spacing, &self.tree);
         let composited = parts.map(|parts| -> Result<()> {
-            let mut comp = Compositor::new(&cam, self.dims, self.spacing, &self.tree, &settings)?;
+            match comp {
+                Some(c) => c.reset(&cam, dims, spacing, tree, &settings)?,
+                None => *comp = Some(Compositor::new(&cam, dims, spacing, tree, &settings)?),
+            }
+            let comp = comp.as_mut().expect("made above");
             let parts = parts.iter().map(|b| Partial::from_bytes(b)).collect::<shearwarp::Result<Vec<_>>>()?;
             for i in comp.order().to_vec() {
                 comp.add(&parts[i]);
@@ -420,6 +430,7 @@ impl Node {
         FrameRecord {
             build_ms: f.stats.build_ms,
             render_ms: render_ms - f.stats.build_ms,
+            gather_ms,
             composite_ms,
             sent: self.comm.sent - sent0,
             received: self.comm.received - received0,
@@ -438,7 +449,7 @@ impl Node {
         let j = serde_json::json!({
             "rank": self.comm.rank, "owned": me.owned, "held": me.ghosted, "load_ms": self.load_ms,
             "build_ms": records.iter().map(|r| r.build_ms).sum::<f64>(),
-            "render_ms": med(&|r| r.render_ms), "composite_ms": med(&|r| r.composite_ms),
+            "render_ms": med(&|r| r.render_ms), "gather_ms": med(&|r| r.gather_ms), "composite_ms": med(&|r| r.composite_ms),
             "sent_bytes_per_frame": med(&|r| r.sent as f64), "received_bytes_per_frame": med(&|r| r.received as f64),
             "covered_pixels": med(&|r| r.covered as f64),
             "peak_rss_bytes": peak_rss(),
@@ -453,7 +464,9 @@ struct FrameRecord {
     build_ms: f64,
     /// Shear and render of the brick.
     render_ms: f64,
-    /// Rank 0: receiving the partial images, compositing and warping; others: sending theirs.
+    /// Rank 0: waiting for and receiving the partial images; others: sending theirs.
+    gather_ms: f64,
+    /// Rank 0: compositing the partial images and warping.
     composite_ms: f64,
     sent: u64,
     received: u64,
@@ -476,14 +489,14 @@ fn check_args(ra: &RenderArgs) -> Result<()> {
 }
 
 /// `shearwarp render --distributed`.
-pub fn render(cmd: &RenderCmd) -> Result<()> {
-    check_args(&cmd.render)?;
-    let kind = match crate::app::output::image_kind(&cmd.output) {
+pub fn render(cmd: &RenderJob) -> Result<()> {
+    check_args(cmd.render)?;
+    let kind = match crate::app::output::image_kind(cmd.output) {
         Ok(k) => k,
         Err(why) => usage!("-o {why}"),
     };
     let universe = init()?;
-    let mut node = Node::new(&universe, &cmd.volume, &cmd.render);
+    let mut node = Node::new(&universe, cmd.volume, cmd.render);
     let cam = node.camera.unwrap_or(Camera::new(glam::DMat3::IDENTITY, [1, 1]));
     let tissue = node.renderer.tissues().map(|(_, c)| c);
     let mut img = Image::new(cam.size[0], cam.size[1]);
@@ -491,7 +504,7 @@ pub fn render(cmd: &RenderCmd) -> Result<()> {
     let rec = node.frame(node.camera, tissue, &mut img);
     let frame_ms = t.elapsed().as_secs_f64() * 1e3;
     let written = if node.comm.rank == 0 {
-        crate::app::output::write_image(&cmd.output, kind, &img.to_rgb8()).map_err(anyhow::Error::from)
+        crate::app::output::write_image(cmd.output, kind, &img.to_rgb8()).map_err(anyhow::Error::from)
     } else {
         Ok(())
     };
@@ -527,17 +540,17 @@ pub fn render(cmd: &RenderCmd) -> Result<()> {
 
 /// `shearwarp rotate --distributed`: the frames of `rotate`, each rendered by
 /// every rank; rank 0 times them and writes `--frames-dir`.
-pub fn rotate(cmd: &RotateCmd) -> Result<()> {
-    check_args(&cmd.render)?;
-    if cmd.gif.is_some() || cmd.apng.is_some() {
+pub fn rotate(cmd: &RotateJob) -> Result<()> {
+    check_args(cmd.render)?;
+    if cmd.animation {
         usage!("--distributed writes --frames-dir; --gif and --apng are not available with it");
     }
     if !(cmd.degrees.is_finite() && cmd.degrees > 0.0) {
         usage!("--degrees must be a positive number, got {}", cmd.degrees);
     }
     let universe = init()?;
-    let mut node = Node::new(&universe, &cmd.volume, &cmd.render);
-    let step = match cmd.step_deg.as_str() {
+    let mut node = Node::new(&universe, cmd.volume, cmd.render);
+    let step = match cmd.step_deg {
         "auto" => one_bit_step_deg(node.dims) * cmd.render.cell as f64,
         s => match s.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0) {
             Some(x) => x,
@@ -548,13 +561,9 @@ pub fn rotate(cmd: &RotateCmd) -> Result<()> {
     if frames > 1_000_000 {
         usage!("{frames} frames is too many (raise --step-deg)");
     }
-    let axis = match cmd.axis {
-        AxisArg::X => 0,
-        AxisArg::Y => 1,
-        AxisArg::Z => 2,
-    };
+    let axis = cmd.axis;
     if node.comm.rank == 0
-        && let Some(d) = &cmd.frames_dir
+        && let Some(d) = cmd.frames_dir
     {
         let made = std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create directory", d.display()));
         node.comm.agree(made);
@@ -577,7 +586,7 @@ pub fn rotate(cmd: &RotateCmd) -> Result<()> {
         records.push(node.frame(cam, tissue, &mut img));
         wall.push(t.elapsed().as_secs_f64() * 1e3);
         if node.comm.rank == 0
-            && let Some(d) = &cmd.frames_dir
+            && let Some(d) = cmd.frames_dir
         {
             let w = shearwarp::output::write_png_unsynced(d.join(format!("frame_{f:05}.png")), &img.to_rgb8());
             node.comm.agree(w.map_err(anyhow::Error::from));
@@ -586,7 +595,7 @@ pub fn rotate(cmd: &RotateCmd) -> Result<()> {
         }
     }
     if node.comm.rank == 0
-        && let Some(d) = &cmd.frames_dir
+        && let Some(d) = cmd.frames_dir
     {
         shearwarp::output::sync_written(d)?;
     }

@@ -30,6 +30,32 @@ macro_rules! usage {
     };
 }
 
+/// What `render --distributed` takes of the command line.
+// (read by the MPI build only)
+#[cfg_attr(not(feature = "mpi"), allow(dead_code))]
+pub struct RenderJob<'a> {
+    pub volume: &'a args::VolumeArgs,
+    pub render: &'a args::RenderArgs,
+    pub output: &'a std::path::Path,
+    pub json: bool,
+}
+
+/// What `rotate --distributed` takes of the command line.
+#[cfg_attr(not(feature = "mpi"), allow(dead_code))]
+pub struct RotateJob<'a> {
+    pub volume: &'a args::VolumeArgs,
+    pub render: &'a args::RenderArgs,
+    /// The eye axis turned about (0 = x, 1 = y, 2 = z).
+    pub axis: usize,
+    pub degrees: f64,
+    pub step_deg: &'a str,
+    pub frames_dir: Option<&'a std::path::Path>,
+    /// `--gif` or `--apng` given (refused).
+    pub animation: bool,
+    pub json: bool,
+    pub cycle_tissues: usize,
+}
+
 /// `--distributed` in a build without the feature `mpi`: an error saying how to get it.
 #[cfg(not(feature = "mpi"))]
 pub mod distributed {
@@ -42,11 +68,11 @@ pub mod distributed {
         )
     }
 
-    pub fn render(_: &crate::app::cli::RenderCmd) -> Result<()> {
+    pub fn render(_: &crate::app::RenderJob) -> Result<()> {
         unavailable()
     }
 
-    pub fn rotate(_: &crate::app::cli::RotateCmd) -> Result<()> {
+    pub fn rotate(_: &crate::app::RotateJob) -> Result<()> {
         unavailable()
     }
 }

@@ -27,6 +27,8 @@
 //! against one renderer); the command line's `--distributed` runs one brick
 //! per MPI rank.
 
+use rayon::prelude::*;
+
 use crate::classify::presets::Tissue;
 use crate::composite::{Intermediate, Mode, Rect, composite_premultiplied, terminated};
 use crate::data::stats::ValueStats;
@@ -36,6 +38,9 @@ use crate::render::{BrickView, Renderer, Settings};
 use crate::view::plan::{FramePlan, Grid};
 use crate::view::{Camera, Factorization};
 use crate::warp::{Canvas, Texel, warp};
+
+/// Pixels per parallel task of a partial image's conversions.
+const ROWS: usize = 1 << 14;
 
 /// Voxels a brick holds beyond its owned box on every side (see the module
 /// documentation): a cell's second voxel (+1), the sample before the first
@@ -231,7 +236,9 @@ impl Partial {
             let (gp, gq) = (p as i64 + offset[0], q as i64 + offset[1]);
             (p0..=p1).contains(&gp) && (q0..=q1).contains(&gq)
         };
-        for q in r.q0..=r.q1 {
+        let whole =
+            [p0, p1, q0, q1] == [r.p0 as i64 + offset[0], r.p1 as i64 + offset[0], r.q0 as i64 + offset[1], r.q1 as i64 + offset[1]];
+        for q in (r.q0..=r.q1).filter(|_| !whole) {
             for p in r.p0..=r.p1 {
                 if !inside(p, q) && inter.rgba[q * w + p] != [0.0; 4] {
                     return Err(Error::Other(format!("internal: a brick's pixel ({p}, {q}) + {offset:?} is outside the {size:?} grid")));
@@ -258,12 +265,18 @@ impl Partial {
     /// The partial image as bytes: the rectangle (four u32, `p1 < p0` for
     /// none) and the pixels (f32, little-endian).
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut b = Vec::with_capacity(self.wire_bytes());
+        let mut b = vec![0u8; self.wire_bytes()];
         let r = self.rect.map_or([1, 0, 1, 0], |r| [r.p0, r.p1, r.q0, r.q1].map(|x| x as u32));
-        r.iter().for_each(|x| b.extend(x.to_le_bytes()));
-        for px in &self.rgba {
-            px.iter().for_each(|x| b.extend(x.to_le_bytes()));
+        for (d, x) in b.chunks_exact_mut(4).zip(r) {
+            d.copy_from_slice(&x.to_le_bytes());
         }
+        b[16..].par_chunks_mut(16 * ROWS).zip(self.rgba.par_chunks(ROWS)).for_each(|(d, px)| {
+            for (d, px) in d.chunks_exact_mut(16).zip(px) {
+                for (d, x) in d.chunks_exact_mut(4).zip(px) {
+                    d.copy_from_slice(&x.to_le_bytes());
+                }
+            }
+        });
         b
     }
 
@@ -275,10 +288,14 @@ impl Partial {
         }
         let u = |i: usize| u32::from_le_bytes(b[4 * i..4 * i + 4].try_into().expect("4 bytes")) as usize;
         let (p0, p1, q0, q1) = (u(0), u(1), u(2), u(3));
-        let rgba: Vec<[f32; 4]> = b[16..]
-            .chunks_exact(16)
-            .map(|c| [0, 1, 2, 3].map(|i| f32::from_le_bytes(c[4 * i..4 * i + 4].try_into().expect("4 bytes"))))
-            .collect();
+        let mut rgba = vec![[0f32; 4]; (b.len() - 16) / 16];
+        rgba.par_chunks_mut(ROWS).zip(b[16..].par_chunks(16 * ROWS)).for_each(|(px, c)| {
+            for (px, c) in px.iter_mut().zip(c.chunks_exact(16)) {
+                for (x, c) in px.iter_mut().zip(c.chunks_exact(4)) {
+                    *x = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+                }
+            }
+        });
         if p1 < p0 || q1 < q0 {
             return if rgba.is_empty() { Ok(Partial::default()) } else { Err(bad()) };
         }
@@ -306,9 +323,27 @@ impl Compositor {
         let plan = FramePlan::parallel(&f, spacing);
         let mut inter = Intermediate::default();
         inter.prepare(plan.grid.size);
-        inter.rgba.fill([0.0; 4]);
         let ert = if settings.mode == Mode::Iso && settings.method.is_raycast() { 1.0 } else { settings.ert };
         Ok(Compositor { order: order(tree, walk_directions(&f)), plan, inter, ert })
+    }
+
+    /// Starts the next frame (what [`Compositor::new`] makes), reusing the
+    /// image: only the last frame's rectangle is cleared.
+    pub fn reset(&mut self, camera: &Camera, dims: [usize; 3], spacing: [f32; 3], tree: &Tree, settings: &Settings) -> Result<()> {
+        let f = factorization(camera, dims, spacing, settings)?;
+        self.plan.set_parallel(&f, spacing);
+        if let Some(r) = self.inter.valid.filter(|_| self.inter.size == self.plan.grid.size) {
+            let w = self.inter.size[0];
+            for q in r.q0..=r.q1 {
+                self.inter.rgba[q * w + r.p0..=q * w + r.p1].fill([0.0; 4]);
+            }
+        } else {
+            self.inter = Intermediate::default();
+        }
+        self.inter.prepare(self.plan.grid.size);
+        self.order = order(tree, walk_directions(&f));
+        self.ert = if settings.mode == Mode::Iso && settings.method.is_raycast() { 1.0 } else { settings.ert };
+        Ok(())
     }
 
     /// The bricks front to back.
@@ -328,14 +363,15 @@ impl Compositor {
         let Some(r) = part.rect else { return };
         let w = self.inter.size[0];
         let rw = r.p1 - r.p0 + 1;
-        for q in r.q0..=r.q1 {
-            let src = &part.rgba[(q - r.q0) * rw..(q - r.q0 + 1) * rw];
-            for (acc, s) in self.inter.rgba[q * w + r.p0..=q * w + r.p1].iter_mut().zip(src) {
-                if !terminated(acc[3], self.ert) {
+        let ert = self.ert;
+        let rows = self.inter.rgba[r.q0 * w..(r.q1 + 1) * w].par_chunks_mut(w);
+        rows.zip(part.rgba.par_chunks(rw)).for_each(|(row, src)| {
+            for (acc, s) in row[r.p0..=r.p1].iter_mut().zip(src) {
+                if !terminated(acc[3], ert) {
                     composite_premultiplied(acc, *s);
                 }
             }
-        }
+        });
         self.inter.valid = Rect::union(self.inter.valid, Some(r));
     }
 

@@ -185,3 +185,43 @@ fn bricks_agree_on_the_whole_volumes_statistics_and_presets() {
         }
     }
 }
+
+/// A compositor reused from frame to frame (clearing only the last frame's
+/// rectangle) composites what a new one does, as the views change axis.
+#[test]
+fn a_reused_compositor_composites_what_a_new_one_does() {
+    use shearwarp::bricks::{Compositor, Partial, split};
+    let vol = random_volume([30, 26, 34], 99, [1.0; 3]);
+    let ts = tissues(1.0);
+    let s = Settings { mode: Mode::Iso, method: Method::Binary, ..Settings::default() };
+    let (bricks, tree) = split(vol.dims(), 3).unwrap();
+    let mut renderers: Vec<Renderer> = bricks.iter().map(|b| Renderer::with_tissues(b.extract(&vol).unwrap(), &ts, s).unwrap()).collect();
+    let mut reused: Option<Compositor> = None;
+    for c in [cam(0.2, 0.3, 0.0), cam(1.4, 0.1, 0.2), cam(0.1, -2.0, 0.0), cam(0.1, -2.05, 0.0)] {
+        let parts: Vec<Partial> = bricks
+            .iter()
+            .zip(&mut renderers)
+            .map(|(b, r)| {
+                let f = r.render_brick(&c, &b.view(vol.dims())).unwrap();
+                let grid = shearwarp::bricks::grid_of(&c, vol.dims(), vol.spacing(), &s).unwrap();
+                Partial::of(r.intermediate(), f.rect, f.offset, grid).unwrap()
+            })
+            .collect();
+        let mut fresh = Compositor::new(&c, vol.dims(), vol.spacing(), &tree, &s).unwrap();
+        let comp = match &mut reused {
+            Some(x) => {
+                x.reset(&c, vol.dims(), vol.spacing(), &tree, &s).unwrap();
+                x
+            }
+            None => reused.insert(Compositor::new(&c, vol.dims(), vol.spacing(), &tree, &s).unwrap()),
+        };
+        let (mut a, mut b) = (Image8::new(56, 52), Image8::new(56, 52));
+        for i in fresh.order().to_vec() {
+            fresh.add(&parts[i]);
+            comp.add(&parts[i]);
+        }
+        fresh.finish(&c, &mut a);
+        comp.finish(&c, &mut b);
+        assert!(a.data == b.data && covered(&a) > 100);
+    }
+}

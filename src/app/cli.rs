@@ -156,7 +156,8 @@ pub struct RotateCmd {
     /// Render one volume split over the ranks of an MPI job (launch with
     /// `mpirun -np N`; needs the build with feature `mpi`): each rank reads
     /// and renders its own brick, rank 0 composites and writes. Parallel
-    /// projection; a still samples one ray per voxel (a frame's rank 0 times it).
+    /// projection; rank 0 times the frames and writes `--frames-dir` (not
+    /// `--gif` or `--apng`).
     #[arg(long)]
     pub distributed: bool,
 }

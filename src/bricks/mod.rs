@@ -283,7 +283,7 @@ impl Partial {
     /// A partial image from [`Partial::to_bytes`].
     pub fn from_bytes(b: &[u8]) -> Result<Partial> {
         let bad = || Error::Other(format!("internal: a partial image of {} bytes is malformed", b.len()));
-        if b.len() < 16 || (b.len() - 16) % 16 != 0 {
+        if b.len() < 16 || !(b.len() - 16).is_multiple_of(16) {
             return Err(bad());
         }
         let u = |i: usize| u32::from_le_bytes(b[4 * i..4 * i + 4].try_into().expect("4 bytes")) as usize;

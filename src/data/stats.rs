@@ -138,7 +138,7 @@ impl ValueStats {
         let (lo, hi, lo2, hi2, n_lo, n_hi) = (f(0)?, f(1)?, f(2)?, f(3)?, u(16)?, u(24)?);
         let counts = match b.len() {
             32 => None,
-            n if n > 36 && (n - 36) % 8 == 0 => {
+            n if n > 36 && (n - 36).is_multiple_of(8) => {
                 let base = i32::from_le_bytes(b[32..36].try_into().ok()?);
                 Some((base, b[36..].chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect()))
             }

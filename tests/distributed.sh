@@ -31,7 +31,7 @@ MPIRUN=(mpirun --oversubscribe)
 
 cargo clippy --release --all-targets --features mpi -- -D warnings
 cargo build --release --features mpi
-cargo test --release --features mpi --test it distributed:: bricks::
+cargo test --release --features mpi --test it -- distributed:: bricks::
 
 mkdir -p "$OUT"
 BIN=target/release/shearwarp

@@ -15,6 +15,7 @@
 //! ```text
 //! geometry/   surfaces in the volume, their rasterizer and the inverse warp
 //! accuracy/   the reference renderer, analytic truth, metrics
+//! bricks/     one volume as bricks, rendered apart and composited sort-last
 //! render/     the Renderer: one frame through every stage below; checks
 //! warp.rs     the intermediate image to the final one
 //! composite/  ray and slice traversals into the intermediate image
@@ -32,6 +33,8 @@
 //! opacity, [`encode`] builds what lets a traversal skip empty space,
 //! [`composite`] traverses into the intermediate image and [`warp`] resamples
 //! it to the output. [`render`] owns the per-frame state and runs the stages;
+//! [`bricks`] splits a volume into bricks rendered apart (one per MPI rank
+//! in a distributed run) and composites their partial images;
 //! [`accuracy`] measures the fast paths against a reference renderer, and
 //! [`geometry`] places meshes and clip regions in the frame as per-pixel ray
 //! limits. [`kernels`] holds the one CPU level every SIMD kernel is chosen by,
@@ -44,6 +47,7 @@
 //! [`Renderer`] with [`Settings`], and render a [`Camera`] into an [`Image`].
 
 pub mod accuracy;
+pub mod bricks;
 pub mod classify;
 pub mod composite;
 pub mod data;

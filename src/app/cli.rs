@@ -89,6 +89,12 @@ pub struct RenderCmd {
     /// intermediate image (zoom, the eye near the volume).
     #[arg(long, value_enum, default_value = "matched")]
     pub sampling: StillSampling,
+    /// Render one volume split over the ranks of an MPI job (launch with
+    /// `mpirun -np N`; needs the build with feature `mpi`): each rank reads
+    /// and renders its own brick, rank 0 composites and writes. Parallel
+    /// projection; a still samples one ray per voxel (as `--sampling voxel`).
+    #[arg(long)]
+    pub distributed: bool,
 }
 
 /// The sampling of a still frame.
@@ -147,6 +153,13 @@ pub struct RotateCmd {
     /// Switch to the next tissue preset every N frames (0 = never).
     #[arg(long, default_value_t = 0)]
     pub cycle_tissues: usize,
+    /// Render one volume split over the ranks of an MPI job (launch with
+    /// `mpirun -np N`; needs the build with feature `mpi`): each rank reads
+    /// and renders its own brick, rank 0 composites and writes. Parallel
+    /// projection; rank 0 times the frames and writes `--frames-dir` (not
+    /// `--gif` or `--apng`).
+    #[arg(long)]
+    pub distributed: bool,
 }
 
 /// `shearwarp info`.
@@ -262,6 +275,10 @@ fn memory_estimate(vol: &Volume, tissues: usize) -> serde_json::Value {
 
 /// Runs `shearwarp render`.
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
+    if cmd.distributed {
+        let job = crate::app::RenderJob { volume: &cmd.volume, render: &cmd.render, output: &cmd.output, json: cmd.json };
+        return crate::app::distributed::render(&job);
+    }
     let kind = match crate::app::output::image_kind(&cmd.output) {
         Ok(k) => k,
         Err(why) => usage!("-o {why}"),
@@ -327,6 +344,19 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
 
 /// Runs `shearwarp rotate`.
 pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
+    if cmd.distributed {
+        return crate::app::distributed::rotate(&crate::app::RotateJob {
+            volume: &cmd.volume,
+            render: &cmd.render,
+            axis: cmd.axis as usize,
+            degrees: cmd.degrees,
+            step_deg: &cmd.step_deg,
+            frames_dir: cmd.frames_dir.as_deref(),
+            animation: cmd.gif.is_some() || cmd.apng.is_some(),
+            json: cmd.json,
+            cycle_tissues: cmd.cycle_tissues,
+        });
+    }
     let (vol, name) = cmd.volume.load()?;
     renderable(&name, &vol)?;
     let load_ms = crate::app::since_start_ms();

@@ -30,9 +30,58 @@ macro_rules! usage {
     };
 }
 
+/// What `render --distributed` takes of the command line.
+// (read by the MPI build only)
+#[cfg_attr(not(feature = "mpi"), allow(dead_code))]
+pub struct RenderJob<'a> {
+    pub volume: &'a args::VolumeArgs,
+    pub render: &'a args::RenderArgs,
+    pub output: &'a std::path::Path,
+    pub json: bool,
+}
+
+/// What `rotate --distributed` takes of the command line.
+#[cfg_attr(not(feature = "mpi"), allow(dead_code))]
+pub struct RotateJob<'a> {
+    pub volume: &'a args::VolumeArgs,
+    pub render: &'a args::RenderArgs,
+    /// The eye axis turned about (0 = x, 1 = y, 2 = z).
+    pub axis: usize,
+    pub degrees: f64,
+    pub step_deg: &'a str,
+    pub frames_dir: Option<&'a std::path::Path>,
+    /// `--gif` or `--apng` given (refused).
+    pub animation: bool,
+    pub json: bool,
+    pub cycle_tissues: usize,
+}
+
+/// `--distributed` in a build without the feature `mpi`: an error saying how to get it.
+#[cfg(not(feature = "mpi"))]
+pub mod distributed {
+    use anyhow::Result;
+
+    fn unavailable() -> Result<()> {
+        usage!(
+            "--distributed needs the MPI build: install Open MPI and libclang (Debian: libopenmpi-dev openmpi-bin libclang-dev), \
+             build with `cargo build --release --features mpi` and launch with `mpirun -np N shearwarp …`"
+        )
+    }
+
+    pub fn render(_: &crate::app::RenderJob) -> Result<()> {
+        unavailable()
+    }
+
+    pub fn rotate(_: &crate::app::RotateJob) -> Result<()> {
+        unavailable()
+    }
+}
+
 pub mod args;
 pub mod bench;
 pub mod cli;
+#[cfg(feature = "mpi")]
+pub mod distributed;
 pub mod output;
 pub mod peers;
 pub mod scene;

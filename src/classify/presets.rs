@@ -164,6 +164,9 @@ fn lerp(lo: f32, hi: f32, f: f64) -> f32 {
     ((lo as f64) + (hi as f64 - lo as f64) * f).clamp(f32::MIN as f64, f32::MAX as f64) as f32
 }
 
+/// Bins of the histogram the presets are found in.
+pub const HISTOGRAM_BINS: usize = 256;
+
 /// A 256-bin histogram over `[lo, hi]`, ignoring values outside it (a sentinel).
 fn histogram_in(v: &Volume, bins: usize, lo: f32, hi: f32) -> Vec<u64> {
     v.stats().histogram_in(v.data(), bins, lo, hi)
@@ -177,7 +180,7 @@ pub fn otsu_threshold(v: &Volume) -> f32 {
     if hi <= lo {
         return lo;
     }
-    let h = histogram_in(v, 256, lo, hi);
+    let h = histogram_in(v, HISTOGRAM_BINS, lo, hi);
     let t = otsu_bins(&h, 0, 256).unwrap_or(0);
     lerp(lo, hi, (t as f64 + 1.0) / 256.0)
 }
@@ -214,7 +217,7 @@ pub fn histogram_thresholds(v: &Volume) -> Vec<f32> {
     if hi <= lo {
         return vec![];
     }
-    let h = histogram_in(v, 256, lo, hi);
+    let h = histogram_in(v, HISTOGRAM_BINS, lo, hi);
     let to_density = |t: usize| lerp(lo, hi, t as f64 / 256.0);
     let mut t: Vec<f32> = multi_otsu(&h, 4).into_iter().map(to_density).collect();
     // bins closer than an f32 step collapse: keep distinct thresholds only

@@ -30,6 +30,9 @@ pub struct ValueStats {
     pub n_hi: u64,
     /// Integer voxels: the count of value `base + i` at `i`, over the type's range.
     counts: Option<(i32, Vec<u64>)>,
+    /// A histogram given with the statistics ([`ValueStats::with_histogram`]):
+    /// `[lo, hi]` and its bins.
+    given: Option<(f32, f32, Vec<u64>)>,
 }
 
 impl ValueStats {
@@ -49,7 +52,7 @@ impl ValueStats {
         let (first, last) = (used.first().copied().unwrap_or(0), used.last().copied().unwrap_or(0));
         let lo2 = used.get(1).map_or(f32::INFINITY, |&i| val(i));
         let hi2 = if used.len() > 1 { val(used[used.len() - 2]) } else { f32::NEG_INFINITY };
-        ValueStats { lo: val(first), hi: val(last), lo2, hi2, n_lo: c[first], n_hi: c[last], counts: Some((base, c)) }
+        ValueStats { lo: val(first), hi: val(last), lo2, hi2, n_lo: c[first], n_hi: c[last], counts: Some((base, c)), given: None }
     }
 
     fn of_f32(v: &[f32]) -> Self {
@@ -66,7 +69,82 @@ impl ValueStats {
             .par_chunks(CHUNK)
             .map(|c| c.iter().fold(zero(), fold))
             .reduce(zero, |a, b| (a.0.min(b.0), a.1.max(b.1), a.2 + b.2, a.3 + b.3));
-        ValueStats { lo, hi, lo2, hi2, n_lo, n_hi, counts: None }
+        ValueStats { lo, hi, lo2, hi2, n_lo, n_hi, counts: None, given: None }
+    }
+
+    /// The statistics of the union of the voxels `self` and `other` were
+    /// computed over (disjoint sets of voxels of one type): the same numbers
+    /// [`ValueStats::of`] gives for the whole, without its voxels (how the
+    /// bricks of a distributed volume agree on one classification).
+    pub fn merge(&self, other: &ValueStats) -> ValueStats {
+        if let (Some((b, c)), Some((b2, c2))) = (&self.counts, &other.counts)
+            && b == b2
+            && c.len() == c2.len()
+        {
+            return Self::from_counts(*b, c.iter().zip(c2).map(|(x, y)| x + y).collect());
+        }
+        let (lo, hi) = (self.lo.min(other.lo), self.hi.max(other.hi));
+        // a part's runner-up: its own end when that end is not the whole's
+        let lo2 = |s: &ValueStats| if s.lo == lo { s.lo2 } else { s.lo };
+        let hi2 = |s: &ValueStats| if s.hi == hi { s.hi2 } else { s.hi };
+        let n_lo = |s: &ValueStats| if s.lo == lo { s.n_lo } else { 0 };
+        let n_hi = |s: &ValueStats| if s.hi == hi { s.n_hi } else { 0 };
+        ValueStats {
+            lo,
+            hi,
+            lo2: lo2(self).min(lo2(other)),
+            hi2: hi2(self).max(hi2(other)),
+            n_lo: n_lo(self) + n_lo(other),
+            n_hi: n_hi(self) + n_hi(other),
+            counts: None,
+            given: None,
+        }
+    }
+
+    /// Whether the statistics answer every histogram without the voxels
+    /// (integer voxels: they hold the count of every value).
+    pub fn has_counts(&self) -> bool {
+        self.counts.is_some()
+    }
+
+    /// These statistics with `hist`, the histogram of `hist.len()` bins over
+    /// `[lo, hi]` of the voxels they describe: [`ValueStats::histogram_in`]
+    /// answers that question with it instead of reading the voxels (what a
+    /// brick of a larger f32 volume is given: the whole volume's histogram).
+    pub fn with_histogram(self, lo: f32, hi: f32, hist: Vec<u64>) -> ValueStats {
+        ValueStats { given: Some((lo, hi, hist)), ..self }
+    }
+
+    /// The statistics as bytes ([`ValueStats::from_bytes`] reads them back;
+    /// a histogram given with them is not part of them).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = Vec::new();
+        for x in [self.lo, self.hi, self.lo2, self.hi2] {
+            b.extend(x.to_le_bytes());
+        }
+        b.extend(self.n_lo.to_le_bytes());
+        b.extend(self.n_hi.to_le_bytes());
+        if let Some((base, c)) = &self.counts {
+            b.extend(base.to_le_bytes());
+            c.iter().for_each(|n| b.extend(n.to_le_bytes()));
+        }
+        b
+    }
+
+    /// Statistics from [`ValueStats::to_bytes`] (`None`: not such bytes).
+    pub fn from_bytes(b: &[u8]) -> Option<ValueStats> {
+        let f = |i: usize| Some(f32::from_le_bytes(b.get(4 * i..4 * i + 4)?.try_into().ok()?));
+        let u = |at: usize| Some(u64::from_le_bytes(b.get(at..at + 8)?.try_into().ok()?));
+        let (lo, hi, lo2, hi2, n_lo, n_hi) = (f(0)?, f(1)?, f(2)?, f(3)?, u(16)?, u(24)?);
+        let counts = match b.len() {
+            32 => None,
+            n if n > 36 && (n - 36).is_multiple_of(8) => {
+                let base = i32::from_le_bytes(b[32..36].try_into().ok()?);
+                Some((base, b[36..].chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect()))
+            }
+            _ => return None,
+        };
+        Some(ValueStats { lo, hi, lo2, hi2, n_lo, n_hi, counts, given: None })
     }
 
     /// `bins` equal bins over `[lo, hi]`, ignoring values outside it; a value
@@ -77,6 +155,11 @@ impl ValueStats {
         let scale = if hi > lo { bins as f64 / (hi as f64 - lo as f64) } else { 0.0 };
         let bin = |x: f32| (((x as f64 - lo as f64) * scale) as usize).min(bins - 1);
         let inside = |x: f32| x >= lo && x <= hi;
+        if let Some((glo, ghi, h)) = &self.given
+            && (*glo, *ghi, h.len()) == (lo, hi, bins)
+        {
+            return h.clone();
+        }
         match (&self.counts, data) {
             (Some((base, c)), _) => {
                 let mut h = vec![0u64; bins];

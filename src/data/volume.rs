@@ -229,6 +229,13 @@ impl Volume {
     pub fn stats(&self) -> &ValueStats {
         self.stats.0.get_or_init(|| ValueStats::of(&self.data))
     }
+    /// This volume with the value statistics `stats` in place of its own:
+    /// a part of a larger volume (a brick) classified as the whole is,
+    /// whose statistics it cannot compute alone. Every range, histogram
+    /// and preset asked of it is then the larger volume's.
+    pub fn with_stats(self, stats: ValueStats) -> Self {
+        Volume { stats: StatsCache(std::sync::OnceLock::from(stats)), ..self }
+    }
     /// Smallest and largest density.
     pub fn value_range(&self) -> (f32, f32) {
         let s = self.stats();

@@ -16,6 +16,7 @@
 //! mode) changes.
 
 mod axes;
+mod brick;
 pub mod checks;
 mod classes;
 mod frame;
@@ -25,6 +26,7 @@ mod settings;
 mod stats;
 
 pub use axes::estimate_axis;
+pub use brick::{BrickFrame, BrickView};
 pub use classes::Focus;
 pub use settings::{
     Deluxe, Footprint, Lattice, MAX_INTERMEDIATE_PIXELS, MAX_MASK_BYTES, MAX_QUALITY, MIN_QUALITY, Method, NEAR_SLICES, Normals, Settings,

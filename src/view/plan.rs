@@ -585,6 +585,42 @@ impl FramePlan {
         st.ends = [0, 1].map(|a| [st.trans[a].first().copied().unwrap_or(0.0), st.trans[a].last().copied().unwrap_or(0.0)]);
     }
 
+    /// Makes this parallel plan (of a sub-volume, a *brick*, whose voxel
+    /// `(0, 0, 0)` is voxel `origin` of a larger volume, along `(i, j, k)`)
+    /// sample exactly where the larger volume's plan `global` (the same
+    /// camera) samples: slice `k` of the brick takes the map of the larger
+    /// volume's slice `k + origin[2]`, its integer part moved by the brick's
+    /// in-slice origin and a whole number of pixels that keeps the brick's
+    /// translations about its own centre (the range its sheared mask is
+    /// padded for). So a brick's sample is the larger volume's sample at the
+    /// same place, weight for weight. Returns that whole number: brick pixel
+    /// `(p, q)` is the larger plan's pixel `(p, q) + offset`.
+    pub fn place_in(&mut self, global: &Factorization, origin: [usize; 3]) -> [i64; 2] {
+        assert_eq!(self.kind, MapKind::Translate, "place_in needs a parallel plan");
+        let nk = self.slices();
+        let kc = origin[2] + nk.saturating_sub(1) / 2;
+        // the brick's translations: the larger volume's less whole voxels `m`
+        // (its samples move by `origin` besides, through the pixel offset)
+        let m: [i64; 2] = [0, 1].map(|a| global.trans(kc)[a].round() as i64);
+        let st = &mut self.shear;
+        for k in 0..nk {
+            let t = global.trans(k + origin[2]);
+            for a in 0..2 {
+                let f = t[a].floor() as i32;
+                let w = (t[a] - f as f64) as f32;
+                st.floor[a][k] = f - m[a] as i32;
+                st.trans[a][k] = t[a] - m[a] as f64;
+                self.maps[k].floor[a] = st.floor[a][k];
+                self.maps[k].weight[a] = w;
+            }
+        }
+        st.ends = [0, 1].map(|a| [st.trans[a].first().copied().unwrap_or(0.0), st.trans[a].last().copied().unwrap_or(0.0)]);
+        let gpad = Grid::parallel([global.n[0].saturating_sub(1), global.n[1].saturating_sub(1)], global.n[2]).pad as i64;
+        // brick pixel p samples i_b = p − pad_b + t − m, the larger plan's pixel
+        // p' samples i_b + origin = p' − pad_g + t
+        [0, 1].map(|a| gpad - self.grid.pad as i64 - m[a] + origin[a] as i64)
+    }
+
     /// Moves the plan's sheared coordinates by `d` voxels: the plan's
     /// sheared point `(a, b)` is its view's `(a − d_a, b − d_b)` (the warp and
     /// its inverse follow; the slices' maps are the caller's to shift, with

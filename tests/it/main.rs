@@ -8,12 +8,15 @@ mod accuracy;
 mod bcc;
 mod bench_cli;
 mod bench_matrix;
+mod bricks;
 mod cli;
 mod cli_inputs;
 mod clip;
 mod deluxe_binary;
 mod deluxe_matched;
 mod deluxe_rle;
+#[cfg(feature = "mpi")]
+mod distributed;
 mod extreme_values;
 mod focus;
 mod geometry;

@@ -19,6 +19,7 @@ use std::fs::File;
 use std::io::{Read, Write};
 use std::path::Path;
 
+use super::raw::RawSpec;
 use super::{io_error, make_volume, read_region};
 use crate::data::volume::{Volume, VoxelData, check_dims};
 use crate::error::{Error, Result};
@@ -72,8 +73,8 @@ pub(crate) fn sniff(head: &[u8], file_len: u64) -> bool {
     }
 }
 
-/// Loads a VolPack `.den` file.
-pub fn load_den(path: &Path) -> Result<Volume> {
+/// The voxel layout of a VolPack `.den` file: 8-bit voxels after the header.
+pub fn layout(path: &Path) -> Result<RawSpec> {
     let mut head = Vec::with_capacity(DEN_HEADER_BYTES as usize);
     File::open(path).map_err(|e| io_error(path, e))?.take(DEN_HEADER_BYTES).read_to_end(&mut head).map_err(|e| io_error(path, e))?;
     let h = parse_header(&head).map_err(|why| Error::file(path, why))?;
@@ -88,6 +89,14 @@ pub fn load_den(path: &Path) -> Result<Volume> {
             format!(".den header is inconsistent: map_length {} is not {}×{}×{} = {n}", h.map_length, dims[0], dims[1], dims[2]),
         ));
     }
+    Ok(RawSpec { header_bytes: DEN_HEADER_BYTES, ..RawSpec::new(dims, crate::data::volume::VoxelType::U8) })
+}
+
+/// Loads a VolPack `.den` file.
+pub fn load_den(path: &Path) -> Result<Volume> {
+    let spec = layout(path)?;
+    let dims = spec.dims;
+    let n = (dims[0] * dims[1] * dims[2]) as u64;
     let bytes = read_region(path, DEN_HEADER_BYTES, n, false)?;
     make_volume(path, dims, [1.0; 3], VoxelData::U8(bytes))
 }

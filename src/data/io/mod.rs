@@ -163,6 +163,70 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume> {
     }
 }
 
+/// The raw layout of the voxels of `path` when a box of them can be read by
+/// seeking (a raw file, by `opts.raw` or its sidecar; a `.den` file), with
+/// the file's patient frame when it has one; `None` for a format that must
+/// be read whole (NRRD, NIfTI, DICOM). Reads the header only.
+pub fn seekable_layout(path: &Path, opts: &LoadOptions) -> Result<Option<RawSpec>> {
+    let meta = std::fs::metadata(path).map_err(|e| io_error(path, e))?;
+    if !meta.is_file() {
+        return Ok(None);
+    }
+    let format = match opts.format {
+        Some(f) => f,
+        None => Format::infer(path)?,
+    };
+    match format {
+        Format::Raw => match &opts.raw {
+            Some(spec) => Ok(Some(spec.clone())),
+            None => raw::sidecar_layout(path),
+        },
+        Format::Den => den::layout(path).map(Some),
+        _ => Ok(None),
+    }
+}
+
+/// Reads the voxels `[lo, hi)` (along x, y, z) of the file `path` laid out
+/// as `spec` says, by seeking to each slice's rows: a brick of a volume
+/// without reading the rest. An error names the file (missing, shorter than
+/// the layout, unreadable).
+pub fn read_box(path: &Path, spec: &RawSpec, lo: [usize; 3], hi: [usize; 3]) -> Result<Volume> {
+    use std::io::{Seek, SeekFrom};
+    let len = spec.data_bytes().map_err(|e| Error::file(path, e.to_string()))?;
+    let [nx, ny, nz] = spec.dims;
+    if (0..3).any(|a| lo[a] >= hi[a] || hi[a] > spec.dims[a]) {
+        return Err(Error::file(path, format!("voxels {lo:?}..{hi:?} are not inside its {nx}×{ny}×{nz} voxels")));
+    }
+    let mut f = File::open(path).map_err(|e| io_error(path, e))?;
+    let size = f.metadata().map_err(|e| io_error(path, e))?.len();
+    let b = spec.voxel_type.size();
+    // the box's last byte (the whole layout was checked against the dims above)
+    let end = spec.header_bytes + (((hi[2] - 1) * ny + hi[1]) * nx * b) as u64;
+    if size < end {
+        return Err(Error::file(
+            path,
+            format!(
+                "file is truncated: {size} bytes, voxels {lo:?}..{hi:?} end at byte {end} (the layout needs {})",
+                spec.header_bytes + len
+            ),
+        ));
+    }
+    let (w, rows) = (hi[0] - lo[0], hi[1] - lo[1]);
+    let mut out = Vec::with_capacity(w * rows * (hi[2] - lo[2]) * b);
+    // one read per slice: its rows y0..y1 whole, then the x range of each
+    let mut slab = vec![0u8; rows * nx * b];
+    for z in lo[2]..hi[2] {
+        let at = spec.header_bytes + ((z * ny + lo[1]) * nx * b) as u64;
+        f.seek(SeekFrom::Start(at)).map_err(|e| io_error(path, e))?;
+        f.read_exact(&mut slab).map_err(|e| io_error(path, e))?;
+        for y in 0..rows {
+            out.extend_from_slice(&slab[(y * nx + lo[0]) * b..(y * nx + hi[0]) * b]);
+        }
+    }
+    let data = decode_samples(out, Sample::from_voxel_type(spec.voxel_type), spec.big_endian);
+    make_volume(path, [w, rows, hi[2] - lo[2]], spec.spacing, data)
+}
+
 /// Reads up to 352 bytes and looks for a known magic.
 fn sniff(path: &Path, len: u64) -> Result<Option<Format>> {
     let mut head = Vec::with_capacity(352);

@@ -1,0 +1,630 @@
+//! `--distributed`: one volume split over MPI ranks (feature `mpi`), rendered
+//! sort-last with [`shearwarp::bricks`], launched as
+//! `mpirun -np N shearwarp render|rotate … --distributed`.
+//!
+//! - **Bricks.** Rank `r` owns brick `r` of the k-d split of the volume into
+//!   `N` bricks ([`shearwarp::bricks::split`]) and holds it with its ghost
+//!   voxels, nothing else. A raw or `.den` file is read brick by brick, each
+//!   rank seeking to its own rows ([`shearwarp::data::io::read_box`]); any
+//!   other input (NRRD, NIfTI, DICOM, a compressed file, a phantom) is read
+//!   whole by rank 0, which sends each rank its brick and then lets go of
+//!   the volume: rank 0 holds the whole volume while it scatters.
+//! - **Classification.** Every rank computes the value statistics of its
+//!   owned voxels; rank 0 merges them and broadcasts the whole volume's, so
+//!   every brick is classified as one renderer classifies the whole volume
+//!   (the presets, the value range).
+//! - **A frame.** Rank 0 owns the camera and the tissue and broadcasts them;
+//!   every rank renders its brick into its share of the whole volume's
+//!   intermediate grid ([`shearwarp::render::Renderer::render_brick`]) and
+//!   sends the rectangle it covers to rank 0 (direct send to one
+//!   compositor), which composites them front to back in the view's brick
+//!   order, warps once and writes the output.
+//! - **Faults.** After every step that can fail, the ranks agree: each
+//!   sends rank 0 its error (if any); rank 0 prints the first with its rank
+//!   and aborts the whole job (`MPI_Abort`), so no rank hangs and nothing
+//!   is written.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result, anyhow};
+use mpi::topology::SimpleCommunicator;
+use mpi::traits::*;
+use shearwarp::bricks::{Brick, Compositor, Partial, Tree, split};
+use shearwarp::data::io;
+use shearwarp::data::stats::ValueStats;
+use shearwarp::data::volume::{Volume, VoxelData};
+use shearwarp::render::Renderer;
+use shearwarp::view::{Camera, one_bit_step_deg, rotate_eye};
+use shearwarp::warp::Image;
+
+use crate::app::args::{RenderArgs, VolumeArgs};
+use crate::app::{RenderJob, RotateJob};
+
+/// The MPI world and what this rank sent and received.
+struct Comm {
+    world: SimpleCommunicator,
+    rank: usize,
+    n: usize,
+    sent: u64,
+    received: u64,
+}
+
+impl Comm {
+    /// Rank 0's `data` on every rank.
+    fn bcast(&mut self, data: Option<Vec<u8>>) -> Vec<u8> {
+        let root = self.world.process_at_rank(0);
+        let mut len = data.as_ref().map_or(0u64, |d| d.len() as u64);
+        root.broadcast_into(&mut len);
+        let mut buf = data.unwrap_or_else(|| vec![0u8; len as usize]);
+        root.broadcast_into(&mut buf[..]);
+        if self.rank == 0 {
+            self.sent += len * (self.n as u64 - 1);
+        } else {
+            self.received += len;
+        }
+        buf
+    }
+
+    /// Every rank's `mine`, in rank order, on rank 0 (`None` elsewhere).
+    fn gather(&mut self, mine: Vec<u8>) -> Option<Vec<Vec<u8>>> {
+        if self.rank == 0 {
+            let mut all = vec![mine];
+            for r in 1..self.n {
+                let (v, _) = self.world.process_at_rank(r as i32).receive_vec::<u8>();
+                self.received += v.len() as u64;
+                all.push(v);
+            }
+            Some(all)
+        } else {
+            self.world.process_at_rank(0).send(&mine[..]);
+            self.sent += mine.len() as u64;
+            None
+        }
+    }
+
+    /// Sends `data` from rank 0 to rank `to`.
+    fn send_to(&mut self, to: usize, data: &[u8]) {
+        self.world.process_at_rank(to as i32).send(data);
+        self.sent += data.len() as u64;
+    }
+
+    /// Receives what rank 0 sent this rank.
+    fn receive_from_root(&mut self) -> Vec<u8> {
+        let (v, _) = self.world.process_at_rank(0).receive_vec::<u8>();
+        self.received += v.len() as u64;
+        v
+    }
+
+    /// Every rank's result of one step: when a rank failed, rank 0 prints
+    /// its error and aborts the job (every rank exits); else every rank goes on.
+    fn agree<T>(&mut self, r: Result<T>) -> T {
+        let (sent, received) = (self.sent, self.received);
+        let msg = match &r {
+            Ok(_) => vec![],
+            Err(e) => format!("{e:#}").into_bytes(),
+        };
+        if let Some(all) = self.gather(msg)
+            && let Some((rank, m)) = all.iter().enumerate().find(|(_, m)| !m.is_empty())
+        {
+            let who = if self.n > 1 { format!("rank {rank} of {}: ", self.n) } else { String::new() };
+            eprintln!("error: {who}{}", String::from_utf8_lossy(m));
+            self.world.abort(2);
+        }
+        self.bcast(Some(vec![1]).filter(|_| self.rank == 0));
+        // (the agreement is not the frame's traffic)
+        (self.sent, self.received) = (sent, received);
+        match r {
+            Ok(t) => t,
+            // rank 0 aborted the job on this error: not reached
+            Err(_) => self.world.abort(2),
+        }
+    }
+}
+
+/// One rank's brick, renderer and the split's geometry.
+struct Node {
+    comm: Comm,
+    dims: [usize; 3],
+    spacing: [f32; 3],
+    bricks: Vec<Brick>,
+    tree: Tree,
+    renderer: Renderer,
+    name: String,
+    /// Rank 0: the camera of the render arguments.
+    camera: Option<Camera>,
+    /// Milliseconds to read this rank's brick (and, on rank 0, to scatter).
+    load_ms: f64,
+    /// Rank 0: the whole volume's frame, kept from frame to frame.
+    compositor: Option<Compositor>,
+}
+
+fn voxel_bytes(v: &Volume) -> Vec<u8> {
+    let mut b = Vec::new();
+    b.extend(v.dims().map(|d| d as u64).iter().flat_map(|d| d.to_le_bytes()));
+    b.extend(v.spacing().iter().flat_map(|s| s.to_le_bytes()));
+    match v.data() {
+        VoxelData::U8(x) => {
+            b.push(0);
+            b.extend_from_slice(x);
+        }
+        VoxelData::U16(x) => {
+            b.push(1);
+            x.iter().for_each(|y| b.extend(y.to_le_bytes()));
+        }
+        VoxelData::I16(x) => {
+            b.push(2);
+            x.iter().for_each(|y| b.extend(y.to_le_bytes()));
+        }
+        VoxelData::F32(x) => {
+            b.push(3);
+            x.iter().for_each(|y| b.extend(y.to_le_bytes()));
+        }
+    }
+    b
+}
+
+fn volume_from_bytes(b: &[u8]) -> Result<Volume> {
+    let bad = || anyhow!("internal: a brick of {} bytes is malformed", b.len());
+    if b.len() < 37 {
+        return Err(bad());
+    }
+    let u = |i: usize| u64::from_le_bytes(b[8 * i..8 * i + 8].try_into().expect("8 bytes")) as usize;
+    let f = |i: usize| f32::from_le_bytes(b[24 + 4 * i..28 + 4 * i].try_into().expect("4 bytes"));
+    let (dims, spacing, body) = ([u(0), u(1), u(2)], [f(0), f(1), f(2)], &b[37..]);
+    let data = match b[36] {
+        0 => VoxelData::U8(body.to_vec()),
+        1 => VoxelData::U16(body.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect()),
+        2 => VoxelData::I16(body.chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]])).collect()),
+        3 => VoxelData::F32(body.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect()),
+        _ => return Err(bad()),
+    };
+    Ok(Volume::new(dims, spacing, data)?)
+}
+
+fn camera_bytes(c: &Camera) -> Vec<u8> {
+    let mut b = Vec::new();
+    c.rotation.to_cols_array().iter().chain([c.zoom.unwrap_or(f64::NAN)].iter()).for_each(|x| b.extend(x.to_le_bytes()));
+    c.size.iter().for_each(|s| b.extend((*s as u64).to_le_bytes()));
+    b
+}
+
+fn camera_from_bytes(b: &[u8]) -> Camera {
+    let f = |i: usize| f64::from_le_bytes(b[8 * i..8 * i + 8].try_into().expect("8 bytes"));
+    let rot: [f64; 9] = std::array::from_fn(f);
+    let zoom = Some(f(9)).filter(|z| !z.is_nan());
+    let size = [f(10).to_bits() as usize, f(11).to_bits() as usize];
+    Camera { rotation: glam::DMat3::from_cols_array(&rot), zoom, size }
+}
+
+/// This process's peak resident memory (Linux `VmHWM`), bytes.
+fn peak_rss() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kb: u64 = s.lines().find(|l| l.starts_with("VmHWM:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// How the volume reaches the ranks, as rank 0 decided: each rank reads its
+/// own brick of a file laid out as the spec says, or rank 0 scatters.
+fn layout_bytes(spec: Option<&io::RawSpec>) -> Vec<u8> {
+    let Some(s) = spec else { return vec![0] };
+    let mut b = vec![1];
+    s.dims.iter().for_each(|d| b.extend((*d as u64).to_le_bytes()));
+    s.spacing.iter().for_each(|x| b.extend(x.to_le_bytes()));
+    b.extend(s.header_bytes.to_le_bytes());
+    b.push(s.big_endian as u8);
+    b.push(s.voxel_type.size() as u8);
+    b.extend(format!("{:?}", s.voxel_type).bytes());
+    b
+}
+
+fn layout_from_bytes(b: &[u8]) -> Option<io::RawSpec> {
+    if b.first() != Some(&1) {
+        return None;
+    }
+    let u = |at: usize| u64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"));
+    let f = |at: usize| f32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"));
+    let dims = [u(1) as usize, u(9) as usize, u(17) as usize];
+    let spacing = [f(25), f(29), f(33)];
+    let header_bytes = u(37);
+    let big_endian = b[45] == 1;
+    let name = String::from_utf8_lossy(&b[47..]).to_ascii_lowercase();
+    let voxel_type = shearwarp::VoxelType::parse(&name).ok()?;
+    Some(io::RawSpec { dims, voxel_type, big_endian, spacing, header_bytes })
+}
+
+/// What a rank decides about the input before reading: the seekable layout
+/// of a raw or `.den` file (without `--orientation`, which may reverse voxels
+/// as it loads), else `None` (rank 0 reads the whole volume).
+fn seekable(v: &VolumeArgs) -> Result<Option<(std::path::PathBuf, io::RawSpec)>> {
+    let (path, format) = match (&v.file, &v.raw, &v.den) {
+        (Some(p), _, _) => (p, v.format),
+        (_, Some(p), _) => (p, Some(io::Format::Raw)),
+        (_, _, Some(p)) => (p, Some(io::Format::Den)),
+        _ => return Ok(None),
+    };
+    if v.orientation.is_some() {
+        return Ok(None);
+    }
+    let raw = match (v.dims, v.voxel_type) {
+        (Some(dims), Some(t)) => {
+            let mut spec = io::RawSpec::new(dims, t);
+            spec.big_endian = v.big_endian;
+            spec.header_bytes = v.header_bytes;
+            Some(spec)
+        }
+        (None, None) => None,
+        _ => return Err(anyhow!(crate::app::Usage("raw files need both --dims X,Y,Z and --type (or a JSON sidecar)".into()))),
+    };
+    let spec = io::seekable_layout(path, &io::LoadOptions { format, raw })?;
+    Ok(spec.map(|mut s| {
+        if let Some(sp) = v.spacing {
+            s.spacing = sp;
+        }
+        (path.clone(), s)
+    }))
+}
+
+impl Node {
+    /// MPI up, the volume split, this rank's brick read, the statistics
+    /// agreed and the renderer made: every step agreed by every rank.
+    fn new(universe: &mpi::environment::Universe, v: &VolumeArgs, ra: &RenderArgs) -> Node {
+        let world = universe.world();
+        let (rank, n) = (world.rank() as usize, world.size() as usize);
+        let mut comm = Comm { world, rank, n, sent: 0, received: 0 };
+        crate::app::set_budget(v.max_memory);
+        let t = Instant::now();
+        // rank 0 decides how the volume comes
+        let decided = if rank == 0 { seekable(v) } else { Ok(None) };
+        let decided = comm.agree(decided);
+        let layout = comm.bcast((rank == 0).then(|| layout_bytes(decided.as_ref().map(|d| &d.1))));
+        let spec = layout_from_bytes(&layout);
+        // rank 0 reads the whole volume when it must (its camera needs its frame)
+        let whole = if rank == 0 && spec.is_none() { Some(v.load()) } else { None };
+        let whole = comm.agree(whole.transpose());
+        let head = if rank == 0 {
+            let (dims, spacing) = match (&whole, &spec) {
+                (Some((vol, _)), _) => (vol.dims(), vol.spacing()),
+                (None, Some(s)) => (s.dims, s.spacing),
+                (None, None) => unreachable!("a layout or a volume"),
+            };
+            let mut b: Vec<u8> = dims.iter().flat_map(|d| (*d as u64).to_le_bytes()).collect();
+            spacing.iter().for_each(|x| b.extend(x.to_le_bytes()));
+            Some(b)
+        } else {
+            None
+        };
+        let head = comm.bcast(head);
+        let dims = [0, 1, 2].map(|i| u64::from_le_bytes(head[8 * i..8 * i + 8].try_into().expect("8 bytes")) as usize);
+        let spacing = [0, 1, 2].map(|i| f32::from_le_bytes(head[24 + 4 * i..28 + 4 * i].try_into().expect("4 bytes")));
+        let split = comm.agree(split(dims, n).map_err(|e| anyhow!(crate::app::Usage(format!("--distributed over {n} ranks: {e}")))));
+        let (bricks, tree) = split;
+        let me = bricks[rank];
+        let name = match (&whole, &decided) {
+            (Some((_, name)), _) => name.clone(),
+            (None, Some((p, _))) => p.display().to_string(),
+            _ => String::new(),
+        };
+        let camera = if rank == 0 { Some(ra.camera(whole.as_ref().and_then(|(v, _)| v.frame()))) } else { None };
+        let camera = comm.agree(camera.transpose());
+        // this rank's brick: read by seeking, or scattered by rank 0
+        let brick: Result<Volume> = match (&spec, whole) {
+            (Some(s), _) => {
+                let path = match (&v.file, &v.raw, &v.den) {
+                    (Some(p), _, _) | (_, Some(p), _) | (_, _, Some(p)) => p.clone(),
+                    _ => unreachable!("a seekable layout has a file"),
+                };
+                io::read_box(&path, s, me.ghosted.map(|g| g[0]), me.ghosted.map(|g| g[1])).map_err(anyhow::Error::from)
+            }
+            (None, Some((vol, _))) => {
+                // rank 0's brick, then every other rank's (an empty message when
+                // one cannot be cut: that rank fails, after rank 0's own error)
+                let mut mine = bricks[0].extract(&vol).map_err(anyhow::Error::from);
+                for (r, b) in bricks.iter().enumerate().skip(1) {
+                    match b.extract(&vol) {
+                        Ok(p) if mine.is_ok() => comm.send_to(r, &voxel_bytes(&p)),
+                        Ok(_) => comm.send_to(r, &[]),
+                        Err(e) => {
+                            comm.send_to(r, &[]);
+                            if mine.is_ok() {
+                                mine = Err(e.into());
+                            }
+                        }
+                    }
+                }
+                drop(vol);
+                mine
+            }
+            (None, None) => volume_from_bytes(&comm.receive_from_root()),
+        };
+        let brick = brick.and_then(|b| {
+            let bytes = b.bytes();
+            match crate::app::budget().filter(|&m| bytes > m) {
+                Some(m) => Err(anyhow!(crate::app::Usage(format!(
+                    "{name}: brick {rank} alone holds {}, over the memory budget of {} (--max-memory)",
+                    shearwarp::fmt::fmt_bytes(bytes),
+                    shearwarp::fmt::fmt_bytes(m)
+                )))),
+                None => Ok(b),
+            }
+        });
+        let brick = comm.agree(brick.with_context(|| format!("reading brick {rank} (voxels {:?})", me.ghosted)));
+        let load_ms = t.elapsed().as_secs_f64() * 1e3;
+        // the statistics of the owned voxels, merged on rank 0, the whole volume's everywhere
+        let own_stats = comm.agree(me.owned_stats(&brick).map_err(anyhow::Error::from));
+        let merged = comm.gather(own_stats.to_bytes()).map(|all| {
+            let mut it = all.iter().filter_map(|b| ValueStats::from_bytes(b));
+            let first = it.next().expect("rank 0's statistics");
+            it.fold(first, |a, b| a.merge(&b)).to_bytes()
+        });
+        let stats = comm.bcast(merged);
+        let mut stats = comm.agree(ValueStats::from_bytes(&stats).ok_or_else(|| anyhow!("internal: the merged statistics are malformed")));
+        // f32 voxels: the presets' histogram, summed over the bricks
+        if let Some((bins, range)) = shearwarp::bricks::preset_histogram_range(&brick, &stats) {
+            let h = comm.agree(me.owned_histogram(&brick, bins, range).map_err(anyhow::Error::from));
+            let sum = comm.gather(h.iter().flat_map(|x| x.to_le_bytes()).collect()).map(|all| {
+                let mut total = vec![0u64; bins];
+                for b in &all {
+                    for (t, c) in total.iter_mut().zip(b.chunks_exact(8)) {
+                        *t += u64::from_le_bytes(c.try_into().expect("8 bytes"));
+                    }
+                }
+                total.iter().flat_map(|x| x.to_le_bytes()).collect()
+            });
+            let sum = comm.bcast(sum);
+            let h = sum.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
+            stats = stats.with_histogram(range[0], range[1], h);
+        }
+        let brick = brick.with_stats(stats);
+        let renderer = ra.renderer_and_scene(brick).map(|(mut r, _)| {
+            r.set_memory_budget(crate::app::budget());
+            r
+        });
+        let renderer = comm.agree(renderer);
+        Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms, compositor: None }
+    }
+
+    /// One frame: rank 0's camera and tissue broadcast, every brick
+    /// rendered, the partial images composited on rank 0 into `img`.
+    fn frame(&mut self, camera: Option<Camera>, tissue: Option<usize>, img: &mut Image) -> FrameRecord {
+        let (sent0, received0) = (self.comm.sent, self.comm.received);
+        let mut msg = camera.as_ref().map(camera_bytes).unwrap_or_default();
+        msg.extend((tissue.unwrap_or(0) as u64).to_le_bytes());
+        let msg = self.comm.bcast((self.comm.rank == 0).then_some(msg));
+        let cam = camera_from_bytes(&msg);
+        let tissue = u64::from_le_bytes(msg[96..104].try_into().expect("8 bytes")) as usize;
+        let me = self.bricks[self.comm.rank];
+        let t = Instant::now();
+        let settings = self.renderer.settings();
+        let r = &mut self.renderer;
+        let rendered = (|| -> Result<_> {
+            if r.tissues().is_some() {
+                r.select_tissue(tissue)?;
+            }
+            let f = r.render_brick(&cam, &me.view(self.dims))?;
+            let grid = shearwarp::bricks::grid_of(&cam, self.dims, self.spacing, &settings)?;
+            Ok((f, Partial::of(r.intermediate(), f.rect, f.offset, grid)?))
+        })();
+        let (f, part) = self.comm.agree(rendered);
+        let render_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let parts = self.comm.gather(part.to_bytes());
+        let gather_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let comp = &mut self.compositor;
+        let (dims, spacing, tree) = (self.dims, self.spacing, &self.tree);
+        let composited = parts.map(|parts| -> Result<()> {
+            match comp {
+                Some(c) => c.reset(&cam, dims, spacing, tree, &settings)?,
+                None => *comp = Some(Compositor::new(&cam, dims, spacing, tree, &settings)?),
+            }
+            let comp = comp.as_mut().expect("made above");
+            let parts = parts.iter().map(|b| Partial::from_bytes(b)).collect::<shearwarp::Result<Vec<_>>>()?;
+            for i in comp.order().to_vec() {
+                comp.add(&parts[i]);
+            }
+            comp.finish(&cam, img);
+            Ok(())
+        });
+        let composite_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.comm.agree(composited.transpose());
+        FrameRecord {
+            build_ms: f.stats.build_ms,
+            render_ms: render_ms - f.stats.build_ms,
+            gather_ms,
+            composite_ms,
+            sent: self.comm.sent - sent0,
+            received: self.comm.received - received0,
+            covered: part.rgba.len() as u64,
+        }
+    }
+
+    /// Every rank's records and peak memory, as JSON on rank 0.
+    fn ranks_json(&mut self, records: &[FrameRecord]) -> Option<Vec<serde_json::Value>> {
+        let me = self.bricks[self.comm.rank];
+        let med = |f: &dyn Fn(&FrameRecord) -> f64| {
+            let mut v: Vec<f64> = records.iter().map(f).collect();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(0.0)
+        };
+        let j = serde_json::json!({
+            "rank": self.comm.rank, "owned": me.owned, "held": me.ghosted, "load_ms": self.load_ms,
+            "build_ms": records.iter().map(|r| r.build_ms).sum::<f64>(),
+            "render_ms": med(&|r| r.render_ms), "gather_ms": med(&|r| r.gather_ms), "composite_ms": med(&|r| r.composite_ms),
+            "sent_bytes_per_frame": med(&|r| r.sent as f64), "received_bytes_per_frame": med(&|r| r.received as f64),
+            "covered_pixels": med(&|r| r.covered as f64),
+            "peak_rss_bytes": peak_rss(),
+        });
+        self.comm.gather(j.to_string().into_bytes()).map(|all| all.iter().filter_map(|b| serde_json::from_slice(b).ok()).collect())
+    }
+}
+
+/// One rank's share of one frame.
+#[derive(Clone, Copy, Debug, Default)]
+struct FrameRecord {
+    build_ms: f64,
+    /// Shear and render of the brick.
+    render_ms: f64,
+    /// Rank 0: waiting for and receiving the partial images; others: sending theirs.
+    gather_ms: f64,
+    /// Rank 0: compositing the partial images and warping.
+    composite_ms: f64,
+    sent: u64,
+    received: u64,
+    covered: u64,
+}
+
+fn init() -> Result<mpi::environment::Universe> {
+    mpi::initialize().ok_or_else(|| anyhow!("MPI is already initialized"))
+}
+
+/// The settings a distributed frame refuses, named before any rank reads.
+fn check_args(ra: &RenderArgs) -> Result<()> {
+    if ra.perspective.is_some() {
+        usage!("--distributed renders parallel projections only (drop --perspective)");
+    }
+    if !ra.clip_plane.is_empty() {
+        usage!("--distributed does not take clip planes");
+    }
+    Ok(())
+}
+
+/// `shearwarp render --distributed`.
+pub fn render(cmd: &RenderJob) -> Result<()> {
+    check_args(cmd.render)?;
+    let kind = match crate::app::output::image_kind(cmd.output) {
+        Ok(k) => k,
+        Err(why) => usage!("-o {why}"),
+    };
+    let universe = init()?;
+    let mut node = Node::new(&universe, cmd.volume, cmd.render);
+    let cam = node.camera.unwrap_or(Camera::new(glam::DMat3::IDENTITY, [1, 1]));
+    let tissue = node.renderer.tissues().map(|(_, c)| c);
+    let mut img = Image::new(cam.size[0], cam.size[1]);
+    let t = Instant::now();
+    let rec = node.frame(node.camera, tissue, &mut img);
+    let frame_ms = t.elapsed().as_secs_f64() * 1e3;
+    let written = if node.comm.rank == 0 {
+        crate::app::output::write_image(cmd.output, kind, &img.to_rgb8()).map_err(anyhow::Error::from)
+    } else {
+        Ok(())
+    };
+    node.comm.agree(written);
+    let ranks = node.ranks_json(&[rec]);
+    if let Some(ranks) = ranks {
+        let s = node.renderer.settings();
+        if cmd.json {
+            let j = serde_json::json!({
+                "volume": node.name, "dims": node.dims, "ranks": node.comm.n, "method": s.method.name(), "mode": s.mode.name(),
+                "cell": s.cell, "size": cam.size[0], "output": cmd.output, "frame_ms": frame_ms, "per_rank": ranks,
+            });
+            say!("{j}");
+        } else {
+            eprintln!(
+                "{} {}×{}×{} on {} ranks → {} ({}×{}, {} {}): frame {:.1} ms",
+                node.name,
+                node.dims[0],
+                node.dims[1],
+                node.dims[2],
+                node.comm.n,
+                cmd.output.display(),
+                cam.size[0],
+                cam.size[1],
+                s.method.name(),
+                s.mode.name(),
+                frame_ms
+            );
+        }
+    }
+    Ok(())
+}
+
+/// `shearwarp rotate --distributed`: the frames of `rotate`, each rendered by
+/// every rank; rank 0 times them and writes `--frames-dir`.
+pub fn rotate(cmd: &RotateJob) -> Result<()> {
+    check_args(cmd.render)?;
+    if cmd.animation {
+        usage!("--distributed writes --frames-dir; --gif and --apng are not available with it");
+    }
+    if !(cmd.degrees.is_finite() && cmd.degrees > 0.0) {
+        usage!("--degrees must be a positive number, got {}", cmd.degrees);
+    }
+    let universe = init()?;
+    let mut node = Node::new(&universe, cmd.volume, cmd.render);
+    let step = match cmd.step_deg {
+        "auto" => one_bit_step_deg(node.dims) * cmd.render.cell as f64,
+        s => match s.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0) {
+            Some(x) => x,
+            None => usage!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'"),
+        },
+    };
+    let frames = ((cmd.degrees / step).round() as usize).max(1);
+    if frames > 1_000_000 {
+        usage!("{frames} frames is too many (raise --step-deg)");
+    }
+    let axis = cmd.axis;
+    if node.comm.rank == 0
+        && let Some(d) = cmd.frames_dir
+    {
+        let made = std::fs::create_dir_all(d).with_context(|| format!("{}: cannot create directory", d.display()));
+        node.comm.agree(made);
+    } else if cmd.frames_dir.is_some() {
+        node.comm.agree(Ok(()));
+    }
+    let cam0 = node.camera;
+    let n_tissues = node.renderer.tissues().map_or(1, |(t, _)| t.len());
+    let mut tissue = node.renderer.tissues().map(|(_, c)| c);
+    let size = cam0.map_or([1, 1], |c| c.size);
+    let mut img = Image::new(size[0], size[1]);
+    let mut records = Vec::with_capacity(frames);
+    let mut wall = Vec::with_capacity(frames);
+    for f in 0..frames {
+        let cam = cam0.map(|c| Camera { rotation: rotate_eye(c.rotation, axis, f as f64 * step), ..c });
+        if cmd.cycle_tissues > 0 && f > 0 && f % cmd.cycle_tissues == 0 {
+            tissue = tissue.map(|t| (t + 1) % n_tissues);
+        }
+        let t = Instant::now();
+        records.push(node.frame(cam, tissue, &mut img));
+        wall.push(t.elapsed().as_secs_f64() * 1e3);
+        if node.comm.rank == 0
+            && let Some(d) = cmd.frames_dir
+        {
+            let w = shearwarp::output::write_png_unsynced(d.join(format!("frame_{f:05}.png")), &img.to_rgb8());
+            node.comm.agree(w.map_err(anyhow::Error::from));
+        } else if cmd.frames_dir.is_some() {
+            node.comm.agree(Ok(()));
+        }
+    }
+    if node.comm.rank == 0
+        && let Some(d) = cmd.frames_dir
+    {
+        shearwarp::output::sync_written(d)?;
+    }
+    let ranks = node.ranks_json(&records);
+    if let Some(ranks) = ranks {
+        let mut w = wall.clone();
+        w.sort_by(f64::total_cmp);
+        let median = w[w.len() / 2];
+        let s = node.renderer.settings();
+        if cmd.json {
+            let j = serde_json::json!({
+                "volume": node.name, "dims": node.dims, "ranks": node.comm.n, "method": s.method.name(), "mode": s.mode.name(),
+                "cell": s.cell, "size": size[0], "frames": frames, "step_deg": step, "frame_ms_median": median,
+                "frames_per_second": 1e3 / median, "per_rank": ranks,
+            });
+            say!("{j}");
+        } else {
+            let bytes: u64 = records.iter().map(|r| r.received).sum::<u64>() / frames as u64;
+            say!(
+                "{} {}×{}×{} on {} ranks: {frames} frames, median {median:.2} ms a frame ({:.0} frames/s), rank 0 received {} a frame",
+                node.name,
+                node.dims[0],
+                node.dims[1],
+                node.dims[2],
+                node.comm.n,
+                1e3 / median,
+                shearwarp::fmt::fmt_bytes(bytes)
+            );
+        }
+    }
+    Ok(())
+}

@@ -433,6 +433,7 @@ impl<W: Word> BinaryMask<W> {
     /// direct shear's, word for word (tested against [`BinaryMask::shear_direct`]).
     /// About `2·log2(distance)` passes over the rectangle instead of a scatter
     /// of every code.
+    #[allow(clippy::needless_range_loop)] // the index picks one axis of several arrays
     fn staged(&mut self, target: &[Vec<i32>; 2]) -> ShearWork {
         let (nb, nw) = (self.nb, self.nw);
         let mut w = ShearWork { steps: 0, direct: 1, words: 0 };

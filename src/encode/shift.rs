@@ -242,45 +242,6 @@ pub fn shift_vectors2<W: Word>(nb: u32, from: &[i32], to: &[i32], moves: &mut [V
     worst
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn fused_shift_vectors_are_disjoint_and_cover_every_bit() {
-        let from = vec![0, 0, 0, 1, 1, 1, 2, 5];
-        let to = vec![-2, 0, 1, 1, 3, 0, 2, 4];
-        let mut m: [Vec<u32>; 5] = std::array::from_fn(|_| vec![0u32; 1]);
-        assert_eq!(shift_vectors2(1, &from, &to, &mut m), 2);
-        // bit 31 − k for slice k
-        assert_eq!(m[0][0], 1 << 27, "+2: slice 4");
-        assert_eq!(m[1][0], 1 << 29, "+1: slice 2");
-        assert_eq!(m[3][0], (1 << 26) | (1 << 24), "−1: slices 5 and 7");
-        assert_eq!(m[4][0], 1 << 31, "−2: slice 0");
-        assert_eq!(m[2][0], !((1 << 27) | (1 << 29) | (1 << 26) | (1 << 24) | (1 << 31)));
-        // 2-bit codes: both bits of a slot move together
-        shift_vectors2(2, &from, &to, &mut m);
-        assert_eq!(m[0][0], 0b11 << 22);
-        assert_eq!(m[4][0], 0b11 << 30);
-        assert_eq!(m.iter().fold(0u32, |a, v| a ^ v[0]), u32::MAX, "disjoint and covering");
-    }
-
-    #[test]
-    fn shift_vectors_split_per_bit() {
-        let from = vec![0, 0, 0, 1, 1, 1, 2];
-        let to = vec![-1, 0, 1, 1, 2, 0, 2];
-        let mut up = vec![0u32; 1];
-        let mut down = vec![0u32; 1];
-        assert_eq!(shift_vectors(1, &from, &to, &mut up, &mut down), 1);
-        assert_eq!(up[0], (1 << 29) | (1 << 27));
-        assert_eq!(down[0], (1 << 31) | (1 << 26));
-        // 2-bit codes: both bits of a slot move together
-        assert_eq!(shift_vectors(2, &from, &to, &mut up, &mut down), 1);
-        assert_eq!(up[0], (0b11 << 26) | (0b11 << 22));
-        assert_eq!(down[0], (0b11 << 30) | (0b11 << 20));
-    }
-}
-
 /// One grid row of a staged shear ([`BinaryMask`](crate::encode::mask::BinaryMask)'s
 /// far moves): the slots of `mv` move `t` columns towards larger `p` (`up`) or
 /// smaller, in place, over columns `ps..=pe` of `row` (columns of `nw` words);
@@ -367,7 +328,7 @@ pub(crate) fn move_rows<W: Word>(words: &mut [W], row_len: usize, span: [usize; 
         None => {
             for d in dst.chunks_exact_mut(nw) {
                 for w in 0..nw {
-                    d[w] = d[w] & !mv[w];
+                    d[w] &= !mv[w];
                 }
             }
         }
@@ -387,5 +348,44 @@ pub(crate) fn move_rows<W: Word>(words: &mut [W], row_len: usize, span: [usize; 
             }
         };
         blend(dst, src);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fused_shift_vectors_are_disjoint_and_cover_every_bit() {
+        let from = vec![0, 0, 0, 1, 1, 1, 2, 5];
+        let to = vec![-2, 0, 1, 1, 3, 0, 2, 4];
+        let mut m: [Vec<u32>; 5] = std::array::from_fn(|_| vec![0u32; 1]);
+        assert_eq!(shift_vectors2(1, &from, &to, &mut m), 2);
+        // bit 31 − k for slice k
+        assert_eq!(m[0][0], 1 << 27, "+2: slice 4");
+        assert_eq!(m[1][0], 1 << 29, "+1: slice 2");
+        assert_eq!(m[3][0], (1 << 26) | (1 << 24), "−1: slices 5 and 7");
+        assert_eq!(m[4][0], 1 << 31, "−2: slice 0");
+        assert_eq!(m[2][0], !((1 << 27) | (1 << 29) | (1 << 26) | (1 << 24) | (1 << 31)));
+        // 2-bit codes: both bits of a slot move together
+        shift_vectors2(2, &from, &to, &mut m);
+        assert_eq!(m[0][0], 0b11 << 22);
+        assert_eq!(m[4][0], 0b11 << 30);
+        assert_eq!(m.iter().fold(0u32, |a, v| a ^ v[0]), u32::MAX, "disjoint and covering");
+    }
+
+    #[test]
+    fn shift_vectors_split_per_bit() {
+        let from = vec![0, 0, 0, 1, 1, 1, 2];
+        let to = vec![-1, 0, 1, 1, 2, 0, 2];
+        let mut up = vec![0u32; 1];
+        let mut down = vec![0u32; 1];
+        assert_eq!(shift_vectors(1, &from, &to, &mut up, &mut down), 1);
+        assert_eq!(up[0], (1 << 29) | (1 << 27));
+        assert_eq!(down[0], (1 << 31) | (1 << 26));
+        // 2-bit codes: both bits of a slot move together
+        assert_eq!(shift_vectors(2, &from, &to, &mut up, &mut down), 1);
+        assert_eq!(up[0], (0b11 << 26) | (0b11 << 22));
+        assert_eq!(down[0], (0b11 << 30) | (0b11 << 20));
     }
 }

@@ -109,6 +109,15 @@ pub struct RenderArgs {
     /// per sample) or gradient (the exact gradient at every sample: slower).
     #[arg(long, value_enum, default_value = "codes")]
     pub normals: Normals,
+    /// How the iso surface is reconstructed between samples (binary and
+    /// brute paths, iso mode): linear (the straight line between two
+    /// slices: the fast preview) or cubic (Catmull–Rom through four slices
+    /// along the volume's z axis, the normal from B-spline-blended central
+    /// differences, no normal codes: no terraces or rings on thick-slice
+    /// scans, at about RECON_COST the frame time). Linear is the default:
+    /// RECON_WHY. Blend mode ignores it; --method rle and --deluxe I refuse cubic.
+    #[arg(long, value_enum, default_value = "linear")]
+    pub reconstruction: shearwarp::kernels::Reconstruction,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -542,6 +551,7 @@ impl RenderArgs {
             deluxe: self.deluxe,
             lattice: self.grid,
             rle_reuse: self.rle_reuse,
+            reconstruction: self.reconstruction,
             ert: self.ert,
             cell: self.cell,
             threads: self.threads,

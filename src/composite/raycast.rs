@@ -362,43 +362,48 @@ impl<'a> RayContext<'a> {
     }
 
     /// The cubic reconstruction's sample at `at` (`za`: its stack axis):
-    /// bilinear along the slices, else Catmull–Rom across the rows along `za`.
+    /// bilinear along the slices, else Catmull–Rom across the four voxel
+    /// lines along `za` (clamped), each linear along the other axis.
     #[inline(always)]
     fn sample_cubic(&self, za: usize, at: At) -> f32 {
         let At { k, ci, cj, wi, wj } = at;
         let st = self.stack;
-        let lerp = |a: f32, b: f32, w: f32| a as f64 + (b as f64 - a as f64) * w as f64;
-        match za {
-            0 => {
-                let cols = four(ci, st.n[0]);
-                reconstruct::eval(cols.map(|i| lerp(st.at(i, cj, k), st.at(i, cj + 1, k), wj)), wi as f64) as f32
-            }
-            1 => {
-                let rows = four(cj, st.n[1]);
-                reconstruct::eval(rows.map(|j| lerp(st.at(ci, j, k), st.at(ci + 1, j, k), wi)), wj as f64) as f32
-            }
-            _ => bilinear(st.cell_at(st.index(ci, cj, k)), wi, wj),
+        if za == 2 {
+            return bilinear(st.cell_at(st.index(ci, cj, k)), wi, wj);
         }
+        let data = st.data();
+        let b = st.index(ci, cj, k);
+        // the step to the next line along za, and to the other voxel of a line
+        let (n0, cells) = (st.n[0], self.cells);
+        let (step, other, c, w_z, w_o) = if za == 0 { (1, n0, ci, wi, wj) } else { (n0, 1, cj, wj, wi) };
+        let last = cells[za] as usize; // the last voxel line along za
+        let at_line = |o: usize| {
+            let (a, z) = (data[o] as f64, data[o + other] as f64);
+            a + (z - a) * w_o as f64
+        };
+        let before = if c > 0 { b - step } else { b };
+        let after = if c < last - 1 { b + 2 * step } else { b + step };
+        reconstruct::eval([at_line(before), at_line(b), at_line(b + step), at_line(after)], w_z as f64) as f32
     }
 
     /// The cubic reconstruction's gradient at the sample `at` (stack axes,
     /// voxel units) when it runs in the slice (`za` 0 or 1): the corners'
-    /// central differences of the four rows along `za`, linear along the
-    /// other axis and blended by the B-spline's weights along `za`.
+    /// central differences of the four voxel lines along `za`, linear along
+    /// the other axis ([`SliceStack::gradient`] at each line) and blended by
+    /// the B-spline's weights along `za`.
     fn gradient_cubic(&self, za: usize, at: At) -> [f32; 3] {
         let At { k, ci, cj, wi, wj } = at;
         let st = self.stack;
-        let (lines, w_z, w_o) = if za == 0 { (four(ci, st.n[0]), wi, wj) } else { (four(cj, st.n[1]), wj, wi) };
+        let (c, w_z) = if za == 0 { (ci, wi) } else { (cj, wj) };
+        let last = self.cells[za] as usize - 1;
         let b = reconstruct::b_spline(w_z as f64);
         let mut g = [0f64; 3];
-        for (m, &l) in lines.iter().enumerate() {
-            let (g0, g1) = if za == 0 {
-                (st.gradient_at(l, cj, k), st.gradient_at(l, cj + 1, k))
-            } else {
-                (st.gradient_at(ci, l, k), st.gradient_at(ci + 1, l, k))
-            };
-            for c in 0..3 {
-                g[c] += b[m] * (g0[c] as f64 + (g1[c] as f64 - g0[c] as f64) * w_o as f64);
+        for (m, l) in four(c, last + 2).into_iter().enumerate() {
+            // voxel line l: the cell starting there, or the last cell's far side
+            let (cell, w) = if l > last { (last, 1.0) } else { (l, 0.0) };
+            let gl = if za == 0 { st.gradient(cell, cj, k, w, wj) } else { st.gradient(ci, cell, k, wi, w) };
+            for (x, y) in g.iter_mut().zip(gl) {
+                *x += b[m] * y as f64;
             }
         }
         g.map(|x| x as f32)

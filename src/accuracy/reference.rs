@@ -498,21 +498,12 @@ impl ReferenceRenderer {
     }
 
     /// The unit normal (world space, down the density) the cubic
-    /// reconstruction's fast paths shade a hit at `p` with: the corners'
-    /// central differences, bilinear in each z slice, blended across the four
-    /// z slices around `p` by the cubic B-spline's weights. NaN where it is zero.
+    /// reconstruction's fast paths shade a hit at `p` with: the gradient of
+    /// the B-spline smoothing ([`ReferenceRenderer::gradient_cubic`]). NaN
+    /// where it is zero.
     pub fn cubic_shading_normal(&self, p: DVec3) -> DVec3 {
-        let (x0, x1, fx) = locate(p.x, self.dims[0]);
-        let (y0, y1, fy) = locate(p.y, self.dims[1]);
-        let (zs, fz) = self.cubic_slices(p.z);
-        let w = reconstruct::b_spline(fz);
-        let mut g = DVec3::ZERO;
-        for (j, &z) in zs.iter().enumerate() {
-            let c = |x, y| self.gradient_at(x, y, z);
-            g += w[j] * c(x0, y0).lerp(c(x1, y0), fx).lerp(c(x0, y1).lerp(c(x1, y1), fx), fy);
-        }
         let sp = DVec3::new(self.spacing[0] as f64, self.spacing[1] as f64, self.spacing[2] as f64);
-        let n = g / sp;
+        let n = self.gradient_cubic(p) / sp;
         if n.length() > 0.0 { -n.normalize() } else { DVec3::NAN }
     }
 

@@ -387,24 +387,30 @@ impl<'a> RayContext<'a> {
     }
 
     /// The cubic reconstruction's gradient at the sample `at` (stack axes,
-    /// voxel units) when it runs in the slice (`za` 0 or 1): the corners'
-    /// central differences of the four voxel lines along `za`, linear along
-    /// the other axis ([`SliceStack::gradient`] at each line) and blended by
-    /// the B-spline's weights along `za`.
+    /// voxel units) when it runs in the slice (`za` 0 or 1), the gradient of
+    /// the cubic B-spline smoothing of the four voxel lines along `za` (as
+    /// the reference's): along `za` the B-spline's derivative of the lines'
+    /// samples, along the other axes the lines' central differences
+    /// ([`SliceStack::gradient`] at each line) blended by the B-spline's weights.
     fn gradient_cubic(&self, za: usize, at: At) -> [f32; 3] {
         let At { k, ci, cj, wi, wj } = at;
         let st = self.stack;
         let (c, w_z) = if za == 0 { (ci, wi) } else { (cj, wj) };
         let last = self.cells[za] as usize - 1;
-        let b = reconstruct::b_spline(w_z as f64);
+        let (b, db) = (reconstruct::b_spline(w_z as f64), reconstruct::b_spline_derivative(w_z as f64));
         let mut g = [0f64; 3];
         for (m, l) in four(c, last + 2).into_iter().enumerate() {
             // voxel line l: the cell starting there, or the last cell's far side
             let (cell, w) = if l > last { (last, 1.0) } else { (l, 0.0) };
-            let gl = if za == 0 { st.gradient(cell, cj, k, w, wj) } else { st.gradient(ci, cell, k, wi, w) };
+            let (gl, value) = if za == 0 {
+                (st.gradient(cell, cj, k, w, wj), st.bilinear(cell, cj, k, w, wj))
+            } else {
+                (st.gradient(ci, cell, k, wi, w), st.bilinear(ci, cell, k, wi, w))
+            };
             for (x, y) in g.iter_mut().zip(gl) {
                 *x += b[m] * y as f64;
             }
+            g[za] += db[m] * value as f64 - b[m] * gl[za] as f64;
         }
         g.map(|x| x as f32)
     }
@@ -465,14 +471,23 @@ impl<'a> RayContext<'a> {
             let after = outer((at, d), self.next_slice(k, lo, hi));
             let four = [before, (ap, dp), (at, d), after];
             if let Some(t) = reconstruct::crossing(four.map(|s| s.1 as f64), iso as f64) {
-                let b = reconstruct::b_spline(t);
-                let mut g = [0f64; 3];
-                for (w, (a, _)) in b.iter().zip(four) {
+                // the gradient of the B-spline smoothing of the four samples: in
+                // the slice their central differences blended by its weights;
+                // along the ray its derivative, less what the in-slice gradient
+                // adds as the ray moves across the slice
+                let (b, db) = (reconstruct::b_spline(t), reconstruct::b_spline_derivative(t));
+                let (mut g, mut along) = ([0f64; 3], 0f64);
+                for ((w, dw), (a, d)) in b.iter().zip(db).zip(four) {
                     let ga = self.stack.gradient(a.ci, a.cj, a.k, a.wi, a.wj);
-                    for c in 0..3 {
+                    for c in 0..2 {
                         g[c] += w * ga[c] as f64;
                     }
+                    along += dw * d as f64;
                 }
+                let pos = |a: At| [a.ci as f64 + a.wi as f64, a.cj as f64 + a.wj as f64];
+                let (x0, x1) = (pos(ap), pos(at));
+                let across = g[0] * (x1[0] - x0[0]) + g[1] * (x1[1] - x0[1]);
+                g[2] = if self.ascending { along - across } else { across - along };
                 let depth = ap.k as f32 + (k as f32 - ap.k as f32) * t as f32;
                 return self.shade_hit(rgb, g.map(|x| x as f32), depth);
             }

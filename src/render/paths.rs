@@ -102,8 +102,11 @@ impl Renderer {
                     }
                     (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);
                     let scaled = plan.kind == MapKind::ScaleTranslate;
+                    let cubic = settings.reconstruction == Reconstruction::Cubic && mode == Mode::Iso;
                     let rect = match &m.mask {
-                        _ if !settings.occupied_rect => volume_rect(plan, stack.cells()),
+                        // (a scaled plan's occupied-ray rectangle misses rays the cubic
+                        // hits: the cubic casts every ray of the volume there)
+                        _ if !settings.occupied_rect || (scaled && cubic) => volume_rect(plan, stack.cells()),
                         // the mask's occupied columns are the translated rays'; a
                         // scaled plan's rays meet the occupied cells elsewhere
                         AnyMask::W32(m) if scaled => occupied_scaled_rays(plan, m, stack.cells()),
@@ -116,11 +119,8 @@ impl Renderer {
                     inter.prepare(plan.grid.size);
                     let ctx = ray_context(stack, plan, classes, settings, normals[axis].as_ref(), shade);
                     // the cubic along the slices when a ray moves farther than its codes
-                    // assume (a perspective eye near the volume): every slice
-                    let walks = settings.reconstruction == Reconstruction::Linear
-                        || mode == Mode::Blend
-                        || cubic_axis(stack.perm()) != 2
-                        || cubic_walks(plan);
+                    // assume (a perspective eye near the volume): every slice, as brute force
+                    let walks = !cubic || cubic_axis(stack.perm()) != 2 || cubic_walks(plan);
                     match (&m.mask, lean_frame) {
                         _ if !walks => render_brute(&ctx, volume_rect(plan, stack.cells()), inter),
                         (AnyMask::W32(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),

@@ -332,7 +332,7 @@ proptest! {
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2,
         spacing in prop::sample::select(vec![[1.0f32, 1.0, 1.0], [1.0, 1.0, 3.0], [0.6, 0.6, 5.0], [3.0, 1.0, 1.0], [1.0, 2.5, 0.7]]),
         cell in 1usize..=4, u64w in any::<bool>(), lut in any::<bool>(), coded in any::<bool>(), tissue in 0usize..3,
-        u16_data in any::<bool>(), perspective in prop::option::of(0.4f64..3.0),
+        u16_data in any::<bool>(), perspective in prop::option::of(0.4f64..3.0), quality in prop::option::of(0.5f64..2.0),
     ) {
         let vol = common::random_volume([nx, ny, nz], seed, spacing);
         let vol = if u16_data { as_u16(&vol) } else { vol };
@@ -360,6 +360,9 @@ proptest! {
                 Renderer::new(vol.clone(), &common::random_tf(tfs), s).unwrap()
             };
             r.set_projection(projection).unwrap();
+            if let Some(q) = quality {
+                r.set_quality(q).unwrap();
+            }
             r
         };
         let want = frame_bits(&mut make(Method::Brute), &cam);

@@ -111,11 +111,13 @@ pub struct RenderArgs {
     pub normals: Normals,
     /// How the iso surface is reconstructed between samples (binary and
     /// brute paths, iso mode): linear (the straight line between two
-    /// slices: the fast preview) or cubic (Catmull–Rom through four slices
-    /// along the volume's z axis, the normal from B-spline-blended central
-    /// differences, no normal codes: no terraces or rings on thick-slice
-    /// scans, at about RECON_COST the frame time). Linear is the default:
-    /// RECON_WHY. Blend mode ignores it; --method rle and --deluxe I refuse cubic.
+    /// slices) or cubic (Catmull–Rom through four samples along the volume's
+    /// z axis, the normal the gradient of their B-spline smoothing, no normal
+    /// codes): no terraces or rings on thick-slice scans (on a 0.6×0.6×5
+    /// ellipsoid the normal error drops from 3.3° to 0.85° mean). Linear
+    /// stays the default: cubic costs about 3–4× linear's preview frame, and
+    /// on isotropic scans both err alike; pick cubic for thick-slice scans.
+    /// Blend mode ignores it; --method rle and --deluxe I refuse cubic.
     #[arg(long, value_enum, default_value = "linear")]
     pub reconstruction: shearwarp::kernels::Reconstruction,
     /// Worker threads (0 = all cores).

@@ -441,7 +441,7 @@ impl<'a> RayContext<'a> {
         for k in ks {
             let Some((at, d)) = sample(k) else { continue };
             let (iso, rgb) = self.iso_at(k, foc);
-            let prev = self.prev_slice(k, lo, hi).and_then(|kp| sample(kp));
+            let prev = self.prev_slice(k, lo, hi).and_then(&sample);
             if za < 2 {
                 if d >= iso {
                     // refined linearly against the sample before, as the linear reconstruction does
@@ -466,7 +466,7 @@ impl<'a> RayContext<'a> {
                 continue;
             };
             // the four samples around the segment from the slice before to k, in walking order
-            let outer = |near: (At, f32), k: Option<usize>| k.and_then(|k| sample(k)).unwrap_or(near);
+            let outer = |near: (At, f32), k: Option<usize>| k.and_then(&sample).unwrap_or(near);
             let before = outer((ap, dp), self.prev_slice(ap.k, lo, hi));
             let after = outer((at, d), self.next_slice(k, lo, hi));
             let four = [before, (ap, dp), (at, d), after];

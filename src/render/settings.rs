@@ -301,13 +301,17 @@ pub struct Settings {
     /// A perspective frame uses the separate encodings (cyclic permutations).
     pub rle_reuse: bool,
     /// Raycast paths, iso mode: how the iso surface is reconstructed between
-    /// samples ([`Reconstruction`]). [`Reconstruction::Cubic`] follows the
-    /// surface between thick slices (Catmull–Rom along the volume's z axis,
-    /// the normal from B-spline-blended central differences, no normal
-    /// codes) at about the cost measured in `benches/README.md`; the
-    /// default stays [`Reconstruction::Linear`], the faster preview, whose
-    /// error is the same on isotropic scans. Blend mode ignores it; the RLE
-    /// paths and Deluxe I refuse it.
+    /// samples ([`Reconstruction`]; see
+    /// [`crate::composite::raycast::RayContext::with_cubic`]).
+    /// [`Reconstruction::Cubic`] follows the surface between thick slices
+    /// (Catmull–Rom along the volume's z axis, the normal the gradient of the
+    /// B-spline smoothing, no normal codes). The default stays
+    /// [`Reconstruction::Linear`], chosen by measurement
+    /// (`benches/README.md`): the cubic frame costs 3–4× the linear preview's
+    /// (which keeps the lean frame and the normal codes), and on isotropic
+    /// volumes the two err alike; on thick slices the cubic's normal error
+    /// is a quarter of the linear's. Blend mode ignores it; the RLE paths and
+    /// Deluxe I refuse it.
     pub reconstruction: Reconstruction,
 }
 

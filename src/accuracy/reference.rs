@@ -909,7 +909,9 @@ pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Optio
 /// and brute paths shade with under [`Normals::Gradient`] — or, under
 /// [`Normals::Codes`], the same blend of the corners' decoded normal codes
 /// (each turned to the gradient's side), the direction whose shade their
-/// blend of the corners' shade entries approximates. `model` must be the
+/// blend of the corners' shade entries approximates; under the cubic
+/// reconstruction (iso mode, raycast paths) the gradient of its B-spline
+/// smoothing at the hit ([`ReferenceRenderer::cubic_shading_normal`]). `model` must be the
 /// [`ReferenceRenderer`] of the renderer's volume.
 pub fn fast_path_normals(renderer: &Renderer, camera: &Camera, model: &ReferenceRenderer) -> Result<Vec<DVec3>> {
     if model.dims != renderer.dims() || model.spacing != renderer.spacing() {

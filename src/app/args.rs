@@ -115,7 +115,7 @@ pub struct RenderArgs {
     /// z axis, the normal the gradient of their B-spline smoothing, no normal
     /// codes): no terraces or rings on thick-slice scans (on a 0.6×0.6×5
     /// ellipsoid the normal error drops from 3.3° to 0.85° mean). Linear
-    /// stays the default: cubic costs about 3–4× linear's preview frame, and
+    /// stays the default: cubic costs 2.5–5× linear's preview frame, and
     /// on isotropic scans both err alike; pick cubic for thick-slice scans.
     /// Blend mode ignores it; --method rle and --deluxe I refuse cubic.
     #[arg(long, value_enum, default_value = "linear")]

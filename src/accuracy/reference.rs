@@ -497,6 +497,16 @@ impl ReferenceRenderer {
         if n.length() > 0.0 { -n.normalize() } else { DVec3::NAN }
     }
 
+    /// The unit normal (world space, down the density) the cubic
+    /// reconstruction's fast paths shade a hit at `p` with: the gradient of
+    /// the B-spline smoothing ([`ReferenceRenderer::gradient_cubic`]). NaN
+    /// where it is zero.
+    pub fn cubic_shading_normal(&self, p: DVec3) -> DVec3 {
+        let sp = DVec3::new(self.spacing[0] as f64, self.spacing[1] as f64, self.spacing[2] as f64);
+        let n = self.gradient_cubic(p) / sp;
+        if n.length() > 0.0 { -n.normalize() } else { DVec3::NAN }
+    }
+
     /// The gradient the linear reconstruction shades point `p` with, in world
     /// space (up the density, not normalized): [`ReferenceRenderer::gradient`]
     /// divided by the spacing, or with `codes` the same trilinear blend of the
@@ -899,14 +909,20 @@ pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Optio
 /// and brute paths shade with under [`Normals::Gradient`] — or, under
 /// [`Normals::Codes`], the same blend of the corners' decoded normal codes
 /// (each turned to the gradient's side), the direction whose shade their
-/// blend of the corners' shade entries approximates. `model` must be the
+/// blend of the corners' shade entries approximates; under the cubic
+/// reconstruction (iso mode, raycast paths) the gradient of its B-spline
+/// smoothing at the hit ([`ReferenceRenderer::cubic_shading_normal`]). `model` must be the
 /// [`ReferenceRenderer`] of the renderer's volume.
 pub fn fast_path_normals(renderer: &Renderer, camera: &Camera, model: &ReferenceRenderer) -> Result<Vec<DVec3>> {
     if model.dims != renderer.dims() || model.spacing != renderer.spacing() {
         return Err(Error::value("fast path normals", "the model volume is not the renderer's"));
     }
     let (points, _) = fast_path_hits(renderer, camera)?;
-    let codes = renderer.settings().normals == Normals::Codes;
+    let s = renderer.settings();
+    if s.reconstruction == Reconstruction::Cubic && s.mode == Mode::Iso && s.method.is_raycast() {
+        return Ok(points.par_iter().map(|p| p.map_or(DVec3::NAN, |h| model.cubic_shading_normal(h.point))).collect());
+    }
+    let codes = s.normals == Normals::Codes;
     Ok(points.par_iter().map(|p| p.map_or(DVec3::NAN, |h| model.shading_normal(h.slices, h.frac, codes))).collect())
 }
 

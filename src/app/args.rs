@@ -109,6 +109,17 @@ pub struct RenderArgs {
     /// per sample) or gradient (the exact gradient at every sample: slower).
     #[arg(long, value_enum, default_value = "codes")]
     pub normals: Normals,
+    /// How the iso surface is reconstructed between samples (binary and
+    /// brute paths, iso mode): linear (the straight line between two
+    /// slices) or cubic (Catmull–Rom through four samples along the volume's
+    /// z axis, the normal the gradient of their B-spline smoothing, no normal
+    /// codes): no terraces or rings on thick-slice scans (on a 0.6×0.6×5
+    /// ellipsoid the normal error drops from 3.3° to 0.85° mean). Linear
+    /// stays the default: cubic costs 2.5–5× linear's preview frame, and
+    /// on isotropic scans both err alike; pick cubic for thick-slice scans.
+    /// Blend mode ignores it; --method rle and --deluxe I refuse cubic.
+    #[arg(long, value_enum, default_value = "linear")]
+    pub reconstruction: shearwarp::kernels::Reconstruction,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -542,6 +553,7 @@ impl RenderArgs {
             deluxe: self.deluxe,
             lattice: self.grid,
             rle_reuse: self.rle_reuse,
+            reconstruction: self.reconstruction,
             ert: self.ert,
             cell: self.cell,
             threads: self.threads,

@@ -94,14 +94,17 @@ pub struct BenchCmd {
     /// Reference step along each ray, in voxels of the smallest spacing.
     #[arg(long, default_value_t = shearwarp::accuracy::reference::DEFAULT_STEP)]
     pub ref_step: f64,
-    /// How the reference reconstructs densities between slices: `linear`
-    /// (trilinear) or `cubic` (Catmull–Rom through four z slices, bilinear
-    /// in-plane; the normal from their cubic B-spline smoothing). The render
-    /// variants stay linear; their image and depth
-    /// errors are measured against this reference, and the suite's table
-    /// gets one `reference` row per case with its own depth and normal error.
-    #[arg(long, value_enum, default_value = "linear")]
-    pub reconstruction: Reconstruction,
+    /// The reconstructions of the iso surface, comma-separated: `linear`
+    /// (trilinear: the straight line between two slices) and/or `cubic`
+    /// (Catmull–Rom through four z slices, bilinear in-plane; the normal
+    /// from B-spline-blended central differences). Each iso variant of the
+    /// raycast paths (binary, brute; not Deluxe I) runs once per
+    /// reconstruction, a cubic one named `…-cubic`; the other variants stay
+    /// linear. The reference reconstructs with the last one listed (image
+    /// and depth errors are measured against it; the suite's table gets one
+    /// `reference` row per case with its own depth and normal error).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "linear")]
+    pub reconstruction: Vec<Reconstruction>,
     /// Only these variants (comma-separated): a variant's exact name selects
     /// just that variant; any other string selects every variant containing it.
     #[arg(long, value_delimiter = ',')]
@@ -223,8 +226,34 @@ pub const SUITE_VARIANTS: [&str; 2] = ["binary-c1-u64-bitscan", "rle"];
 /// How a variant reconstructs the iso hit between samples: `linear` (the
 /// crossing on the straight line between two slices, the normal the
 /// trilinear gradient or the corners' codes), today for every variant.
-pub fn reconstruction(_settings: &Settings) -> &'static str {
-    "linear"
+pub fn reconstruction(settings: &Settings) -> &'static str {
+    match settings.mode {
+        Mode::Iso => settings.reconstruction.name(),
+        Mode::Blend => Reconstruction::Linear.name(),
+    }
+}
+
+/// `variants` once per reconstruction of `recons`: as they are for
+/// `linear`, and for `cubic` the iso variants that render it (the raycast
+/// paths without Deluxe I), named `…-cubic`.
+pub fn with_reconstructions(variants: Vec<Variant>, recons: &[Reconstruction]) -> Vec<Variant> {
+    let mut out = vec![];
+    for &r in recons {
+        for v in &variants {
+            match r {
+                Reconstruction::Linear => out.push(v.clone()),
+                Reconstruction::Cubic => {
+                    let s = v.settings;
+                    if s.mode == Mode::Iso && s.method.is_raycast() && !s.deluxe.intermediate {
+                        let settings = Settings { reconstruction: r, ..s };
+                        out.push(Variant { name: format!("{}-cubic", v.name), settings, ..v.clone() });
+                    }
+                }
+            }
+        }
+    }
+    out.dedup_by(|a, b| a.name == b.name);
+    out
 }
 
 /// A named render variant of the benchmark matrix.
@@ -561,6 +590,11 @@ impl BenchCmd {
 
     /// The settings every variant of `mode` starts from: the peers' material
     /// in blend mode when peers are measured.
+    /// The reconstruction of the reference: the last of `--reconstruction`.
+    pub fn reference_reconstruction(&self) -> Reconstruction {
+        self.reconstruction.last().copied().unwrap_or_default()
+    }
+
     fn base_settings(&self, mode: Mode) -> Settings {
         let shading = if self.peer_model(mode) { MODEL_SHADING } else { Settings::default().shading };
         Settings { mode, ert: self.ert, threads: self.threads, shading, ..Settings::default() }
@@ -957,7 +991,8 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
         m
     };
     let refr = ReferenceRenderer::new(&vol);
-    let ropts = ReferenceOptions { step: cmd.ref_step, threads: cmd.threads, reconstruction: cmd.reconstruction, ..Default::default() };
+    let ref_recon = cmd.reference_reconstruction();
+    let ropts = ReferenceOptions { step: cmd.ref_step, threads: cmd.threads, reconstruction: ref_recon, ..Default::default() };
     let camera = |v: &View| Camera { rotation: v.rotation, zoom: None, size: [cmd.size, cmd.size] };
 
     let per_mode: Vec<(Mode, Vec<Variant>)> = modes
@@ -977,6 +1012,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
             let exact = |o: &str| all.iter().any(|v| v.name == o);
             let picked = |v: &Variant| cmd.only.iter().any(|o| if exact(o) { v.name == *o } else { v.name.contains(o.as_str()) });
             let vs: Vec<Variant> = all.iter().filter(|v| cmd.only.is_empty() || picked(v)).cloned().collect();
+            let vs = with_reconstructions(vs, &cmd.reconstruction);
             (mode, vs)
         })
         .collect();
@@ -1066,7 +1102,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                 view: if proj.is_perspective() { format!("{} (perspective)", view.name) } else { view.name.clone() },
                 ms,
                 samples: image.samples,
-                reconstruction: cmd.reconstruction.name(),
+                reconstruction: ref_recon.name(),
                 depth: ref_depth,
                 normal: ref_normal,
                 truth_ms,

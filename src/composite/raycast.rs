@@ -36,6 +36,7 @@ use crate::encode::mask::BinaryMask;
 use crate::encode::mask::BlockOccupancy;
 use crate::encode::mask::SliceSpan;
 use crate::encode::walk::{ColumnWalk, Drift, StillWalk};
+use crate::kernels::reconstruct;
 use crate::view::plan::{FramePlan, MapKind, SliceMap, floor_i64};
 
 /// Everything a ray needs, borrowed for one frame.
@@ -75,6 +76,9 @@ pub struct RayContext<'a> {
     focus_cls: &'a Classifier,
     focus_iso: f32,
     focus_iso_rgb: [f32; 3],
+    /// The cubic reconstruction ([`RayContext::with_cubic`]): the stack axis
+    /// it runs along.
+    cubic: Option<usize>,
 }
 
 /// What one ray produced.
@@ -245,6 +249,7 @@ impl<'a> RayContext<'a> {
             focus_cls: classifier,
             focus_iso: iso,
             focus_iso_rgb: [iso_c.r, iso_c.g, iso_c.b],
+            cubic: None,
         }
     }
 
@@ -323,6 +328,178 @@ impl<'a> RayContext<'a> {
         assert_eq!(normals.n, self.stack.n, "normal codes of another stack");
         self.normals = Some((normals, table));
         self
+    }
+
+    /// The cubic reconstruction of the iso surface
+    /// ([`crate::kernels::reconstruct`], `Some(z_axis)`: the stack axis of
+    /// the volume's z, along which it runs; the stack must be resident and
+    /// the context shade by gradient). Along the slices (`z_axis` 2) a ray
+    /// tests, at each candidate slice `k`, the Catmull–Rom cubic through its
+    /// bilinear samples in the four slices around the segment from the slice
+    /// before `k` to `k` (a sample outside the ray's slices or the volume
+    /// repeats its neighbour), so a crossing between two samples below iso
+    /// is found; in the slice (`z_axis` 0 or 1) each sample is Catmull–Rom
+    /// across the four voxel rows along z and linear along the other axis,
+    /// and the hit is refined linearly against the sample before it. The
+    /// normal is the central differences blended by the cubic B-spline's
+    /// weights along z and linearly along the other axes (no normal codes).
+    /// The binary walk needs a mask of [`crate::encode::cells::CellCodes::build_cubic`]
+    /// codes and, along the slices, rays that move at most one voxel a slice
+    /// ([`cubic_walks`]).
+    pub fn with_cubic(mut self, z_axis: Option<usize>) -> Self {
+        self.cubic = z_axis;
+        self
+    }
+
+    /// The density a ray reads at `at` before a walk: the cubic
+    /// reconstruction's sample when it runs in the slice, else the bilinear one.
+    #[inline(always)]
+    fn first_sample<V: Cells>(&self, v: &V, at: At) -> f32 {
+        match self.cubic {
+            Some(za) if za < 2 => self.sample_cubic(za, at),
+            _ => self.sample(v, at.ci, at.cj, at.k, at.wi, at.wj),
+        }
+    }
+
+    /// The cubic reconstruction's sample at `at` (`za`: its stack axis):
+    /// bilinear along the slices, else Catmull–Rom across the four voxel
+    /// lines along `za` (clamped), each linear along the other axis.
+    #[inline(always)]
+    fn sample_cubic(&self, za: usize, at: At) -> f32 {
+        let At { k, ci, cj, wi, wj } = at;
+        let st = self.stack;
+        if za == 2 {
+            return bilinear(st.cell_at(st.index(ci, cj, k)), wi, wj);
+        }
+        let data = st.data();
+        let b = st.index(ci, cj, k);
+        // the step to the next line along za, and to the other voxel of a line
+        let (n0, cells) = (st.n[0], self.cells);
+        let (step, other, c, w_z, w_o) = if za == 0 { (1, n0, ci, wi, wj) } else { (n0, 1, cj, wj, wi) };
+        let last = cells[za] as usize; // the last voxel line along za
+        let at_line = |o: usize| {
+            let (a, z) = (data[o] as f64, data[o + other] as f64);
+            a + (z - a) * w_o as f64
+        };
+        let before = if c > 0 { b - step } else { b };
+        let after = if c < last - 1 { b + 2 * step } else { b + step };
+        reconstruct::eval([at_line(before), at_line(b), at_line(b + step), at_line(after)], w_z as f64) as f32
+    }
+
+    /// The cubic reconstruction's gradient at the sample `at` (stack axes,
+    /// voxel units) when it runs in the slice (`za` 0 or 1), the gradient of
+    /// the cubic B-spline smoothing of the four voxel lines along `za` (as
+    /// the reference's): along `za` the B-spline's derivative of the lines'
+    /// samples, along the other axes the lines' central differences
+    /// ([`SliceStack::gradient`] at each line) blended by the B-spline's weights.
+    fn gradient_cubic(&self, za: usize, at: At) -> [f32; 3] {
+        let At { k, ci, cj, wi, wj } = at;
+        let st = self.stack;
+        let (c, w_z) = if za == 0 { (ci, wi) } else { (cj, wj) };
+        let last = self.cells[za] as usize - 1;
+        let (b, db) = (reconstruct::b_spline(w_z as f64), reconstruct::b_spline_derivative(w_z as f64));
+        let mut g = [0f64; 3];
+        for (m, l) in four(c, last + 2).into_iter().enumerate() {
+            // voxel line l: the cell starting there, or the last cell's far side
+            let (cell, w) = if l > last { (last, 1.0) } else { (l, 0.0) };
+            let (gl, value) = if za == 0 {
+                (st.gradient(cell, cj, k, w, wj), st.bilinear(cell, cj, k, w, wj))
+            } else {
+                (st.gradient(ci, cell, k, wi, w), st.bilinear(ci, cell, k, wi, w))
+            };
+            for (x, y) in g.iter_mut().zip(gl) {
+                *x += b[m] * y as f64;
+            }
+            g[za] += db[m] * value as f64 - b[m] * gl[za] as f64;
+        }
+        g.map(|x| x as f32)
+    }
+
+    /// The slice after `k` in walking order within `[lo, hi]`, if any.
+    #[inline(always)]
+    fn next_slice(&self, k: usize, lo: usize, hi: usize) -> Option<usize> {
+        if self.ascending { (k < hi).then_some(k + 1) } else { (k > lo).then(|| k - 1) }
+    }
+
+    /// [`RayContext::trace_iso`] under the cubic reconstruction along stack
+    /// axis `za` ([`RayContext::with_cubic`]), with the iso value of each
+    /// candidate's slice (focus or context).
+    #[inline(always)]
+    fn trace_iso_cubic<R: Ray>(
+        &self,
+        ray: R,
+        ks: impl Iterator<Item = usize>,
+        za: usize,
+        [lo, hi]: [usize; 2],
+        foc: [usize; 2],
+    ) -> RayResult {
+        let sample = |k: usize| -> Option<(At, f32)> {
+            let (ci, cj, wi, wj) = ray.locate(self, k)?;
+            let at = At { k, ci, cj, wi, wj };
+            Some((at, self.sample_cubic(za, at)))
+        };
+        for k in ks {
+            let Some((at, d)) = sample(k) else { continue };
+            let (iso, rgb) = self.iso_at(k, foc);
+            let prev = self.prev_slice(k, lo, hi).and_then(&sample);
+            if za < 2 {
+                if d >= iso {
+                    // refined linearly against the sample before, as the linear reconstruction does
+                    let before = prev.filter(|&(_, dp)| dp < iso).map(|(ap, dp)| (ap, ((iso - dp) / (d - dp)).clamp(0.0, 1.0)));
+                    let mut g = self.gradient_cubic(za, at);
+                    let depth = match before {
+                        None => k as f32,
+                        Some((ap, t)) => {
+                            let gp = self.gradient_cubic(za, ap);
+                            g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
+                            ap.k as f32 + (k as f32 - ap.k as f32) * t
+                        }
+                    };
+                    return self.shade_hit(rgb, g, depth);
+                }
+                continue;
+            }
+            let Some((ap, dp)) = prev else {
+                if d >= iso {
+                    return self.shade_hit(rgb, self.stack.gradient(at.ci, at.cj, k, at.wi, at.wj), k as f32);
+                }
+                continue;
+            };
+            // the four samples around the segment from the slice before to k, in walking order
+            let outer = |near: (At, f32), k: Option<usize>| k.and_then(&sample).unwrap_or(near);
+            let before = outer((ap, dp), self.prev_slice(ap.k, lo, hi));
+            let after = outer((at, d), self.next_slice(k, lo, hi));
+            let four = [before, (ap, dp), (at, d), after];
+            if let Some(t) = reconstruct::crossing(four.map(|s| s.1 as f64), iso as f64) {
+                // the gradient of the B-spline smoothing of the four samples: in
+                // the slice their central differences blended by its weights;
+                // along the ray its derivative, less what the in-slice gradient
+                // adds as the ray moves across the slice
+                let (b, db) = (reconstruct::b_spline(t), reconstruct::b_spline_derivative(t));
+                let (mut g, mut along) = ([0f64; 3], 0f64);
+                for ((w, dw), (a, d)) in b.iter().zip(db).zip(four) {
+                    let ga = self.stack.gradient(a.ci, a.cj, a.k, a.wi, a.wj);
+                    for c in 0..2 {
+                        g[c] += w * ga[c] as f64;
+                    }
+                    along += dw * d as f64;
+                }
+                let pos = |a: At| [a.ci as f64 + a.wi as f64, a.cj as f64 + a.wj as f64];
+                let (x0, x1) = (pos(ap), pos(at));
+                let across = g[0] * (x1[0] - x0[0]) + g[1] * (x1[1] - x0[1]);
+                g[2] = if self.ascending { along - across } else { across - along };
+                let depth = ap.k as f32 + (k as f32 - ap.k as f32) * t as f32;
+                return self.shade_hit(rgb, g.map(|x| x as f32), depth);
+            }
+        }
+        MISS
+    }
+
+    /// An opaque iso hit at `depth` in `iso_rgb`, shaded by the gradient `g`.
+    #[inline(always)]
+    fn shade_hit(&self, iso_rgb: [f32; 3], g: [f32; 3], depth: f32) -> RayResult {
+        let rgb = self.shading.shade(iso_rgb, headlight_ndl(g, self.grad_m, self.grad_s));
+        RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }
 
     /// The cells of this context kept apart (the f32 stack and the codes).
@@ -423,6 +600,7 @@ impl<'a> RayContext<'a> {
     ) -> RayResult {
         // (a ray without a focus interval runs the loops without the per-sample test)
         match (self.mode, self.half, foc[0] <= foc[1]) {
+            (Mode::Iso, false, _) if let Some(za) = self.cubic => self.trace_iso_cubic(ray, ks, za, [lo, hi], foc),
             (Mode::Blend, false, false) => self.trace_blend::<_, _, false>(v, ray, ks, foc),
             (Mode::Blend, false, true) => self.trace_blend::<_, _, true>(v, ray, ks, foc),
             (Mode::Iso, false, false) => self.trace_iso::<_, _, false>(v, ray, ks, lo, hi, foc),
@@ -697,6 +875,34 @@ impl<'a> RayContext<'a> {
             }
         };
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
+    }
+}
+
+/// The four voxel lines `c − 1 … c + 2` around cell `c` of `n` voxels,
+/// clamped to the volume (a border repeats its line).
+#[inline(always)]
+fn four(c: usize, n: usize) -> [usize; 4] {
+    [c.saturating_sub(1), c, c + 1, (c + 2).min(n - 1)]
+}
+
+/// Whether the binary walk serves the cubic reconstruction along the slices
+/// under `plan` ([`RayContext::with_cubic`]): every ray moves at most one
+/// voxel a slice along each in-slice axis, as the cubic codes assume
+/// ([`crate::encode::cells::CellCodes::build_cubic`]). True for every
+/// parallel plan (the factorization shears by at most a voxel a slice); a
+/// perspective plan with the eye near may move farther.
+pub fn cubic_walks(plan: &FramePlan) -> bool {
+    let n = plan.slices();
+    match plan.kind {
+        MapKind::Translate => (0..2).all(|a| plan.shear.trans[a].windows(2).all(|w| (w[1] - w[0]).abs() <= 1.0)),
+        MapKind::ScaleTranslate => {
+            let g = plan.grid.size;
+            let corners = [[0.0, 0.0], [g[0] as f64, g[1] as f64]].map(|[p, q]| plan.intermediate_to_sheared(p, q));
+            (1..n).all(|k| {
+                let (m0, m1) = (&plan.scaled[k - 1], &plan.scaled[k]);
+                (0..2).all(|a| corners.iter().all(|c| ((m1.scale - m0.scale) * c[a] + (m1.trans[a] - m0.trans[a])).abs() <= 1.0))
+            })
+        }
     }
 }
 
@@ -1080,7 +1286,7 @@ impl<'a, W: Word> RaySource for Diverging<'a, W> {
             && first / len == b
             && plan.ray_hole(p, self.q).is_none_or(|[h0, h1]| first < h0 || first > h1)
             && let Some((ci, cj, wi, wj)) = ray.locate(ctx, first)
-            && ctx.sample(v, ci, cj, first, wi, wj) >= ctx.iso_at(first, plan.focus_range(p, self.q)).0
+            && ctx.first_sample(v, At { k: first, ci, cj, wi, wj }) >= ctx.iso_at(first, plan.focus_range(p, self.q)).0
         {
             return (ray, Some((ColumnWalk::only(self.mask, self.occ, self.m, self.search, first), first)));
         }

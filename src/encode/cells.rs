@@ -14,6 +14,7 @@ use rayon::prelude::*;
 use crate::data::slices::Densities;
 use crate::encode::depth::code_width_for;
 use crate::error::{Error, Result};
+use crate::kernels::reconstruct;
 
 /// `nb`-bit codes (`nb` ∈ 1, 2, 4) of `rows` rows of `len` cells, each row
 /// padded to whole u64 words: cell `i` of row `r` sits in the bits
@@ -252,6 +253,100 @@ impl CellCodes {
         CellCodes { cells: [ci_n, cj_n], nk, nb, codes: Arc::new(codes) }
     }
 
+    /// Codes for the cubic reconstruction
+    /// ([`crate::kernels::reconstruct::Reconstruction::Cubic`], Catmull–Rom
+    /// along the stack axis `z_axis`, the volume's z): `code(lo, hi)` of the
+    /// range the cubic can reach in what a ray through cell `(ci, cj)` of
+    /// slice `k` reads, bounded by [`reconstruct::upper_bound`] (and
+    /// [`reconstruct::lower_bound`]) from the maximum of the *inner* voxels
+    /// and the minimum of the *outer* ones, so a mask packed from these codes
+    /// stays conservative for the cubic:
+    ///
+    /// - `z_axis` 2 (the slices): a ray visiting slice `k` tests the segment
+    ///   to the slice before it, whose cubic reads the ray's samples in
+    ///   slices `k − 2 … k + 1` (or `k − 1 … k + 2` walking the other way). A
+    ///   ray moves at most one voxel a slice, so its inner samples (slices
+    ///   `k − 1 … k + 1`) lie in cells within one of `(ci, cj)`, voxels
+    ///   `[ci − 1, ci + 2]`, and its outer ones (slices `k ± 2`) within two,
+    ///   voxels `[ci − 2, ci + 3]` (the same along j).
+    /// - `z_axis` 0 or 1 (in the slice): the sample reads the cell's two
+    ///   voxel rows along z (inner) and the row before and after them (outer).
+    ///
+    /// Indices are clipped to the volume (a clamped sample repeats a voxel
+    /// already in the range).
+    pub fn build_cubic(stack: &(impl Densities + ?Sized), nb: u32, z_axis: usize, code: impl Fn(f32, f32) -> u8 + Sync) -> Self {
+        let n = stack.dims();
+        let [ci_n, cj_n] = [n[0].saturating_sub(1), n[1].saturating_sub(1)];
+        let nk = n[2];
+        let mut codes = PackedCodes::new(nb, ci_n, cj_n * nk);
+        // voxel windows around a cell (along i, j) and a slice (along k): inner, outer
+        let (inner, outer): ([usize; 3], [usize; 3]) = match z_axis {
+            0 => ([0, 0, 0], [1, 0, 0]),
+            1 => ([0, 0, 0], [0, 1, 0]),
+            _ => ([1, 1, 1], [2, 2, 2]),
+        };
+        if ci_n * cj_n > 0 {
+            let rw = codes.row_words;
+            let (n0, n1) = (n[0], n[1]);
+            codes.chunks_mut(cj_n).enumerate().for_each(|(k, out)| {
+                // per voxel: the max over the inner slices, the min over the outer ones
+                let (mut pmax, mut pmin) = (vec![f32::NEG_INFINITY; n0 * n1], vec![f32::INFINITY; n0 * n1]);
+                let mut row = vec![0f32; n0];
+                let (k0, k1) = (k.saturating_sub(outer[2]), (k + outer[2]).min(nk - 1));
+                for kk in k0..=k1 {
+                    let is_inner = kk + inner[2] >= k && kk <= k + inner[2];
+                    for j in 0..n1 {
+                        stack.row(j, kk, &mut row);
+                        let (mx, mn) = (&mut pmax[j * n0..(j + 1) * n0], &mut pmin[j * n0..(j + 1) * n0]);
+                        for ((x, m), &v) in mx.iter_mut().zip(mn.iter_mut()).zip(&row) {
+                            if is_inner {
+                                *x = x.max(v);
+                            }
+                            *m = m.min(v);
+                        }
+                    }
+                }
+                // windows along i per voxel row, then along j per cell
+                let win = |c: usize, r: usize, len: usize| (c.saturating_sub(r), (c + 1 + r).min(len - 1));
+                let (mut rmax, mut rmin) = (vec![0f32; n1 * ci_n], vec![0f32; n1 * ci_n]);
+                for j in 0..n1 {
+                    for ci in 0..ci_n {
+                        let (a0, a1) = win(ci, inner[0], n0);
+                        let (b0, b1) = win(ci, outer[0], n0);
+                        rmax[j * ci_n + ci] = pmax[j * n0 + a0..=j * n0 + a1].iter().fold(f32::NEG_INFINITY, |m, &x| m.max(x));
+                        rmin[j * ci_n + ci] = pmin[j * n0 + b0..=j * n0 + b1].iter().fold(f32::INFINITY, |m, &x| m.min(x));
+                    }
+                }
+                let mut line = vec![0u8; ci_n];
+                for cj in 0..cj_n {
+                    let (a0, a1) = win(cj, inner[1], n1);
+                    let (b0, b1) = win(cj, outer[1], n1);
+                    for (ci, o) in line.iter_mut().enumerate() {
+                        let hi = (a0..=a1).map(|j| rmax[j * ci_n + ci]).fold(f32::NEG_INFINITY, f32::max);
+                        let lo = (b0..=b1).map(|j| rmin[j * ci_n + ci]).fold(f32::INFINITY, f32::min);
+                        let up = reconstruct::upper_bound(hi as f64, lo as f64);
+                        let down = reconstruct::lower_bound(lo as f64, hi as f64).min(lo as f64);
+                        // rounded outward to f32
+                        *o = code(next_down(down as f32, down), next_up(up as f32, up));
+                    }
+                    PackedCodes::pack_row(nb, &line, &mut out[cj * rw..(cj + 1) * rw]);
+                }
+            });
+        }
+        CellCodes { cells: [ci_n, cj_n], nk, nb, codes: Arc::new(codes) }
+    }
+
+    /// [`CellCodes::binary`] for the cubic reconstruction ([`CellCodes::build_cubic`]).
+    pub fn binary_cubic(stack: &(impl Densities + ?Sized), z_axis: usize, visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
+        Self::build_cubic(stack, 1, z_axis, |lo, hi| visible(lo, hi) as u8)
+    }
+
+    /// [`CellCodes::thresholds`] for the cubic reconstruction ([`CellCodes::build_cubic`]).
+    pub fn thresholds_cubic(stack: &(impl Densities + ?Sized), z_axis: usize, thresholds: &[f32]) -> Result<Self> {
+        let nb = check_thresholds(thresholds)?;
+        Ok(Self::build_cubic(stack, nb, z_axis, |_, hi| thresholds.iter().map(|&t| (t <= hi) as u8).sum()))
+    }
+
     /// [`CellCodes::binary`] for Deluxe I ([`CellCodes::build_half`]).
     pub fn binary_half(stack: &(impl Densities + ?Sized), visible: impl Fn(f32, f32) -> bool + Sync) -> Self {
         Self::build_half(stack, 1, |lo, hi| visible(lo, hi) as u8)
@@ -354,6 +449,24 @@ impl CellCodes {
         });
         (sc, Arc::new(out), bbox)
     }
+}
+
+/// The validated code width of ascending `thresholds`.
+fn check_thresholds(thresholds: &[f32]) -> Result<u32> {
+    if thresholds.is_empty() || !thresholds.windows(2).all(|w| w[0] < w[1]) || thresholds.iter().any(|t| t.is_nan()) {
+        return Err(Error::value("thresholds", format!("{thresholds:?} (need 1..=15 strictly ascending values)")));
+    }
+    code_width_for(thresholds.len()).ok_or_else(|| Error::value("thresholds", format!("{} thresholds (at most 15)", thresholds.len())))
+}
+
+/// `x` (`v` rounded to f32), or the next f32 above it when it rounded down.
+fn next_up(x: f32, v: f64) -> f32 {
+    if (x as f64) < v { x.next_up() } else { x }
+}
+
+/// `x` (`v` rounded to f32), or the next f32 below it when it rounded up.
+fn next_down(x: f32, v: f64) -> f32 {
+    if (x as f64) > v { x.next_down() } else { x }
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@
 use super::settings::{Lattice, Normals, Settings, WordSize};
 use super::stats::BuildTimes;
 use super::{MAX_INTERMEDIATE_PIXELS, MAX_MASK_BYTES, Renderer};
+use crate::kernels::reconstruct::Reconstruction;
 
 use std::time::Instant;
 
@@ -76,6 +77,9 @@ pub(super) struct MaskKey {
     /// Deluxe I: each bit also covers the midpoint after its slice
     /// ([`CellCodes::build_half`]).
     pub(super) half: bool,
+    /// The cubic reconstruction's iso surface: each bit covers what the
+    /// cubic can reach from its cell ([`CellCodes::build_cubic`]).
+    pub(super) cubic: bool,
 }
 
 #[derive(Debug)]
@@ -87,9 +91,16 @@ pub(super) struct AxisMask {
 /// True when the binary path keeps no f32 stack for `volume`: table shading
 /// with packed cells, whose 8- or 16-bit densities are all its rays read (8-
 /// and 16-bit scans). Every other path samples a resident [`SliceStack`].
+/// The stack axis (0: i, 1: j, 2: the slices) of a stack of permutation
+/// `perm` along which the cubic reconstruction runs: the volume's z.
+pub fn cubic_axis(perm: [usize; 3]) -> usize {
+    perm.iter().position(|&a| a == 2).unwrap_or(2)
+}
+
 pub(super) fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
     settings.method.uses_mask()
         && settings.normals == Normals::Codes
+        && settings.reconstruction == Reconstruction::Linear
         && settings.pack
         && volume.data().voxel_type() != crate::data::volume::VoxelType::F32
 }
@@ -379,6 +390,7 @@ impl Renderer {
             cell: self.settings.cell,
             generation: self.classes.generation,
             half: self.settings.deluxe.intermediate,
+            cubic: self.settings.reconstruction == Reconstruction::Cubic && self.settings.mode == Mode::Iso,
         }
     }
 
@@ -492,11 +504,21 @@ impl Renderer {
                 };
                 // cell codes depend only on the classification (and Deluxe I's
                 // dilation); cell size and word size reuse them
-                let codes_key = key.generation * 4 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64) * 2 + key.half as u64;
+                let codes_key =
+                    key.generation * 8 + key.cubic as u64 * 4 + key.mode.map_or(0, |m| (m == Mode::Blend) as u64) * 2 + key.half as u64;
                 if self.axes.codes[axis].as_ref().map(|c| c.0) != Some(codes_key) {
                     let t = Instant::now();
                     let half = key.half;
+                    // the cubic's stack axis: the volume's z
+                    let z_axis = key.cubic.then(|| cubic_axis(perm));
                     let codes = self.pool.install(|| match (&self.classes.tissues, self.settings.mode) {
+                        (Some(ts), _) if let Some(za) = z_axis => {
+                            CellCodes::thresholds_cubic(stack, za, &ts.thresholds).expect("thresholds validated in with_tissues")
+                        }
+                        (None, Mode::Iso) if let Some(za) = z_axis => {
+                            let iso = self.classes.iso;
+                            CellCodes::binary_cubic(stack, za, |_, hi| hi >= iso)
+                        }
                         (Some(ts), _) if half => {
                             CellCodes::thresholds_half(stack, &ts.thresholds).expect("thresholds validated in with_tissues")
                         }

@@ -5,10 +5,13 @@ use super::{FrameStats, Lattice, Method, Normals, Renderer, Settings};
 
 use std::time::Instant;
 
+use super::axes::cubic_axis;
 use crate::classify::Classifier;
 use crate::classify::shade_table::{ShadeTable, headlight_object};
 use crate::composite::lean::LeanFrame;
-use crate::composite::raycast::{RayContext, occupied_scaled_rays, render_binary, render_brute, volume_rect, volume_rect_with_mids};
+use crate::composite::raycast::{
+    RayContext, cubic_walks, occupied_scaled_rays, render_binary, render_brute, volume_rect, volume_rect_with_mids,
+};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::normals::NormalStack;
 use crate::data::slices::SliceStack;
@@ -16,6 +19,7 @@ use crate::encode::depth::{Matcher, binary_matcher};
 use crate::encode::mask::ShearWork;
 use crate::encode::walk::Drift;
 use crate::error::Result;
+use crate::kernels::reconstruct::Reconstruction;
 use crate::view::plan::{FramePlan, MapKind};
 
 impl Renderer {
@@ -75,6 +79,7 @@ impl Renderer {
         // the lean binary iso frame, chosen once for the frame from its plan
         let lean_frame = self.lean_on
             && settings.method == Method::Binary
+            && settings.reconstruction == Reconstruction::Linear
             && LeanFrame::applies(plan, mode, settings.normals == Normals::Codes && normals[axis].is_some(), settings.search);
         // one job on the pool per plan: shear and render run inside it
         let result: Result<()> = self.pool.install(|| {
@@ -97,8 +102,11 @@ impl Renderer {
                     }
                     (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);
                     let scaled = plan.kind == MapKind::ScaleTranslate;
+                    let cubic = settings.reconstruction == Reconstruction::Cubic && mode == Mode::Iso;
                     let rect = match &m.mask {
-                        _ if !settings.occupied_rect => volume_rect(plan, stack.cells()),
+                        // (a scaled plan's occupied-ray rectangle misses rays the cubic
+                        // hits: the cubic casts every ray of the volume there)
+                        _ if !settings.occupied_rect || (scaled && cubic) => volume_rect(plan, stack.cells()),
                         // the mask's occupied columns are the translated rays'; a
                         // scaled plan's rays meet the occupied cells elsewhere
                         AnyMask::W32(m) if scaled => occupied_scaled_rays(plan, m, stack.cells()),
@@ -110,7 +118,11 @@ impl Renderer {
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
                     let ctx = ray_context(stack, plan, classes, settings, normals[axis].as_ref(), shade);
+                    // the cubic along the slices when a ray moves farther than its codes
+                    // assume (a perspective eye near the volume): every slice, as brute force
+                    let walks = !cubic || cubic_axis(stack.perm()) != 2 || cubic_walks(plan);
                     match (&m.mask, lean_frame) {
+                        _ if !walks => render_brute(&ctx, volume_rect(plan, stack.cells()), inter),
                         (AnyMask::W32(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
                         (AnyMask::W64(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
                         (AnyMask::W32(m), false) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
@@ -191,6 +203,10 @@ fn ray_context<'a>(
         RayContext::new(stack, cls, plan, settings.mode, iso, settings.shading, settings.ert).with_intermediate(plan.intermediate());
     if let Some((fc, fiso)) = focus {
         ctx = ctx.with_focus(fc, fiso);
+    }
+    if settings.reconstruction == Reconstruction::Cubic && settings.mode == Mode::Iso {
+        // shaded by the cubic's own gradient, never by normal codes
+        return ctx.with_cubic(Some(cubic_axis(stack.perm())));
     }
     match (settings.normals, normals) {
         (Normals::Codes, Some(ns)) => {

@@ -16,21 +16,11 @@ use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::Camera;
 use shearwarp::warp::Image8;
 
-use crate::common::random_volume;
+use crate::common::{random_volume, typed};
 
 /// Case count: `PROPTEST_CASES` when set (for long soak runs), else `default`.
 fn cases(default: u32) -> u32 {
     std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
-}
-
-fn typed(v: &Volume, ty: u8) -> Volume {
-    let f = v.to_f32();
-    let data = match ty {
-        0 => return v.clone(),
-        1 => VoxelData::U8(f.iter().map(|x| x.round().clamp(0.0, 255.0) as u8).collect()),
-        _ => VoxelData::U16(f.iter().map(|x| (x.round() * 7.0) as u16).collect()),
-    };
-    Volume::new(v.dims(), v.spacing(), data).unwrap()
 }
 
 fn tissues(scale: f32) -> Vec<Tissue> {

@@ -15,19 +15,7 @@ use shearwarp::render::{FrameStats, Method, Renderer, Settings, WordSize};
 use shearwarp::view::{Camera, Factorization};
 use shearwarp::warp::Image;
 
-use crate::common::random_volume;
-
-/// `v` in voxel type `ty` (0: f32, 1: u8, 2: u16), values rounded to integers
-/// for the integer types.
-fn typed(v: &Volume, ty: u8) -> Volume {
-    let f = v.to_f32();
-    let data = match ty {
-        0 => return v.clone(),
-        1 => VoxelData::U8(f.iter().map(|x| x.round().clamp(0.0, 255.0) as u8).collect()),
-        _ => VoxelData::U16(f.iter().map(|x| (x.round() * 7.0) as u16).collect()),
-    };
-    Volume::new(v.dims(), v.spacing(), data).unwrap()
-}
+use crate::common::{random_volume, typed};
 
 fn tissues(scale: f32) -> Vec<Tissue> {
     [(60.0, "a"), (110.0, "b"), (170.0, "c")]

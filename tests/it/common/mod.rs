@@ -65,6 +65,18 @@ pub fn blobs(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {
     Volume::new(dims, spacing, VoxelData::F32(data)).unwrap()
 }
 
+/// `v` in voxel type `ty` (0: f32, 1: u8, 2: u16), values rounded to integers
+/// for the integer types (the 16-bit values spread seven apart).
+pub fn typed(v: &Volume, ty: u8) -> Volume {
+    let f = v.to_f32();
+    let data = match ty {
+        0 => return v.clone(),
+        1 => shearwarp::data::volume::VoxelData::U8(f.iter().map(|x| x.round().clamp(0.0, 255.0) as u8).collect()),
+        _ => shearwarp::data::volume::VoxelData::U16(f.iter().map(|x| (x.round() * 7.0) as u16).collect()),
+    };
+    Volume::new(v.dims(), v.spacing(), data).unwrap()
+}
+
 /// A random volume of four soft blobs and hashed noise, with internal empty
 /// regions (the property tests' volumes: `invariants.rs`, `rle.rs`).
 pub fn random_volume(dims: [usize; 3], seed: u64, spacing: [f32; 3]) -> Volume {

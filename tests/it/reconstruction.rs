@@ -21,7 +21,7 @@ use glam::DVec3;
 use proptest::prelude::*;
 
 use crate::common;
-use shearwarp::accuracy::metrics::{depth_error, normal_error};
+use shearwarp::accuracy::metrics::{DepthError, NormalError, depth_error, normal_error};
 use shearwarp::accuracy::reference::{ReferenceOptions, ReferenceRenderer, Scene, fast_path_depth, fast_path_normals};
 use shearwarp::accuracy::truth::surface_truth;
 use shearwarp::classify::presets::Tissue;
@@ -163,6 +163,34 @@ fn the_cubic_reproduces_what_its_order_promises() {
     assert_eq!(catmull_rom(0.0), [0.0, 1.0, 0.0, 0.0]);
 }
 
+/// Depth and normal errors over several views: both means weighted by the
+/// pixels compared, the largest p99 of each.
+#[derive(Default)]
+struct ViewErrors {
+    dsum: f64,
+    dn: usize,
+    dp99: f64,
+    nsum: f64,
+    nn: usize,
+    np99: f64,
+}
+
+impl ViewErrors {
+    fn add(&mut self, d: &DepthError, n: &NormalError) {
+        self.dsum += d.mean * d.both as f64;
+        self.dn += d.both;
+        self.dp99 = self.dp99.max(d.p99);
+        self.nsum += n.mean_deg * n.both as f64;
+        self.nn += n.both;
+        self.np99 = self.np99.max(n.p99_deg);
+    }
+
+    /// `[depth mean, depth p99, normal mean °, normal p99 °]`.
+    fn summary(&self) -> [f64; 4] {
+        [self.dsum / self.dn as f64, self.dp99, self.nsum / self.nn as f64, self.np99]
+    }
+}
+
 /// Depth (voxels of the finest spacing: pooled mean, worst view's p99) and
 /// normal error (degrees: pooled mean, worst view's p99) of the reference
 /// against the analytic surface over the seven standard views at `size`².
@@ -176,21 +204,16 @@ fn reference_errors(phantom: Phantom, dims: [usize; 3], spacing: [f64; 3], recon
     let cls = Classifier::new(&TransferFunction::threshold(iso, [0.9, 0.8, 0.7]), lo, hi);
     let scene = Scene::new(Mode::Iso, &cls, iso, Shading::default());
     let opts = ReferenceOptions { reconstruction: recon, threads: 2, ..Default::default() };
-    let (mut dsum, mut dn, mut dp99, mut nsum, mut nn, mut np99) = (0.0, 0usize, 0f64, 0.0, 0usize, 0f64);
+    let mut errors = ViewErrors::default();
     for v in standard_views(NamedView::Anterior.rotation(), 0, 1) {
         let cam = Camera { rotation: v.rotation, zoom: None, size: [size, size] };
         let img = model.render(&scene, &cam, &opts).unwrap();
         let t = surface_truth(&a, vol.spacing(), &cam, &Projection::Parallel, iso as f64, opts.near).unwrap();
         let d = depth_error(&img.depth, &t.depth, unit).unwrap();
         let n = normal_error(&img.normal, &t.normal).unwrap();
-        dsum += d.mean * d.both as f64;
-        dn += d.both;
-        dp99 = dp99.max(d.p99);
-        nsum += n.mean_deg * n.both as f64;
-        nn += n.both;
-        np99 = np99.max(n.p99_deg);
+        errors.add(&d, &n);
     }
-    [dsum / dn as f64, dp99, nsum / nn as f64, np99]
+    errors.summary()
 }
 
 /// The reference's error on the thick-slice ball (1×1×3) and ellipsoid
@@ -389,7 +412,7 @@ fn binary_errors(phantom: Phantom, dims: [usize; 3], spacing: Option<[f64; 3]>, 
     let s = Settings { mode: Mode::Iso, reconstruction: recon, deluxe, threads: 2, ..Settings::default() };
     let mut r = Renderer::new(vol.clone(), &tf, s).unwrap();
     r.set_iso(iso).unwrap();
-    let (mut dsum, mut dn, mut dp99, mut nsum, mut nn, mut np99) = (0.0, 0usize, 0f64, 0.0, 0usize, 0f64);
+    let mut errors = ViewErrors::default();
     for v in standard_views(NamedView::Anterior.rotation(), 0, 1) {
         let cam = Camera { rotation: v.rotation, zoom: None, size: [size, size] };
         let mut img = Image::new(size, size);
@@ -397,14 +420,9 @@ fn binary_errors(phantom: Phantom, dims: [usize; 3], spacing: Option<[f64; 3]>, 
         let t = surface_truth(&a, vol.spacing(), &cam, &Projection::Parallel, iso as f64, 0.0).unwrap();
         let d = depth_error(&fast_path_depth(&r, &cam).unwrap(), &t.depth, unit).unwrap();
         let n = normal_error(&fast_path_normals(&r, &cam, &model).unwrap(), &t.normal).unwrap();
-        dsum += d.mean * d.both as f64;
-        dn += d.both;
-        dp99 = dp99.max(d.p99);
-        nsum += n.mean_deg * n.both as f64;
-        nn += n.both;
-        np99 = np99.max(n.p99_deg);
+        errors.add(&d, &n);
     }
-    [dsum / dn as f64, dp99, nsum / nn as f64, np99]
+    errors.summary()
 }
 
 /// The binary path's cubic on the ball, isotropic (64³) and at 1×1×3, over

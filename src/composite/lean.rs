@@ -80,7 +80,10 @@ pub struct LeanFrame {
 
 /// What a row of the lean frame reads, borrowed for one frame.
 struct Frame<'a, W: Word> {
+    /// The per-slice table, at least as long as a depth row has slots.
     slices: &'a [SliceEntry],
+    /// Slices of the stack.
+    nk: usize,
     words: &'a [W],
     m: &'a Matcher,
     table: &'a ShadeTable,
@@ -147,8 +150,9 @@ impl LeanFrame {
             && !plan.intermediate()
     }
 
-    /// The table of the frame of `ctx`.
-    fn fill(&mut self, ctx: &RayContext) {
+    /// The table of the frame of `ctx`, padded to `len` entries (the slots of
+    /// a depth row) with entries whose cell is outside every volume.
+    fn fill(&mut self, ctx: &RayContext, len: usize) {
         let n = ctx.stack.n;
         let (n0, n01) = (n[0] as isize, (n[0] * n[1]) as isize);
         let pad = ctx.pad;
@@ -157,9 +161,14 @@ impl LeanFrame {
             let (di, dj) = (s.floor[0] - pad, s.floor[1] - pad);
             SliceEntry { base: di as isize + n0 * dj as isize + n01 * k as isize, di, dj, wi: s.weight[0], wj: s.weight[1] }
         }));
+        // (a padding slot is never a candidate of a correct mask; were it one,
+        // its cell fails the in-volume test and its index every bounds check)
+        let outside = SliceEntry { base: isize::MIN / 2, di: i32::MIN / 2, dj: i32::MIN / 2, wi: 0.0, wj: 0.0 };
+        self.slices.resize(len.max(self.slices.len()), outside);
     }
 
-    /// The table of the last frame rendered.
+    /// The table of the last frame rendered (one entry per slice, then the
+    /// padding up to the slots of a depth row).
     pub fn slices(&self) -> &[SliceEntry] {
         &self.slices
     }
@@ -183,10 +192,13 @@ impl LeanFrame {
         );
         assert_eq!(m.width(), mask.code_width(), "a matcher of another code width");
         let Some(table) = ctx.table() else { return };
-        self.fill(ctx);
+        let slots = (W::BITS >> m.width().trailing_zeros()) as usize;
+        self.fill(ctx, mask.words_per_row() * slots);
         let n = ctx.stack.n;
+        assert!(self.slices.len() >= mask.words_per_row() * slots && ctx.maps.len() <= self.slices.len());
         let f = Frame {
             slices: &self.slices,
+            nk: ctx.maps.len(),
             words: mask.words(),
             m,
             table,
@@ -195,7 +207,7 @@ impl LeanFrame {
             cells: ctx.cell_counts(),
             n0: n[0],
             n01: n[0] * n[1],
-            slots: (W::BITS >> m.width().trailing_zeros()) as usize,
+            slots,
             log_nb: m.width().trailing_zeros(),
             prefetch,
         };
@@ -204,14 +216,19 @@ impl LeanFrame {
         // matching bit at slice k is a cell of the volume, so its visit needs
         // no in-volume test (the grid's margin is the mask's, module docs)
         let exact = mask.cell_size() == 1 && ctx.plan.grid.pad == Grid::parallel(ctx.stack.cells(), n[2]).pad;
+        let one = m.width() == 1;
         super::raycast::with_cells!(ctx, |v| {
             render_rows(rect, out, |out| {
                 let row = RowStart::new(mask, out.q, out.p0);
-                match (ctx.ascending, exact) {
-                    (true, true) => lean_row_at::<W, _, true, false>(&f, &v, avx2, row, out),
-                    (false, true) => lean_row_at::<W, _, false, false>(&f, &v, avx2, row, out),
-                    (true, false) => lean_row_at::<W, _, true, true>(&f, &v, avx2, row, out),
-                    (false, false) => lean_row_at::<W, _, false, true>(&f, &v, avx2, row, out),
+                match (ctx.ascending, exact, one) {
+                    (true, true, true) => lean_row_at::<W, _, true, false, true>(&f, &v, avx2, row, out),
+                    (false, true, true) => lean_row_at::<W, _, false, false, true>(&f, &v, avx2, row, out),
+                    (true, false, true) => lean_row_at::<W, _, true, true, true>(&f, &v, avx2, row, out),
+                    (false, false, true) => lean_row_at::<W, _, false, true, true>(&f, &v, avx2, row, out),
+                    (true, true, false) => lean_row_at::<W, _, true, false, false>(&f, &v, avx2, row, out),
+                    (false, true, false) => lean_row_at::<W, _, false, false, false>(&f, &v, avx2, row, out),
+                    (true, false, false) => lean_row_at::<W, _, true, true, false>(&f, &v, avx2, row, out),
+                    (false, false, false) => lean_row_at::<W, _, false, true, false>(&f, &v, avx2, row, out),
                 }
             })
         });
@@ -241,17 +258,17 @@ impl<W: Word> Frame<'_, W> {
     /// The walk of the depth row starting at word `start`, at its first
     /// matching slot (no slot left: no candidate).
     #[inline(always)]
-    fn first<const ASC: bool>(&self, start: usize, nw: usize) -> Walk<W> {
+    fn first<const ASC: bool, const ONE: bool>(&self, start: usize, nw: usize) -> Walk<W> {
         let (w, kbase) = if ASC { (start, 0) } else { (start + nw - 1, (nw - 1) * self.slots) };
-        let cur = self.m.hits(self.words[w]);
+        let cur = self.hits::<ONE>(self.words[w]);
         let mut walk = Walk { w, cur, kbase, left: nw - 1 };
-        self.settle::<ASC>(&mut walk);
+        self.settle::<ASC, ONE>(&mut walk);
         walk
     }
 
     /// Moves `walk` past words with no matching slot; false at the row's end.
     #[inline(always)]
-    fn settle<const ASC: bool>(&self, walk: &mut Walk<W>) -> bool {
+    fn settle<const ASC: bool, const ONE: bool>(&self, walk: &mut Walk<W>) -> bool {
         while walk.cur == W::ZERO {
             if walk.left == 0 {
                 return false;
@@ -264,22 +281,43 @@ impl<W: Word> Frame<'_, W> {
                 walk.w -= 1;
                 walk.kbase -= self.slots;
             }
-            walk.cur = self.m.hits(self.words[walk.w]);
+            walk.cur = self.hits::<ONE>(self.words[walk.w]);
         }
         true
     }
 
+    /// The matching slots of word `w` ([`Matcher::hits`]; `ONE`: the codes
+    /// are one bit wide, so every set bit matches).
+    #[inline(always)]
+    fn hits<const ONE: bool>(&self, w: W) -> W {
+        debug_assert!(!ONE || self.log_nb == 0);
+        if ONE { w } else { self.m.hits(w) }
+    }
+
+    /// The table entry of slice `k`, which must be a slot of a depth row
+    /// (every slice a walk takes is: `kbase` counts whole words before the
+    /// slot).
+    #[inline(always)]
+    fn slice(&self, k: usize) -> &SliceEntry {
+        debug_assert!(k < self.slices.len());
+        // SAFETY: `k` is a walk's slot, `kbase + (pos >> log_nb)` with `kbase`
+        // at most `(nw − 1)·slots` and `pos < W::BITS = slots << log_nb`, so
+        // `k < nw·slots`, and `render` asserted the table at least that long
+        // (`fill` pads it). Exercised by every lean frame (tests/it/lean_frame.rs).
+        unsafe { self.slices.get_unchecked(k) }
+    }
+
     /// The slice of the walk's next candidate (the walk must be settled).
     #[inline(always)]
-    fn peek<const ASC: bool>(&self, walk: &Walk<W>) -> usize {
+    fn peek<const ASC: bool, const ONE: bool>(&self, walk: &Walk<W>) -> usize {
         let pos = if ASC { walk.cur.lz() } else { W::BITS - 1 - walk.cur.tz() };
-        walk.kbase + (pos >> self.log_nb) as usize
+        walk.kbase + (pos >> if ONE { 0 } else { self.log_nb }) as usize
     }
 
     /// Takes the walk's next candidate (the walk must be settled).
     #[inline(always)]
-    fn take<const ASC: bool>(&self, walk: &mut Walk<W>) -> usize {
-        let k = self.peek::<ASC>(walk);
+    fn take<const ASC: bool, const ONE: bool>(&self, walk: &mut Walk<W>) -> usize {
+        let k = self.peek::<ASC, ONE>(walk);
         walk.cur = if ASC { walk.cur & !(W::MSB >> walk.cur.lz()) } else { walk.cur.clear_lowest() };
         k
     }
@@ -321,24 +359,24 @@ impl<W: Word> Frame<'_, W> {
     /// candidate whose sample reaches the iso value, refined and shaded; the
     /// pixel is left as it is (a miss) if there is none.
     #[inline(always)]
-    fn trace<V: Cells, const ASC: bool, const CHECKED: bool>(&self, v: &V, ray: LeanRay, mut pending: Pending<W>, px: Pixel) {
+    fn trace<V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(&self, v: &V, ray: LeanRay, mut pending: Pending<W>, px: Pixel) {
         let (mut k, mut b) = (pending.k, pending.b);
-        // the last sample below the iso value: its slice, stack index and density
-        let mut below = Visit { k: usize::MAX, b: 0, d: 0.0 };
+        // the last sample below the iso value: its slice and density
+        let mut below = Below { k: usize::MAX, d: 0.0 };
         loop {
             if !CHECKED || b != usize::MAX {
-                let e = &self.slices[k];
+                let e = self.slice(k);
                 let d = bilinear(v.densities(b), e.wi, e.wj);
                 if d >= self.iso {
                     return self.hit::<V, ASC>(v, ray, Visit { k, b, d }, below, px);
                 }
-                below = Visit { k, b, d };
+                below = Below { k, d };
             }
-            if !self.settle::<ASC>(&mut pending.walk) {
+            if !self.settle::<ASC, ONE>(&mut pending.walk) {
                 return;
             }
-            k = self.take::<ASC>(&mut pending.walk);
-            b = self.cell_at::<CHECKED>(&self.slices[k], ray);
+            k = self.take::<ASC, ONE>(&mut pending.walk);
+            b = self.cell_at::<CHECKED>(self.slice(k), ray);
         }
     }
 
@@ -349,14 +387,15 @@ impl<W: Word> Frame<'_, W> {
     /// slice before, its density is the one the refinement needs (the same
     /// cell, weights and arithmetic) and is not sampled again.
     #[inline(never)]
-    fn hit<V: Cells, const ASC: bool>(&self, v: &V, ray: LeanRay, at: Visit, below: Visit, px: Pixel) {
+    fn hit<V: Cells, const ASC: bool>(&self, v: &V, ray: LeanRay, at: Visit, below: Below, px: Pixel) {
         let (iso, Visit { k, b, d }) = (self.iso, at);
-        let e = &self.slices[k];
-        let kp = if ASC { k.checked_sub(1) } else { Some(k + 1).filter(|&kp| kp < self.slices.len()) };
+        let e = self.slice(k);
+        let kp = if ASC { k.checked_sub(1) } else { Some(k + 1).filter(|&kp| kp < self.nk) };
         let before = kp.and_then(|kp| {
             let ep = &self.slices[kp];
             let (bp, dp) = if below.k == kp {
-                (below.b, below.d)
+                // (a visited cell: inside the volume)
+                (ray.rb.wrapping_add_signed(ep.base), below.d)
             } else {
                 let bp = self.cell(ep, ray)?;
                 (bp, bilinear(v.densities(bp), ep.wi, ep.wj))
@@ -384,6 +423,13 @@ impl<W: Word> Frame<'_, W> {
 struct Visit {
     k: usize,
     b: usize,
+    d: f32,
+}
+
+/// A ray's last sample below the iso value: its slice and density.
+#[derive(Clone, Copy, Debug)]
+struct Below {
+    k: usize,
     d: f32,
 }
 
@@ -416,7 +462,7 @@ fn blend_pair(table: &ShadeTable, codes: [u16; 4], w: [f32; 2], codes_p: [u16; 4
 /// One row of the lean frame by the copy compiled for the CPU level (`avx2`:
 /// the mask's level, [`BinaryMask::cpu_level`], has AVX2).
 #[inline(always)]
-fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, avx2: bool, row: RowStart, out: RowOut) {
+fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(f: &Frame<W>, v: &V, avx2: bool, row: RowStart, out: RowOut) {
     #[cfg(target_arch = "x86_64")]
     if avx2 {
         // SAFETY: the mask's CPU level has AVX2; a mask's level is capped to
@@ -424,11 +470,11 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Fram
         // `is_x86_feature_detected!` found lzcnt and bmi1 on this CPU at run
         // time, all that `lean_row_lzcnt` requires; its body is the safe
         // `lean_row`.
-        unsafe { lean_row_lzcnt::<W, V, ASC, CHECKED>(f, v, row, out) };
+        unsafe { lean_row_lzcnt::<W, V, ASC, CHECKED, ONE>(f, v, row, out) };
         return;
     }
     let _ = avx2;
-    lean_row::<W, V, ASC, CHECKED>(f, v, row, out)
+    lean_row::<W, V, ASC, CHECKED, ONE>(f, v, row, out)
 }
 
 /// One row of the lean frame: the row cleared to misses, then in groups of
@@ -436,7 +482,7 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Fram
 /// then the traces of the rays that have one. A ray's base index is the row's
 /// plus its offset along the row.
 #[inline(always)]
-fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, mut row: RowStart, out: RowOut) {
+fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(f: &Frame<W>, v: &V, mut row: RowStart, out: RowOut) {
     let RowOut { q, p0, rgba: crow, depth: drow } = out;
     crow.fill(MISS.rgba);
     drow.fill(MISS.depth);
@@ -448,11 +494,11 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W
     for (g, (cg, dg)) in crow.chunks_mut(GROUP).zip(drow.chunks_mut(GROUP)).enumerate() {
         let pending = &mut pending[..cg.len()];
         for (dp, r) in pending.iter_mut().enumerate() {
-            let mut walk = f.first::<ASC>(row.start, row.nw);
+            let mut walk = f.first::<ASC, ONE>(row.start, row.nw);
             r.k = usize::MAX;
             if walk.cur != W::ZERO {
-                let k = f.take::<ASC>(&mut walk);
-                let b = f.cell_at::<CHECKED>(&f.slices[k], ray(g * GROUP + dp));
+                let k = f.take::<ASC, ONE>(&mut walk);
+                let b = f.cell_at::<CHECKED>(f.slice(k), ray(g * GROUP + dp));
                 if f.prefetch && b != usize::MAX {
                     f.prefetch_at::<V, ASC>(v, b, &mut last_line);
                 }
@@ -472,7 +518,7 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W
         }
         for (dp, ((rgba, depth), r)) in cg.iter_mut().zip(dg.iter_mut()).zip(pending.iter()).enumerate() {
             if r.k != usize::MAX {
-                f.trace::<V, ASC, CHECKED>(v, ray(g * GROUP + dp), *r, Pixel { rgba, depth });
+                f.trace::<V, ASC, CHECKED, ONE>(v, ray(g * GROUP + dp), *r, Pixel { rgba, depth });
             }
         }
     }
@@ -483,6 +529,7 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W
 /// [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "lzcnt,bmi1")]
-unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool>(f: &Frame<W>, v: &V, row: RowStart, out: RowOut) {
-    lean_row::<W, V, ASC, CHECKED>(f, v, row, out)
+unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(f: &Frame<W>, v: &V, row: RowStart, out: RowOut) {
+    lean_row::<W, V, ASC, CHECKED, ONE>(f, v, row, out)
 }
+

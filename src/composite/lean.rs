@@ -391,19 +391,28 @@ impl<W: Word> Frame<'_, W> {
         let (iso, Visit { k, b, d }) = (self.iso, at);
         let e = self.slice(k);
         let kp = if ASC { k.checked_sub(1) } else { Some(k + 1).filter(|&kp| kp < self.nk) };
-        let before = kp.and_then(|kp| {
+        // the slice before in walking order, when its sample is below iso:
+        // its slice, the refinement's fraction, its cell and its entry
+        let mut before = None;
+        if let Some(kp) = kp {
             let ep = &self.slices[kp];
-            let (bp, dp) = if below.k == kp {
+            let prev = if below.k == kp {
                 // (a visited cell: inside the volume)
-                (ray.rb.wrapping_add_signed(ep.base), below.d)
+                Some((ray.rb.wrapping_add_signed(ep.base), below.d))
             } else {
-                let bp = self.cell(ep, ray)?;
-                (bp, bilinear(v.densities(bp), ep.wi, ep.wj))
+                self.cell(ep, ray).map(|bp| (bp, bilinear(v.densities(bp), ep.wi, ep.wj)))
             };
-            (dp < iso).then(|| (kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), bp, ep))
-        });
+            if let Some((bp, dp)) = prev
+                && dp < iso
+            {
+                before = Some((kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), bp, ep));
+            }
+        }
         // (slice indices are below 2^24: exact as f32 through u32, as through usize)
-        let depth = before.map_or(k as u32 as f32, |(kp, t, _, _)| kp as u32 as f32 + (k as u32 as f32 - kp as u32 as f32) * t);
+        let depth = match before {
+            None => k as u32 as f32,
+            Some((kp, t, _, _)) => kp as u32 as f32 + (k as u32 as f32 - kp as u32 as f32) * t,
+        };
         let s = match before {
             None => self.table.blend(v.codes(b), e.wi, e.wj),
             Some((_, t, bp, ep)) => {
@@ -468,8 +477,8 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ON
         // SAFETY: the mask's CPU level has AVX2; a mask's level is capped to
         // at most `kernels::detected()`, which is `Avx2` only when
         // `is_x86_feature_detected!` found lzcnt and bmi1 on this CPU at run
-        // time, all that `lean_row_lzcnt` requires; its body is the safe
-        // `lean_row`.
+        // time (with avx2), all that `lean_row_lzcnt` requires; its body is
+        // the safe `lean_row`.
         unsafe { lean_row_lzcnt::<W, V, ASC, CHECKED, ONE>(f, v, row, out) };
         return;
     }
@@ -524,11 +533,13 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: 
     }
 }
 
-/// [`lean_row`] compiled with `lzcnt`/`tzcnt` (single instructions for the
-/// bit scans). Callers must hold a CPU level with AVX2 that is at most
-/// [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
+/// [`lean_row`] compiled for AVX2 with `lzcnt`/`tzcnt` (single
+/// instructions for the bit scans; three-operand vector forms). Callers must
+/// hold a CPU level with AVX2 that is at most [`crate::kernels::detected`]
+/// (that level implies avx2, lzcnt and bmi1). No fused multiply-add is
+/// enabled, so every float operation rounds as in [`lean_row`].
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "lzcnt,bmi1")]
+#[target_feature(enable = "avx2,lzcnt,bmi1")]
 unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(f: &Frame<W>, v: &V, row: RowStart, out: RowOut) {
     lean_row::<W, V, ASC, CHECKED, ONE>(f, v, row, out)
 }

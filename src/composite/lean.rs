@@ -477,8 +477,8 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ON
         // SAFETY: the mask's CPU level has AVX2; a mask's level is capped to
         // at most `kernels::detected()`, which is `Avx2` only when
         // `is_x86_feature_detected!` found lzcnt and bmi1 on this CPU at run
-        // time (with avx2), all that `lean_row_lzcnt` requires; its body is
-        // the safe `lean_row`.
+        // time, all that `lean_row_lzcnt` requires; its body is the safe
+        // `lean_row`.
         unsafe { lean_row_lzcnt::<W, V, ASC, CHECKED, ONE>(f, v, row, out) };
         return;
     }
@@ -533,13 +533,11 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: 
     }
 }
 
-/// [`lean_row`] compiled for AVX2 with `lzcnt`/`tzcnt` (single
-/// instructions for the bit scans; three-operand vector forms). Callers must
-/// hold a CPU level with AVX2 that is at most [`crate::kernels::detected`]
-/// (that level implies avx2, lzcnt and bmi1). No fused multiply-add is
-/// enabled, so every float operation rounds as in [`lean_row`].
+/// [`lean_row`] compiled with `lzcnt`/`tzcnt` (single instructions for the
+/// bit scans). Callers must hold a CPU level with AVX2 that is at most
+/// [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,lzcnt,bmi1")]
+#[target_feature(enable = "lzcnt,bmi1")]
 unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(f: &Frame<W>, v: &V, row: RowStart, out: RowOut) {
     lean_row::<W, V, ASC, CHECKED, ONE>(f, v, row, out)
 }

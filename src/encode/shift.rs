@@ -18,17 +18,33 @@ use crate::encode::depth::{Word, slot_mask};
 #[inline(always)]
 pub(crate) fn shift_columns_n<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, up: &[W], down: &[W], keep: &[W]) {
     let (up, down, keep): (&[W; N], &[W; N], &[W; N]) = (fixed(up), fixed(down), fixed(keep));
-    let gw = row.len() / N;
-    let mut prev = if ps > 0 { *fixed::<W, N>(&row[(ps - 1) * N..]) } else { [W::ZERO; N] };
-    let mut old = *fixed::<W, N>(&row[ps * N..]);
-    for p in ps..=pe {
-        let next = if p + 1 < gw { *fixed::<W, N>(&row[(p + 1) * N..]) } else { [W::ZERO; N] };
-        let out: &mut [W; N] = (&mut row[p * N..p * N + N]).try_into().expect("N words");
-        for w in 0..N {
-            out[w] = (old[w] & keep[w]) | (prev[w] & up[w]) | (next[w] & down[w]);
-        }
+    let (cols, _) = row.as_chunks_mut::<N>();
+    let gw = cols.len();
+    let mix = |prev: &[W; N], old: &[W; N], next: &[W; N]| -> [W; N] {
+        std::array::from_fn(|w| (old[w] & keep[w]) | (prev[w] & up[w]) | (next[w] & down[w]))
+    };
+    let mut prev = if ps > 0 { cols[ps - 1] } else { [W::ZERO; N] };
+    let mut old = cols[ps];
+    let mut p = ps;
+    // four columns a block while the block's last read (p + 4) is in the
+    // row: the window lives in named values, so no copies between columns,
+    // and one test bounds the block's reads and writes
+    while p + 3 <= pe && p + 4 < gw {
+        let c = &mut cols[p..p + 5];
+        let (n1, n2, n3, n4) = (c[1], c[2], c[3], c[4]);
+        c[0] = mix(&prev, &old, &n1);
+        c[1] = mix(&old, &n1, &n2);
+        c[2] = mix(&n1, &n2, &n3);
+        c[3] = mix(&n2, &n3, &n4);
+        (prev, old) = (n3, n4);
+        p += 4;
+    }
+    while p <= pe {
+        let next = if p + 1 < gw { cols[p + 1] } else { [W::ZERO; N] };
+        cols[p] = mix(&prev, &old, &next);
         prev = old;
         old = next;
+        p += 1;
     }
 }
 
@@ -91,16 +107,37 @@ pub(crate) fn shift_row_n<W: Word, const N: usize>(row: &mut [W], next: &[W], pr
 /// columns around `p` ride in a window, so a column is written after it is read.
 #[inline(always)]
 pub(crate) fn shift_columns2_n<W: Word, const N: usize>(row: &mut [W], ps: usize, pe: usize, m: [&[W; N]; 5]) {
-    let gw = row.len() / N;
-    let col = |row: &[W], p: usize| if p < gw { *fixed::<W, N>(&row[p * N..]) } else { [W::ZERO; N] };
+    let (cols, _) = row.as_chunks_mut::<N>();
+    let gw = cols.len();
+    let col = |cols: &[[W; N]], p: usize| if p < gw { cols[p] } else { [W::ZERO; N] };
+    let mix = |a: &[W; N], b: &[W; N], c: &[W; N], d: &[W; N], e: &[W; N]| -> [W; N] {
+        std::array::from_fn(|w| (a[w] & m[0][w]) | (b[w] & m[1][w]) | (c[w] & m[2][w]) | (d[w] & m[3][w]) | (e[w] & m[4][w]))
+    };
     // ps − 2 and ps − 1 wrap to huge indices (read as zero) at the grid's edge
-    let mut win = [col(row, ps.wrapping_sub(2)), col(row, ps.wrapping_sub(1)), col(row, ps), col(row, ps + 1), col(row, ps + 2)];
-    for p in ps..=pe {
-        let out: &mut [W; N] = (&mut row[p * N..p * N + N]).try_into().expect("N words");
-        for w in 0..N {
-            out[w] = (win[0][w] & m[0][w]) | (win[1][w] & m[1][w]) | (win[2][w] & m[2][w]) | (win[3][w] & m[3][w]) | (win[4][w] & m[4][w]);
-        }
-        win = [win[1], win[2], win[3], win[4], col(row, p + 3)];
+    let (mut a, mut b, mut c, mut d, mut e) = (col(cols, ps.wrapping_sub(2)), col(cols, ps.wrapping_sub(1)), col(cols, ps), col(cols, ps + 1), col(cols, ps + 2));
+    let mut p = ps;
+    // four columns a block while the block's last read (p + 6) is in the
+    // row: the window lives in named values (no copies between columns), a
+    // column is read (three ahead) before it is written, and one test bounds
+    // the block
+    while p + 3 <= pe && p + 6 < gw {
+        let s = &mut cols[p..p + 7];
+        let f = s[3];
+        s[0] = mix(&a, &b, &c, &d, &e);
+        let g = s[4];
+        s[1] = mix(&b, &c, &d, &e, &f);
+        let h = s[5];
+        s[2] = mix(&c, &d, &e, &f, &g);
+        let i = s[6];
+        s[3] = mix(&d, &e, &f, &g, &h);
+        (a, b, c, d, e) = (e, f, g, h, i);
+        p += 4;
+    }
+    while p <= pe {
+        let f = col(cols, p + 3);
+        cols[p] = mix(&a, &b, &c, &d, &e);
+        (a, b, c, d, e) = (b, c, d, e, f);
+        p += 1;
     }
 }
 

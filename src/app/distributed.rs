@@ -1,6 +1,6 @@
 //! `--distributed`: one volume split over MPI ranks (feature `mpi`), rendered
 //! sort-last with [`shearwarp::bricks`], launched as
-//! `mpirun -np N shearwarp render|rotate … --distributed`.
+//! `mpirun -np N shearwarp render|rotate|bench … --distributed`.
 //!
 //! - **Bricks.** Rank `r` owns brick `r` of the k-d split of the volume into
 //!   `N` bricks ([`shearwarp::bricks::split`]) and holds it with its ghost
@@ -19,6 +19,10 @@
 //!   sends the rectangle it covers to rank 0 (direct send to one
 //!   compositor), which composites them front to back in the view's brick
 //!   order, warps once and writes the output.
+//! - **`bench`.** The binary and RLE variants of the benchmark's parallel
+//!   matrix, each over the benchmark's views and rounds: rank 0's frame
+//!   time and every rank's render, compositing and bytes a frame; the
+//!   variants a distributed frame does not run are listed as skipped.
 //! - **Faults.** After every step that can fail, the ranks agree: each
 //!   sends rank 0 its error (if any); rank 0 prints the first with its rank
 //!   and aborts the whole job (`MPI_Abort`), so no rank hangs and nothing
@@ -30,14 +34,17 @@ use anyhow::{Context, Result, anyhow};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
 use shearwarp::bricks::{Brick, Compositor, Partial, Tree, split};
+use shearwarp::composite::Mode;
 use shearwarp::data::io;
+use shearwarp::data::orientation::PatientFrame;
 use shearwarp::data::stats::ValueStats;
 use shearwarp::data::volume::{Volume, VoxelData};
-use shearwarp::render::Renderer;
-use shearwarp::view::{Camera, one_bit_step_deg, rotate_eye};
+use shearwarp::render::{Method, Renderer, Settings};
+use shearwarp::view::{Camera, NamedView, one_bit_step_deg, rotate_eye, standard_views};
 use shearwarp::warp::Image;
 
 use crate::app::args::{RenderArgs, VolumeArgs};
+use crate::app::bench::{BenchCmd, Variant, variants_of};
 use crate::app::{RenderJob, RotateJob};
 
 /// The MPI world and what this rank sent and received.
@@ -267,7 +274,14 @@ fn seekable(v: &VolumeArgs) -> Result<Option<(std::path::PathBuf, io::RawSpec)>>
 impl Node {
     /// MPI up, the volume split, this rank's brick read, the statistics
     /// agreed and the renderer made: every step agreed by every rank.
-    fn new(universe: &mpi::environment::Universe, v: &VolumeArgs, ra: &RenderArgs) -> Node {
+    /// `camera` makes rank 0's camera from the volume's patient frame (when
+    /// it has one), `renderer` each rank's renderer of its brick.
+    fn new(
+        universe: &mpi::environment::Universe,
+        v: &VolumeArgs,
+        camera: impl FnOnce(Option<&PatientFrame>) -> Result<Camera>,
+        renderer: impl FnOnce(Volume) -> Result<Renderer>,
+    ) -> Node {
         let world = universe.world();
         let (rank, n) = (world.rank() as usize, world.size() as usize);
         let mut comm = Comm { world, rank, n, sent: 0, received: 0 };
@@ -304,7 +318,7 @@ impl Node {
             (None, Some((p, _))) => p.display().to_string(),
             _ => String::new(),
         };
-        let camera = if rank == 0 { Some(ra.camera(whole.as_ref().and_then(|(v, _)| v.frame()))) } else { None };
+        let camera = if rank == 0 { Some(camera(whole.as_ref().and_then(|(v, _)| v.frame()))) } else { None };
         let camera = comm.agree(camera.transpose());
         // this rank's brick: read by seeking, or scattered by rank 0
         let brick: Result<Volume> = match (&spec, whole) {
@@ -375,11 +389,7 @@ impl Node {
             stats = stats.with_histogram(range[0], range[1], h);
         }
         let brick = brick.with_stats(stats);
-        let renderer = ra.renderer_and_scene(brick).map(|(mut r, _)| {
-            r.set_memory_budget(crate::app::budget());
-            r
-        });
-        let renderer = comm.agree(renderer);
+        let renderer = comm.agree(renderer(brick));
         Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms, compositor: None }
     }
 
@@ -473,6 +483,17 @@ struct FrameRecord {
     covered: u64,
 }
 
+/// The node of `render` and `rotate`: the camera and renderer of the render arguments.
+fn node_of(universe: &mpi::environment::Universe, v: &VolumeArgs, ra: &RenderArgs) -> Node {
+    let renderer = |brick| {
+        ra.renderer_and_scene(brick).map(|(mut r, _)| {
+            r.set_memory_budget(crate::app::budget());
+            r
+        })
+    };
+    Node::new(universe, v, |frame| ra.camera(frame), renderer)
+}
+
 fn init() -> Result<mpi::environment::Universe> {
     mpi::initialize().ok_or_else(|| anyhow!("MPI is already initialized"))
 }
@@ -496,7 +517,7 @@ pub fn render(cmd: &RenderJob) -> Result<()> {
         Err(why) => usage!("-o {why}"),
     };
     let universe = init()?;
-    let mut node = Node::new(&universe, cmd.volume, cmd.render);
+    let mut node = node_of(&universe, cmd.volume, cmd.render);
     let cam = node.camera.unwrap_or(Camera::new(glam::DMat3::IDENTITY, [1, 1]));
     let tissue = node.renderer.tissues().map(|(_, c)| c);
     let mut img = Image::new(cam.size[0], cam.size[1]);
@@ -549,7 +570,7 @@ pub fn rotate(cmd: &RotateJob) -> Result<()> {
         usage!("--degrees must be a positive number, got {}", cmd.degrees);
     }
     let universe = init()?;
-    let mut node = Node::new(&universe, cmd.volume, cmd.render);
+    let mut node = node_of(&universe, cmd.volume, cmd.render);
     let step = match cmd.step_deg {
         "auto" => one_bit_step_deg(node.dims) * cmd.render.cell as f64,
         s => match s.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0) {
@@ -627,4 +648,199 @@ pub fn rotate(cmd: &RotateJob) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Why a distributed frame does not run `v` (`None`: it does): the binary
+/// and RLE paths, parallel, on the cartesian grid at quality 1, linear
+/// reconstruction and no Deluxe option.
+fn unsupported(v: &Variant) -> Option<&'static str> {
+    let s = &v.settings;
+    if !matches!(s.method, Method::Binary | Method::Rle) {
+        Some("a distributed frame renders the binary and RLE paths only")
+    } else if v.projection.is_perspective() {
+        Some("a distributed frame renders parallel projections only")
+    } else if v.quality != 1.0 {
+        Some("a distributed frame renders at quality 1 only")
+    } else if s.lattice != shearwarp::Lattice::Cartesian {
+        Some("a distributed frame renders the cartesian grid only")
+    } else if s.reconstruction != shearwarp::kernels::Reconstruction::Linear {
+        Some("a distributed frame reconstructs linearly only")
+    } else if !s.deluxe.is_standard() || s.rle_reuse {
+        Some("a distributed frame takes no Deluxe option or encoding reuse")
+    } else {
+        None
+    }
+}
+
+/// One variant's frames: rank 0's wall time of each and every rank's records.
+struct Run {
+    mode: Mode,
+    name: String,
+    wall: Vec<f64>,
+    records: Vec<FrameRecord>,
+}
+
+/// `shearwarp bench --distributed`: the frame time of every binary and RLE
+/// variant of the matrix over the benchmark's views, each frame rendered by
+/// every rank and composited on rank 0; the other variants are listed as
+/// skipped. Rank 0 prints the table (or `--json`) and writes `--json-out`.
+pub fn bench(cmd: &BenchCmd) -> Result<()> {
+    if cmd.suite.is_some() {
+        usage!("--distributed times one volume; --suite is not available with it");
+    }
+    if !cmd.peers.is_empty() {
+        usage!("--distributed does not run --peers");
+    }
+    if cmd.csv.is_some() || !cmd.plot.is_empty() {
+        usage!("--distributed measures frame times only: --csv and --plot are not available with it (use --json or --json-out)");
+    }
+    if !cmd.perspective.is_empty() || cmd.perspective_matrix {
+        usage!("--distributed renders parallel projections only (drop --perspective and --perspective-matrix)");
+    }
+    cmd.check()?;
+    shearwarp::render::checks::check_threads(cmd.threads)?;
+    let mut modes = cmd.modes.clone();
+    modes.dedup();
+    let mut runs: Vec<(Mode, Vec<Variant>)> = vec![];
+    let mut skipped = vec![];
+    for &mode in &modes {
+        let (ok, not): (Vec<Variant>, Vec<Variant>) = variants_of(cmd, mode).into_iter().partition(|v| unsupported(v).is_none());
+        for v in &not {
+            skipped.push(serde_json::json!({"mode": mode.name(), "variant": v.name, "reason": unsupported(v)}));
+        }
+        if !ok.is_empty() {
+            runs.push((mode, ok));
+        }
+    }
+    let Some(&(first_mode, _)) = runs.first() else {
+        usage!("--distributed: --only {:?} matches no binary or RLE variant of the parallel matrix", cmd.only);
+    };
+    let universe = init()?;
+    let size = [cmd.size, cmd.size];
+    let mut node = Node::new(
+        &universe,
+        &cmd.volume,
+        |_| Ok(Camera::new(glam::DMat3::IDENTITY, size)),
+        |b| cmd.renderer(b, first_mode).map(|(r, _)| r),
+    );
+    let views = standard_views(NamedView::Anterior.rotation(), cmd.random_views, cmd.seed);
+    let mut img = Image::new(cmd.size, cmd.size);
+    let mut done: Vec<Run> = vec![];
+    let mut classification = vec![];
+    for (mode, variants) in &runs {
+        if *mode != first_mode {
+            // this mode's renderer of the same brick (as the bench makes one a mode)
+            let r = node.renderer.volume().map(|v| v.into_owned()).map_err(anyhow::Error::from);
+            let r = r.and_then(|v| cmd.renderer(v, *mode).map(|(r, _)| r));
+            node.renderer = node.comm.agree(r);
+        }
+        classification.push(
+            serde_json::json!({"mode": mode.name(), "classification": node.renderer.classification_name(), "iso": node.renderer.iso()}),
+        );
+        let tissue = node.renderer.tissues().map(|(_, c)| c);
+        let first = done.len();
+        done.extend(variants.iter().map(|v| Run { mode: *mode, name: v.name.clone(), wall: vec![], records: vec![] }));
+        // rounds over the whole matrix of the mode: a change in load biases no variant
+        for _ in 0..cmd.rounds {
+            for (i, v) in variants.iter().enumerate() {
+                let set = node.renderer.set_settings(Settings { threads: cmd.threads, ..v.settings });
+                node.comm.agree(set.map_err(anyhow::Error::from));
+                for view in &views {
+                    let cam = Some(Camera { rotation: view.rotation, zoom: None, size }).filter(|_| node.comm.rank == 0);
+                    for _ in 0..cmd.warmup {
+                        node.frame(cam, tissue, &mut img);
+                    }
+                    for _ in 0..cmd.reps {
+                        let t = Instant::now();
+                        let rec = node.frame(cam, tissue, &mut img);
+                        done[first + i].wall.push(t.elapsed().as_secs_f64() * 1e3);
+                        done[first + i].records.push(rec);
+                    }
+                }
+            }
+        }
+    }
+    let mut rows = vec![];
+    for run in &done {
+        let ranks = node.ranks_json(&run.records);
+        if let Some(ranks) = ranks {
+            let mut w = run.wall.clone();
+            let median = crate::app::median(&mut w).unwrap_or(f64::NAN);
+            rows.push(serde_json::json!({
+                "mode": run.mode.name(), "variant": run.name, "frames": run.wall.len(), "frame_ms_median": median,
+                "frames_per_second": 1e3 / median, "per_rank": ranks,
+            }));
+        }
+    }
+    if node.comm.rank != 0 {
+        return Ok(());
+    }
+    let j = serde_json::json!({
+        "volume": node.name, "dims": node.dims, "spacing": node.spacing, "ranks": node.comm.n, "size": cmd.size,
+        "threads": if cmd.threads == 0 { rayon::current_num_threads() } else { cmd.threads },
+        "cpu": shearwarp::kernels::level().name(), "reps": cmd.reps, "rounds": cmd.rounds, "warmup": cmd.warmup,
+        "views": views.iter().map(|v| v.name.clone()).collect::<Vec<_>>(), "classification": classification,
+        "records": rows, "skipped": skipped,
+    });
+    if let Some(p) = &cmd.json_out {
+        crate::app::output::write_text(p, &serde_json::to_string_pretty(&j)?)?;
+    }
+    if cmd.json {
+        crate::app::output::print_text(&(serde_json::to_string_pretty(&j)? + "\n"))?;
+    } else {
+        crate::app::output::print_text(&bench_markdown(&j))?;
+    }
+    Ok(())
+}
+
+/// The distributed bench's table: a row per variant, rank 0's median frame
+/// and the slowest rank's render, the bytes rank 0 received a frame.
+fn bench_markdown(j: &serde_json::Value) -> String {
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let d = &j["dims"];
+    let mut s = format!(
+        "## {} ({}×{}×{}) on {} ranks, {}×{} pixels, {} views\n\n\
+         | mode | variant | frame ms | frames/s | slowest rank render ms | rank 0 composite ms | rank 0 received a frame |\n\
+         |---|---|---:|---:|---:|---:|---:|\n",
+        j["volume"].as_str().unwrap_or(""),
+        d[0],
+        d[1],
+        d[2],
+        j["ranks"],
+        j["size"],
+        j["size"],
+        j["views"].as_array().map_or(0, Vec::len)
+    );
+    for r in j["records"].as_array().into_iter().flatten() {
+        let ranks = r["per_rank"].as_array().cloned().unwrap_or_default();
+        let slowest = ranks.iter().map(|x| f(&x["render_ms"])).fold(0.0, f64::max);
+        let r0 = ranks.first().cloned().unwrap_or_default();
+        s += &format!(
+            "| {} | {} | {:.2} | {:.1} | {:.2} | {:.2} | {} |\n",
+            r["mode"].as_str().unwrap_or(""),
+            r["variant"].as_str().unwrap_or(""),
+            f(&r["frame_ms_median"]),
+            f(&r["frames_per_second"]),
+            slowest,
+            f(&r0["composite_ms"]),
+            shearwarp::fmt::fmt_bytes(f(&r0["received_bytes_per_frame"]) as u64)
+        );
+    }
+    // the skipped variants, a line per reason
+    let mut why: Vec<(&str, Vec<String>)> = vec![];
+    for x in j["skipped"].as_array().into_iter().flatten() {
+        let (r, name) =
+            (x["reason"].as_str().unwrap_or(""), format!("{} {}", x["mode"].as_str().unwrap_or(""), x["variant"].as_str().unwrap_or("")));
+        match why.iter_mut().find(|(w, _)| *w == r) {
+            Some((_, names)) => names.push(name),
+            None => why.push((r, vec![name])),
+        }
+    }
+    if !why.is_empty() {
+        s += "\nSkipped:\n";
+        for (r, names) in &why {
+            s += &format!("- {r}: {}\n", names.join(", "));
+        }
+    }
+    s
 }

@@ -75,6 +75,10 @@ pub mod distributed {
     pub fn rotate(_: &crate::app::RotateJob) -> Result<()> {
         unavailable()
     }
+
+    pub fn bench(_: &crate::app::bench::BenchCmd) -> Result<()> {
+        unavailable()
+    }
 }
 
 pub mod args;

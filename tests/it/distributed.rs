@@ -140,3 +140,60 @@ fn a_rank_that_cannot_read_its_brick_ends_the_job_with_one_error() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("memory budget"), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(!out.exists(), "an output was written");
 }
+
+#[test]
+fn bench_times_the_binary_and_rle_variants_on_every_rank() {
+    let dir = tempfile::tempdir().unwrap();
+    let raw = raw_volume(dir.path(), [36, 40, 33], 7);
+    let json = dir.path().join("bench.json");
+    let args = [
+        "bench",
+        raw.to_str().unwrap(),
+        "--only",
+        "binary-c1-u64-bitscan,rle,binary-c1-u64-bitscan-q2",
+        "--size",
+        "64",
+        "--reps",
+        "2",
+        "--rounds",
+        "1",
+        "--random-views",
+        "0",
+        "--quiet",
+        "--json",
+        "--json-out",
+        json.to_str().unwrap(),
+    ];
+    let o = mpirun(3, &args);
+    ok(&o, "3 ranks");
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON report");
+    assert_eq!(j, serde_json::from_slice::<serde_json::Value>(&std::fs::read(&json).unwrap()).unwrap(), "--json-out differs");
+    assert_eq!(j["ranks"], 3);
+    let views = j["views"].as_array().unwrap().len();
+    let rows = j["records"].as_array().unwrap();
+    let names: Vec<String> = rows.iter().map(|r| format!("{} {}", r["mode"].as_str().unwrap(), r["variant"].as_str().unwrap())).collect();
+    assert_eq!(names, ["iso binary-c1-u64-bitscan", "iso rle", "blend binary-c1-u64-bitscan", "blend rle"]);
+    for r in rows {
+        assert_eq!(r["frames"], 2 * views);
+        assert!(r["frame_ms_median"].as_f64().unwrap() > 0.0, "{r}");
+        let ranks = r["per_rank"].as_array().unwrap();
+        assert_eq!(ranks.len(), 3);
+        for (i, x) in ranks.iter().enumerate() {
+            assert_eq!(x["rank"], i);
+            let key = if i == 0 { "received_bytes_per_frame" } else { "sent_bytes_per_frame" };
+            assert!(x[key].as_f64().unwrap() > 16.0 && x["peak_rss_bytes"].as_u64().unwrap() > 0, "rank {i}: {x}");
+        }
+    }
+    // the variants a distributed frame does not run are named, with the reason
+    let skipped = j["skipped"].as_array().unwrap();
+    assert_eq!(skipped.len(), 2, "{skipped:?}");
+    assert!(skipped.iter().all(|s| s["variant"] == "binary-c1-u64-bitscan-q2" && s["reason"].as_str().unwrap().contains("quality 1")));
+    // the table names them too; a selection of none of them is refused before any rank reads
+    let o = mpirun(2, &args[..args.len() - 3]);
+    ok(&o, "2 ranks, the table");
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert!(table.contains("| blend | rle |") && table.contains("binary-c1-u64-bitscan-q2"), "{table}");
+    let o = mpirun(2, &["bench", raw.to_str().unwrap(), "--only", "brute", "--quiet"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no binary or RLE variant"), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -4,11 +4,15 @@
 //!
 //! - **Bricks.** Rank `r` owns brick `r` of the k-d split of the volume into
 //!   `N` bricks ([`shearwarp::bricks::split`]) and holds it with its ghost
-//!   voxels, nothing else. A raw or `.den` file is read brick by brick, each
-//!   rank seeking to its own rows ([`shearwarp::data::io::read_box`]); any
-//!   other input (NRRD, NIfTI, DICOM, a compressed file, a phantom) is read
-//!   whole by rank 0, which sends each rank its brick and then lets go of
-//!   the volume: rank 0 holds the whole volume while it scatters.
+//!   voxels, nothing else. A raw or `.den` file or an NRRD with raw
+//!   encoding (attached, or a detached header and its data file) is read
+//!   brick by brick, each rank seeking to its own rows
+//!   ([`shearwarp::data::io::read_box`], with the loader's own header
+//!   parse); any other input (a gzip NRRD, NIfTI, DICOM, a phantom, or any
+//!   file under `--orientation`) is read whole by rank 0, which sends each
+//!   rank its brick and then lets go of the volume: rank 0 holds the whole
+//!   volume while it scatters. `--json` says which (`read`: `seek` or
+//!   `scatter`).
 //! - **Classification.** Every rank computes the value statistics of its
 //!   owned voxels; rank 0 merges them and broadcasts the whole volume's, so
 //!   every brick is classified as one renderer classifies the whole volume
@@ -141,6 +145,9 @@ struct Node {
     camera: Option<Camera>,
     /// Milliseconds to read this rank's brick (and, on rank 0, to scatter).
     load_ms: f64,
+    /// How the brick came: `"seek"` (this rank read it from the file) or
+    /// `"scatter"` (rank 0 read the whole volume and sent it).
+    read: &'static str,
     /// Rank 0: the whole volume's frame, kept from frame to frame.
     compositor: Option<Compositor>,
 }
@@ -210,39 +217,11 @@ fn peak_rss() -> Option<u64> {
     Some(kb * 1024)
 }
 
-/// How the volume reaches the ranks, as rank 0 decided: each rank reads its
-/// own brick of a file laid out as the spec says, or rank 0 scatters.
-fn layout_bytes(spec: Option<&io::RawSpec>) -> Vec<u8> {
-    let Some(s) = spec else { return vec![0] };
-    let mut b = vec![1];
-    s.dims.iter().for_each(|d| b.extend((*d as u64).to_le_bytes()));
-    s.spacing.iter().for_each(|x| b.extend(x.to_le_bytes()));
-    b.extend(s.header_bytes.to_le_bytes());
-    b.push(s.big_endian as u8);
-    b.push(s.voxel_type.size() as u8);
-    b.extend(format!("{:?}", s.voxel_type).bytes());
-    b
-}
-
-fn layout_from_bytes(b: &[u8]) -> Option<io::RawSpec> {
-    if b.first() != Some(&1) {
-        return None;
-    }
-    let u = |at: usize| u64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"));
-    let f = |at: usize| f32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"));
-    let dims = [u(1) as usize, u(9) as usize, u(17) as usize];
-    let spacing = [f(25), f(29), f(33)];
-    let header_bytes = u(37);
-    let big_endian = b[45] == 1;
-    let name = String::from_utf8_lossy(&b[47..]).to_ascii_lowercase();
-    let voxel_type = shearwarp::VoxelType::parse(&name).ok()?;
-    Some(io::RawSpec { dims, voxel_type, big_endian, spacing, header_bytes })
-}
-
-/// What a rank decides about the input before reading: the seekable layout
-/// of a raw or `.den` file (without `--orientation`, which may reverse voxels
-/// as it loads), else `None` (rank 0 reads the whole volume).
-fn seekable(v: &VolumeArgs) -> Result<Option<(std::path::PathBuf, io::RawSpec)>> {
+/// What every rank finds of the input before reading: the seekable layout
+/// of a raw, `.den` or uncompressed NRRD file (without `--orientation`,
+/// which may reverse voxels as it loads), else `None` (rank 0 reads the
+/// whole volume).
+fn seekable(v: &VolumeArgs) -> Result<Option<io::Layout>> {
     let (path, format) = match (&v.file, &v.raw, &v.den) {
         (Some(p), _, _) => (p, v.format),
         (_, Some(p), _) => (p, Some(io::Format::Raw)),
@@ -262,12 +241,12 @@ fn seekable(v: &VolumeArgs) -> Result<Option<(std::path::PathBuf, io::RawSpec)>>
         (None, None) => None,
         _ => return Err(anyhow!(crate::app::Usage("raw files need both --dims X,Y,Z and --type (or a JSON sidecar)".into()))),
     };
-    let spec = io::seekable_layout(path, &io::LoadOptions { format, raw })?;
-    Ok(spec.map(|mut s| {
+    let layout = io::seekable_layout(path, &io::LoadOptions { format, raw })?;
+    Ok(layout.map(|mut s| {
         if let Some(sp) = v.spacing {
             s.spacing = sp;
         }
-        (path.clone(), s)
+        s
     }))
 }
 
@@ -287,11 +266,8 @@ impl Node {
         let mut comm = Comm { world, rank, n, sent: 0, received: 0 };
         crate::app::set_budget(v.max_memory);
         let t = Instant::now();
-        // rank 0 decides how the volume comes
-        let decided = if rank == 0 { seekable(v) } else { Ok(None) };
-        let decided = comm.agree(decided);
-        let layout = comm.bcast((rank == 0).then(|| layout_bytes(decided.as_ref().map(|d| &d.1))));
-        let spec = layout_from_bytes(&layout);
+        // how the volume comes: every rank reads the file's header (rank 0's error first)
+        let spec = comm.agree(seekable(v));
         // rank 0 reads the whole volume when it must (its camera needs its frame)
         let whole = if rank == 0 && spec.is_none() { Some(v.load()) } else { None };
         let whole = comm.agree(whole.transpose());
@@ -313,22 +289,17 @@ impl Node {
         let split = comm.agree(split(dims, n).map_err(|e| anyhow!(crate::app::Usage(format!("--distributed over {n} ranks: {e}")))));
         let (bricks, tree) = split;
         let me = bricks[rank];
-        let name = match (&whole, &decided) {
+        let name = match (&whole, [&v.file, &v.raw, &v.den].into_iter().flatten().next()) {
             (Some((_, name)), _) => name.clone(),
-            (None, Some((p, _))) => p.display().to_string(),
+            (None, Some(p)) => p.display().to_string(),
             _ => String::new(),
         };
-        let camera = if rank == 0 { Some(camera(whole.as_ref().and_then(|(v, _)| v.frame()))) } else { None };
+        let frame = whole.as_ref().and_then(|(v, _)| v.frame()).or(spec.as_ref().and_then(|s| s.frame.as_ref()));
+        let camera = if rank == 0 { Some(camera(frame)) } else { None };
         let camera = comm.agree(camera.transpose());
         // this rank's brick: read by seeking, or scattered by rank 0
         let brick: Result<Volume> = match (&spec, whole) {
-            (Some(s), _) => {
-                let path = match (&v.file, &v.raw, &v.den) {
-                    (Some(p), _, _) | (_, Some(p), _) | (_, _, Some(p)) => p.clone(),
-                    _ => unreachable!("a seekable layout has a file"),
-                };
-                io::read_box(&path, s, me.ghosted.map(|g| g[0]), me.ghosted.map(|g| g[1])).map_err(anyhow::Error::from)
-            }
+            (Some(s), _) => io::read_box(s, me.ghosted.map(|g| g[0]), me.ghosted.map(|g| g[1])).map_err(anyhow::Error::from),
             (None, Some((vol, _))) => {
                 // rank 0's brick, then every other rank's (an empty message when
                 // one cannot be cut: that rank fails, after rank 0's own error)
@@ -390,7 +361,8 @@ impl Node {
         }
         let brick = brick.with_stats(stats);
         let renderer = comm.agree(renderer(brick));
-        Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms, compositor: None }
+        let read = if spec.is_some() { "seek" } else { "scatter" };
+        Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms, read, compositor: None }
     }
 
     /// One frame: rank 0's camera and tissue broadcast, every brick
@@ -457,7 +429,7 @@ impl Node {
             v.get(v.len() / 2).copied().unwrap_or(0.0)
         };
         let j = serde_json::json!({
-            "rank": self.comm.rank, "owned": me.owned, "held": me.ghosted, "load_ms": self.load_ms,
+            "rank": self.comm.rank, "owned": me.owned, "held": me.ghosted, "read": self.read, "load_ms": self.load_ms,
             "build_ms": records.iter().map(|r| r.build_ms).sum::<f64>(),
             "render_ms": med(&|r| r.render_ms), "gather_ms": med(&|r| r.gather_ms), "composite_ms": med(&|r| r.composite_ms),
             "sent_bytes_per_frame": med(&|r| r.sent as f64), "received_bytes_per_frame": med(&|r| r.received as f64),

@@ -218,7 +218,7 @@ fn median(v: &mut [f64]) -> f64 {
 
 /// The renderer's memory per structure (bytes; per axis x, y, z where there
 /// is one), its total, the budget and the process's peak resident memory.
-fn memory_json(r: &Renderer) -> serde_json::Value {
+pub(crate) fn memory_json(r: &Renderer) -> serde_json::Value {
     let m = r.memory();
     serde_json::json!({
         "volume": m.volume, "stacks": m.stacks, "normals": m.normals, "cell_codes": m.cell_codes, "masks": m.masks,

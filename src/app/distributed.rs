@@ -93,15 +93,15 @@ impl Comm {
         }
     }
 
-    /// Sends `data` from rank 0 to rank `to`.
+    /// Sends `data` to rank `to`.
     fn send_to(&mut self, to: usize, data: &[u8]) {
         self.world.process_at_rank(to as i32).send(data);
         self.sent += data.len() as u64;
     }
 
-    /// Receives what rank 0 sent this rank.
-    fn receive_from_root(&mut self) -> Vec<u8> {
-        let (v, _) = self.world.process_at_rank(0).receive_vec::<u8>();
+    /// Receives what rank `from` sent this rank.
+    fn receive(&mut self, from: usize) -> Vec<u8> {
+        let (v, _) = self.world.process_at_rank(from as i32).receive_vec::<u8>();
         self.received += v.len() as u64;
         v
     }
@@ -148,6 +148,8 @@ struct Node {
     /// How the brick came: `"seek"` (this rank read it from the file) or
     /// `"scatter"` (rank 0 read the whole volume and sent it).
     read: &'static str,
+    /// Peak resident bytes once the brick was read (before the renderer).
+    read_peak: Option<u64>,
     /// Rank 0: the whole volume's frame, kept from frame to frame.
     compositor: Option<Compositor>,
 }
@@ -319,7 +321,7 @@ impl Node {
                 drop(vol);
                 mine
             }
-            (None, None) => volume_from_bytes(&comm.receive_from_root()),
+            (None, None) => volume_from_bytes(&comm.receive(0)),
         };
         let brick = brick.and_then(|b| {
             let bytes = b.bytes();
@@ -334,6 +336,7 @@ impl Node {
         });
         let brick = comm.agree(brick.with_context(|| format!("reading brick {rank} (voxels {:?})", me.ghosted)));
         let load_ms = t.elapsed().as_secs_f64() * 1e3;
+        let read_peak = peak_rss();
         // the statistics of the owned voxels, merged on rank 0, the whole volume's everywhere
         let own_stats = comm.agree(me.owned_stats(&brick).map_err(anyhow::Error::from));
         let merged = comm.gather(own_stats.to_bytes()).map(|all| {
@@ -362,7 +365,7 @@ impl Node {
         let brick = brick.with_stats(stats);
         let renderer = comm.agree(renderer(brick));
         let read = if spec.is_some() { "seek" } else { "scatter" };
-        Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms, read, compositor: None }
+        Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms, read, read_peak, compositor: None }
     }
 
     /// One frame: rank 0's camera and tissue broadcast, every brick
@@ -388,27 +391,51 @@ impl Node {
         })();
         let (f, part) = self.comm.agree(rendered);
         let render_ms = t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let parts = self.comm.gather(part.to_bytes());
-        let gather_ms = t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let comp = &mut self.compositor;
-        let (dims, spacing, tree) = (self.dims, self.spacing, &self.tree);
-        let composited = parts.map(|parts| -> Result<()> {
-            match comp {
-                Some(c) => c.reset(&cam, dims, spacing, tree, &settings)?,
-                None => *comp = Some(Compositor::new(&cam, dims, spacing, tree, &settings)?),
+        // rank 0 takes the partial images one at a time in the view's brick
+        // order, compositing each as it comes: it holds one besides its own
+        let (mut gather_ms, mut composite_ms) = (0.0, 0.0);
+        let composited = if self.comm.rank == 0 {
+            let t = Instant::now();
+            let comp = &mut self.compositor;
+            let (dims, spacing, tree) = (self.dims, self.spacing, &self.tree);
+            let mut done = match comp {
+                Some(c) => c.reset(&cam, dims, spacing, tree, &settings),
+                None => Compositor::new(&cam, dims, spacing, tree, &settings).map(|c| *comp = Some(c)),
             }
-            let comp = comp.as_mut().expect("made above");
-            let parts = parts.iter().map(|b| Partial::from_bytes(b)).collect::<shearwarp::Result<Vec<_>>>()?;
-            for i in comp.order().to_vec() {
-                comp.add(&parts[i]);
+            .map_err(anyhow::Error::from);
+            // (every rank's image is received even after an error: a sender never waits for ever)
+            let order = match (&done, comp.as_ref()) {
+                (Ok(()), Some(c)) => c.order().to_vec(),
+                _ => (0..self.comm.n).collect(),
+            };
+            composite_ms += t.elapsed().as_secs_f64() * 1e3;
+            for i in order {
+                let t = Instant::now();
+                let bytes = (i != 0).then(|| self.comm.receive(i));
+                gather_ms += t.elapsed().as_secs_f64() * 1e3;
+                let t = Instant::now();
+                if let (Ok(()), Some(c)) = (&done, comp.as_mut()) {
+                    match bytes.map(|b| Partial::from_bytes(&b)) {
+                        None => c.add(&part),
+                        Some(Ok(p)) => c.add(&p),
+                        Some(Err(e)) => done = Err(e.into()),
+                    }
+                }
+                composite_ms += t.elapsed().as_secs_f64() * 1e3;
             }
-            comp.finish(&cam, img);
+            let t = Instant::now();
+            if let (Ok(()), Some(c)) = (&done, comp.as_mut()) {
+                c.finish(&cam, img);
+            }
+            composite_ms += t.elapsed().as_secs_f64() * 1e3;
+            done
+        } else {
+            let t = Instant::now();
+            self.comm.send_to(0, &part.to_bytes());
+            gather_ms = t.elapsed().as_secs_f64() * 1e3;
             Ok(())
-        });
-        let composite_ms = t.elapsed().as_secs_f64() * 1e3;
-        self.comm.agree(composited.transpose());
+        };
+        self.comm.agree(composited);
         FrameRecord {
             build_ms: f.stats.build_ms,
             render_ms: render_ms - f.stats.build_ms,
@@ -434,7 +461,8 @@ impl Node {
             "render_ms": med(&|r| r.render_ms), "gather_ms": med(&|r| r.gather_ms), "composite_ms": med(&|r| r.composite_ms),
             "sent_bytes_per_frame": med(&|r| r.sent as f64), "received_bytes_per_frame": med(&|r| r.received as f64),
             "covered_pixels": med(&|r| r.covered as f64),
-            "peak_rss_bytes": peak_rss(),
+            "peak_rss_bytes": peak_rss(), "peak_rss_after_read_bytes": self.read_peak,
+            "memory": crate::app::cli::memory_json(&self.renderer),
         });
         self.comm.gather(j.to_string().into_bytes()).map(|all| all.iter().filter_map(|b| serde_json::from_slice(b).ok()).collect())
     }

@@ -273,13 +273,16 @@ fn box_of(v: &Volume, lo: [usize; 3], hi: [usize; 3]) -> Vec<f32> {
     out
 }
 
+/// A test NRRD: its name, type, big endian, extra header lines, the bytes
+/// before the data, and whether the header is detached.
+type NrrdCase<'a> = (&'a str, &'a str, bool, &'a str, &'a [u8], bool);
+
 #[test]
 fn an_uncompressed_nrrd_is_read_box_by_box_as_it_loads() {
     use shearwarp::data::io::{LoadOptions, load, read_box, seekable_layout};
     let dir = tempfile::tempdir().unwrap();
     let dims = [13, 9, 11];
-    // (name, type, big endian, extra header lines, bytes before the data, detached)
-    let cases: [(&str, &str, bool, &str, &[u8], bool); 6] = [
+    let cases: [NrrdCase; 6] = [
         ("u8.nrrd", "uchar", false, "spacings: 1 1 2.5\n", b"", false),
         ("i16.nrrd", "short", true, "line skip: 1\nbyte skip: 3\n", b"skip me\nabc", false),
         ("f64.nhdr", "double", false, "space: left-posterior-superior\nspace directions: (0.7,0,0) (0,0.7,0) (0,0,3)\n", b"", true),

@@ -196,7 +196,7 @@ fn raw_start(l: &Located) -> Result<u64> {
     let remaining = data_len.saturating_sub(pos);
     let skip = if h.byte_skip == -1 {
         if remaining < expected {
-            return Err(Error::file(&data_path, format!("NRRD data are truncated: expected {expected} bytes, found only {remaining}")));
+            return Err(Error::file(data_path, format!("NRRD data are truncated: expected {expected} bytes, found only {remaining}")));
         }
         remaining - expected
     } else {
@@ -205,7 +205,7 @@ fn raw_start(l: &Located) -> Result<u64> {
     let avail = remaining.saturating_sub(skip);
     if avail < expected {
         return Err(Error::file(
-            &data_path,
+            data_path,
             format!(
                 "NRRD data are truncated: the header describes {expected} bytes ({}×{}×{} × {size}), found only {avail}",
                 dims[0], dims[1], dims[2]
@@ -214,7 +214,7 @@ fn raw_start(l: &Located) -> Result<u64> {
     }
     if avail > expected {
         return Err(Error::file(
-            &data_path,
+            data_path,
             format!("NRRD data hold {} bytes more than the header describes ({expected})", avail - expected),
         ));
     }

@@ -793,9 +793,6 @@ pub fn variants_of(cmd: &BenchCmd, mode: Mode) -> Vec<Variant> {
 
 /// Runs `shearwarp bench`.
 pub fn run(cmd: &BenchCmd) -> Result<()> {
-    if cmd.distributed {
-        return crate::app::distributed::bench(cmd);
-    }
     if let Some(suite) = cmd.suite {
         return run_suite(cmd, suite);
     }

@@ -212,13 +212,6 @@ fn camera_from_bytes(b: &[u8]) -> Camera {
     Camera { rotation: glam::DMat3::from_cols_array(&rot), zoom, size }
 }
 
-/// This process's peak resident memory (Linux `VmHWM`), bytes.
-fn peak_rss() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let kb: u64 = s.lines().find(|l| l.starts_with("VmHWM:"))?.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
-}
-
 /// What every rank finds of the input before reading: the seekable layout
 /// of a raw, `.den` or uncompressed NRRD file (without `--orientation`,
 /// which may reverse voxels as it loads), else `None` (rank 0 reads the
@@ -336,7 +329,7 @@ impl Node {
         });
         let brick = comm.agree(brick.with_context(|| format!("reading brick {rank} (voxels {:?})", me.ghosted)));
         let load_ms = t.elapsed().as_secs_f64() * 1e3;
-        let read_peak = peak_rss();
+        let read_peak = crate::app::peak_rss_bytes();
         // the statistics of the owned voxels, merged on rank 0, the whole volume's everywhere
         let own_stats = comm.agree(me.owned_stats(&brick).map_err(anyhow::Error::from));
         let merged = comm.gather(own_stats.to_bytes()).map(|all| {
@@ -461,8 +454,8 @@ impl Node {
             "render_ms": med(&|r| r.render_ms), "gather_ms": med(&|r| r.gather_ms), "composite_ms": med(&|r| r.composite_ms),
             "sent_bytes_per_frame": med(&|r| r.sent as f64), "received_bytes_per_frame": med(&|r| r.received as f64),
             "covered_pixels": med(&|r| r.covered as f64),
-            "peak_rss_bytes": peak_rss(), "peak_rss_after_read_bytes": self.read_peak,
-            "memory": crate::app::cli::memory_json(&self.renderer),
+            "peak_rss_bytes": crate::app::peak_rss_bytes(), "peak_rss_after_read_bytes": self.read_peak,
+            "memory": crate::app::memory_json(&self.renderer),
         });
         self.comm.gather(j.to_string().into_bytes()).map(|all| all.iter().filter_map(|b| serde_json::from_slice(b).ok()).collect())
     }
@@ -691,8 +684,10 @@ pub fn bench(cmd: &BenchCmd) -> Result<()> {
     if !cmd.peers.is_empty() {
         usage!("--distributed does not run --peers");
     }
-    if cmd.csv.is_some() || !cmd.plot.is_empty() {
-        usage!("--distributed measures frame times only: --csv and --plot are not available with it (use --json or --json-out)");
+    if cmd.csv.is_some() || !cmd.plot.is_empty() || cmd.per_view {
+        usage!(
+            "--distributed measures frame times only: --csv, --plot and --per-view are not available with it (use --json or --json-out)"
+        );
     }
     if !cmd.perspective.is_empty() || cmd.perspective_matrix {
         usage!("--distributed renders parallel projections only (drop --perspective and --perspective-matrix)");

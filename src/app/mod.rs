@@ -145,6 +145,17 @@ pub fn peak_rss_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// The renderer's memory per structure (bytes; per axis x, y, z where there
+/// is one), its total, the budget and the process's peak resident memory.
+pub fn memory_json(r: &shearwarp::render::Renderer) -> serde_json::Value {
+    let m = r.memory();
+    serde_json::json!({
+        "volume": m.volume, "stacks": m.stacks, "normals": m.normals, "cell_codes": m.cell_codes, "masks": m.masks,
+        "rle": m.rle, "intermediate": m.intermediate, "total": m.total(), "budget": r.memory_budget(),
+        "peak_rss_bytes": crate::app::peak_rss_bytes(),
+    })
+}
+
 /// The median of `v` (sorted in place), `None` for no values: each report
 /// says what an empty column shows.
 pub fn median(v: &mut [f64]) -> Option<f64> {

@@ -16,7 +16,7 @@
 //! or reports progress.
 //!
 //! **Robustness contract.** Bad input never panics, hangs or over-allocates.
-//! Header dimensions go through [`check_dims`](crate::data::volume::check_dims)
+//! Header dimensions go through [`check_dims`]
 //! before anything is allocated, uncompressed payloads are checked against
 //! the file size before they are read, and compressed payloads are read
 //! through `Read::take(expected + 1)` so a decompression bomb stops at the

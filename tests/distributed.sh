@@ -3,7 +3,8 @@
 # with apt-get when missing (as root; fails loudly when it cannot), builds with
 # the feature `mpi`, runs the distributed tests of the test crate (1–4 ranks,
 # oversubscribed) and a smoke test of `render` and `rotate --distributed` at
-# 2 and 4 ranks against the single process (`cmp` of the iso images).
+# 2 and 4 ranks against the single process (`cmp` of the iso images) and of
+# `bench --distributed`.
 # Usage: tests/distributed.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -40,5 +41,8 @@ for n in 2 4; do
     timeout 300 "${MPIRUN[@]}" -np "$n" "$BIN" render --distributed --tissue bone --rotate 15,40,0 -o "$OUT/d$n.png" --json > "$OUT/d$n.json"
     cmp "$OUT/one.png" "$OUT/d$n.png"
     timeout 300 "${MPIRUN[@]}" -np "$n" "$BIN" rotate --distributed --degrees 30 --cell 2 --cycle-tissues 5
+    timeout 300 "${MPIRUN[@]}" -np "$n" "$BIN" bench --distributed --only binary-c1-u64-bitscan,rle \
+        --size 128 --reps 1 --rounds 1 --random-views 0 --quiet --json-out "$OUT/bench$n.json" > "$OUT/bench$n.md"
+    grep -q '| blend | rle |' "$OUT/bench$n.md"
 done
-echo "test-distributed: ok (render at 2 and 4 ranks equal to one process; rotate ran)"
+echo "test-distributed: ok (render at 2 and 4 ranks equal to one process; rotate and bench ran)"

@@ -189,6 +189,16 @@ pub struct BenchCmd {
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Time the frames of one volume split over the ranks of an MPI job
+    /// (launch with `mpirun -np N`; needs the build with feature `mpi`):
+    /// each rank reads and renders its own brick, rank 0 composites, warps
+    /// and reports every variant's frame time with each rank's render and
+    /// compositing times and bytes. The binary and RLE variants of the
+    /// parallel, cartesian matrix run; the others are listed as skipped.
+    /// No reference, accuracy columns, CSV, plots or peers (a distributed
+    /// frame equals the single process's).
+    #[arg(long)]
+    pub distributed: bool,
 }
 
 /// A list of benchmark cases (`--suite`).
@@ -489,7 +499,7 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 impl BenchCmd {
-    fn check(&self) -> Result<()> {
+    pub(crate) fn check(&self) -> Result<()> {
         if self.size == 0 || self.size > 8192 {
             return Err(usage(format!("--size must be 1..=8192, got {}", self.size)));
         }
@@ -595,7 +605,7 @@ impl BenchCmd {
         self.reconstruction.last().copied().unwrap_or_default()
     }
 
-    fn base_settings(&self, mode: Mode) -> Settings {
+    pub(crate) fn base_settings(&self, mode: Mode) -> Settings {
         let shading = if self.peer_model(mode) { MODEL_SHADING } else { Settings::default().shading };
         Settings { mode, ert: self.ert, threads: self.threads, shading, ..Settings::default() }
     }
@@ -607,7 +617,7 @@ impl BenchCmd {
 
     /// A renderer for `mode` with the benchmark's classification, and the
     /// peers' threshold when `mode` uses their model.
-    fn renderer(&self, vol: Volume, mode: Mode) -> Result<(Renderer, Option<f32>)> {
+    pub(crate) fn renderer(&self, vol: Volume, mode: Mode) -> Result<(Renderer, Option<f32>)> {
         let base = self.base_settings(mode);
         let tissues = presets::tissues_for(&vol);
         let hi = vol.value_range().1;
@@ -758,6 +768,27 @@ pub struct SuiteReport {
     /// `--reconstruction`), against the analytic truth.
     pub reference: Vec<SuiteRow>,
     pub cases: Vec<Report>,
+}
+
+/// The variants `cmd` measures in `mode`: the matrix ([`registry`]), its
+/// perspective rows, `--deluxe` and `--grid`, picked by `--only`, once per
+/// `--reconstruction`.
+pub fn variants_of(cmd: &BenchCmd, mode: Mode) -> Vec<Variant> {
+    let base = cmd.base_settings(mode);
+    let mut all = registry(base);
+    let projections = cmd.projections().unwrap_or_default();
+    for p in &projections {
+        all.extend(perspective_variants(base, *p, &projection_suffix(p, projections.len())));
+    }
+    let mut all = with_options(all, &cmd.deluxe, cmd.grid);
+    if cmd.deluxe.iter().any(|d| !d.is_standard()) || cmd.grid.is_some_and(|g| g != Lattice::Cartesian) {
+        // (the matrix's own Deluxe rows would repeat the options)
+        all.retain(|v| v.name.matches("-deluxe-").count() < 2 && v.name.matches("-bcc").count() < 2);
+    }
+    let exact = |o: &str| all.iter().any(|v| v.name == o);
+    let picked = |v: &Variant| cmd.only.iter().any(|o| if exact(o) { v.name == *o } else { v.name.contains(o.as_str()) });
+    let vs: Vec<Variant> = all.iter().filter(|v| cmd.only.is_empty() || picked(v)).cloned().collect();
+    with_reconstructions(vs, &cmd.reconstruction)
 }
 
 /// Runs `shearwarp bench`.
@@ -995,27 +1026,7 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
     let ropts = ReferenceOptions { step: cmd.ref_step, threads: cmd.threads, reconstruction: ref_recon, ..Default::default() };
     let camera = |v: &View| Camera { rotation: v.rotation, zoom: None, size: [cmd.size, cmd.size] };
 
-    let per_mode: Vec<(Mode, Vec<Variant>)> = modes
-        .iter()
-        .map(|&mode| {
-            let base = cmd.base_settings(mode);
-            let mut all = registry(base);
-            let projections = cmd.projections().unwrap_or_default();
-            for p in &projections {
-                all.extend(perspective_variants(base, *p, &projection_suffix(p, projections.len())));
-            }
-            let mut all = with_options(all, &cmd.deluxe, cmd.grid);
-            if cmd.deluxe.iter().any(|d| !d.is_standard()) || cmd.grid.is_some_and(|g| g != Lattice::Cartesian) {
-                // (the matrix's own Deluxe rows would repeat the options)
-                all.retain(|v| v.name.matches("-deluxe-").count() < 2 && v.name.matches("-bcc").count() < 2);
-            }
-            let exact = |o: &str| all.iter().any(|v| v.name == o);
-            let picked = |v: &Variant| cmd.only.iter().any(|o| if exact(o) { v.name == *o } else { v.name.contains(o.as_str()) });
-            let vs: Vec<Variant> = all.iter().filter(|v| cmd.only.is_empty() || picked(v)).cloned().collect();
-            let vs = with_reconstructions(vs, &cmd.reconstruction);
-            (mode, vs)
-        })
-        .collect();
+    let per_mode: Vec<(Mode, Vec<Variant>)> = modes.iter().map(|&mode| (mode, variants_of(cmd, mode))).collect();
     if per_mode.iter().all(|(_, v)| v.is_empty()) {
         let names: Vec<String> = registry(Settings::default()).into_iter().map(|v| v.name).collect();
         return Err(usage(format!("--only {:?} matches no variant (variants: {})", cmd.only, names.join(", "))));

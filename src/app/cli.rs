@@ -216,17 +216,6 @@ fn median(v: &mut [f64]) -> f64 {
     crate::app::median(v).unwrap_or(0.0)
 }
 
-/// The renderer's memory per structure (bytes; per axis x, y, z where there
-/// is one), its total, the budget and the process's peak resident memory.
-fn memory_json(r: &Renderer) -> serde_json::Value {
-    let m = r.memory();
-    serde_json::json!({
-        "volume": m.volume, "stacks": m.stacks, "normals": m.normals, "cell_codes": m.cell_codes, "masks": m.masks,
-        "rle": m.rle, "intermediate": m.intermediate, "total": m.total(), "budget": r.memory_budget(),
-        "peak_rss_bytes": crate::app::peak_rss_bytes(),
-    })
-}
-
 /// Milliseconds of the last build of each structure, per axis x, y, z.
 fn build_json(r: &Renderer) -> serde_json::Value {
     serde_json::to_value(r.build_times()).unwrap_or_default()
@@ -314,7 +303,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": build_ms + stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,
-            "load_ms": load_ms, "first_frame_ms": first_frame_ms, "memory": memory_json(&r), "build": build_json(&r),
+            "load_ms": load_ms, "first_frame_ms": first_frame_ms, "memory": crate::app::memory_json(&r), "build": build_json(&r),
             "geometry": scene.has_meshes().then(|| serde_json::json!({
                 "raster_ms": geometry.raster_ms, "inverse_warp_ms": geometry.inverse_warp_ms, "composite_ms": geometry.composite_ms,
                 "inverse_warp_ns_per_output_pixel": geometry.inverse_warp_ms * 1e6 / (cam.size[0] * cam.size[1]) as f64,
@@ -495,7 +484,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
         });
         // added apart: one json! of all the fields exceeds the macro's recursion limit
         let mut j = j;
-        j["memory"] = memory_json(&r);
+        j["memory"] = crate::app::memory_json(&r);
         j["build"] = build_json(&r);
         j["quality"] = r.quality().into();
         j["deluxe"] = r.settings().deluxe.label().into();
@@ -728,6 +717,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Render(c) => run_render(c),
         Command::Rotate(c) => run_rotate(c),
         Command::Info(c) => run_info(c),
+        Command::Bench(c) if c.distributed => crate::app::distributed::bench(c),
         Command::Bench(c) => crate::app::bench::run(c),
         Command::View(c) => crate::app::viewer::run(c),
         Command::Export(c) => run_export(c),

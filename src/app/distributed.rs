@@ -1,14 +1,18 @@
 //! `--distributed`: one volume split over MPI ranks (feature `mpi`), rendered
 //! sort-last with [`shearwarp::bricks`], launched as
-//! `mpirun -np N shearwarp render|rotate … --distributed`.
+//! `mpirun -np N shearwarp render|rotate|bench … --distributed`.
 //!
 //! - **Bricks.** Rank `r` owns brick `r` of the k-d split of the volume into
 //!   `N` bricks ([`shearwarp::bricks::split`]) and holds it with its ghost
-//!   voxels, nothing else. A raw or `.den` file is read brick by brick, each
-//!   rank seeking to its own rows ([`shearwarp::data::io::read_box`]); any
-//!   other input (NRRD, NIfTI, DICOM, a compressed file, a phantom) is read
-//!   whole by rank 0, which sends each rank its brick and then lets go of
-//!   the volume: rank 0 holds the whole volume while it scatters.
+//!   voxels, nothing else. A raw or `.den` file or an NRRD with raw
+//!   encoding (attached, or a detached header and its data file) is read
+//!   brick by brick, each rank seeking to its own rows
+//!   ([`shearwarp::data::io::read_box`], with the loader's own header
+//!   parse); any other input (a gzip NRRD, NIfTI, DICOM, a phantom, or any
+//!   file under `--orientation`) is read whole by rank 0, which sends each
+//!   rank its brick and then lets go of the volume: rank 0 holds the whole
+//!   volume while it scatters. `--json` says which (`read`: `seek` or
+//!   `scatter`).
 //! - **Classification.** Every rank computes the value statistics of its
 //!   owned voxels; rank 0 merges them and broadcasts the whole volume's, so
 //!   every brick is classified as one renderer classifies the whole volume
@@ -19,6 +23,10 @@
 //!   sends the rectangle it covers to rank 0 (direct send to one
 //!   compositor), which composites them front to back in the view's brick
 //!   order, warps once and writes the output.
+//! - **`bench`.** The binary and RLE variants of the benchmark's parallel
+//!   matrix, each over the benchmark's views and rounds: rank 0's frame
+//!   time and every rank's render, compositing and bytes a frame; the
+//!   variants a distributed frame does not run are listed as skipped.
 //! - **Faults.** After every step that can fail, the ranks agree: each
 //!   sends rank 0 its error (if any); rank 0 prints the first with its rank
 //!   and aborts the whole job (`MPI_Abort`), so no rank hangs and nothing
@@ -30,14 +38,17 @@ use anyhow::{Context, Result, anyhow};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
 use shearwarp::bricks::{Brick, Compositor, Partial, Tree, split};
+use shearwarp::composite::Mode;
 use shearwarp::data::io;
+use shearwarp::data::orientation::PatientFrame;
 use shearwarp::data::stats::ValueStats;
 use shearwarp::data::volume::{Volume, VoxelData};
-use shearwarp::render::Renderer;
-use shearwarp::view::{Camera, one_bit_step_deg, rotate_eye};
+use shearwarp::render::{Method, Renderer, Settings};
+use shearwarp::view::{Camera, NamedView, one_bit_step_deg, rotate_eye, standard_views};
 use shearwarp::warp::Image;
 
 use crate::app::args::{RenderArgs, VolumeArgs};
+use crate::app::bench::{BenchCmd, Variant, variants_of};
 use crate::app::{RenderJob, RotateJob};
 
 /// The MPI world and what this rank sent and received.
@@ -82,15 +93,15 @@ impl Comm {
         }
     }
 
-    /// Sends `data` from rank 0 to rank `to`.
+    /// Sends `data` to rank `to`.
     fn send_to(&mut self, to: usize, data: &[u8]) {
         self.world.process_at_rank(to as i32).send(data);
         self.sent += data.len() as u64;
     }
 
-    /// Receives what rank 0 sent this rank.
-    fn receive_from_root(&mut self) -> Vec<u8> {
-        let (v, _) = self.world.process_at_rank(0).receive_vec::<u8>();
+    /// Receives what rank `from` sent this rank.
+    fn receive(&mut self, from: usize) -> Vec<u8> {
+        let (v, _) = self.world.process_at_rank(from as i32).receive_vec::<u8>();
         self.received += v.len() as u64;
         v
     }
@@ -134,6 +145,11 @@ struct Node {
     camera: Option<Camera>,
     /// Milliseconds to read this rank's brick (and, on rank 0, to scatter).
     load_ms: f64,
+    /// How the brick came: `"seek"` (this rank read it from the file) or
+    /// `"scatter"` (rank 0 read the whole volume and sent it).
+    read: &'static str,
+    /// Peak resident bytes once the brick was read (before the renderer).
+    read_peak: Option<u64>,
     /// Rank 0: the whole volume's frame, kept from frame to frame.
     compositor: Option<Compositor>,
 }
@@ -196,46 +212,11 @@ fn camera_from_bytes(b: &[u8]) -> Camera {
     Camera { rotation: glam::DMat3::from_cols_array(&rot), zoom, size }
 }
 
-/// This process's peak resident memory (Linux `VmHWM`), bytes.
-fn peak_rss() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let kb: u64 = s.lines().find(|l| l.starts_with("VmHWM:"))?.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
-}
-
-/// How the volume reaches the ranks, as rank 0 decided: each rank reads its
-/// own brick of a file laid out as the spec says, or rank 0 scatters.
-fn layout_bytes(spec: Option<&io::RawSpec>) -> Vec<u8> {
-    let Some(s) = spec else { return vec![0] };
-    let mut b = vec![1];
-    s.dims.iter().for_each(|d| b.extend((*d as u64).to_le_bytes()));
-    s.spacing.iter().for_each(|x| b.extend(x.to_le_bytes()));
-    b.extend(s.header_bytes.to_le_bytes());
-    b.push(s.big_endian as u8);
-    b.push(s.voxel_type.size() as u8);
-    b.extend(format!("{:?}", s.voxel_type).bytes());
-    b
-}
-
-fn layout_from_bytes(b: &[u8]) -> Option<io::RawSpec> {
-    if b.first() != Some(&1) {
-        return None;
-    }
-    let u = |at: usize| u64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"));
-    let f = |at: usize| f32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"));
-    let dims = [u(1) as usize, u(9) as usize, u(17) as usize];
-    let spacing = [f(25), f(29), f(33)];
-    let header_bytes = u(37);
-    let big_endian = b[45] == 1;
-    let name = String::from_utf8_lossy(&b[47..]).to_ascii_lowercase();
-    let voxel_type = shearwarp::VoxelType::parse(&name).ok()?;
-    Some(io::RawSpec { dims, voxel_type, big_endian, spacing, header_bytes })
-}
-
-/// What a rank decides about the input before reading: the seekable layout
-/// of a raw or `.den` file (without `--orientation`, which may reverse voxels
-/// as it loads), else `None` (rank 0 reads the whole volume).
-fn seekable(v: &VolumeArgs) -> Result<Option<(std::path::PathBuf, io::RawSpec)>> {
+/// What every rank finds of the input before reading: the seekable layout
+/// of a raw, `.den` or uncompressed NRRD file (without `--orientation`,
+/// which may reverse voxels as it loads), else `None` (rank 0 reads the
+/// whole volume).
+fn seekable(v: &VolumeArgs) -> Result<Option<io::Layout>> {
     let (path, format) = match (&v.file, &v.raw, &v.den) {
         (Some(p), _, _) => (p, v.format),
         (_, Some(p), _) => (p, Some(io::Format::Raw)),
@@ -255,29 +236,33 @@ fn seekable(v: &VolumeArgs) -> Result<Option<(std::path::PathBuf, io::RawSpec)>>
         (None, None) => None,
         _ => return Err(anyhow!(crate::app::Usage("raw files need both --dims X,Y,Z and --type (or a JSON sidecar)".into()))),
     };
-    let spec = io::seekable_layout(path, &io::LoadOptions { format, raw })?;
-    Ok(spec.map(|mut s| {
+    let layout = io::seekable_layout(path, &io::LoadOptions { format, raw })?;
+    Ok(layout.map(|mut s| {
         if let Some(sp) = v.spacing {
             s.spacing = sp;
         }
-        (path.clone(), s)
+        s
     }))
 }
 
 impl Node {
     /// MPI up, the volume split, this rank's brick read, the statistics
     /// agreed and the renderer made: every step agreed by every rank.
-    fn new(universe: &mpi::environment::Universe, v: &VolumeArgs, ra: &RenderArgs) -> Node {
+    /// `camera` makes rank 0's camera from the volume's patient frame (when
+    /// it has one), `renderer` each rank's renderer of its brick.
+    fn new(
+        universe: &mpi::environment::Universe,
+        v: &VolumeArgs,
+        camera: impl FnOnce(Option<&PatientFrame>) -> Result<Camera>,
+        renderer: impl FnOnce(Volume) -> Result<Renderer>,
+    ) -> Node {
         let world = universe.world();
         let (rank, n) = (world.rank() as usize, world.size() as usize);
         let mut comm = Comm { world, rank, n, sent: 0, received: 0 };
         crate::app::set_budget(v.max_memory);
         let t = Instant::now();
-        // rank 0 decides how the volume comes
-        let decided = if rank == 0 { seekable(v) } else { Ok(None) };
-        let decided = comm.agree(decided);
-        let layout = comm.bcast((rank == 0).then(|| layout_bytes(decided.as_ref().map(|d| &d.1))));
-        let spec = layout_from_bytes(&layout);
+        // how the volume comes: every rank reads the file's header (rank 0's error first)
+        let spec = comm.agree(seekable(v));
         // rank 0 reads the whole volume when it must (its camera needs its frame)
         let whole = if rank == 0 && spec.is_none() { Some(v.load()) } else { None };
         let whole = comm.agree(whole.transpose());
@@ -299,22 +284,17 @@ impl Node {
         let split = comm.agree(split(dims, n).map_err(|e| anyhow!(crate::app::Usage(format!("--distributed over {n} ranks: {e}")))));
         let (bricks, tree) = split;
         let me = bricks[rank];
-        let name = match (&whole, &decided) {
+        let name = match (&whole, [&v.file, &v.raw, &v.den].into_iter().flatten().next()) {
             (Some((_, name)), _) => name.clone(),
-            (None, Some((p, _))) => p.display().to_string(),
+            (None, Some(p)) => p.display().to_string(),
             _ => String::new(),
         };
-        let camera = if rank == 0 { Some(ra.camera(whole.as_ref().and_then(|(v, _)| v.frame()))) } else { None };
+        let frame = whole.as_ref().and_then(|(v, _)| v.frame()).or(spec.as_ref().and_then(|s| s.frame.as_ref()));
+        let camera = if rank == 0 { Some(camera(frame)) } else { None };
         let camera = comm.agree(camera.transpose());
         // this rank's brick: read by seeking, or scattered by rank 0
         let brick: Result<Volume> = match (&spec, whole) {
-            (Some(s), _) => {
-                let path = match (&v.file, &v.raw, &v.den) {
-                    (Some(p), _, _) | (_, Some(p), _) | (_, _, Some(p)) => p.clone(),
-                    _ => unreachable!("a seekable layout has a file"),
-                };
-                io::read_box(&path, s, me.ghosted.map(|g| g[0]), me.ghosted.map(|g| g[1])).map_err(anyhow::Error::from)
-            }
+            (Some(s), _) => io::read_box(s, me.ghosted.map(|g| g[0]), me.ghosted.map(|g| g[1])).map_err(anyhow::Error::from),
             (None, Some((vol, _))) => {
                 // rank 0's brick, then every other rank's (an empty message when
                 // one cannot be cut: that rank fails, after rank 0's own error)
@@ -334,7 +314,7 @@ impl Node {
                 drop(vol);
                 mine
             }
-            (None, None) => volume_from_bytes(&comm.receive_from_root()),
+            (None, None) => volume_from_bytes(&comm.receive(0)),
         };
         let brick = brick.and_then(|b| {
             let bytes = b.bytes();
@@ -349,6 +329,7 @@ impl Node {
         });
         let brick = comm.agree(brick.with_context(|| format!("reading brick {rank} (voxels {:?})", me.ghosted)));
         let load_ms = t.elapsed().as_secs_f64() * 1e3;
+        let read_peak = crate::app::peak_rss_bytes();
         // the statistics of the owned voxels, merged on rank 0, the whole volume's everywhere
         let own_stats = comm.agree(me.owned_stats(&brick).map_err(anyhow::Error::from));
         let merged = comm.gather(own_stats.to_bytes()).map(|all| {
@@ -375,12 +356,9 @@ impl Node {
             stats = stats.with_histogram(range[0], range[1], h);
         }
         let brick = brick.with_stats(stats);
-        let renderer = ra.renderer_and_scene(brick).map(|(mut r, _)| {
-            r.set_memory_budget(crate::app::budget());
-            r
-        });
-        let renderer = comm.agree(renderer);
-        Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms, compositor: None }
+        let renderer = comm.agree(renderer(brick));
+        let read = if spec.is_some() { "seek" } else { "scatter" };
+        Node { comm, dims, spacing, bricks, tree, renderer, name, camera, load_ms, read, read_peak, compositor: None }
     }
 
     /// One frame: rank 0's camera and tissue broadcast, every brick
@@ -406,27 +384,51 @@ impl Node {
         })();
         let (f, part) = self.comm.agree(rendered);
         let render_ms = t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let parts = self.comm.gather(part.to_bytes());
-        let gather_ms = t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let comp = &mut self.compositor;
-        let (dims, spacing, tree) = (self.dims, self.spacing, &self.tree);
-        let composited = parts.map(|parts| -> Result<()> {
-            match comp {
-                Some(c) => c.reset(&cam, dims, spacing, tree, &settings)?,
-                None => *comp = Some(Compositor::new(&cam, dims, spacing, tree, &settings)?),
+        // rank 0 takes the partial images one at a time in the view's brick
+        // order, compositing each as it comes: it holds one besides its own
+        let (mut gather_ms, mut composite_ms) = (0.0, 0.0);
+        let composited = if self.comm.rank == 0 {
+            let t = Instant::now();
+            let comp = &mut self.compositor;
+            let (dims, spacing, tree) = (self.dims, self.spacing, &self.tree);
+            let mut done = match comp {
+                Some(c) => c.reset(&cam, dims, spacing, tree, &settings),
+                None => Compositor::new(&cam, dims, spacing, tree, &settings).map(|c| *comp = Some(c)),
             }
-            let comp = comp.as_mut().expect("made above");
-            let parts = parts.iter().map(|b| Partial::from_bytes(b)).collect::<shearwarp::Result<Vec<_>>>()?;
-            for i in comp.order().to_vec() {
-                comp.add(&parts[i]);
+            .map_err(anyhow::Error::from);
+            // (every rank's image is received even after an error: a sender never waits for ever)
+            let order = match (&done, comp.as_ref()) {
+                (Ok(()), Some(c)) => c.order().to_vec(),
+                _ => (0..self.comm.n).collect(),
+            };
+            composite_ms += t.elapsed().as_secs_f64() * 1e3;
+            for i in order {
+                let t = Instant::now();
+                let bytes = (i != 0).then(|| self.comm.receive(i));
+                gather_ms += t.elapsed().as_secs_f64() * 1e3;
+                let t = Instant::now();
+                if let (Ok(()), Some(c)) = (&done, comp.as_mut()) {
+                    match bytes.map(|b| Partial::from_bytes(&b)) {
+                        None => c.add(&part),
+                        Some(Ok(p)) => c.add(&p),
+                        Some(Err(e)) => done = Err(e.into()),
+                    }
+                }
+                composite_ms += t.elapsed().as_secs_f64() * 1e3;
             }
-            comp.finish(&cam, img);
+            let t = Instant::now();
+            if let (Ok(()), Some(c)) = (&done, comp.as_mut()) {
+                c.finish(&cam, img);
+            }
+            composite_ms += t.elapsed().as_secs_f64() * 1e3;
+            done
+        } else {
+            let t = Instant::now();
+            self.comm.send_to(0, &part.to_bytes());
+            gather_ms = t.elapsed().as_secs_f64() * 1e3;
             Ok(())
-        });
-        let composite_ms = t.elapsed().as_secs_f64() * 1e3;
-        self.comm.agree(composited.transpose());
+        };
+        self.comm.agree(composited);
         FrameRecord {
             build_ms: f.stats.build_ms,
             render_ms: render_ms - f.stats.build_ms,
@@ -447,12 +449,13 @@ impl Node {
             v.get(v.len() / 2).copied().unwrap_or(0.0)
         };
         let j = serde_json::json!({
-            "rank": self.comm.rank, "owned": me.owned, "held": me.ghosted, "load_ms": self.load_ms,
+            "rank": self.comm.rank, "owned": me.owned, "held": me.ghosted, "read": self.read, "load_ms": self.load_ms,
             "build_ms": records.iter().map(|r| r.build_ms).sum::<f64>(),
             "render_ms": med(&|r| r.render_ms), "gather_ms": med(&|r| r.gather_ms), "composite_ms": med(&|r| r.composite_ms),
             "sent_bytes_per_frame": med(&|r| r.sent as f64), "received_bytes_per_frame": med(&|r| r.received as f64),
             "covered_pixels": med(&|r| r.covered as f64),
-            "peak_rss_bytes": peak_rss(),
+            "peak_rss_bytes": crate::app::peak_rss_bytes(), "peak_rss_after_read_bytes": self.read_peak,
+            "memory": crate::app::memory_json(&self.renderer),
         });
         self.comm.gather(j.to_string().into_bytes()).map(|all| all.iter().filter_map(|b| serde_json::from_slice(b).ok()).collect())
     }
@@ -471,6 +474,17 @@ struct FrameRecord {
     sent: u64,
     received: u64,
     covered: u64,
+}
+
+/// The node of `render` and `rotate`: the camera and renderer of the render arguments.
+fn node_of(universe: &mpi::environment::Universe, v: &VolumeArgs, ra: &RenderArgs) -> Node {
+    let renderer = |brick| {
+        ra.renderer_and_scene(brick).map(|(mut r, _)| {
+            r.set_memory_budget(crate::app::budget());
+            r
+        })
+    };
+    Node::new(universe, v, |frame| ra.camera(frame), renderer)
 }
 
 fn init() -> Result<mpi::environment::Universe> {
@@ -496,7 +510,7 @@ pub fn render(cmd: &RenderJob) -> Result<()> {
         Err(why) => usage!("-o {why}"),
     };
     let universe = init()?;
-    let mut node = Node::new(&universe, cmd.volume, cmd.render);
+    let mut node = node_of(&universe, cmd.volume, cmd.render);
     let cam = node.camera.unwrap_or(Camera::new(glam::DMat3::IDENTITY, [1, 1]));
     let tissue = node.renderer.tissues().map(|(_, c)| c);
     let mut img = Image::new(cam.size[0], cam.size[1]);
@@ -549,7 +563,7 @@ pub fn rotate(cmd: &RotateJob) -> Result<()> {
         usage!("--degrees must be a positive number, got {}", cmd.degrees);
     }
     let universe = init()?;
-    let mut node = Node::new(&universe, cmd.volume, cmd.render);
+    let mut node = node_of(&universe, cmd.volume, cmd.render);
     let step = match cmd.step_deg {
         "auto" => one_bit_step_deg(node.dims) * cmd.render.cell as f64,
         s => match s.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0) {
@@ -627,4 +641,201 @@ pub fn rotate(cmd: &RotateJob) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Why a distributed frame does not run `v` (`None`: it does): the binary
+/// and RLE paths, parallel, on the cartesian grid at quality 1, linear
+/// reconstruction and no Deluxe option.
+fn unsupported(v: &Variant) -> Option<&'static str> {
+    let s = &v.settings;
+    if !matches!(s.method, Method::Binary | Method::Rle) {
+        Some("a distributed frame renders the binary and RLE paths only")
+    } else if v.projection.is_perspective() {
+        Some("a distributed frame renders parallel projections only")
+    } else if v.quality != 1.0 {
+        Some("a distributed frame renders at quality 1 only")
+    } else if s.lattice != shearwarp::Lattice::Cartesian {
+        Some("a distributed frame renders the cartesian grid only")
+    } else if s.reconstruction != shearwarp::kernels::Reconstruction::Linear {
+        Some("a distributed frame reconstructs linearly only")
+    } else if !s.deluxe.is_standard() || s.rle_reuse {
+        Some("a distributed frame takes no Deluxe option or encoding reuse")
+    } else {
+        None
+    }
+}
+
+/// One variant's frames: rank 0's wall time of each and every rank's records.
+struct Run {
+    mode: Mode,
+    name: String,
+    wall: Vec<f64>,
+    records: Vec<FrameRecord>,
+}
+
+/// `shearwarp bench --distributed`: the frame time of every binary and RLE
+/// variant of the matrix over the benchmark's views, each frame rendered by
+/// every rank and composited on rank 0; the other variants are listed as
+/// skipped. Rank 0 prints the table (or `--json`) and writes `--json-out`.
+pub fn bench(cmd: &BenchCmd) -> Result<()> {
+    if cmd.suite.is_some() {
+        usage!("--distributed times one volume; --suite is not available with it");
+    }
+    if !cmd.peers.is_empty() {
+        usage!("--distributed does not run --peers");
+    }
+    if cmd.csv.is_some() || !cmd.plot.is_empty() || cmd.per_view {
+        usage!(
+            "--distributed measures frame times only: --csv, --plot and --per-view are not available with it (use --json or --json-out)"
+        );
+    }
+    if !cmd.perspective.is_empty() || cmd.perspective_matrix {
+        usage!("--distributed renders parallel projections only (drop --perspective and --perspective-matrix)");
+    }
+    cmd.check()?;
+    shearwarp::render::checks::check_threads(cmd.threads)?;
+    let mut modes = cmd.modes.clone();
+    modes.dedup();
+    let mut runs: Vec<(Mode, Vec<Variant>)> = vec![];
+    let mut skipped = vec![];
+    for &mode in &modes {
+        let (ok, not): (Vec<Variant>, Vec<Variant>) = variants_of(cmd, mode).into_iter().partition(|v| unsupported(v).is_none());
+        for v in &not {
+            skipped.push(serde_json::json!({"mode": mode.name(), "variant": v.name, "reason": unsupported(v)}));
+        }
+        if !ok.is_empty() {
+            runs.push((mode, ok));
+        }
+    }
+    let Some(&(first_mode, _)) = runs.first() else {
+        usage!("--distributed: --only {:?} matches no binary or RLE variant of the parallel matrix", cmd.only);
+    };
+    let universe = init()?;
+    let size = [cmd.size, cmd.size];
+    let mut node = Node::new(
+        &universe,
+        &cmd.volume,
+        |_| Ok(Camera::new(glam::DMat3::IDENTITY, size)),
+        |b| cmd.renderer(b, first_mode).map(|(r, _)| r),
+    );
+    let views = standard_views(NamedView::Anterior.rotation(), cmd.random_views, cmd.seed);
+    let mut img = Image::new(cmd.size, cmd.size);
+    let mut done: Vec<Run> = vec![];
+    let mut classification = vec![];
+    for (mode, variants) in &runs {
+        if *mode != first_mode {
+            // this mode's renderer of the same brick (as the bench makes one a mode)
+            let r = node.renderer.volume().map(|v| v.into_owned()).map_err(anyhow::Error::from);
+            let r = r.and_then(|v| cmd.renderer(v, *mode).map(|(r, _)| r));
+            node.renderer = node.comm.agree(r);
+        }
+        classification.push(
+            serde_json::json!({"mode": mode.name(), "classification": node.renderer.classification_name(), "iso": node.renderer.iso()}),
+        );
+        let tissue = node.renderer.tissues().map(|(_, c)| c);
+        let first = done.len();
+        done.extend(variants.iter().map(|v| Run { mode: *mode, name: v.name.clone(), wall: vec![], records: vec![] }));
+        // rounds over the whole matrix of the mode: a change in load biases no variant
+        for _ in 0..cmd.rounds {
+            for (i, v) in variants.iter().enumerate() {
+                let set = node.renderer.set_settings(Settings { threads: cmd.threads, ..v.settings });
+                node.comm.agree(set.map_err(anyhow::Error::from));
+                for view in &views {
+                    let cam = Some(Camera { rotation: view.rotation, zoom: None, size }).filter(|_| node.comm.rank == 0);
+                    for _ in 0..cmd.warmup {
+                        node.frame(cam, tissue, &mut img);
+                    }
+                    for _ in 0..cmd.reps {
+                        let t = Instant::now();
+                        let rec = node.frame(cam, tissue, &mut img);
+                        done[first + i].wall.push(t.elapsed().as_secs_f64() * 1e3);
+                        done[first + i].records.push(rec);
+                    }
+                }
+            }
+        }
+    }
+    let mut rows = vec![];
+    for run in &done {
+        let ranks = node.ranks_json(&run.records);
+        if let Some(ranks) = ranks {
+            let mut w = run.wall.clone();
+            let median = crate::app::median(&mut w).unwrap_or(f64::NAN);
+            rows.push(serde_json::json!({
+                "mode": run.mode.name(), "variant": run.name, "frames": run.wall.len(), "frame_ms_median": median,
+                "frames_per_second": 1e3 / median, "per_rank": ranks,
+            }));
+        }
+    }
+    if node.comm.rank != 0 {
+        return Ok(());
+    }
+    let j = serde_json::json!({
+        "volume": node.name, "dims": node.dims, "spacing": node.spacing, "ranks": node.comm.n, "size": cmd.size,
+        "threads": if cmd.threads == 0 { rayon::current_num_threads() } else { cmd.threads },
+        "cpu": shearwarp::kernels::level().name(), "reps": cmd.reps, "rounds": cmd.rounds, "warmup": cmd.warmup,
+        "views": views.iter().map(|v| v.name.clone()).collect::<Vec<_>>(), "classification": classification,
+        "records": rows, "skipped": skipped,
+    });
+    if let Some(p) = &cmd.json_out {
+        crate::app::output::write_text(p, &serde_json::to_string_pretty(&j)?)?;
+    }
+    if cmd.json {
+        crate::app::output::print_text(&(serde_json::to_string_pretty(&j)? + "\n"))?;
+    } else {
+        crate::app::output::print_text(&bench_markdown(&j))?;
+    }
+    Ok(())
+}
+
+/// The distributed bench's table: a row per variant, rank 0's median frame
+/// and the slowest rank's render, the bytes rank 0 received a frame.
+fn bench_markdown(j: &serde_json::Value) -> String {
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let d = &j["dims"];
+    let mut s = format!(
+        "## {} ({}×{}×{}) on {} ranks, {}×{} pixels, {} views\n\n\
+         | mode | variant | frame ms | frames/s | slowest rank render ms | rank 0 composite ms | rank 0 received a frame |\n\
+         |---|---|---:|---:|---:|---:|---:|\n",
+        j["volume"].as_str().unwrap_or(""),
+        d[0],
+        d[1],
+        d[2],
+        j["ranks"],
+        j["size"],
+        j["size"],
+        j["views"].as_array().map_or(0, Vec::len)
+    );
+    for r in j["records"].as_array().into_iter().flatten() {
+        let ranks = r["per_rank"].as_array().cloned().unwrap_or_default();
+        let slowest = ranks.iter().map(|x| f(&x["render_ms"])).fold(0.0, f64::max);
+        let r0 = ranks.first().cloned().unwrap_or_default();
+        s += &format!(
+            "| {} | {} | {:.2} | {:.1} | {:.2} | {:.2} | {} |\n",
+            r["mode"].as_str().unwrap_or(""),
+            r["variant"].as_str().unwrap_or(""),
+            f(&r["frame_ms_median"]),
+            f(&r["frames_per_second"]),
+            slowest,
+            f(&r0["composite_ms"]),
+            shearwarp::fmt::fmt_bytes(f(&r0["received_bytes_per_frame"]) as u64)
+        );
+    }
+    // the skipped variants, a line per reason
+    let mut why: Vec<(&str, Vec<String>)> = vec![];
+    for x in j["skipped"].as_array().into_iter().flatten() {
+        let (r, name) =
+            (x["reason"].as_str().unwrap_or(""), format!("{} {}", x["mode"].as_str().unwrap_or(""), x["variant"].as_str().unwrap_or("")));
+        match why.iter_mut().find(|(w, _)| *w == r) {
+            Some((_, names)) => names.push(name),
+            None => why.push((r, vec![name])),
+        }
+    }
+    if !why.is_empty() {
+        s += "\nSkipped:\n";
+        for (r, names) in &why {
+            s += &format!("- {r}: {}\n", names.join(", "));
+        }
+    }
+    s
 }

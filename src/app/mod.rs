@@ -75,6 +75,10 @@ pub mod distributed {
     pub fn rotate(_: &crate::app::RotateJob) -> Result<()> {
         unavailable()
     }
+
+    pub fn bench(_: &crate::app::bench::BenchCmd) -> Result<()> {
+        unavailable()
+    }
 }
 
 pub mod args;
@@ -139,6 +143,17 @@ pub fn peak_rss_bytes() -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
     let kb: u64 = s.lines().find(|l| l.starts_with("VmHWM:"))?.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
+}
+
+/// The renderer's memory per structure (bytes; per axis x, y, z where there
+/// is one), its total, the budget and the process's peak resident memory.
+pub fn memory_json(r: &shearwarp::render::Renderer) -> serde_json::Value {
+    let m = r.memory();
+    serde_json::json!({
+        "volume": m.volume, "stacks": m.stacks, "normals": m.normals, "cell_codes": m.cell_codes, "masks": m.masks,
+        "rle": m.rle, "intermediate": m.intermediate, "total": m.total(), "budget": r.memory_budget(),
+        "peak_rss_bytes": crate::app::peak_rss_bytes(),
+    })
 }
 
 /// The median of `v` (sorted in place), `None` for no values: each report

@@ -197,6 +197,18 @@ impl PatientFrame {
         (0..3).max_by(|&a, &b| self.directions.col(a).x.abs().total_cmp(&self.directions.col(b).x.abs()).then(b.cmp(&a))).unwrap_or(0)
     }
 
+    /// The right-handed frame a volume of `dims` voxels `spacing` apart
+    /// carries for this one, and the index axis its voxels are reversed
+    /// along to get it (`None`: the frame is not mirrored, nothing moves).
+    pub fn unmirrored(&self, dims: [usize; 3], spacing: [f32; 3]) -> (PatientFrame, Option<usize>) {
+        if self.is_mirrored() {
+            let a = self.mirror_axis();
+            (self.reversed(a, dims[a], spacing[a]), Some(a))
+        } else {
+            (*self, None)
+        }
+    }
+
     /// The same placement with index axis `axis` (of `n` voxels, `spacing` mm
     /// apart) reversed: the old last voxel becomes voxel 0.
     pub fn reversed(&self, axis: usize, n: usize, spacing: f32) -> Self {

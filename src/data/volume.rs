@@ -122,13 +122,11 @@ impl Volume {
     /// carries a right-handed index frame and renders unmirrored.
     pub fn set_frame(&mut self, frame: Option<PatientFrame>) {
         self.frame = frame.map(|f| {
-            if f.is_mirrored() {
-                let a = f.mirror_axis();
+            let (f, reversed) = f.unmirrored(self.dims, self.spacing);
+            if let Some(a) = reversed {
                 self.reverse_axis(a);
-                f.reversed(a, self.dims[a], self.spacing[a])
-            } else {
-                f
             }
+            f
         });
     }
     /// The volume with frame `frame` (see [`Volume::set_frame`]).

@@ -215,3 +215,155 @@ fn a_reused_compositor_composites_what_a_new_one_does() {
         assert!(a.data == b.data && covered(&a) > 100);
     }
 }
+
+/// An NRRD whose voxels are `n` values below 200 stored as `ty` (`endian`
+/// for multi-byte types), with the given extra header lines, before the
+/// data: `pre` bytes (what a line or byte skip passes over). Returns the
+/// header and the data bytes.
+fn nrrd_parts(dims: [usize; 3], ty: &str, big: bool, extra: &str, pre: &[u8], seed: u64) -> (String, Vec<u8>) {
+    let mut rng = crate::common::xorshift(seed);
+    let n = dims[0] * dims[1] * dims[2];
+    let mut data = pre.to_vec();
+    for _ in 0..n {
+        let v = (rng() % 200) as i64 - if ty == "signed char" { 100 } else { 0 };
+        let b: Vec<u8> = match ty {
+            "uchar" => vec![v as u8],
+            "signed char" => vec![v as i8 as u8],
+            "short" => {
+                if big {
+                    (v as i16).to_be_bytes().to_vec()
+                } else {
+                    (v as i16).to_le_bytes().to_vec()
+                }
+            }
+            "uint" => {
+                if big {
+                    (v as u32).to_be_bytes().to_vec()
+                } else {
+                    (v as u32).to_le_bytes().to_vec()
+                }
+            }
+            "double" => {
+                if big {
+                    (v as f64 * 0.5).to_be_bytes().to_vec()
+                } else {
+                    (v as f64 * 0.5).to_le_bytes().to_vec()
+                }
+            }
+            _ => unreachable!(),
+        };
+        data.extend(b);
+    }
+    let endian = if big { "big" } else { "little" };
+    let header =
+        format!("NRRD0004\ntype: {ty}\ndimension: 3\nsizes: {} {} {}\nendian: {endian}\nencoding: raw\n{extra}", dims[0], dims[1], dims[2]);
+    (header, data)
+}
+
+/// The voxels `[lo, hi)` of `v`, as f32.
+fn box_of(v: &Volume, lo: [usize; 3], hi: [usize; 3]) -> Vec<f32> {
+    let [nx, ny, _] = v.dims();
+    let all = v.to_f32();
+    let mut out = vec![];
+    for z in lo[2]..hi[2] {
+        for y in lo[1]..hi[1] {
+            out.extend_from_slice(&all[(z * ny + y) * nx + lo[0]..(z * ny + y) * nx + hi[0]]);
+        }
+    }
+    out
+}
+
+/// A test NRRD: its name, type, big endian, extra header lines, the bytes
+/// before the data, and whether the header is detached.
+type NrrdCase<'a> = (&'a str, &'a str, bool, &'a str, &'a [u8], bool);
+
+#[test]
+fn an_uncompressed_nrrd_is_read_box_by_box_as_it_loads() {
+    use shearwarp::data::io::{LoadOptions, load, read_box, seekable_layout};
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [13, 9, 11];
+    let cases: [NrrdCase; 6] = [
+        ("u8.nrrd", "uchar", false, "spacings: 1 1 2.5\n", b"", false),
+        ("i16.nrrd", "short", true, "line skip: 1\nbyte skip: 3\n", b"skip me\nabc", false),
+        ("f64.nhdr", "double", false, "space: left-posterior-superior\nspace directions: (0.7,0,0) (0,0.7,0) (0,0,3)\n", b"", true),
+        // a mirrored frame: the loader reverses x, the box is read mirrored
+        (
+            "i8.nrrd",
+            "signed char",
+            false,
+            "space: right-anterior-superior\nspace directions: (-1.5,0,0) (0,1,0) (0,0,2)\nspace origin: (10,20,30)\n",
+            b"",
+            false,
+        ),
+        ("u32.nhdr", "uint", true, "byte skip: -1\n", b"leading junk", true),
+        ("u8-skip.nrrd", "uchar", false, "byte skip: -1\n", b"", false),
+    ];
+    for (i, (name, ty, big, extra, pre, detached)) in cases.into_iter().enumerate() {
+        let (header, data) = nrrd_parts(dims, ty, big, extra, pre, 17 + i as u64);
+        let path = dir.path().join(name);
+        if detached {
+            let data_name = format!("{name}.data");
+            std::fs::write(dir.path().join(&data_name), &data).unwrap();
+            std::fs::write(&path, format!("{header}data file: {data_name}\n\n")).unwrap();
+        } else {
+            std::fs::write(&path, [format!("{header}\n").into_bytes(), data].concat()).unwrap();
+        }
+        let whole = load(&path, &LoadOptions::default()).unwrap();
+        let layout = seekable_layout(&path, &LoadOptions::default()).unwrap().unwrap_or_else(|| panic!("{name}: not seekable"));
+        assert_eq!((layout.dims, layout.spacing), (whole.dims(), whole.spacing()), "{name}");
+        assert_eq!(layout.frame.as_ref(), whole.frame(), "{name}");
+        assert_eq!(layout.reversed_axis.is_some(), name.starts_with("i8"), "{name}");
+        for (lo, hi) in [([0, 0, 0], dims), ([2, 3, 4], [7, 9, 10]), ([12, 0, 5], [13, 1, 6]), ([0, 4, 0], [6, 8, 11])] {
+            let b = read_box(&layout, lo, hi).unwrap();
+            assert_eq!(b.dims(), [0, 1, 2].map(|a| hi[a] - lo[a]), "{name}");
+            assert_eq!(b.data().voxel_type(), whole.data().voxel_type(), "{name}");
+            assert_eq!(b.to_f32(), box_of(&whole, lo, hi), "{name}: voxels {lo:?}..{hi:?}");
+        }
+    }
+    // gzip data are read whole (by rank 0 in a distributed run)
+    let (header, data) = nrrd_parts(dims, "uchar", false, "", b"", 3);
+    let header = header.replace("encoding: raw", "encoding: gzip");
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, &data).unwrap();
+    let path = dir.path().join("gz.nrrd");
+    std::fs::write(&path, [format!("{header}\n").into_bytes(), gz.finish().unwrap()].concat()).unwrap();
+    assert!(load(&path, &LoadOptions::default()).is_ok());
+    assert_eq!(seekable_layout(&path, &LoadOptions::default()).unwrap(), None);
+}
+
+#[test]
+fn a_bad_or_truncated_nrrd_names_the_file() {
+    use shearwarp::data::io::{LoadOptions, read_box, seekable_layout};
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [8, 6, 5];
+    let (header, data) = nrrd_parts(dims, "short", false, "", b"", 5);
+    let write = |name: &str, bytes: Vec<u8>| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let opts = LoadOptions::default();
+    let err = |p: &std::path::Path| seekable_layout(p, &opts).unwrap_err().to_string();
+    // the data end early, or run on: the loader's own checks
+    let short = write("short.nrrd", [format!("{header}\n").into_bytes(), data[..data.len() - 7].to_vec()].concat());
+    let e = err(&short);
+    assert!(e.contains("short.nrrd") && e.contains("truncated"), "{e}");
+    let long = write("long.nrrd", [format!("{header}\n").into_bytes(), data.clone(), vec![0; 4]].concat());
+    let e = err(&long);
+    assert!(e.contains("long.nrrd") && e.contains("more than the header"), "{e}");
+    // a header line that is no field, a missing data file
+    let bad = write("bad.nrrd", format!("{header}this is not a field\n\n").into_bytes());
+    let e = err(&bad);
+    assert!(e.contains("bad.nrrd") && e.contains("neither a field nor a comment"), "{e}");
+    let lost = write("lost.nhdr", format!("{header}data file: gone.raw\n\n").into_bytes());
+    let e = err(&lost);
+    assert!(e.contains("lost.nhdr") && e.contains("gone.raw"), "{e}");
+    // a file cut after its layout was read: the box that reaches past the end fails, naming it
+    let cut = write("cut.nrrd", [format!("{header}\n").into_bytes(), data.clone()].concat());
+    let layout = seekable_layout(&cut, &opts).unwrap().unwrap();
+    let bytes = std::fs::read(&cut).unwrap();
+    std::fs::write(&cut, &bytes[..bytes.len() - 2 * 8 * 6]).unwrap();
+    assert!(read_box(&layout, [0, 0, 0], [8, 6, 4]).is_ok());
+    let e = read_box(&layout, [0, 0, 3], [8, 6, 5]).unwrap_err().to_string();
+    assert!(e.contains("cut.nrrd") && e.contains("truncated"), "{e}");
+}

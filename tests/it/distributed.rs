@@ -1,8 +1,9 @@
 //! `--distributed` under `mpirun` (feature `mpi`; Open MPI's `mpirun` on the
 //! PATH): with 1–4 ranks, oversubscribed, the iso image is the single
 //! process's byte for byte and the blended image within 1/255 and the same
-//! every run, for a raw file each rank reads its own brick of and for a
-//! phantom rank 0 scatters; `--json` reports every rank; a rank that cannot
+//! every run, for a raw file and an uncompressed NRRD each rank reads its
+//! own brick of and for a phantom rank 0 scatters; `bench` times the
+//! variants a distributed frame runs and names the others; `--json` reports every rank; a rank that cannot
 //! read its brick ends the job with one error from rank 0 and no output.
 
 use std::path::{Path, PathBuf};
@@ -139,4 +140,94 @@ fn a_rank_that_cannot_read_its_brick_ends_the_job_with_one_error() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("memory budget"), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(!out.exists(), "an output was written");
+}
+
+#[test]
+fn bench_times_the_binary_and_rle_variants_on_every_rank() {
+    let dir = tempfile::tempdir().unwrap();
+    let raw = raw_volume(dir.path(), [36, 40, 33], 7);
+    let json = dir.path().join("bench.json");
+    let args = [
+        "bench",
+        raw.to_str().unwrap(),
+        "--only",
+        "binary-c1-u64-bitscan,rle,binary-c1-u64-bitscan-q2",
+        "--size",
+        "64",
+        "--reps",
+        "2",
+        "--rounds",
+        "1",
+        "--random-views",
+        "0",
+        "--quiet",
+        "--json",
+        "--json-out",
+        json.to_str().unwrap(),
+    ];
+    let o = mpirun(3, &args);
+    ok(&o, "3 ranks");
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON report");
+    assert_eq!(j, serde_json::from_slice::<serde_json::Value>(&std::fs::read(&json).unwrap()).unwrap(), "--json-out differs");
+    assert_eq!(j["ranks"], 3);
+    let views = j["views"].as_array().unwrap().len();
+    let rows = j["records"].as_array().unwrap();
+    let names: Vec<String> = rows.iter().map(|r| format!("{} {}", r["mode"].as_str().unwrap(), r["variant"].as_str().unwrap())).collect();
+    assert_eq!(names, ["iso binary-c1-u64-bitscan", "iso rle", "blend binary-c1-u64-bitscan", "blend rle"]);
+    for r in rows {
+        assert_eq!(r["frames"], 2 * views);
+        assert!(r["frame_ms_median"].as_f64().unwrap() > 0.0, "{r}");
+        let ranks = r["per_rank"].as_array().unwrap();
+        assert_eq!(ranks.len(), 3);
+        for (i, x) in ranks.iter().enumerate() {
+            assert_eq!(x["rank"], i);
+            let key = if i == 0 { "received_bytes_per_frame" } else { "sent_bytes_per_frame" };
+            assert!(x[key].as_f64().unwrap() > 16.0 && x["peak_rss_bytes"].as_u64().unwrap() > 0, "rank {i}: {x}");
+        }
+    }
+    // the variants a distributed frame does not run are named, with the reason
+    let skipped = j["skipped"].as_array().unwrap();
+    assert_eq!(skipped.len(), 2, "{skipped:?}");
+    assert!(skipped.iter().all(|s| s["variant"] == "binary-c1-u64-bitscan-q2" && s["reason"].as_str().unwrap().contains("quality 1")));
+    // the table names them too; a selection of none of them is refused before any rank reads
+    let o = mpirun(2, &args[..args.len() - 3]);
+    ok(&o, "2 ranks, the table");
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert!(table.contains("| blend | rle |") && table.contains("binary-c1-u64-bitscan-q2"), "{table}");
+    let o = mpirun(2, &["bench", raw.to_str().unwrap(), "--only", "brute", "--quiet"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no binary or RLE variant"), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn an_uncompressed_nrrd_is_read_brick_by_brick_as_one_process_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [41, 36, 30];
+    let v = random_volume(dims, 23, [1.0; 3]);
+    // 16-bit big-endian voxels in a mirrored patient frame (x is reversed on load)
+    let mut bytes = format!(
+        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {} {} {}\nendian: big\nencoding: raw\n\
+         space: right-anterior-superior\nspace directions: (-0.8,0,0) (0,0.8,0) (0,0,1.6)\nspace origin: (5,-3,40)\n\n",
+        dims[0], dims[1], dims[2]
+    )
+    .into_bytes();
+    v.to_f32().iter().for_each(|x| bytes.extend((x.round().clamp(0.0, 255.0) as u16 * 9).to_be_bytes()));
+    let path = dir.path().join("ct.nrrd");
+    std::fs::write(&path, bytes).unwrap();
+    let file = path.to_str().unwrap();
+    for (i, (view, tissue)) in [("anterior", "low"), ("left", "high")].into_iter().enumerate() {
+        let args = ["render", file, "--view", view, "--rotate", "10,25,0", "--tissue", tissue, "--size", "128"];
+        let one = dir.path().join(format!("one{i}.png"));
+        ok(&single(&[&args[..], &["-o", one.to_str().unwrap()]].concat()), "one process");
+        for n in [2, 4] {
+            let out = dir.path().join(format!("d{i}-{n}.png"));
+            let o = mpirun(n, &[&args[..], &["-o", out.to_str().unwrap(), "--json"]].concat());
+            ok(&o, &format!("{n} ranks"));
+            assert!(std::fs::read(&one).unwrap() == std::fs::read(&out).unwrap(), "{view}: {n} ranks differ from one process");
+            // every rank read its own brick from the file
+            let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            assert!(j["per_rank"].as_array().unwrap().iter().all(|r| r["read"] == "seek"), "{j}");
+        }
+        assert!(pixels(&one).chunks(4).filter(|p| p[..3] != [0, 0, 0]).count() > 300, "{view} shows little");
+    }
 }

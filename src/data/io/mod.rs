@@ -16,7 +16,7 @@
 //! or reports progress.
 //!
 //! **Robustness contract.** Bad input never panics, hangs or over-allocates.
-//! Header dimensions go through [`check_dims`](crate::data::volume::check_dims)
+//! Header dimensions go through [`check_dims`]
 //! before anything is allocated, uncompressed payloads are checked against
 //! the file size before they are read, and compressed payloads are read
 //! through `Read::take(expected + 1)` so a decompression bomb stops at the
@@ -32,7 +32,8 @@ use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use crate::data::volume::{Volume, VoxelData, VoxelType};
+use crate::data::orientation::PatientFrame;
+use crate::data::volume::{Volume, VoxelData, VoxelType, check_dims};
 use crate::error::{Error, Result};
 
 pub use raw::{RawSpec, save_raw, sidecar_path};
@@ -163,11 +164,54 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume> {
     }
 }
 
-/// The raw layout of the voxels of `path` when a box of them can be read by
-/// seeking (a raw file, by `opts.raw` or its sidecar; a `.den` file), with
-/// the file's patient frame when it has one; `None` for a format that must
-/// be read whole (NRRD, NIfTI, DICOM). Reads the header only.
-pub fn seekable_layout(path: &Path, opts: &LoadOptions) -> Result<Option<RawSpec>> {
+/// Where the voxels of a file lie, for reading a box of them by seeking
+/// ([`read_box`]): a raw file, a `.den` file or an uncompressed NRRD, found
+/// by [`seekable_layout`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layout {
+    /// The file holding the voxels (a detached NRRD header names another).
+    pub data: PathBuf,
+    /// Grid size `[nx, ny, nz]`, x fastest in the file.
+    pub dims: [usize; 3],
+    /// The stored sample type (converted as the loader converts it).
+    pub sample: Sample,
+    /// Byte order of multi-byte samples.
+    pub big_endian: bool,
+    /// Voxel size along x, y, z.
+    pub spacing: [f32; 3],
+    /// The byte of [`Layout::data`] where voxel `(0, 0, 0)` starts.
+    pub offset: u64,
+    /// The patient frame the loaded volume carries, if the file has one
+    /// (right-handed: see [`Volume::set_frame`]).
+    pub frame: Option<PatientFrame>,
+    /// The index axis the loader reverses to unmirror the file's frame: a
+    /// box of the loaded volume is then read mirrored and reversed.
+    pub reversed_axis: Option<usize>,
+}
+
+impl Layout {
+    /// The layout of the raw file `path` laid out as `spec` says.
+    pub fn raw(path: &Path, spec: &RawSpec) -> Layout {
+        Layout {
+            data: path.to_path_buf(),
+            dims: spec.dims,
+            sample: Sample::from_voxel_type(spec.voxel_type),
+            big_endian: spec.big_endian,
+            spacing: spec.spacing,
+            offset: spec.header_bytes,
+            frame: None,
+            reversed_axis: None,
+        }
+    }
+}
+
+/// The layout of the voxels of `path` when a box of them can be read by
+/// seeking: a raw file (by `opts.raw` or its sidecar), a `.den` file, or an
+/// NRRD with raw encoding (attached, or a detached header and its data
+/// file), with the patient frame the loader gives the volume; `None` for a
+/// format that must be read whole (gzip NRRD, NIfTI, DICOM). Reads and
+/// checks the header only, with the loader's own parser.
+pub fn seekable_layout(path: &Path, opts: &LoadOptions) -> Result<Option<Layout>> {
     let meta = std::fs::metadata(path).map_err(|e| io_error(path, e))?;
     if !meta.is_file() {
         return Ok(None);
@@ -178,53 +222,66 @@ pub fn seekable_layout(path: &Path, opts: &LoadOptions) -> Result<Option<RawSpec
     };
     match format {
         Format::Raw => match &opts.raw {
-            Some(spec) => Ok(Some(spec.clone())),
-            None => raw::sidecar_layout(path),
+            Some(spec) => Ok(Some(Layout::raw(path, spec))),
+            None => raw::sidecar_layout(path).map(|(spec, frame)| Some(Layout { frame, ..Layout::raw(path, &spec) })),
         },
-        Format::Den => den::layout(path).map(Some),
+        Format::Den => den::layout(path).map(|spec| Some(Layout::raw(path, &spec))),
+        Format::Nrrd => nrrd::layout(path),
         _ => Ok(None),
     }
 }
 
-/// Reads the voxels `[lo, hi)` (along x, y, z) of the file `path` laid out
-/// as `spec` says, by seeking to each slice's rows: a brick of a volume
-/// without reading the rest. An error names the file (missing, shorter than
-/// the layout, unreadable).
-pub fn read_box(path: &Path, spec: &RawSpec, lo: [usize; 3], hi: [usize; 3]) -> Result<Volume> {
+/// Reads the voxels `[lo, hi)` (along x, y, z) of the volume that loading
+/// the file laid out as `layout` says gives, by seeking to each slice's
+/// rows: a brick of a volume without reading the rest. An error names the
+/// file (missing, shorter than the layout, unreadable).
+pub fn read_box(layout: &Layout, lo: [usize; 3], hi: [usize; 3]) -> Result<Volume> {
     use std::io::{Seek, SeekFrom};
-    let len = spec.data_bytes().map_err(|e| Error::file(path, e.to_string()))?;
-    let [nx, ny, nz] = spec.dims;
-    if (0..3).any(|a| lo[a] >= hi[a] || hi[a] > spec.dims[a]) {
+    let path = layout.data.as_path();
+    let dims = check_dims(layout.dims.map(|d| d as u64)).map_err(|e| Error::file(path, e.to_string()))?;
+    let [nx, ny, nz] = dims;
+    if (0..3).any(|a| lo[a] >= hi[a] || hi[a] > dims[a]) {
         return Err(Error::file(path, format!("voxels {lo:?}..{hi:?} are not inside its {nx}×{ny}×{nz} voxels")));
+    }
+    // the box as the file stores it (mirrored along a reversed axis)
+    let (mut flo, mut fhi) = (lo, hi);
+    if let Some(a) = layout.reversed_axis.filter(|&a| a < 3) {
+        (flo[a], fhi[a]) = (dims[a] - hi[a], dims[a] - lo[a]);
     }
     let mut f = File::open(path).map_err(|e| io_error(path, e))?;
     let size = f.metadata().map_err(|e| io_error(path, e))?.len();
-    let b = spec.voxel_type.size();
+    let b = layout.sample.size();
+    let len = (nx * ny * nz * b) as u64;
     // the box's last byte (the whole layout was checked against the dims above)
-    let end = spec.header_bytes + (((hi[2] - 1) * ny + hi[1]) * nx * b) as u64;
+    let end = layout.offset + (((fhi[2] - 1) * ny + fhi[1]) * nx * b) as u64;
     if size < end {
         return Err(Error::file(
             path,
             format!(
-                "file is truncated: {size} bytes, voxels {lo:?}..{hi:?} end at byte {end} (the layout needs {})",
-                spec.header_bytes + len
+                "file is truncated: {size} bytes, voxels {flo:?}..{fhi:?} end at byte {end} (the layout needs {})",
+                layout.offset + len
             ),
         ));
     }
-    let (w, rows) = (hi[0] - lo[0], hi[1] - lo[1]);
-    let mut out = Vec::with_capacity(w * rows * (hi[2] - lo[2]) * b);
+    let (w, rows) = (fhi[0] - flo[0], fhi[1] - flo[1]);
+    let mut out = Vec::with_capacity(w * rows * (fhi[2] - flo[2]) * b);
     // one read per slice: its rows y0..y1 whole, then the x range of each
     let mut slab = vec![0u8; rows * nx * b];
-    for z in lo[2]..hi[2] {
-        let at = spec.header_bytes + ((z * ny + lo[1]) * nx * b) as u64;
+    for z in flo[2]..fhi[2] {
+        let at = layout.offset + ((z * ny + flo[1]) * nx * b) as u64;
         f.seek(SeekFrom::Start(at)).map_err(|e| io_error(path, e))?;
         f.read_exact(&mut slab).map_err(|e| io_error(path, e))?;
         for y in 0..rows {
-            out.extend_from_slice(&slab[(y * nx + lo[0]) * b..(y * nx + hi[0]) * b]);
+            out.extend_from_slice(&slab[(y * nx + flo[0]) * b..(y * nx + fhi[0]) * b]);
         }
     }
-    let data = decode_samples(out, Sample::from_voxel_type(spec.voxel_type), spec.big_endian);
-    make_volume(path, [w, rows, hi[2] - lo[2]], spec.spacing, data)
+    drop(slab);
+    let data = decode_samples(out, layout.sample, layout.big_endian);
+    let mut v = make_volume(path, [w, rows, fhi[2] - flo[2]], layout.spacing, data)?;
+    if let Some(a) = layout.reversed_axis {
+        v.reverse_axis(a);
+    }
+    Ok(v)
 }
 
 /// Reads up to 352 bytes and looks for a known magic.
@@ -259,22 +316,32 @@ fn is_nifti_magic(head: &[u8]) -> bool {
     matches!(head.get(344..348), Some(b"n+1\0") | Some(b"ni1\0"))
 }
 
-/// The scalar type of samples stored in a file, before conversion to a [`VoxelType`].
+/// The scalar type of samples stored in a file, before conversion to a
+/// [`VoxelType`]: u8, u16 and i16 are kept, i8 widens to i16 and the
+/// others become f32.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Sample {
+pub enum Sample {
+    /// Unsigned 8-bit.
     U8,
+    /// Signed 8-bit.
     I8,
+    /// Unsigned 16-bit.
     U16,
+    /// Signed 16-bit.
     I16,
+    /// Unsigned 32-bit.
     U32,
+    /// Signed 32-bit.
     I32,
+    /// 32-bit float.
     F32,
+    /// 64-bit float.
     F64,
 }
 
 impl Sample {
     /// Bytes per sample.
-    pub(crate) fn size(self) -> usize {
+    pub fn size(self) -> usize {
         match self {
             Sample::U8 | Sample::I8 => 1,
             Sample::U16 | Sample::I16 => 2,
@@ -283,7 +350,8 @@ impl Sample {
         }
     }
 
-    pub(crate) fn from_voxel_type(t: VoxelType) -> Sample {
+    /// The sample type of voxels of type `t`.
+    pub fn from_voxel_type(t: VoxelType) -> Sample {
         match t {
             VoxelType::U8 => Sample::U8,
             VoxelType::U16 => Sample::U16,

@@ -32,7 +32,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use super::{Sample, decode_samples, io_error, make_volume, read_capped};
+use super::{Layout, Sample, decode_samples, io_error, make_volume, read_capped};
 use crate::data::orientation::PatientFrame;
 use crate::data::volume::{Volume, check_dims};
 use crate::error::{Error, Result};
@@ -71,8 +71,25 @@ struct Header {
     line_skip: u64,
 }
 
-/// Loads a `.nrrd` or `.nhdr` file.
-pub fn load_nrrd(path: &Path) -> Result<Volume> {
+/// A parsed header and where its data start: what [`load_nrrd`] and
+/// [`layout`] share, so a file seek-read is read as the loader reads it.
+struct Located {
+    h: Header,
+    dims: [usize; 3],
+    spacing: [f32; 3],
+    frame: Option<PatientFrame>,
+    /// The file holding the data: this one, or the detached header's data file.
+    data_path: PathBuf,
+    /// The data file, standing at `pos` (past the header and the line skip).
+    reader: Box<dyn BufRead>,
+    pos: u64,
+    data_len: u64,
+    /// The bytes of the voxels.
+    expected: u64,
+}
+
+/// Reads and checks the header of `path` and finds its data.
+fn locate(path: &Path) -> Result<Located> {
     let file = File::open(path).map_err(|e| io_error(path, e))?;
     let mut reader = BufReader::new(file);
     let (fields, data_offset) = read_header(path, &mut reader)?;
@@ -123,6 +140,8 @@ pub fn load_nrrd(path: &Path) -> Result<Volume> {
     }
     let expected = (dims[0] * dims[1] * dims[2]) as u64 * size;
 
+    let frame = patient_frame(path, &h, &axes)?;
+
     // Where the data are: this file after the header, or the named data file.
     let (data_path, mut reader, start): (PathBuf, Box<dyn BufRead>, u64) = match &h.data_file {
         None => {
@@ -165,63 +184,106 @@ pub fn load_nrrd(path: &Path) -> Result<Volume> {
         }
         pos += n as u64;
     }
+    Ok(Located { h, dims, spacing, frame, data_path, reader, pos, data_len, expected })
+}
+
+/// Where the voxels of raw-encoded data start in the data file, after the
+/// byte skip, once the data are checked to be exactly as long as the
+/// header describes.
+fn raw_start(l: &Located) -> Result<u64> {
+    let Located { h, dims, data_path, pos, data_len, expected, .. } = l;
+    let (pos, expected, size) = (*pos, *expected, h.sample.size() as u64);
     let remaining = data_len.saturating_sub(pos);
-    let bytes = match h.encoding {
+    let skip = if h.byte_skip == -1 {
+        if remaining < expected {
+            return Err(Error::file(data_path, format!("NRRD data are truncated: expected {expected} bytes, found only {remaining}")));
+        }
+        remaining - expected
+    } else {
+        h.byte_skip as u64
+    };
+    let avail = remaining.saturating_sub(skip);
+    if avail < expected {
+        return Err(Error::file(
+            data_path,
+            format!(
+                "NRRD data are truncated: the header describes {expected} bytes ({}×{}×{} × {size}), found only {avail}",
+                dims[0], dims[1], dims[2]
+            ),
+        ));
+    }
+    if avail > expected {
+        return Err(Error::file(
+            data_path,
+            format!("NRRD data hold {} bytes more than the header describes ({expected})", avail - expected),
+        ));
+    }
+    Ok(pos + skip)
+}
+
+/// Loads a `.nrrd` or `.nhdr` file.
+pub fn load_nrrd(path: &Path) -> Result<Volume> {
+    let l = locate(path)?;
+    let bytes = match l.h.encoding {
         Encoding::Raw => {
-            let skip = if h.byte_skip == -1 {
-                if remaining < expected {
-                    return Err(Error::file(
-                        &data_path,
-                        format!("NRRD data are truncated: expected {expected} bytes, found only {remaining}"),
-                    ));
-                }
-                remaining - expected
-            } else {
-                h.byte_skip as u64
-            };
-            let avail = remaining.saturating_sub(skip);
-            if avail < expected {
-                return Err(Error::file(
-                    &data_path,
-                    format!(
-                        "NRRD data are truncated: the header describes {expected} bytes ({}×{}×{} × {size}), found only {avail}",
-                        dims[0], dims[1], dims[2]
-                    ),
-                ));
-            }
-            if avail > expected {
-                return Err(Error::file(
-                    &data_path,
-                    format!("NRRD data hold {} bytes more than the header describes ({expected})", avail - expected),
-                ));
-            }
+            let start = raw_start(&l)?;
+            let Located { data_path, reader, expected, .. } = l;
             drop(reader);
             let mut f = File::open(&data_path).map_err(|e| io_error(&data_path, e))?;
-            f.seek(SeekFrom::Start(pos + skip)).map_err(|e| io_error(&data_path, e))?;
+            f.seek(SeekFrom::Start(start)).map_err(|e| io_error(&data_path, e))?;
             read_capped(&data_path, f, expected, "NRRD data")?
         }
         Encoding::Gzip => {
-            if h.byte_skip < 0 {
+            if l.h.byte_skip < 0 {
                 return Err(Error::file(path, "NRRD 'byte skip: -1' is only allowed with raw encoding"));
             }
-            if h.byte_skip as u64 > MAX_GZIP_SKIP {
+            if l.h.byte_skip as u64 > MAX_GZIP_SKIP {
                 return Err(Error::file(
                     path,
-                    format!("NRRD byte skip {} into gzip data is more than the {MAX_GZIP_SKIP} bytes supported", h.byte_skip),
+                    format!("NRRD byte skip {} into gzip data is more than the {MAX_GZIP_SKIP} bytes supported", l.h.byte_skip),
                 ));
             }
-            let mut gz = flate2::bufread::MultiGzDecoder::new(reader);
-            let skipped = std::io::copy(&mut (&mut gz).take(h.byte_skip as u64), &mut std::io::sink())
-                .map_err(|e| Error::file(&data_path, format!("NRRD gzip data: {e}")))?;
-            if skipped < h.byte_skip as u64 {
-                return Err(Error::file(&data_path, format!("NRRD gzip data end inside the {}-byte skip", h.byte_skip)));
+            let mut gz = flate2::bufread::MultiGzDecoder::new(l.reader);
+            let skipped = std::io::copy(&mut (&mut gz).take(l.h.byte_skip as u64), &mut std::io::sink())
+                .map_err(|e| Error::file(&l.data_path, format!("NRRD gzip data: {e}")))?;
+            if skipped < l.h.byte_skip as u64 {
+                return Err(Error::file(&l.data_path, format!("NRRD gzip data end inside the {}-byte skip", l.h.byte_skip)));
             }
-            read_capped(&data_path, gz, expected, "NRRD gzip data")?
+            read_capped(&l.data_path, gz, l.expected, "NRRD gzip data")?
         }
     };
-    let data = decode_samples(bytes, h.sample, h.big_endian.unwrap_or(false));
-    let frame = patient_frame(path, &h, &axes)?;
-    Ok(make_volume(path, dims, spacing, data)?.with_frame(frame))
+    let data = decode_samples(bytes, l.h.sample, l.h.big_endian.unwrap_or(false));
+    Ok(make_volume(path, l.dims, l.spacing, data)?.with_frame(l.frame))
+}
+
+/// The layout of the voxels of `path` when they are raw-encoded (attached,
+/// or in a detached header's data file), for reading a box of them by
+/// seeking ([`super::read_box`]): the same header parse and the same checks
+/// of the data's length as [`load_nrrd`]; `None` for gzip data, which must
+/// be decompressed from the start.
+pub fn layout(path: &Path) -> Result<Option<Layout>> {
+    let l = locate(path)?;
+    if l.h.encoding != Encoding::Raw {
+        return Ok(None);
+    }
+    let offset = raw_start(&l)?;
+    let (frame, reversed_axis) = match l.frame {
+        Some(f) => {
+            let (f, a) = f.unmirrored(l.dims, l.spacing);
+            (Some(f), a)
+        }
+        None => (None, None),
+    };
+    Ok(Some(Layout {
+        data: l.data_path,
+        dims: l.dims,
+        sample: l.h.sample,
+        big_endian: l.h.big_endian.unwrap_or(false),
+        spacing: l.spacing,
+        offset,
+        frame,
+        reversed_axis,
+    }))
 }
 
 /// The index-to-patient frame of the three (squeezed) axes, when the header

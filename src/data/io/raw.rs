@@ -185,20 +185,18 @@ fn read_sidecar_text(path: &Path) -> Result<Sidecar> {
     serde_json::from_str(&text).map_err(|e| Error::file(path, format!("raw sidecar is not valid: {e}")))
 }
 
-/// The layout of a raw file from its sidecar (see [`find_sidecar`]), when the
-/// sidecar gives no patient frame (a frame may reverse the voxels on load:
-/// such a file is read whole); an error naming the file when it has none.
-pub fn sidecar_layout(path: &Path) -> Result<Option<RawSpec>> {
+/// The layout of a raw file from its sidecar (see [`find_sidecar`]) and the
+/// patient frame the sidecar gives (right-handed, so the voxels load as
+/// they lie); an error naming the file when it has none.
+pub fn sidecar_layout(path: &Path) -> Result<(RawSpec, Option<PatientFrame>)> {
     let Some(sidecar) = find_sidecar(path) else {
         return Err(Error::file(
             path,
             format!("a raw file needs its layout: write {} or pass the dimensions and type", sidecar_path(path).display()),
         ));
     };
-    if read_sidecar_text(&sidecar)?.frame.is_some() {
-        return Ok(None);
-    }
-    read_sidecar(&sidecar).map(Some)
+    let frame = read_sidecar_text(&sidecar)?.frame.map(|f| f.frame(&sidecar)).transpose()?;
+    Ok((read_sidecar(&sidecar)?, frame))
 }
 
 /// Loads a raw file described by its sidecar (see [`find_sidecar`]).

@@ -50,25 +50,32 @@ pub struct RleVolume {
 }
 
 /// The scanlines of one encoding, in the order of the axis that encoded them
-/// (shared with the axis that re-uses them). Each array is an `Arc<[T]>`: a
-/// fat pointer held inline, so reading it costs what a `Vec` does (no second
-/// pointer to follow in the traversal's per-row cursor set-up).
+/// (shared with the axis that re-uses them). Each array is an `Arc<Vec<T>>`:
+/// the encoder's vector moves in without a second copy of the encoding (an
+/// `Arc<[T]>` would copy it), for one more pointer to follow where a
+/// scanline's cursor is set up (no measurable change in frame time).
 #[derive(Clone, Debug)]
 struct Scanlines {
     /// Run lengths: per scanline `(transparent, non-transparent)` pairs.
-    runs: Arc<[u16]>,
+    runs: Arc<Vec<u16>>,
     /// Scanline `t` owns `runs[scan_runs[t]..scan_runs[t + 1]]` ...
-    scan_runs: Arc<[u32]>,
+    scan_runs: Arc<Vec<u32>>,
     /// ... and `voxels[scan_voxels[t]..scan_voxels[t + 1]]`.
-    scan_voxels: Arc<[u32]>,
+    scan_voxels: Arc<Vec<u32>>,
     /// The non-transparent voxels, scanline by scanline, in `i` order.
-    voxels: Arc<[RleVoxel]>,
+    voxels: Arc<Vec<RleVoxel>>,
 }
 
 impl Scanlines {
     fn bytes(&self) -> usize {
         self.runs.len() * 2 + (self.scan_runs.len() + self.scan_voxels.len()) * 4 + self.voxels.len() * 4
     }
+}
+
+/// `v` shared, its spare capacity given back (in place for a large one).
+fn owned<T>(mut v: Vec<T>) -> Arc<Vec<T>> {
+    v.shrink_to_fit();
+    Arc::new(v)
 }
 
 /// One slice's part of an encoding (built in parallel, then concatenated).
@@ -80,6 +87,10 @@ struct SliceRuns {
     extent: Vec<[u16; 2]>,
     bbox: [u32; 4],
 }
+
+/// Slices the encoder encodes before appending them to the whole (at least;
+/// four a thread on more threads).
+const ENCODE_GROUP: usize = 32;
 
 impl RleVolume {
     /// Encodes `src` (one principal axis's slices: a [`SliceStack`], or the
@@ -139,82 +150,82 @@ impl RleVolume {
     fn encode_with<S: VoxelSource + ?Sized>(src: &S, pre: &Preclass, post: Option<&PostVisible>) -> Self {
         let stack: &SliceStack = src.slices();
         let [ni, nj, nk] = stack.n;
-        let slices: Vec<SliceRuns> = (0..nk)
-            .into_par_iter()
-            .map(|k| {
-                let keep = post.map(|vis| Self::post_mask(stack, pre, vis, k));
-                let voxel = |i: usize, j: usize| match &keep {
-                    None => pre.classify_voxel(src, i, j, k),
-                    Some(m) => m[i + ni * j].then(|| pre.post_voxel(src, i, j, k)),
-                };
-                let bridge = |i: usize, j: usize| match &keep {
-                    None => pre.bridge_voxel(stack, i, j, k),
-                    Some(_) => pre.post_voxel(src, i, j, k),
-                };
-                let mut s = SliceRuns {
-                    runs: Vec::new(),
-                    voxels: Vec::new(),
-                    ends: Vec::with_capacity(nj),
-                    extent: Vec::with_capacity(nj),
-                    bbox: [u32::MAX, 0, u32::MAX, 0],
-                };
-                for j in 0..nj {
-                    s.extent.push([u16::MAX, 0]);
-                    // `gap` is where the current transparent run began; `run` where the
-                    // current non-transparent run began; `pending` counts the
-                    // transparent voxels since its last non-transparent one
-                    let (mut gap, mut run, mut pending): (usize, Option<usize>, usize) = (0, None, 0);
-                    for i in 0..ni {
-                        match voxel(i, j) {
-                            Some(v) => {
-                                // a short gap inside the run: bridge it with its transparent voxels
-                                if run.is_some() {
-                                    s.voxels.extend((i - pending..i).map(|b| bridge(b, j)));
-                                }
-                                run.get_or_insert(i);
-                                pending = 0;
-                                s.voxels.push(v);
+        let encode_slice = |k: usize| {
+            let keep = post.map(|vis| Self::post_mask(stack, pre, vis, k));
+            let voxel = |i: usize, j: usize| match &keep {
+                None => pre.classify_voxel(src, i, j, k),
+                Some(m) => m[i + ni * j].then(|| pre.post_voxel(src, i, j, k)),
+            };
+            let bridge = |i: usize, j: usize| match &keep {
+                None => pre.bridge_voxel(stack, i, j, k),
+                Some(_) => pre.post_voxel(src, i, j, k),
+            };
+            let mut s = SliceRuns {
+                runs: Vec::new(),
+                voxels: Vec::new(),
+                ends: Vec::with_capacity(nj),
+                extent: Vec::with_capacity(nj),
+                bbox: [u32::MAX, 0, u32::MAX, 0],
+            };
+            for j in 0..nj {
+                s.extent.push([u16::MAX, 0]);
+                // `gap` is where the current transparent run began; `run` where the
+                // current non-transparent run began; `pending` counts the
+                // transparent voxels since its last non-transparent one
+                let (mut gap, mut run, mut pending): (usize, Option<usize>, usize) = (0, None, 0);
+                for i in 0..ni {
+                    match voxel(i, j) {
+                        Some(v) => {
+                            // a short gap inside the run: bridge it with its transparent voxels
+                            if run.is_some() {
+                                s.voxels.extend((i - pending..i).map(|b| bridge(b, j)));
                             }
-                            None => {
-                                if let Some(start) = run {
-                                    pending += 1;
-                                    if pending > BRIDGE {
-                                        let end = i + 1 - pending;
-                                        s.push_pair(start - gap, end - start, start, end - 1, j);
-                                        (gap, run, pending) = (end, None, 0);
-                                    }
+                            run.get_or_insert(i);
+                            pending = 0;
+                            s.voxels.push(v);
+                        }
+                        None => {
+                            if let Some(start) = run {
+                                pending += 1;
+                                if pending > BRIDGE {
+                                    let end = i + 1 - pending;
+                                    s.push_pair(start - gap, end - start, start, end - 1, j);
+                                    (gap, run, pending) = (end, None, 0);
                                 }
                             }
                         }
                     }
-                    if let Some(start) = run {
-                        let end = ni - pending;
-                        s.push_pair(start - gap, end - start, start, end - 1, j);
-                    }
-                    s.ends.push((s.runs.len() as u32, s.voxels.len() as u32));
                 }
-                s
-            })
-            .collect();
-        let total_runs: usize = slices.iter().map(|s| s.runs.len()).sum();
-        let total_voxels: usize = slices.iter().map(|s| s.voxels.len()).sum();
-        let mut runs = Vec::with_capacity(total_runs);
-        let mut voxels = Vec::with_capacity(total_voxels);
+                if let Some(start) = run {
+                    let end = ni - pending;
+                    s.push_pair(start - gap, end - start, start, end - 1, j);
+                }
+                s.ends.push((s.runs.len() as u32, s.voxels.len() as u32));
+            }
+            s
+        };
+        let (mut runs, mut voxels) = (Vec::new(), Vec::new());
         let (mut scan_runs, mut scan_voxels) = (Vec::with_capacity(nj * nk + 1), Vec::with_capacity(nj * nk + 1));
         let (mut extent, mut bbox) = (Vec::with_capacity(nj * nk), Vec::with_capacity(nk));
         scan_runs.push(0);
         scan_voxels.push(0);
-        for s in slices {
-            // run and voxel counts fit u32: the volume has at most 2^30 voxels
-            let (r0, v0) = (runs.len() as u32, voxels.len() as u32);
-            scan_runs.extend(s.ends.iter().map(|e| r0 + e.0));
-            scan_voxels.extend(s.ends.iter().map(|e| v0 + e.1));
-            runs.extend_from_slice(&s.runs);
-            voxels.extend_from_slice(&s.voxels);
-            extent.extend_from_slice(&s.extent);
-            bbox.push(s.bbox);
+        // a group of slices at a time, in parallel, appended in order: the
+        // encoding's peak is the whole plus one group's slices, not twice the whole
+        let group = (4 * rayon::current_num_threads()).max(ENCODE_GROUP);
+        for k0 in (0..nk).step_by(group) {
+            let slices: Vec<SliceRuns> = (k0..(k0 + group).min(nk)).into_par_iter().map(encode_slice).collect();
+            for s in slices {
+                // run and voxel counts fit u32: the volume has at most 2^30 voxels
+                let (r0, v0) = (runs.len() as u32, voxels.len() as u32);
+                scan_runs.extend(s.ends.iter().map(|e| r0 + e.0));
+                scan_voxels.extend(s.ends.iter().map(|e| v0 + e.1));
+                runs.extend_from_slice(&s.runs);
+                voxels.extend_from_slice(&s.voxels);
+                extent.extend_from_slice(&s.extent);
+                bbox.push(s.bbox);
+            }
         }
-        let lines = Scanlines { runs: runs.into(), scan_runs: scan_runs.into(), scan_voxels: scan_voxels.into(), voxels: voxels.into() };
+        let lines = Scanlines { runs: owned(runs), scan_runs: owned(scan_runs), scan_voxels: owned(scan_voxels), voxels: owned(voxels) };
         RleVolume { axis: stack.axis, n: stack.n, perm: stack.perm(), lines, map: Vec::new(), extent, bbox }
     }
 

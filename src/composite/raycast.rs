@@ -94,12 +94,12 @@ pub(crate) const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN }
 /// A located slice sample: slice `k`, cell `(ci, cj)`, in-cell weights
 /// `(wi, wj)`.
 #[derive(Clone, Copy, Debug)]
-struct At {
-    k: usize,
-    ci: usize,
-    cj: usize,
-    wi: f32,
-    wj: f32,
+pub(crate) struct At {
+    pub k: usize,
+    pub ci: usize,
+    pub cj: usize,
+    pub wi: f32,
+    pub wj: f32,
 }
 
 /// A located sample of Deluxe I: slice `k`, or (`mid`) the midpoint between
@@ -365,7 +365,7 @@ impl<'a> RayContext<'a> {
     /// bilinear along the slices, else Catmull–Rom across the four voxel
     /// lines along `za` (clamped), each linear along the other axis.
     #[inline(always)]
-    fn sample_cubic(&self, za: usize, at: At) -> f32 {
+    pub(crate) fn sample_cubic(&self, za: usize, at: At) -> f32 {
         let At { k, ci, cj, wi, wj } = at;
         let st = self.stack;
         if za == 2 {
@@ -486,19 +486,7 @@ impl<'a> RayContext<'a> {
                 let Some((at, d)) = sample(k) else { continue };
                 let (iso, rgb) = self.iso_at(k, foc);
                 if d >= iso {
-                    // refined linearly against the sample before, as the linear reconstruction does
-                    let prev = self.prev_slice(k, lo, hi).and_then(sample);
-                    let before = prev.filter(|&(_, dp)| dp < iso).map(|(ap, dp)| (ap, ((iso - dp) / (d - dp)).clamp(0.0, 1.0)));
-                    let mut g = self.gradient_cubic(za, at);
-                    let depth = match before {
-                        None => k as f32,
-                        Some((ap, t)) => {
-                            let gp = self.gradient_cubic(za, ap);
-                            g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
-                            ap.k as f32 + (k as f32 - ap.k as f32) * t
-                        }
-                    };
-                    return self.shade_hit(rgb, g, depth);
+                    return self.hit_in_slice(za, (iso, rgb), (at, d), self.prev_slice(k, lo, hi).and_then(sample));
                 }
             }
             return MISS;
@@ -510,7 +498,7 @@ impl<'a> RayContext<'a> {
             let (iso, rgb) = self.iso_at(k, foc);
             let Some((ap, dp)) = self.prev_slice(k, lo, hi).and_then(&mut sample) else {
                 if d >= iso {
-                    return self.shade_hit(rgb, self.stack.gradient(at.ci, at.cj, k, at.wi, at.wj), k as f32);
+                    return self.hit_at_slice(rgb, at);
                 }
                 continue;
             };
@@ -529,6 +517,34 @@ impl<'a> RayContext<'a> {
         MISS
     }
 
+    /// The hit `(at, d)` of the cubic in the slice (`za` 0 or 1) against
+    /// the iso value and colour `(iso, rgb)`: refined linearly against the
+    /// sample before it in walking order (`prev`, when it is below iso), as
+    /// the linear reconstruction does, and shaded by the blend of both
+    /// samples' [`RayContext::gradient_cubic`].
+    #[inline(never)]
+    pub(crate) fn hit_in_slice(&self, za: usize, (iso, rgb): (f32, [f32; 3]), (at, d): (At, f32), prev: Option<(At, f32)>) -> RayResult {
+        let k = at.k;
+        let before = prev.filter(|&(_, dp)| dp < iso).map(|(ap, dp)| (ap, ((iso - dp) / (d - dp)).clamp(0.0, 1.0)));
+        let mut g = self.gradient_cubic(za, at);
+        let depth = match before {
+            None => k as f32,
+            Some((ap, t)) => {
+                let gp = self.gradient_cubic(za, ap);
+                g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
+                ap.k as f32 + (k as f32 - ap.k as f32) * t
+            }
+        };
+        self.shade_hit(rgb, g, depth)
+    }
+
+    /// An iso hit at slice `at` with no slice before it along the ray,
+    /// shaded by the trilinear gradient there.
+    #[inline(never)]
+    pub(crate) fn hit_at_slice(&self, rgb: [f32; 3], at: At) -> RayResult {
+        self.shade_hit(rgb, self.stack.gradient(at.ci, at.cj, at.k, at.wi, at.wj), at.k as f32)
+    }
+
     /// The hit of a crossing at fraction `t` of the segment between the
     /// middle two of the four samples `four` (in walking order) along the
     /// slices, shaded by the gradient of the B-spline smoothing of the four
@@ -536,7 +552,7 @@ impl<'a> RayContext<'a> {
     /// weights; along the ray its derivative, less what the in-slice gradient
     /// adds as the ray moves across the slice.
     #[inline(never)]
-    fn hit_along(&self, rgb: [f32; 3], four: [(At, f32); 4], t: f64) -> RayResult {
+    pub(crate) fn hit_along(&self, rgb: [f32; 3], four: [(At, f32); 4], t: f64) -> RayResult {
         let (ap, at) = (four[1].0, four[2].0);
         let (b, db) = (reconstruct::b_spline(t), reconstruct::b_spline_derivative(t));
         let (mut g, mut along) = ([0f64; 3], 0f64);
@@ -557,7 +573,7 @@ impl<'a> RayContext<'a> {
 
     /// An opaque iso hit at `depth` in `iso_rgb`, shaded by the gradient `g`.
     #[inline(always)]
-    fn shade_hit(&self, iso_rgb: [f32; 3], g: [f32; 3], depth: f32) -> RayResult {
+    pub(crate) fn shade_hit(&self, iso_rgb: [f32; 3], g: [f32; 3], depth: f32) -> RayResult {
         let rgb = self.shading.shade(iso_rgb, headlight_ndl(g, self.grad_m, self.grad_s));
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }

@@ -14,12 +14,12 @@
 //!   slice `k` shares the offset of its cell and the bilinear weights, so a
 //!   ray locates its sample in a slice by one table entry and one in-volume
 //!   test on two integers, instead of the general ray's sample map.
-//! - **Along the slices, a window of four densities**: a candidate `k`
+//! - **Along the slices, a register of four densities**: a candidate `k`
 //!   tests the cubic through the samples of the slices `k − 2 … k + 1` (in
-//!   walking order); a ray keeps the densities of the last four slices it
-//!   sampled (by slice modulo 4), so consecutive candidates read one new
-//!   sample each, and the segment's [`reconstruct::upper_bound`] rejects it
-//!   before any solve.
+//!   walking order); a ray keeps the four of its last candidate and shifts
+//!   them by one slice when the next candidate is the next slice, so a run
+//!   of candidates reads one new sample each, and the segment's
+//!   [`reconstruct::upper_bound`] rejects it before any solve.
 //! - **The expensive parts only at the hit**: the crossing's solve
 //!   ([`reconstruct::crossing`]) runs where the bound admits one, and the
 //!   normal (the B-spline gradient) once, at the ray's hit.
@@ -72,13 +72,6 @@ struct Frame<'c, 'a> {
     za: usize,
     /// The last slice index.
     last: usize,
-}
-
-/// The densities of one ray in the last four slices it sampled, by slice
-/// modulo 4 (`None` outside the volume; a slot of another slice is stale).
-struct Window {
-    k: [usize; 4],
-    d: [Option<f32>; 4],
 }
 
 impl LeanCubic {
@@ -189,22 +182,18 @@ impl Frame<'_, '_> {
     }
 
     /// The density of ray `(p, q)` in slice `k` along the slices (`None`
-    /// outside the volume), kept in `win`.
+    /// outside the volume): [`RayContext::sample_cubic`]'s.
     #[inline(always)]
-    fn density(&self, p: usize, q: usize, k: usize, win: &mut Window) -> Option<f32> {
-        let s = k & 3;
-        if win.k[s] == k {
-            return win.d[s];
-        }
+    fn density(&self, p: usize, q: usize, k: usize) -> Option<f32> {
         let e = &self.slices[k];
         let ci = p as i32 + e.di;
         let cj = q as i32 + e.dj;
-        let d = ((ci as u32) < self.cells[0] && (cj as u32) < self.cells[1]).then(|| {
+        if (ci as u32) < self.cells[0] && (cj as u32) < self.cells[1] {
             let b = (p + self.n0 * q).wrapping_add_signed(e.base);
-            bilinear(self.ctx.stack.cell_at(b), e.wi, e.wj)
-        });
-        (win.k[s], win.d[s]) = (k, d);
-        d
+            Some(bilinear(self.ctx.stack.cell_at(b), e.wi, e.wj))
+        } else {
+            None
+        }
     }
 
     /// The slice before `k` in walking order, if any.
@@ -235,19 +224,36 @@ impl Frame<'_, '_> {
             }
             return MISS;
         }
-        let mut win = Window { k: [usize::MAX; 4], d: [None; 4] };
-        let mut sample = |k: usize| self.density(p, q, k, &mut win).map(|d| (k, d));
+        // the densities of the slices before the slice before, before, at and
+        // after the last candidate (walking order; None: no such slice, or
+        // outside the volume), shifted by one slice between consecutive candidates
+        let mut last = usize::MAX;
+        let mut reg: [Option<f32>; 4] = [None; 4];
+        let sample = |k: Option<usize>| k.and_then(|k| self.density(p, q, k));
         for k in walk {
-            let Some((_, d)) = sample(k) else { continue };
-            let Some((kp, dp)) = self.prev(k).and_then(&mut sample) else {
+            let (kp, kn) = (self.prev(k), self.next(k));
+            reg = if last != usize::MAX && kp == Some(last) {
+                [reg[1], reg[2], reg[3], sample(kn)]
+            } else {
+                [sample(kp.and_then(|kp| self.prev(kp))), sample(kp), sample(Some(k)), sample(kn)]
+            };
+            last = k;
+            let Some(d) = reg[2] else { continue };
+            let (Some(kp), Some(dp)) = (kp, reg[1]) else {
                 if d >= iso {
                     return ctx.hit_at_slice(rgb, self.at(p, q, k).expect("sampled").0);
                 }
                 continue;
             };
             // the four samples around the segment from the slice before to k, in walking order
-            let before = self.prev(kp).and_then(&mut sample).unwrap_or((kp, dp));
-            let after = self.next(k).and_then(&mut sample).unwrap_or((k, d));
+            let before = match reg[0] {
+                Some(x) => (self.prev(kp).expect("sampled"), x),
+                None => (kp, dp),
+            };
+            let after = match (kn, reg[3]) {
+                (Some(kn), Some(x)) => (kn, x),
+                _ => (k, d),
+            };
             let four = [before, (kp, dp), (k, d), after];
             let v = four.map(|s| s.1 as f64);
             if reconstruct::upper_bound(v[1].max(v[2]), v[0].min(v[3])) < iso as f64 {

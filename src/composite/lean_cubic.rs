@@ -20,6 +20,9 @@
 //!   them by one slice when the next candidate is the next slice, so a run
 //!   of candidates reads one new sample each, and the segment's
 //!   [`reconstruct::upper_bound`] rejects it before any solve.
+//! - **Prefetched first tests**: in groups of rays, every ray's first
+//!   candidate is found and the voxels its first test reads are prefetched
+//!   before the group is traced, so the cache misses of a group overlap.
 //! - **The expensive parts only at the hit**: the crossing's solve
 //!   ([`reconstruct::crossing`]) runs where the bound admits one, and the
 //!   normal (the B-spline gradient) once, at the ray's hit.
@@ -38,7 +41,7 @@
 
 use crate::composite::raycast::{At, MISS, RayContext, RayResult, RowOut, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
-use crate::data::slices::bilinear;
+use crate::data::slices::{bilinear, prefetch_cell};
 use crate::encode::depth::{Matcher, Search, SetBits, Word};
 use crate::encode::mask::BinaryMask;
 use crate::kernels::reconstruct;
@@ -106,18 +109,19 @@ impl LeanCubic {
     /// cubic codes and its matcher `m`, into `out`; marks `rect` valid. The
     /// same image as [`super::raycast::render_binary`] of the same frame,
     /// bit for bit.
-    pub fn render<W: Word>(&mut self, ctx: &RayContext, za: usize, mask: &BinaryMask<W>, m: &Matcher, rect: Option<Rect>, out: &mut Intermediate) {
+    pub fn render<W: Word>(
+        &mut self,
+        ctx: &RayContext,
+        za: usize,
+        mask: &BinaryMask<W>,
+        m: &Matcher,
+        rect: Option<Rect>,
+        out: &mut Intermediate,
+    ) {
         assert!(LeanCubic::applies(ctx.plan, ctx.mode, Search::Bitscan), "a frame the lean cubic path does not cover");
         assert_eq!(m.width(), mask.code_width(), "a matcher of another code width");
         self.fill(ctx);
-        let f = Frame {
-            ctx,
-            slices: &self.slices,
-            n0: ctx.stack.n[0],
-            cells: ctx.cell_counts(),
-            za,
-            last: ctx.stack.n[2] - 1,
-        };
+        let f = Frame { ctx, slices: &self.slices, n0: ctx.stack.n[0], cells: ctx.cell_counts(), za, last: ctx.stack.n[2] - 1 };
         let avx2 = mask.cpu_level().has_avx2();
         render_rows(rect, out, |row| {
             #[cfg(target_arch = "x86_64")]
@@ -136,8 +140,15 @@ impl LeanCubic {
     }
 }
 
+/// Rays per group: the first candidates of a group are found and their
+/// voxels prefetched before the group is traced (the general path's
+/// [`super::raycast::PREFETCH_GROUP`]).
+const GROUP: usize = super::raycast::PREFETCH_GROUP;
+
 /// One row of the lean cubic frame: each ray walks its (super) column of
-/// the mask, stepping from column to column with a counter.
+/// the mask, stepping from column to column with a counter; in groups of
+/// [`GROUP`] rays, first every ray's first candidate is found and the
+/// voxels its first test reads are prefetched, then the rays are traced.
 #[inline(always)]
 fn cubic_row<W: Word>(f: &Frame, mask: &BinaryMask<W>, m: &Matcher, row: RowOut) {
     let RowOut { q, p0, rgba, depth } = row;
@@ -145,15 +156,28 @@ fn cubic_row<W: Word>(f: &Frame, mask: &BinaryMask<W>, m: &Matcher, row: RowOut)
     let sq = mask.ray_column(p0, q).1;
     let s = mask.cell_size();
     let asc = f.ctx.ascending;
-    for (dp, (c, d)) in rgba.iter_mut().zip(depth.iter_mut()).enumerate() {
-        let walk = SetBits::with_matcher(mask.row(sp, sq), asc, Search::Bitscan, m);
-        let res = f.trace(p0 + dp, q, walk);
-        *c = res.rgba;
-        *d = res.depth;
-        left -= 1;
-        if left == 0 {
-            sp += 1;
-            left = s;
+    let mut walks: [Option<SetBits<W>>; GROUP] = std::array::from_fn(|_| None);
+    for (g, (cg, dg)) in rgba.chunks_mut(GROUP).zip(depth.chunks_mut(GROUP)).enumerate() {
+        let pg = p0 + g * GROUP;
+        for (dp, w) in walks[..cg.len()].iter_mut().enumerate() {
+            let mut walk = SetBits::with_matcher(mask.row(sp, sq), asc, Search::Bitscan, m);
+            *w = walk.peek().map(|k0| {
+                f.prefetch(pg + dp, q, k0);
+                walk
+            });
+            left -= 1;
+            if left == 0 {
+                sp += 1;
+                left = s;
+            }
+        }
+        for (dp, ((c, d), w)) in cg.iter_mut().zip(dg.iter_mut()).zip(walks.iter_mut()).enumerate() {
+            let res = match w.take() {
+                None => MISS,
+                Some(walk) => f.trace(pg + dp, q, walk),
+            };
+            *c = res.rgba;
+            *d = res.depth;
         }
     }
 }
@@ -193,6 +217,28 @@ impl Frame<'_, '_> {
             Some(bilinear(self.ctx.stack.cell_at(b), e.wi, e.wj))
         } else {
             None
+        }
+    }
+
+    /// Hints the cache to fetch what ray `(p, q)`'s test at its first
+    /// candidate `k` reads: along the slices its cells in the slices `k − 2 …
+    /// k + 1` (walking order), in the slice the four voxel rows around its
+    /// cell in slice `k` and the slice before. No effect on results.
+    #[inline(always)]
+    fn prefetch(&self, p: usize, q: usize, k: usize) {
+        let data = self.ctx.stack.data();
+        let cell = |k: usize| (p + self.n0 * q).wrapping_add_signed(self.slices[k].base);
+        let kp = self.prev(k);
+        if self.za == 2 {
+            for k in [kp.and_then(|kp| self.prev(kp)), kp, Some(k), self.next(k)].into_iter().flatten() {
+                prefetch_cell(data, cell(k), self.n0);
+            }
+        } else {
+            for k in [kp, Some(k)].into_iter().flatten() {
+                let b = cell(k).wrapping_sub(1);
+                prefetch_cell(data, b.wrapping_sub(self.n0), 2 * self.n0);
+                prefetch_cell(data, b, 2 * self.n0);
+            }
         }
     }
 

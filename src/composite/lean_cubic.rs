@@ -10,7 +10,7 @@
 //! loop of [`super::raycast`].
 //!
 //! What makes it lean:
-//! - **A per-slice table** ([`Entry`]): in parallel projection every ray of
+//! - **A per-slice table** (`Entry`): in parallel projection every ray of
 //!   slice `k` shares the offset of its cell and the bilinear weights, so a
 //!   ray locates its sample in a slice by one table entry and one in-volume
 //!   test on two integers, instead of the general ray's sample map.
@@ -33,11 +33,11 @@
 //!   matcher and search), in the same order;
 //! - a sample's cell, weights and density are the general ray's
 //!   ([`super::raycast::GridRay`] over the same [`crate::view::plan::SliceMap`]s,
-//!   the same in-volume test, [`RayContext::sample_cubic`]'s arithmetic);
+//!   the same in-volume test, `RayContext::sample_cubic`'s arithmetic);
 //! - the four samples of a segment, their fallbacks at the ends of the
 //!   volume, the bound, the crossing and the hit are the general path's
-//!   ([`RayContext::hit_along`], [`RayContext::hit_in_slice`],
-//!   [`RayContext::hit_at_slice`]), so every float operation is the same.
+//!   (`RayContext::hit_along`, `RayContext::hit_in_slice`,
+//!   `RayContext::hit_at_slice`), so every float operation is the same.
 
 use crate::composite::raycast::{At, MISS, RayContext, RayResult, RowOut, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
@@ -206,7 +206,7 @@ impl Frame<'_, '_> {
     }
 
     /// The density of ray `(p, q)` in slice `k` along the slices (`None`
-    /// outside the volume): [`RayContext::sample_cubic`]'s.
+    /// outside the volume): `RayContext::sample_cubic`'s.
     #[inline(always)]
     fn density(&self, p: usize, q: usize, k: usize) -> Option<f32> {
         let e = &self.slices[k];

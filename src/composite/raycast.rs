@@ -492,7 +492,7 @@ impl<'a> RayContext<'a> {
             return MISS;
         }
         let mut window = Window::default();
-        let mut sample = |k: usize| window.get(k, &sample);
+        let mut sample = |k: usize| window.get(k, sample);
         for k in ks {
             let Some((at, d)) = sample(k) else { continue };
             let (iso, rgb) = self.iso_at(k, foc);
@@ -959,13 +959,16 @@ impl<'a> RayContext<'a> {
 /// slice, so a kept sample is the one a new computation would give).
 #[derive(Default)]
 struct Window {
-    slots: [Option<(usize, Option<(At, f32)>)>; 4],
+    slots: [Option<(usize, Sample)>; 4],
 }
+
+/// A located sample and its density (`None`: outside the volume).
+type Sample = Option<(At, f32)>;
 
 impl Window {
     /// The sample of slice `k`: kept, or computed by `f` and kept.
     #[inline(always)]
-    fn get(&mut self, k: usize, f: impl FnOnce(usize) -> Option<(At, f32)>) -> Option<(At, f32)> {
+    fn get(&mut self, k: usize, f: impl FnOnce(usize) -> Sample) -> Sample {
         let slot = &mut self.slots[k & 3];
         match *slot {
             Some((kk, s)) if kk == k => s,

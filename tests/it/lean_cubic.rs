@@ -4,107 +4,21 @@
 //! random volumes (f32, 8- and 16-bit), spacings that put the volume's z
 //! along the slices or in them, views, cell sizes, one transfer function or
 //! the tissue presets' threshold codes, u32 and u64 words, slice counts
-//! below and above one word, and 1, 2 or 3 threads.
+//! below and above one word, and 1, 2 or 3 threads. The frames are compared
+//! by the lean binary frame's check ([`crate::lean_frame::check`]), with the
+//! cubic reconstruction in the settings.
 
-use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
-use shearwarp::classify::TransferFunction;
-use shearwarp::classify::presets::Tissue;
-use shearwarp::composite::Mode;
-use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::kernels::Reconstruction;
-use shearwarp::render::{FrameStats, Method, Renderer, Settings, WordSize};
+use shearwarp::render::{Settings, WordSize};
 use shearwarp::view::Camera;
-use shearwarp::warp::Image;
 
 use crate::common::{random_volume, typed};
+use crate::lean_frame::{cam, cases, check};
 
-fn tissues(scale: f32) -> Vec<Tissue> {
-    [(60.0, "a"), (110.0, "b"), (170.0, "c")]
-        .into_iter()
-        .map(|(t, name)| {
-            let t = t * scale;
-            Tissue {
-                name,
-                threshold: t,
-                rgb: [0.8, 0.7, 0.6],
-                tf: TransferFunction::new(vec![(t, 0.0), (t + 30.0, 0.5), (t + 300.0, 0.9)], vec![(t, [0.9, 0.5, 0.3]), (t + 300.0, [0.3, 0.5, 0.9])])
-                    .unwrap(),
-            }
-        })
-        .collect()
-}
-
-/// What a frame produced: the final image, the whole intermediate grid
-/// and its depths, as bits.
-struct Frame {
-    image: Vec<u32>,
-    inter: Vec<u32>,
-    stats: FrameStats,
-}
-
-fn frame(r: &mut Renderer, cam: &Camera) -> Frame {
-    let mut img = Image::new(cam.size[0], cam.size[1]);
-    let stats = r.render(cam, &mut img).unwrap();
-    let inter = r.intermediate();
-    let [w, h] = inter.size;
-    let mut bits = Vec::with_capacity(w * h * 5);
-    for q in 0..h {
-        for p in 0..w {
-            bits.extend(inter.get(p as isize, q as isize).map(f32::to_bits));
-            bits.push(inter.depth_at(p, q).to_bits());
-        }
-    }
-    Frame { image: img.data.iter().flatten().map(|x| x.to_bits()).collect(), inter: bits, stats }
-}
-
-/// A cubic renderer of `vol`: one iso value (`tissue` `None`) or the
-/// presets with tissue `i` selected.
-fn renderer(vol: &Volume, tissue: Option<usize>, s: Settings) -> Renderer {
-    let scale = match vol.data() {
-        VoxelData::U16(_) => 7.0,
-        _ => 1.0,
-    };
-    match tissue {
-        None => {
-            let tf = TransferFunction::threshold(90.0 * scale, [0.9, 0.8, 0.7]);
-            Renderer::new(vol.clone(), &tf, s).unwrap()
-        }
-        Some(i) => {
-            let mut r = Renderer::with_tissues(vol.clone(), &tissues(scale), s).unwrap();
-            r.select_tissue(i).unwrap();
-            r
-        }
-    }
-}
-
-/// Renders `cams` with the lean cubic frame, the general ray loop and the
-/// brute force, all cubic, and asserts the three equal bit for bit and that
-/// the lean renderer took the lean path; returns how many covered pixels
-/// the frames had.
-fn check(vol: &Volume, tissue: Option<usize>, s: Settings, cams: &[Camera]) -> usize {
-    let s = Settings { mode: Mode::Iso, method: Method::Binary, reconstruction: Reconstruction::Cubic, ..s };
-    let mut lean = renderer(vol, tissue, s);
-    let mut general = renderer(vol, tissue, s);
-    general.set_lean_frame(false);
-    let mut brute = renderer(vol, tissue, Settings { method: Method::Brute, ..s });
-    let mut covered = 0;
-    for (f, cam) in cams.iter().enumerate() {
-        let a = frame(&mut lean, cam);
-        let b = frame(&mut general, cam);
-        let c = frame(&mut brute, cam);
-        assert!(a.stats.lean, "frame {f}: the lean renderer took the general path");
-        assert!(!b.stats.lean, "frame {f}: the general renderer took the lean path");
-        assert!(a.inter == b.inter, "frame {f}: lean and general intermediate images differ");
-        assert!(a.inter == c.inter, "frame {f}: lean and brute-force intermediate images differ");
-        assert!(a.image == b.image && a.image == c.image, "frame {f}: final images differ");
-        covered += a.inter.chunks(5).filter(|px| f32::from_bits(px[3]) > 0.0).count();
-    }
-    covered
-}
-
-fn cam(rx: f64, ry: f64, rz: f64) -> Camera {
-    Camera::new(DMat3::from_euler(EulerRot::XYZ, rx, ry, rz), [48, 44])
+/// The settings of a cubic frame.
+fn cubic(s: Settings) -> Settings {
+    Settings { reconstruction: Reconstruction::Cubic, ..s }
 }
 
 proptest! {
@@ -124,7 +38,7 @@ proptest! {
         let mut dims = [nx, ny, nz];
         dims[long] = nlong;
         let vol = typed(&random_volume(dims, seed, spacing), ty);
-        let s = Settings { word: if u32w { WordSize::U32 } else { WordSize::U64 }, cell, threads, ..Settings::default() };
+        let s = cubic(Settings { word: if u32w { WordSize::U32 } else { WordSize::U64 }, cell, threads, ..Settings::default() });
         let cams: Vec<Camera> = (0..4).map(|f| cam(rx + f as f64 * step, ry - f as f64 * 0.3 * step, 0.2)).collect();
         check(&vol, tissue, s, &cams);
     }
@@ -140,25 +54,14 @@ fn lean_cubic_frame_at_word_boundaries() {
     let mut checked = 0;
     for nk in [3usize, 31, 32, 33, 63, 64, 65] {
         let vol = random_volume([17, 13, nk], nk as u64 * 977, [1.0, 1.0, 2.0]);
-        let cams = [
-            cam(0.0, 0.0, 0.0),
-            cam(0.0, std::f64::consts::PI, 0.3),
-            cam(0.35, -0.4, 0.1),
-            cam(1.4, 0.2, 0.1),
-            cam(0.1, -1.5, 0.4),
-        ];
+        let cams = [cam(0.0, 0.0, 0.0), cam(0.0, std::f64::consts::PI, 0.3), cam(0.35, -0.4, 0.1), cam(1.4, 0.2, 0.1), cam(0.1, -1.5, 0.4)];
         for (word, tissue, threads) in [(WordSize::U32, None, 1), (WordSize::U64, Some(1), 2)] {
             for cell in [1, 3] {
-                let s = Settings { word, cell, threads, ..Settings::default() };
-                covered += check(&vol, tissue, s, &cams);
+                covered += check(&vol, tissue, cubic(Settings { word, cell, threads, ..Settings::default() }), &cams);
                 checked += 1;
             }
         }
     }
     assert_eq!(checked, 28);
     assert!(covered > 5_000, "only {covered} covered pixels");
-}
-
-fn cases(default: u32) -> u32 {
-    std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }

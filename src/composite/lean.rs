@@ -148,7 +148,7 @@ impl LeanFrame {
     }
 
     /// The table of the frame of `ctx`.
-    pub(crate) fn fill(&mut self, ctx: &RayContext) {
+    fn fill(&mut self, ctx: &RayContext) {
         let n = ctx.stack.n;
         let (n0, n01) = (n[0] as isize, (n[0] * n[1]) as isize);
         let pad = ctx.pad;

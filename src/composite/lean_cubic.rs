@@ -10,9 +10,8 @@
 //! loop of [`super::raycast`].
 //!
 //! What makes it lean:
-//! - **A per-slice table**, the lean linear frame's ([`SliceEntry`]): in
-//!   parallel projection every ray of slice `k` shares the offset of its
-//!   cell and the bilinear weights, so a
+//! - **A per-slice table** (`Entry`): in parallel projection every ray of
+//!   slice `k` shares the offset of its cell and the bilinear weights, so a
 //!   ray locates its sample in a slice by one table entry and one in-volume
 //!   test on two integers, instead of the general ray's sample map.
 //! - **Along the slices, a register of four densities**: a candidate `k`
@@ -40,7 +39,6 @@
 //!   (`RayContext::hit_along`, `RayContext::hit_in_slice`,
 //!   `RayContext::hit_at_slice`), so every float operation is the same.
 
-use crate::composite::lean::{LeanFrame, SliceEntry};
 use crate::composite::raycast::{At, MISS, RayContext, RayResult, RowOut, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::slices::{bilinear, prefetch_cell};
@@ -49,17 +47,28 @@ use crate::encode::mask::BinaryMask;
 use crate::kernels::reconstruct;
 use crate::view::plan::{FramePlan, MapKind};
 
-/// The per-slice table of the lean cubic frame, kept across frames (the
-/// lean linear frame's table, [`LeanFrame::slices`]).
+/// One slice of the per-slice table of a frame: ray `(p, q)` samples cell
+/// `(p + di, q + dj)` at weights `(wi, wj)`, whose first voxel has stack
+/// index `p + n₀·q + base`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Entry {
+    base: isize,
+    di: i32,
+    dj: i32,
+    wi: f32,
+    wj: f32,
+}
+
+/// The per-slice table of the lean cubic frame, kept across frames.
 #[derive(Clone, Debug, Default)]
 pub struct LeanCubic {
-    table: LeanFrame,
+    slices: Vec<Entry>,
 }
 
 /// What the rays of one frame read.
 struct Frame<'c, 'a> {
     ctx: &'c RayContext<'a>,
-    slices: &'c [SliceEntry],
+    slices: &'c [Entry],
     n0: usize,
     cells: [u32; 2],
     /// The cubic's stack axis (2: along the slices).
@@ -82,6 +91,18 @@ impl LeanCubic {
             && !plan.intermediate()
     }
 
+    /// The table of the frame of `ctx`.
+    fn fill(&mut self, ctx: &RayContext) {
+        let n = ctx.stack.n;
+        let (n0, n01) = (n[0] as isize, (n[0] * n[1]) as isize);
+        let pad = ctx.pad;
+        self.slices.clear();
+        self.slices.extend(ctx.maps.iter().enumerate().map(|(k, s)| {
+            let (di, dj) = (s.floor[0] - pad, s.floor[1] - pad);
+            Entry { base: di as isize + n0 * dj as isize + n01 * k as isize, di, dj, wi: s.weight[0], wj: s.weight[1] }
+        }));
+    }
+
     /// Renders the rays of `rect` of a cubic frame for which
     /// [`LeanCubic::applies`] holds (`ctx` runs the cubic along its stack
     /// axis `za`, [`RayContext::with_cubic`]) through the sheared `mask` of
@@ -99,8 +120,8 @@ impl LeanCubic {
     ) {
         assert!(LeanCubic::applies(ctx.plan, ctx.mode, Search::Bitscan), "a frame the lean cubic path does not cover");
         assert_eq!(m.width(), mask.code_width(), "a matcher of another code width");
-        self.table.fill(ctx);
-        let f = Frame { ctx, slices: self.table.slices(), n0: ctx.stack.n[0], cells: ctx.cell_counts(), za, last: ctx.stack.n[2] - 1 };
+        self.fill(ctx);
+        let f = Frame { ctx, slices: &self.slices, n0: ctx.stack.n[0], cells: ctx.cell_counts(), za, last: ctx.stack.n[2] - 1 };
         let avx2 = mask.cpu_level().has_avx2();
         render_rows(rect, out, |row| {
             #[cfg(target_arch = "x86_64")]

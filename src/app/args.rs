@@ -115,8 +115,9 @@ pub struct RenderArgs {
     /// z axis, the normal the gradient of their B-spline smoothing, no normal
     /// codes): no terraces or rings on thick-slice scans (on a 0.6×0.6×5
     /// ellipsoid the normal error drops from 3.3° to 0.85° mean). Linear
-    /// stays the default: cubic costs 2.5–5× linear's preview frame, and
-    /// on isotropic scans both err alike; pick cubic for thick-slice scans.
+    /// stays the default: a cubic preview frame costs about 2× linear's on
+    /// a 5 mm-slice CT and 3–6× on an isotropic 256³ head (benches/README.md),
+    /// and on isotropic scans both err alike; pick cubic for thick-slice scans.
     /// Blend mode ignores it; --method rle and --deluxe I refuse cubic.
     #[arg(long, value_enum, default_value = "linear")]
     pub reconstruction: shearwarp::kernels::Reconstruction,

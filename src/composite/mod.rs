@@ -17,6 +17,7 @@
 //!   a half-step plan (Deluxe I).
 
 pub mod lean;
+pub mod lean_cubic;
 pub mod raycast;
 pub mod slices;
 

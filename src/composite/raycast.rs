@@ -94,12 +94,12 @@ pub(crate) const MISS: RayResult = RayResult { rgba: [0.0; 4], depth: f32::NAN }
 /// A located slice sample: slice `k`, cell `(ci, cj)`, in-cell weights
 /// `(wi, wj)`.
 #[derive(Clone, Copy, Debug)]
-struct At {
-    k: usize,
-    ci: usize,
-    cj: usize,
-    wi: f32,
-    wj: f32,
+pub(crate) struct At {
+    pub k: usize,
+    pub ci: usize,
+    pub cj: usize,
+    pub wi: f32,
+    pub wj: f32,
 }
 
 /// A located sample of Deluxe I: slice `k`, or (`mid`) the midpoint between
@@ -365,7 +365,7 @@ impl<'a> RayContext<'a> {
     /// bilinear along the slices, else Catmull–Rom across the four voxel
     /// lines along `za` (clamped), each linear along the other axis.
     #[inline(always)]
-    fn sample_cubic(&self, za: usize, at: At) -> f32 {
+    pub(crate) fn sample_cubic(&self, za: usize, at: At) -> f32 {
         let At { k, ci, cj, wi, wj } = at;
         let st = self.stack;
         if za == 2 {
@@ -390,9 +390,45 @@ impl<'a> RayContext<'a> {
     /// voxel units) when it runs in the slice (`za` 0 or 1), the gradient of
     /// the cubic B-spline smoothing of the four voxel lines along `za` (as
     /// the reference's): along `za` the B-spline's derivative of the lines'
-    /// samples, along the other axes the lines' central differences
-    /// ([`SliceStack::gradient`] at each line) blended by the B-spline's weights.
+    /// samples, along the other axes the lines' central differences blended
+    /// by the B-spline's weights. Each line's sample and central differences
+    /// are linear along the other in-slice axis, so away from the borders
+    /// they are read as eight voxels a line ([`RayContext::gradient_cubic_border`]
+    /// elsewhere: one-sided differences at a border).
     fn gradient_cubic(&self, za: usize, at: At) -> [f32; 3] {
+        let At { k, ci, cj, wi, wj } = at;
+        let st = self.stack;
+        let n = st.n;
+        // the other in-slice axis: its cell and weight
+        let (c, w_z, oa, co, w_o) = if za == 0 { (ci, wi, 1, cj, wj) } else { (cj, wj, 0, ci, wi) };
+        if !(co >= 1 && co + 2 < n[oa] && k >= 1 && k + 1 < n[2]) {
+            return self.gradient_cubic_border(za, at);
+        }
+        let n01 = n[0] * n[1];
+        // the steps to the next voxel line along za and along the other axis
+        let (s_l, s_o) = if za == 0 { (1, n[0]) } else { (n[0], 1) };
+        let (b, db) = (reconstruct::b_spline(w_z as f64), reconstruct::b_spline_derivative(w_z as f64));
+        let data = st.data();
+        let lerp = |a: f32, c: f32, w: f32| a + (c - a) * w;
+        let mut g = [0f64; 3];
+        for (m, l) in four(c, n[za]).into_iter().enumerate() {
+            let o = l * s_l + co * s_o + k * n01;
+            let (vm, v0, v1, v2) = (data[o - s_o], data[o], data[o + s_o], data[o + 2 * s_o]);
+            let (p0, p1, m0, m1) = (data[o + n01], data[o + n01 + s_o], data[o - n01], data[o - n01 + s_o]);
+            let value = lerp(v0, v1, w_o);
+            let d_o = lerp((v1 - vm) * 0.5, (v2 - v0) * 0.5, w_o);
+            let d_k = lerp((p0 - m0) * 0.5, (p1 - m1) * 0.5, w_o);
+            g[za] += db[m] * value as f64;
+            g[oa] += b[m] * d_o as f64;
+            g[2] += b[m] * d_k as f64;
+        }
+        g.map(|x| x as f32)
+    }
+
+    /// [`RayContext::gradient_cubic`] at any sample: each line's gradient
+    /// by [`SliceStack::gradient`] (one-sided at the borders).
+    #[inline(never)]
+    fn gradient_cubic_border(&self, za: usize, at: At) -> [f32; 3] {
         let At { k, ci, cj, wi, wj } = at;
         let st = self.stack;
         let (c, w_z) = if za == 0 { (ci, wi) } else { (cj, wj) };
@@ -407,10 +443,9 @@ impl<'a> RayContext<'a> {
             } else {
                 (st.gradient(ci, cell, k, wi, w), st.bilinear(ci, cell, k, wi, w))
             };
-            for (x, y) in g.iter_mut().zip(gl) {
-                *x += b[m] * y as f64;
+            for (a, (x, y)) in g.iter_mut().zip(gl).enumerate() {
+                *x += if a == za { db[m] * value as f64 } else { b[m] * y as f64 };
             }
-            g[za] += db[m] * value as f64 - b[m] * gl[za] as f64;
         }
         g.map(|x| x as f32)
     }
@@ -424,6 +459,14 @@ impl<'a> RayContext<'a> {
     /// [`RayContext::trace_iso`] under the cubic reconstruction along stack
     /// axis `za` ([`RayContext::with_cubic`]), with the iso value of each
     /// candidate's slice (focus or context).
+    ///
+    /// A ray's samples depend only on their slice, so each is computed once
+    /// and kept in a window of the last four slices sampled ([`Window`]):
+    /// consecutive candidates along the slices share three of their four
+    /// samples, and the segment's [`reconstruct::upper_bound`] rejects it
+    /// before any solve (the first test of [`reconstruct::crossing`], so the
+    /// result is the same). In the slice the sample before a candidate is
+    /// read only for its hit's refinement.
     #[inline(always)]
     fn trace_iso_cubic<R: Ray>(
         &self,
@@ -438,66 +481,99 @@ impl<'a> RayContext<'a> {
             let at = At { k, ci, cj, wi, wj };
             Some((at, self.sample_cubic(za, at)))
         };
+        if za < 2 {
+            for k in ks {
+                let Some((at, d)) = sample(k) else { continue };
+                let (iso, rgb) = self.iso_at(k, foc);
+                if d >= iso {
+                    return self.hit_in_slice(za, (iso, rgb), (at, d), self.prev_slice(k, lo, hi).and_then(sample));
+                }
+            }
+            return MISS;
+        }
+        let mut window = Window::default();
+        let mut sample = |k: usize| window.get(k, sample);
         for k in ks {
             let Some((at, d)) = sample(k) else { continue };
             let (iso, rgb) = self.iso_at(k, foc);
-            let prev = self.prev_slice(k, lo, hi).and_then(&sample);
-            if za < 2 {
+            let Some((ap, dp)) = self.prev_slice(k, lo, hi).and_then(&mut sample) else {
                 if d >= iso {
-                    // refined linearly against the sample before, as the linear reconstruction does
-                    let before = prev.filter(|&(_, dp)| dp < iso).map(|(ap, dp)| (ap, ((iso - dp) / (d - dp)).clamp(0.0, 1.0)));
-                    let mut g = self.gradient_cubic(za, at);
-                    let depth = match before {
-                        None => k as f32,
-                        Some((ap, t)) => {
-                            let gp = self.gradient_cubic(za, ap);
-                            g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
-                            ap.k as f32 + (k as f32 - ap.k as f32) * t
-                        }
-                    };
-                    return self.shade_hit(rgb, g, depth);
-                }
-                continue;
-            }
-            let Some((ap, dp)) = prev else {
-                if d >= iso {
-                    return self.shade_hit(rgb, self.stack.gradient(at.ci, at.cj, k, at.wi, at.wj), k as f32);
+                    return self.hit_at_slice(rgb, at);
                 }
                 continue;
             };
             // the four samples around the segment from the slice before to k, in walking order
-            let outer = |near: (At, f32), k: Option<usize>| k.and_then(&sample).unwrap_or(near);
-            let before = outer((ap, dp), self.prev_slice(ap.k, lo, hi));
-            let after = outer((at, d), self.next_slice(k, lo, hi));
+            let before = self.prev_slice(ap.k, lo, hi).and_then(&mut sample).unwrap_or((ap, dp));
+            let after = self.next_slice(k, lo, hi).and_then(&mut sample).unwrap_or((at, d));
             let four = [before, (ap, dp), (at, d), after];
-            if let Some(t) = reconstruct::crossing(four.map(|s| s.1 as f64), iso as f64) {
-                // the gradient of the B-spline smoothing of the four samples: in
-                // the slice their central differences blended by its weights;
-                // along the ray its derivative, less what the in-slice gradient
-                // adds as the ray moves across the slice
-                let (b, db) = (reconstruct::b_spline(t), reconstruct::b_spline_derivative(t));
-                let (mut g, mut along) = ([0f64; 3], 0f64);
-                for ((w, dw), (a, d)) in b.iter().zip(db).zip(four) {
-                    let ga = self.stack.gradient(a.ci, a.cj, a.k, a.wi, a.wj);
-                    for c in 0..2 {
-                        g[c] += w * ga[c] as f64;
-                    }
-                    along += dw * d as f64;
-                }
-                let pos = |a: At| [a.ci as f64 + a.wi as f64, a.cj as f64 + a.wj as f64];
-                let (x0, x1) = (pos(ap), pos(at));
-                let across = g[0] * (x1[0] - x0[0]) + g[1] * (x1[1] - x0[1]);
-                g[2] = if self.ascending { along - across } else { across - along };
-                let depth = ap.k as f32 + (k as f32 - ap.k as f32) * t as f32;
-                return self.shade_hit(rgb, g.map(|x| x as f32), depth);
+            let p = four.map(|s| s.1 as f64);
+            if reconstruct::upper_bound(p[1].max(p[2]), p[0].min(p[3])) < iso as f64 {
+                continue;
+            }
+            if let Some(t) = reconstruct::crossing(p, iso as f64) {
+                return self.hit_along(rgb, four, t);
             }
         }
         MISS
     }
 
+    /// The hit `(at, d)` of the cubic in the slice (`za` 0 or 1) against
+    /// the iso value and colour `(iso, rgb)`: refined linearly against the
+    /// sample before it in walking order (`prev`, when it is below iso), as
+    /// the linear reconstruction does, and shaded by the blend of both
+    /// samples' [`RayContext::gradient_cubic`].
+    #[inline(never)]
+    pub(crate) fn hit_in_slice(&self, za: usize, (iso, rgb): (f32, [f32; 3]), (at, d): (At, f32), prev: Option<(At, f32)>) -> RayResult {
+        let k = at.k;
+        let before = prev.filter(|&(_, dp)| dp < iso).map(|(ap, dp)| (ap, ((iso - dp) / (d - dp)).clamp(0.0, 1.0)));
+        let mut g = self.gradient_cubic(za, at);
+        let depth = match before {
+            None => k as f32,
+            Some((ap, t)) => {
+                let gp = self.gradient_cubic(za, ap);
+                g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
+                ap.k as f32 + (k as f32 - ap.k as f32) * t
+            }
+        };
+        self.shade_hit(rgb, g, depth)
+    }
+
+    /// An iso hit at slice `at` with no slice before it along the ray,
+    /// shaded by the trilinear gradient there.
+    #[inline(never)]
+    pub(crate) fn hit_at_slice(&self, rgb: [f32; 3], at: At) -> RayResult {
+        self.shade_hit(rgb, self.stack.gradient(at.ci, at.cj, at.k, at.wi, at.wj), at.k as f32)
+    }
+
+    /// The hit of a crossing at fraction `t` of the segment between the
+    /// middle two of the four samples `four` (in walking order) along the
+    /// slices, shaded by the gradient of the B-spline smoothing of the four
+    /// samples: in the slice their central differences blended by its
+    /// weights; along the ray its derivative, less what the in-slice gradient
+    /// adds as the ray moves across the slice.
+    #[inline(never)]
+    pub(crate) fn hit_along(&self, rgb: [f32; 3], four: [(At, f32); 4], t: f64) -> RayResult {
+        let (ap, at) = (four[1].0, four[2].0);
+        let (b, db) = (reconstruct::b_spline(t), reconstruct::b_spline_derivative(t));
+        let (mut g, mut along) = ([0f64; 3], 0f64);
+        for ((w, dw), (a, d)) in b.iter().zip(db).zip(four) {
+            let ga = self.stack.gradient_in_slice(a.ci, a.cj, a.k, a.wi, a.wj);
+            for c in 0..2 {
+                g[c] += w * ga[c] as f64;
+            }
+            along += dw * d as f64;
+        }
+        let pos = |a: At| [a.ci as f64 + a.wi as f64, a.cj as f64 + a.wj as f64];
+        let (x0, x1) = (pos(ap), pos(at));
+        let across = g[0] * (x1[0] - x0[0]) + g[1] * (x1[1] - x0[1]);
+        g[2] = if self.ascending { along - across } else { across - along };
+        let depth = ap.k as f32 + (at.k as f32 - ap.k as f32) * t as f32;
+        self.shade_hit(rgb, g.map(|x| x as f32), depth)
+    }
+
     /// An opaque iso hit at `depth` in `iso_rgb`, shaded by the gradient `g`.
     #[inline(always)]
-    fn shade_hit(&self, iso_rgb: [f32; 3], g: [f32; 3], depth: f32) -> RayResult {
+    pub(crate) fn shade_hit(&self, iso_rgb: [f32; 3], g: [f32; 3], depth: f32) -> RayResult {
         let rgb = self.shading.shade(iso_rgb, headlight_ndl(g, self.grad_m, self.grad_s));
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }
@@ -875,6 +951,33 @@ impl<'a> RayContext<'a> {
             }
         };
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
+    }
+}
+
+/// The samples of one ray in the last four slices it sampled along the
+/// slices, by slice index modulo 4 (a ray's sample depends only on its
+/// slice, so a kept sample is the one a new computation would give).
+#[derive(Default)]
+struct Window {
+    slots: [Option<(usize, Sample)>; 4],
+}
+
+/// A located sample and its density (`None`: outside the volume).
+type Sample = Option<(At, f32)>;
+
+impl Window {
+    /// The sample of slice `k`: kept, or computed by `f` and kept.
+    #[inline(always)]
+    fn get(&mut self, k: usize, f: impl FnOnce(usize) -> Sample) -> Sample {
+        let slot = &mut self.slots[k & 3];
+        match *slot {
+            Some((kk, s)) if kk == k => s,
+            _ => {
+                let s = f(k);
+                *slot = Some((k, s));
+                s
+            }
+        }
     }
 }
 

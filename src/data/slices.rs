@@ -295,6 +295,25 @@ impl SliceStack {
         }
     }
 
+    /// The in-slice components `[g_i, g_j]` of [`SliceStack::gradient`],
+    /// the same numbers, without reading the neighbouring slices.
+    #[inline]
+    pub fn gradient_in_slice(&self, ci: usize, cj: usize, k: usize, wi: f32, wj: f32) -> [f32; 2] {
+        let n = self.n;
+        if ci >= 1 && cj >= 1 && k >= 1 && ci + 2 < n[0] && cj + 2 < n[1] && k + 1 < n[2] {
+            let (n0, b) = (self.n[0], self.index(ci, cj, k));
+            let r4 = |o: usize| -> [f32; 4] { self.data[o - 1..o + 3].try_into().expect("4 voxels") };
+            let (rm, r0, r1, r2) = (r4(b - n0), r4(b), r4(b + n0), r4(b + 2 * n0));
+            let lerp = |a: f32, c: f32, w: f32| a + (c - a) * w;
+            let li = |r: [f32; 4]| lerp(r[1], r[2], wi);
+            let di = |r: [f32; 4]| lerp(r[2] - r[0], r[3] - r[1], wi) * 0.5;
+            [lerp(di(r0), di(r1), wj), lerp((li(r1) - li(rm)) * 0.5, (li(r2) - li(r0)) * 0.5, wj)]
+        } else {
+            let g = self.gradient_general(ci, cj, k, wi, wj);
+            [g[0], g[1]]
+        }
+    }
+
     /// [`SliceStack::gradient`] for a cell whose 4×4 in-slice neighbourhood and
     /// both neighbouring slices exist. The blend of the corners' central
     /// differences is linear in the voxels, so it is evaluated as differences of

@@ -206,7 +206,8 @@ pub fn crossing(p: [f64; 4], iso: f64) -> Option<f64> {
     if f(0.0) >= iso {
         return Some(0.0);
     }
-    // roots of f' = 3c₃t² + 2c₂t + c₁ inside (0, 1), in order
+    // roots of f' = 3c₃t² + 2c₂t + c₁ inside (0, 1), in order (the smaller
+    // root is pushed first, so the cuts ascend)
     let mut cuts = [0.0f64, 1.0, 1.0, 1.0];
     let mut n = 1;
     let (a, b, cc) = (3.0 * c[3], 2.0 * c[2], c[1]);
@@ -228,7 +229,6 @@ pub fn crossing(p: [f64; 4], iso: f64) -> Option<f64> {
         push(-cc / b);
     }
     cuts[n] = 1.0;
-    cuts[..=n].sort_by(f64::total_cmp);
     for w in cuts[..=n].windows(2) {
         let (mut lo, mut hi) = (w[0], w[1]);
         let mut f_hi = f(hi);

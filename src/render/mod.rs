@@ -45,6 +45,7 @@ use crate::classify::shade_table::ShadeTable;
 use crate::classify::{Classifier, TransferFunction};
 use crate::composite::Intermediate;
 use crate::composite::lean::LeanFrame;
+use crate::composite::lean_cubic::LeanCubic;
 use crate::data::bcc::BccLattice;
 use crate::data::volume::Volume;
 use crate::encode::depth::Matcher;
@@ -92,9 +93,10 @@ pub struct Renderer {
     /// The shade table of the raycast paths' table shading (kept across frames,
     /// rebuilt when the light direction or the material changes).
     shade: ShadeTable,
-    /// The lean binary iso frame's per-slice table (kept across frames), and
-    /// whether the frames it covers take it.
+    /// The lean binary iso frames' per-slice tables (linear and cubic, kept
+    /// across frames), and whether the frames they cover take them.
     lean: LeanFrame,
+    lean_cubic: LeanCubic,
     lean_on: bool,
     inter: Intermediate,
     pool: rayon::ThreadPool,
@@ -119,6 +121,7 @@ impl Renderer {
             pyramids: Pyramids::default(),
             shade: ShadeTable::default(),
             lean: LeanFrame::default(),
+            lean_cubic: LeanCubic::default(),
             lean_on: true,
             inter: Intermediate::default(),
             pool,
@@ -186,8 +189,9 @@ impl Renderer {
         self.range
     }
 
-    /// Whether the binary frames the lean path covers take it
-    /// ([`crate::composite::lean`]; `true`, the default) or the general ray
+    /// Whether the binary frames the lean paths cover take them
+    /// ([`crate::composite::lean`], [`crate::composite::lean_cubic`]; `true`,
+    /// the default) or the general ray
     /// loop (`false`): the same image either way, a knob for comparisons.
     pub fn set_lean_frame(&mut self, on: bool) {
         self.lean_on = on;

@@ -9,6 +9,7 @@ use super::axes::cubic_axis;
 use crate::classify::Classifier;
 use crate::classify::shade_table::{ShadeTable, headlight_object};
 use crate::composite::lean::LeanFrame;
+use crate::composite::lean_cubic::LeanCubic;
 use crate::composite::raycast::{
     RayContext, cubic_walks, occupied_scaled_rays, render_binary, render_brute, volume_rect, volume_rect_with_mids,
 };
@@ -75,12 +76,17 @@ impl Renderer {
         let classes = FrameClasses { cls, iso, focus };
         let (inter, masks, rle) = (&mut self.inter, &mut self.axes.masks, &mut self.axes.rle);
         let (normals, shade) = (&self.axes.normals, &mut self.shade);
-        let lean = &mut self.lean;
+        let (lean, lean_cubic) = (&mut self.lean, &mut self.lean_cubic);
         // the lean binary iso frame, chosen once for the frame from its plan
         let lean_frame = self.lean_on
             && settings.method == Method::Binary
             && settings.reconstruction == Reconstruction::Linear
             && LeanFrame::applies(plan, mode, settings.normals == Normals::Codes && normals[axis].is_some(), settings.search);
+        // its cubic counterpart, likewise
+        let lean_cubic_frame = self.lean_on
+            && settings.method == Method::Binary
+            && settings.reconstruction == Reconstruction::Cubic
+            && LeanCubic::applies(plan, mode, settings.search);
         // one job on the pool per plan: shear and render run inside it
         let result: Result<()> = self.pool.install(|| {
             let t = Instant::now();
@@ -123,13 +129,19 @@ impl Renderer {
                     let walks = !cubic || cubic_axis(stack.perm()) != 2 || cubic_walks(plan);
                     match (&m.mask, lean_frame) {
                         _ if !walks => render_brute(&ctx, volume_rect(plan, stack.cells()), inter),
+                        (AnyMask::W32(m), _) if lean_cubic_frame => {
+                            lean_cubic.render(&ctx, cubic_axis(stack.perm()), m, matcher, rect, inter)
+                        }
+                        (AnyMask::W64(m), _) if lean_cubic_frame => {
+                            lean_cubic.render(&ctx, cubic_axis(stack.perm()), m, matcher, rect, inter)
+                        }
                         (AnyMask::W32(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
                         (AnyMask::W64(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
                         (AnyMask::W32(m), false) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                         (AnyMask::W64(m), false) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),
                     }
                     stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
-                    stats.lean = lean_frame;
+                    stats.lean = (lean_frame || lean_cubic_frame) && walks;
                     rect
                 }
                 Method::Brute => {

@@ -33,8 +33,9 @@ pub struct FrameStats {
     pub shear_words: u64,
     /// Rays cast (pixels of the valid rectangle of the intermediate image).
     pub rays: u64,
-    /// True when the binary frame took the lean iso path
-    /// ([`crate::composite::lean`]; every plan of the frame did).
+    /// True when the binary frame took a lean iso path
+    /// ([`crate::composite::lean`], or [`crate::composite::lean_cubic`]
+    /// under the cubic reconstruction; every plan of the frame did).
     pub lean: bool,
     /// True when nothing changed since this renderer last wrote the same image,
     /// so nothing was rendered.

@@ -78,9 +78,10 @@ fn renderer(vol: &Volume, tissue: Option<usize>, s: Settings) -> Renderer {
 
 /// Renders `frames` views with the lean frame, the general ray loop and the
 /// brute force and asserts the three equal bit for bit (intermediate image,
-/// depths and final image) and that the lean renderer took the lean path;
+/// depths and final image) and that the lean renderer took the lean path
+/// (the settings' reconstruction: linear, or the lean cubic frame's cubic);
 /// returns how many covered pixels the frames had.
-fn check(vol: &Volume, tissue: Option<usize>, s: Settings, cams: &[Camera]) -> usize {
+pub(crate) fn check(vol: &Volume, tissue: Option<usize>, s: Settings, cams: &[Camera]) -> usize {
     let s = Settings { mode: Mode::Iso, method: Method::Binary, ..s };
     let mut lean = renderer(vol, tissue, s);
     let mut general = renderer(vol, tissue, s);
@@ -101,7 +102,7 @@ fn check(vol: &Volume, tissue: Option<usize>, s: Settings, cams: &[Camera]) -> u
     covered
 }
 
-fn cam(rx: f64, ry: f64, rz: f64) -> Camera {
+pub(crate) fn cam(rx: f64, ry: f64, rz: f64) -> Camera {
     Camera::new(DMat3::from_euler(EulerRot::XYZ, rx, ry, rz), [48, 44])
 }
 
@@ -190,6 +191,6 @@ fn frames_outside_the_lean_case_take_the_general_path() {
     assert!(!r.render(&c, &mut img).unwrap().lean, "perspective");
 }
 
-fn cases(default: u32) -> u32 {
+pub(crate) fn cases(default: u32) -> u32 {
     std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }

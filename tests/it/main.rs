@@ -27,6 +27,7 @@ mod io_fuzz;
 mod io_outputs;
 mod io_real;
 mod io_synth;
+mod lean_cubic;
 mod lean_frame;
 mod memory;
 mod orientation;

@@ -153,14 +153,7 @@ impl LeanFrame {
     /// The table of the frame of `ctx`, padded to `len` entries (the slots of
     /// a depth row) with entries whose cell is outside every volume.
     fn fill(&mut self, ctx: &RayContext, len: usize) {
-        let n = ctx.stack.n;
-        let (n0, n01) = (n[0] as isize, (n[0] * n[1]) as isize);
-        let pad = ctx.pad;
-        self.slices.clear();
-        self.slices.extend(ctx.maps.iter().enumerate().map(|(k, s)| {
-            let (di, dj) = (s.floor[0] - pad, s.floor[1] - pad);
-            SliceEntry { base: di as isize + n0 * dj as isize + n01 * k as isize, di, dj, wi: s.weight[0], wj: s.weight[1] }
-        }));
+        slice_table(ctx, &mut self.slices);
         // (a padding slot is never a candidate of a correct mask; were it one,
         // its cell fails the in-volume test and its index every bounds check)
         let outside = SliceEntry { base: isize::MIN / 2, di: i32::MIN / 2, dj: i32::MIN / 2, wi: 0.0, wj: 0.0 };
@@ -233,6 +226,19 @@ impl LeanFrame {
             })
         });
     }
+}
+
+/// The per-slice table of the frame of `ctx` into `out` (one entry per
+/// slice, refilled without allocating once `out` has grown).
+pub(crate) fn slice_table(ctx: &RayContext, out: &mut Vec<SliceEntry>) {
+    let n = ctx.stack.n;
+    let (n0, n01) = (n[0] as isize, (n[0] * n[1]) as isize);
+    let pad = ctx.pad;
+    out.clear();
+    out.extend(ctx.maps.iter().enumerate().map(|(k, s)| {
+        let (di, dj) = (s.floor[0] - pad, s.floor[1] - pad);
+        SliceEntry { base: di as isize + n0 * dj as isize + n01 * k as isize, di, dj, wi: s.weight[0], wj: s.weight[1] }
+    }));
 }
 
 /// Where the depth rows of one row of rays start: the first ray's column
@@ -359,7 +365,13 @@ impl<W: Word> Frame<'_, W> {
     /// candidate whose sample reaches the iso value, refined and shaded; the
     /// pixel is left as it is (a miss) if there is none.
     #[inline(always)]
-    fn trace<V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(&self, v: &V, ray: LeanRay, mut pending: Pending<W>, px: Pixel) {
+    fn trace<V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(
+        &self,
+        v: &V,
+        ray: LeanRay,
+        mut pending: Pending<W>,
+        px: Pixel,
+    ) {
         let (mut k, mut b) = (pending.k, pending.b);
         // the last sample below the iso value: its slice and density
         let mut below = Below { k: usize::MAX, d: 0.0 };
@@ -471,7 +483,13 @@ fn blend_pair(table: &ShadeTable, codes: [u16; 4], w: [f32; 2], codes_p: [u16; 4
 /// One row of the lean frame by the copy compiled for the CPU level (`avx2`:
 /// the mask's level, [`BinaryMask::cpu_level`], has AVX2).
 #[inline(always)]
-fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(f: &Frame<W>, v: &V, avx2: bool, row: RowStart, out: RowOut) {
+fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(
+    f: &Frame<W>,
+    v: &V,
+    avx2: bool,
+    row: RowStart,
+    out: RowOut,
+) {
     #[cfg(target_arch = "x86_64")]
     if avx2 {
         // SAFETY: the mask's CPU level has AVX2; a mask's level is capped to
@@ -538,7 +556,11 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: 
 /// [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "lzcnt,bmi1")]
-unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(f: &Frame<W>, v: &V, row: RowStart, out: RowOut) {
+unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(
+    f: &Frame<W>,
+    v: &V,
+    row: RowStart,
+    out: RowOut,
+) {
     lean_row::<W, V, ASC, CHECKED, ONE>(f, v, row, out)
 }
-

@@ -10,7 +10,7 @@
 //! loop of [`super::raycast`].
 //!
 //! What makes it lean:
-//! - **A per-slice table** (`Entry`): in parallel projection every ray of
+//! - **A per-slice table** ([`SliceEntry`]): in parallel projection every ray of
 //!   slice `k` shares the offset of its cell and the bilinear weights, so a
 //!   ray locates its sample in a slice by one table entry and one in-volume
 //!   test on two integers, instead of the general ray's sample map.
@@ -39,6 +39,7 @@
 //!   (`RayContext::hit_along`, `RayContext::hit_in_slice`,
 //!   `RayContext::hit_at_slice`), so every float operation is the same.
 
+use crate::composite::lean::{SliceEntry, slice_table};
 use crate::composite::raycast::{At, MISS, RayContext, RayResult, RowOut, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::slices::{bilinear, prefetch_cell};
@@ -47,28 +48,16 @@ use crate::encode::mask::BinaryMask;
 use crate::kernels::reconstruct;
 use crate::view::plan::{FramePlan, MapKind};
 
-/// One slice of the per-slice table of a frame: ray `(p, q)` samples cell
-/// `(p + di, q + dj)` at weights `(wi, wj)`, whose first voxel has stack
-/// index `p + n₀·q + base`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct Entry {
-    base: isize,
-    di: i32,
-    dj: i32,
-    wi: f32,
-    wj: f32,
-}
-
 /// The per-slice table of the lean cubic frame, kept across frames.
 #[derive(Clone, Debug, Default)]
 pub struct LeanCubic {
-    slices: Vec<Entry>,
+    slices: Vec<SliceEntry>,
 }
 
 /// What the rays of one frame read.
 struct Frame<'c, 'a> {
     ctx: &'c RayContext<'a>,
-    slices: &'c [Entry],
+    slices: &'c [SliceEntry],
     n0: usize,
     cells: [u32; 2],
     /// The cubic's stack axis (2: along the slices).
@@ -93,14 +82,7 @@ impl LeanCubic {
 
     /// The table of the frame of `ctx`.
     fn fill(&mut self, ctx: &RayContext) {
-        let n = ctx.stack.n;
-        let (n0, n01) = (n[0] as isize, (n[0] * n[1]) as isize);
-        let pad = ctx.pad;
-        self.slices.clear();
-        self.slices.extend(ctx.maps.iter().enumerate().map(|(k, s)| {
-            let (di, dj) = (s.floor[0] - pad, s.floor[1] - pad);
-            Entry { base: di as isize + n0 * dj as isize + n01 * k as isize, di, dj, wi: s.weight[0], wj: s.weight[1] }
-        }));
+        slice_table(ctx, &mut self.slices);
     }
 
     /// Renders the rays of `rect` of a cubic frame for which

@@ -114,7 +114,8 @@ pub(crate) fn shift_columns2_n<W: Word, const N: usize>(row: &mut [W], ps: usize
         std::array::from_fn(|w| (a[w] & m[0][w]) | (b[w] & m[1][w]) | (c[w] & m[2][w]) | (d[w] & m[3][w]) | (e[w] & m[4][w]))
     };
     // ps − 2 and ps − 1 wrap to huge indices (read as zero) at the grid's edge
-    let (mut a, mut b, mut c, mut d, mut e) = (col(cols, ps.wrapping_sub(2)), col(cols, ps.wrapping_sub(1)), col(cols, ps), col(cols, ps + 1), col(cols, ps + 2));
+    let (mut a, mut b, mut c, mut d, mut e) =
+        (col(cols, ps.wrapping_sub(2)), col(cols, ps.wrapping_sub(1)), col(cols, ps), col(cols, ps + 1), col(cols, ps + 2));
     let mut p = ps;
     // four columns a block while the block's last read (p + 6) is in the
     // row: the window lives in named values (no copies between columns), a

@@ -114,13 +114,16 @@ pub struct RenderArgs {
     /// slices) or cubic (Catmull–Rom through four samples along the volume's
     /// z axis, the normal the gradient of their B-spline smoothing, no normal
     /// codes): no terraces or rings on thick-slice scans (on a 0.6×0.6×5
-    /// ellipsoid the normal error drops from 3.3° to 0.85° mean). Linear
-    /// stays the default: a cubic preview frame costs about 2× linear's on
-    /// a 5 mm-slice CT and 3–6× on an isotropic 256³ head (benches/README.md),
-    /// and on isotropic scans both err alike; pick cubic for thick-slice scans.
-    /// Blend mode ignores it; --method rle and --deluxe I refuse cubic.
-    #[arg(long, value_enum, default_value = "linear")]
-    pub reconstruction: shearwarp::kernels::Reconstruction,
+    /// ellipsoid the normal error drops from 3.3° to 0.85° mean). A cubic
+    /// frame costs about 2× linear's on a 5 mm-slice CT and 3–6× on an
+    /// isotropic 256³ head (benches/README.md), and on isotropic scans both
+    /// err alike. Default: `render` (a still frame) takes cubic for a scan
+    /// whose slices are at least 1.5× as far apart as its pixels, when the
+    /// method and mode render it; `rotate` and `view` (the interactive
+    /// preview) take linear. Blend mode ignores it; --method rle and
+    /// --deluxe I refuse cubic.
+    #[arg(long, value_enum)]
+    pub reconstruction: Option<shearwarp::kernels::Reconstruction>,
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -554,7 +557,7 @@ impl RenderArgs {
             deluxe: self.deluxe,
             lattice: self.grid,
             rle_reuse: self.rle_reuse,
-            reconstruction: self.reconstruction,
+            reconstruction: self.reconstruction.unwrap_or_default(),
             ert: self.ert,
             cell: self.cell,
             threads: self.threads,

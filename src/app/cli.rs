@@ -262,6 +262,13 @@ fn memory_estimate(vol: &Volume, tissues: usize) -> serde_json::Value {
     })
 }
 
+/// Whether a scan's slices lie at least 1.5× as far apart as its pixels
+/// (`spacing` per volume axis, z the slice axis): where linear
+/// reconstruction shows terraces and a still frame takes the cubic.
+fn thick_slices(spacing: [f32; 3]) -> bool {
+    spacing[2] >= 1.5 * spacing[0].min(spacing[1])
+}
+
 /// Runs `shearwarp render`.
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     if cmd.distributed {
@@ -278,12 +285,18 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let (vol, name) = cmd.volume.load()?;
     renderable(&name, &vol)?;
     let load_ms = crate::app::since_start_ms();
-    let dims = vol.dims();
+    let (dims, spacing) = (vol.dims(), vol.spacing());
     let cam = cmd.render.camera(vol.frame())?;
     let (mut r, scene) = cmd.render.renderer_and_scene(vol)?;
     if cmd.sampling == StillSampling::Matched {
         let s = r.settings();
         r.set_settings(Settings { deluxe: shearwarp::Deluxe { matched: true, ..s.deluxe }, ..s })?;
+    }
+    if cmd.render.reconstruction.is_none() && thick_slices(spacing) {
+        let s = r.settings();
+        if s.mode == shearwarp::Mode::Iso && s.method.is_raycast() && !s.deluxe.intermediate {
+            r.set_settings(Settings { reconstruction: shearwarp::kernels::Reconstruction::Cubic, ..s })?;
+        }
     }
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let build_ms = prepare_first(&mut r, &cam)?;
@@ -299,7 +312,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
         let j = serde_json::json!({
             "volume": name, "dims": dims, "tissue": r.classification_name(), "iso": r.iso(),
             "method": s.method.name(), "mode": s.mode.name(), "word": s.word.name(), "search": s.search.name(), "cell": s.cell,
-            "projection": projection_json(r.projection()), "quality": r.quality(), "sampling": cmd.sampling.to_possible_value().map(|v| v.get_name().to_string()), "deluxe": r.settings().deluxe.label(), "grid": r.settings().lattice.name(),
+            "projection": projection_json(r.projection()), "quality": r.quality(), "sampling": cmd.sampling.to_possible_value().map(|v| v.get_name().to_string()), "deluxe": r.settings().deluxe.label(), "grid": r.settings().lattice.name(), "reconstruction": r.settings().reconstruction.name(),
             "cpu": s.cpu.capped().name(), "size": cam.size[0], "output": cmd.output, "build_ms": build_ms + stats.build_ms, "shear_ms": stats.shear_ms,
             "render_ms": stats.render_ms, "warp_ms": stats.warp_ms, "frame_ms": stats.frame_ms(),
             "axis": AXES[stats.axis], "rays": stats.rays, "coverage": img.coverage(), "warnings": warnings,

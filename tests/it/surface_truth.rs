@@ -462,3 +462,25 @@ fn perspective_truth_matches_the_ball() {
     assert!(e.depth.both > 1000 && e.depth.only_test + e.depth.only_truth < 40, "{e:?}");
     assert!(e.depth.mean < 0.2 && e.depth.p99 < 3.0 && e.normal.mean_deg < 0.5 && e.normal.p99_deg < 6.0, "{e:?}");
 }
+
+/// `render` reconstructs a thick-slice scan (slices at least 1.5× as far
+/// apart as its pixels) by the cubic unless told otherwise, where the method
+/// and mode render it; an isotropic scan, `rotate`, an explicit
+/// `--reconstruction`, and the RLE path stay linear.
+#[test]
+fn render_takes_the_cubic_for_thick_slices() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("r.png");
+    let recon = |args: &[&str]| -> String {
+        let o = shearwarp().args(args).args(["--size", "48", "-q", "--json", "-o"]).arg(&out).output().unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        j["reconstruction"].as_str().unwrap_or_else(|| panic!("{args:?}: no reconstruction in {j}")).to_string()
+    };
+    let thick = ["render", "--phantom", "ellipsoid", "--phantom-spacing", "0.6,0.6,5", "--iso", "100"];
+    assert_eq!(recon(&thick), "cubic");
+    assert_eq!(recon(&[&thick[..], &["--reconstruction", "linear"]].concat()), "linear");
+    assert_eq!(recon(&[&thick[..], &["--method", "rle"]].concat()), "linear");
+    assert_eq!(recon(&["render", "--phantom", "ellipsoid", "--phantom-spacing", "1,1,1.4", "--iso", "100"]), "linear");
+    assert_eq!(recon(&["render", "--phantom", "sphere", "--iso", "100"]), "linear");
+}

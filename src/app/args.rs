@@ -119,9 +119,9 @@ pub struct RenderArgs {
     /// isotropic 256³ head (benches/README.md), and on isotropic scans both
     /// err alike. Default: `render` (a still frame) takes cubic for a scan
     /// whose slices are at least 1.5× as far apart as its pixels, when the
-    /// method and mode render it; `rotate` and `view` (the interactive
-    /// preview) take linear. Blend mode ignores it; --method rle and
-    /// --deluxe I refuse cubic.
+    /// method and mode render it; `rotate`, `view` (the interactive
+    /// preview) and `--distributed` take linear. Blend mode ignores it;
+    /// --method rle, --deluxe I and --distributed refuse cubic.
     #[arg(long, value_enum)]
     pub reconstruction: Option<shearwarp::kernels::Reconstruction>,
     /// Worker threads (0 = all cores).

@@ -499,6 +499,9 @@ fn check_args(ra: &RenderArgs) -> Result<()> {
     if !ra.clip_plane.is_empty() {
         usage!("--distributed does not take clip planes");
     }
+    if ra.reconstruction.is_some_and(|r| r != shearwarp::kernels::Reconstruction::Linear) {
+        usage!("--distributed reconstructs linearly only (drop --reconstruction cubic)");
+    }
     Ok(())
 }
 

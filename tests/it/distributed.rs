@@ -216,7 +216,9 @@ fn an_uncompressed_nrrd_is_read_brick_by_brick_as_one_process_reads_it() {
     std::fs::write(&path, bytes).unwrap();
     let file = path.to_str().unwrap();
     for (i, (view, tissue)) in [("anterior", "low"), ("left", "high")].into_iter().enumerate() {
-        let args = ["render", file, "--view", view, "--rotate", "10,25,0", "--tissue", tissue, "--size", "128"];
+        // (linear: a one-process still of these thick slices would take the cubic)
+        let args =
+            ["render", file, "--view", view, "--rotate", "10,25,0", "--tissue", tissue, "--size", "128", "--reconstruction", "linear"];
         let one = dir.path().join(format!("one{i}.png"));
         ok(&single(&[&args[..], &["-o", one.to_str().unwrap()]].concat()), "one process");
         for n in [2, 4] {
@@ -229,5 +231,27 @@ fn an_uncompressed_nrrd_is_read_brick_by_brick_as_one_process_reads_it() {
             assert!(j["per_rank"].as_array().unwrap().iter().all(|r| r["read"] == "seek"), "{j}");
         }
         assert!(pixels(&one).chunks(4).filter(|p| p[..3] != [0, 0, 0]).count() > 300, "{view} shows little");
+    }
+}
+
+#[test]
+fn frames_it_does_not_render_are_usage_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let raw = raw_volume(dir.path(), [20, 18, 16], 5);
+    let out = dir.path().join("x.png");
+    for (extra, says) in [
+        (&["--perspective", "40"][..], "parallel projections only"),
+        (&["--clip-plane", "1,0,0,8"][..], "clip planes"),
+        (&["--reconstruction", "cubic"][..], "linearly only"),
+    ] {
+        // (refused before MPI starts: one process shows it)
+        let o = Command::new(bin())
+            .args(["render", raw.to_str().unwrap(), "--distributed", "-o", out.to_str().unwrap()])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(String::from_utf8_lossy(&o.stderr).contains(says), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(!out.exists(), "{extra:?} wrote an image");
     }
 }

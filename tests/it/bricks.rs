@@ -8,7 +8,6 @@
 use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
 use shearwarp::bricks::render_split;
-use shearwarp::classify::TransferFunction;
 use shearwarp::classify::presets::Tissue;
 use shearwarp::composite::Mode;
 use shearwarp::data::volume::{Volume, VoxelData};
@@ -24,22 +23,7 @@ fn cases(default: u32) -> u32 {
 }
 
 fn tissues(scale: f32) -> Vec<Tissue> {
-    [(60.0, "a"), (110.0, "b"), (170.0, "c")]
-        .into_iter()
-        .map(|(t, name)| {
-            let t = t * scale;
-            Tissue {
-                name,
-                threshold: t,
-                rgb: [0.8, 0.7, 0.6],
-                tf: TransferFunction::new(
-                    vec![(t, 0.0), (t + 30.0 * scale, 0.3), (t + 300.0 * scale, 0.8)],
-                    vec![(t, [0.9, 0.5, 0.3]), (t + 300.0 * scale, [0.3, 0.5, 0.9])],
-                )
-                .unwrap(),
-            }
-        })
-        .collect()
+    crate::common::three_tissues(scale, scale, [0.3, 0.8])
 }
 
 /// One renderer's image and the image of `n` bricks, for `vol` under `cam`.

@@ -18,22 +18,7 @@ use shearwarp::warp::Image;
 use crate::common::{random_volume, typed};
 
 fn tissues(scale: f32) -> Vec<Tissue> {
-    [(60.0, "a"), (110.0, "b"), (170.0, "c")]
-        .into_iter()
-        .map(|(t, name)| {
-            let t = t * scale;
-            Tissue {
-                name,
-                threshold: t,
-                rgb: [0.8, 0.7, 0.6],
-                tf: TransferFunction::new(
-                    vec![(t, 0.0), (t + 30.0, 0.5), (t + 300.0, 0.9)],
-                    vec![(t, [0.9, 0.5, 0.3]), (t + 300.0, [0.3, 0.5, 0.9])],
-                )
-                .unwrap(),
-            }
-        })
-        .collect()
+    crate::common::three_tissues(scale, 1.0, [0.5, 0.9])
 }
 
 /// What a frame produced: the final image, the whole intermediate grid

@@ -197,3 +197,25 @@ pub fn random_tf(seed: u64) -> TransferFunction {
             .unwrap(),
     }
 }
+
+/// Three threshold tissues `a`, `b`, `c` at 60, 110 and 170 times `scale`,
+/// each opaque from its threshold on: opacity `alpha[0]` at `30·span` above
+/// it and `alpha[1]` at `300·span`, its colour ramping over the same span.
+pub fn three_tissues(scale: f32, span: f32, alpha: [f32; 2]) -> Vec<shearwarp::classify::presets::Tissue> {
+    [(60.0, "a"), (110.0, "b"), (170.0, "c")]
+        .into_iter()
+        .map(|(t, name)| {
+            let t = t * scale;
+            shearwarp::classify::presets::Tissue {
+                name,
+                threshold: t,
+                rgb: [0.8, 0.7, 0.6],
+                tf: TransferFunction::new(
+                    vec![(t, 0.0), (t + 30.0 * span, alpha[0]), (t + 300.0 * span, alpha[1])],
+                    vec![(t, [0.9, 0.5, 0.3]), (t + 300.0 * span, [0.3, 0.5, 0.9])],
+                )
+                .unwrap(),
+            }
+        })
+        .collect()
+}

@@ -31,6 +31,10 @@
 //! - **A compact state per ray**: the group of rays whose first candidates are
 //!   found (and their voxels prefetched) before they are traced keeps a word
 //!   index, the remaining bits and the slice of the word's first slot.
+//! - **One vector per sample**: where the CPU level has SSSE3, a visit gathers
+//!   its cell's four densities into one SSE vector and interpolates them
+//!   there ([`Cells::sample_ssse3`]): the same float operations, the same
+//!   value bit for bit.
 //!
 //! Invariants (what keeps the image the general path's, bit for bit):
 //! - the candidate slices are the general walk's ([`crate::encode::depth::SetBits`]
@@ -253,6 +257,23 @@ struct RowStart {
 }
 
 impl RowStart {
+    /// Moves to the next ray's column (`CHECKED`: super cells, where rays share
+    /// a column; otherwise every ray has its own).
+    #[inline(always)]
+    fn advance<const CHECKED: bool>(&mut self) {
+        if CHECKED {
+            self.left -= 1;
+            if self.left == 0 {
+                self.start += self.nw;
+                self.left = self.s;
+            }
+        } else {
+            // (cell size 1: every ray has its own column)
+            debug_assert_eq!(self.s, 1);
+            self.start += self.nw;
+        }
+    }
+
     fn new<W: Word>(mask: &BinaryMask<W>, q: usize, p0: usize) -> Self {
         let (sp, left) = mask.column_run(p0);
         let sq = mask.ray_column(p0, q).1;
@@ -339,16 +360,13 @@ impl<W: Word> Frame<'_, W> {
 
     /// Hints the cache to fetch what a ray reads from its first candidate at
     /// stack index `b` on: the cell there, at the slice before it (a hit's
-    /// refinement) and the densities at the slice after it (the next visit
-    /// when the first misses), as [`RayContext::prefetch`] does.
+    /// refinement) and at the slice after it (the next visit when the first
+    /// misses), as [`RayContext::prefetch`] does; once per 16 indices.
     #[inline(always)]
-    fn prefetch_at<V: Cells, const ASC: bool>(&self, v: &V, b: usize, last: &mut usize) {
+    fn prefetch_at<V: Cells>(&self, v: &V, b: usize, last: &mut usize) {
         if b >> 4 != *last {
             *last = b >> 4;
-            let (before, after) = if ASC { (b.wrapping_sub(self.n01), b + self.n01) } else { (b + self.n01, b.wrapping_sub(self.n01)) };
-            v.prefetch(b);
-            v.prefetch(before);
-            v.prefetch_densities(after);
+            v.prefetch_around(b, self.n01);
         }
     }
 
@@ -365,29 +383,30 @@ impl<W: Word> Frame<'_, W> {
     /// candidate whose sample reaches the iso value, refined and shaded; the
     /// pixel is left as it is (a miss) if there is none.
     #[inline(always)]
-    fn trace<V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(
+    fn trace<V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool, const ONE: bool>(
         &self,
         v: &V,
+        s: S,
         ray: LeanRay,
-        mut pending: Pending<W>,
+        pending: Pending<W>,
         px: Pixel,
     ) {
-        let (mut k, mut b) = (pending.k, pending.b);
+        let Pending { mut walk, mut k, mut b } = pending;
         // the last sample below the iso value: its slice and density
         let mut below = Below { k: usize::MAX, d: 0.0 };
         loop {
             if !CHECKED || b != usize::MAX {
                 let e = self.slice(k);
-                let d = bilinear(v.densities(b), e.wi, e.wj);
+                let d = s.sample(v, b, e);
                 if d >= self.iso {
                     return self.hit::<V, ASC>(v, ray, Visit { k, b, d }, below, px);
                 }
                 below = Below { k, d };
             }
-            if !self.settle::<ASC, ONE>(&mut pending.walk) {
+            if !self.settle::<ASC, ONE>(&mut walk) {
                 return;
             }
-            k = self.take::<ASC, ONE>(&mut pending.walk);
+            k = self.take::<ASC, ONE>(&mut walk);
             b = self.cell_at::<CHECKED>(self.slice(k), ray);
         }
     }
@@ -501,7 +520,7 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ON
         return;
     }
     let _ = avx2;
-    lean_row::<W, V, ASC, CHECKED, ONE>(f, v, row, out)
+    lean_row::<W, V, Plain, ASC, CHECKED, ONE>(f, v, Plain, row, out)
 }
 
 /// One row of the lean frame: the row cleared to misses, then in groups of
@@ -509,7 +528,13 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ON
 /// then the traces of the rays that have one. A ray's base index is the row's
 /// plus its offset along the row.
 #[inline(always)]
-fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(f: &Frame<W>, v: &V, mut row: RowStart, out: RowOut) {
+fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool, const ONE: bool>(
+    f: &Frame<W>,
+    v: &V,
+    s: S,
+    mut row: RowStart,
+    out: RowOut,
+) {
     let RowOut { q, p0, rgba: crow, depth: drow } = out;
     crow.fill(MISS.rgba);
     drow.fill(MISS.depth);
@@ -527,40 +552,83 @@ fn lean_row<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: 
                 let k = f.take::<ASC, ONE>(&mut walk);
                 let b = f.cell_at::<CHECKED>(f.slice(k), ray(g * GROUP + dp));
                 if f.prefetch && b != usize::MAX {
-                    f.prefetch_at::<V, ASC>(v, b, &mut last_line);
+                    f.prefetch_at::<V>(v, b, &mut last_line);
                 }
                 *r = Pending { walk, k, b };
             }
-            if CHECKED {
-                row.left -= 1;
-                if row.left == 0 {
-                    row.start += row.nw;
-                    row.left = row.s;
-                }
-            } else {
-                // (cell size 1: every ray has its own column)
-                debug_assert_eq!(row.s, 1);
-                row.start += row.nw;
-            }
+            row.advance::<CHECKED>();
         }
         for (dp, ((rgba, depth), r)) in cg.iter_mut().zip(dg.iter_mut()).zip(pending.iter()).enumerate() {
             if r.k != usize::MAX {
-                f.trace::<V, ASC, CHECKED, ONE>(v, ray(g * GROUP + dp), *r, Pixel { rgba, depth });
+                f.trace::<V, S, ASC, CHECKED, ONE>(v, s, ray(g * GROUP + dp), *r, Pixel { rgba, depth });
             }
         }
     }
 }
 
 /// [`lean_row`] compiled with `lzcnt`/`tzcnt` (single instructions for the
-/// bit scans). Callers must hold a CPU level with AVX2 that is at most
-/// [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
+/// bit scans) and SSSE3 (the visits' gathers, [`Ssse3`]). Callers must hold a
+/// CPU level with AVX2 that is at most [`crate::kernels::detected`] (that
+/// level implies lzcnt, bmi1 and SSSE3).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "lzcnt,bmi1")]
+#[target_feature(enable = "lzcnt,bmi1,sse3,ssse3")]
 unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(
     f: &Frame<W>,
     v: &V,
     row: RowStart,
     out: RowOut,
 ) {
-    lean_row::<W, V, ASC, CHECKED, ONE>(f, v, row, out)
+    // SAFETY: the caller holds a CPU level that has SSSE3 (this function's
+    // contract)
+    let s = unsafe { Ssse3::new() };
+    lean_row::<W, V, Ssse3, ASC, CHECKED, ONE>(f, v, s, row, out)
+}
+
+/// How a visit samples its cell: [`Plain`] or [`Ssse3`], the same value bit
+/// for bit.
+trait Sampler: Copy {
+    /// The density of `v`'s cell at stack index `b` at the weights of slice entry `e`.
+    fn sample<V: Cells>(self, v: &V, b: usize, e: &SliceEntry) -> f32;
+}
+
+/// [`bilinear`] of the four corner densities.
+#[derive(Clone, Copy, Debug)]
+struct Plain;
+
+impl Sampler for Plain {
+    #[inline(always)]
+    fn sample<V: Cells>(self, v: &V, b: usize, e: &SliceEntry) -> f32 {
+        bilinear(v.densities(b), e.wi, e.wj)
+    }
+}
+
+/// The layout's SSSE3 gather and [`crate::data::slices::bilinear_sse`]
+/// ([`Cells::sample_ssse3`]); a value of it proves the CPU has SSSE3.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, Debug)]
+struct Ssse3 {
+    _proof: (),
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Ssse3 {
+    /// # Safety
+    /// The CPU must have SSSE3 (and so SSE3).
+    #[inline(always)]
+    unsafe fn new() -> Self {
+        Ssse3 { _proof: () }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Sampler for Ssse3 {
+    #[inline(always)]
+    fn sample<V: Cells>(self, v: &V, b: usize, e: &SliceEntry) -> f32 {
+        // SAFETY: an `Ssse3` exists only where the CPU has SSSE3
+        // (`Ssse3::new`'s contract); it is made in `lean_row_lzcnt`, whose
+        // code has the feature, so the gathers inline. Exercised by every lean
+        // frame at the AVX2 level (tests/it/lean_frame.rs compares it with the
+        // scalar level and the brute force).
+        unsafe { v.sample_ssse3(b, e.wi, e.wj) }
+    }
 }

@@ -144,6 +144,25 @@ pub trait Cells: Sync {
     fn prefetch_densities(&self, b: usize) {
         self.prefetch(b)
     }
+    /// Hints the cache to fetch the cell at stack index `b` and the cells
+    /// `n01` indices (one slice) before and after it (no effect on results).
+    #[inline(always)]
+    fn prefetch_around(&self, b: usize, n01: usize) {
+        self.prefetch(b);
+        self.prefetch(b.wrapping_sub(n01));
+        self.prefetch_densities(b.wrapping_add(n01));
+    }
+    /// [`bilinear`] of [`Cells::densities`] at `(wi, wj)`, by a copy that
+    /// gathers the corners into one SSE vector where the layout allows it:
+    /// the same value bit for bit.
+    ///
+    /// # Safety
+    /// The CPU must have SSSE3, and the caller be compiled with it.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn sample_ssse3(&self, b: usize, wi: f32, wj: f32) -> f32 {
+        bilinear(self.densities(b), wi, wj)
+    }
 }
 
 /// The stack's densities and the codes kept apart (no codes: gradient shading).
@@ -181,6 +200,16 @@ impl Cells for PackedCells<'_> {
     fn prefetch(&self, b: usize) {
         PackedCells::prefetch(self, b)
     }
+    #[inline(always)]
+    fn prefetch_around(&self, b: usize, n01: usize) {
+        PackedCells::prefetch_around(self, b, n01)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn sample_ssse3(&self, b: usize, wi: f32, wj: f32) -> f32 {
+        // SAFETY: the caller guarantees SSSE3 (this method's contract)
+        unsafe { PackedCells::sample_ssse3(self, b, wi, wj) }
+    }
 }
 
 impl Cells for ByteCells<'_> {
@@ -195,6 +224,16 @@ impl Cells for ByteCells<'_> {
     #[inline(always)]
     fn prefetch(&self, b: usize) {
         ByteCells::prefetch(self, b)
+    }
+    #[inline(always)]
+    fn prefetch_around(&self, b: usize, n01: usize) {
+        ByteCells::prefetch_around(self, b, n01)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn sample_ssse3(&self, b: usize, wi: f32, wj: f32) -> f32 {
+        // SAFETY: the caller guarantees SSSE3 (this method's contract)
+        unsafe { ByteCells::sample_ssse3(self, b, wi, wj) }
     }
 }
 

@@ -23,7 +23,9 @@
 use rayon::prelude::*;
 
 use crate::data::packing::{BLOCK, InPlace, restride};
-use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch_cell};
+#[cfg(target_arch = "x86_64")]
+use crate::data::slices::bilinear_sse;
+use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch_cell, prefetch_ptr};
 use crate::data::volume::{Volume, VoxelData, VoxelType};
 
 /// Cells per side of the hemi-octahedral normal grid.
@@ -516,6 +518,44 @@ impl PackedCells<'_> {
     pub fn prefetch(&self, b: usize) {
         prefetch_cell(self.words, b, self.n0);
     }
+
+    /// Hints the cache to fetch both rows of the cells at stack indices
+    /// `b − n01`, `b` and `b + n01` (one slice before and after), addresses
+    /// formed once: no effect on results.
+    #[inline(always)]
+    pub fn prefetch_around(&self, b: usize, n01: usize) {
+        let at = self.words.as_ptr().wrapping_add(b);
+        let (row, slice) = (self.n0, n01);
+        for p in [at.wrapping_sub(slice), at, at.wrapping_add(slice)] {
+            prefetch_ptr(p);
+            prefetch_ptr(p.wrapping_add(row));
+        }
+    }
+
+    /// [`crate::data::slices::bilinear`] of [`PackedCells::densities`] at `(wi, wj)`, bit for bit:
+    /// each row's two voxels in one 8-byte load, the four densities moved
+    /// into one vector by a byte shuffle ([`bilinear_sse`]).
+    ///
+    /// # Safety
+    /// The CPU must have SSSE3, and the caller be compiled with it.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub unsafe fn sample_ssse3(&self, b: usize, wi: f32, wj: f32) -> f32 {
+        use std::arch::x86_64::*;
+        assert!(b + self.n0 + 2 <= self.words.len(), "a cell outside the stack");
+        let p = self.words.as_ptr();
+        // SAFETY: voxels `b, b + 1` and `b + n0, b + n0 + 1` lie in `words`
+        // (asserted), each pair 8 contiguous bytes read unaligned; the
+        // intrinsics need SSSE3 (pshufb) and SSE3, which the caller guarantees.
+        unsafe {
+            let (r0, r1) = (p.add(b).cast::<i64>().read_unaligned(), p.add(b + self.n0).cast::<i64>().read_unaligned());
+            // bytes: row 0 [d00 c00 d10 c10], row 1 [d01 c01 d11 c11] (u16 each);
+            // lanes [d00, d01, d10, d11] zero-extended, converted exactly
+            let x = _mm_shuffle_epi8(_mm_set_epi64x(r1, r0), _mm_setr_epi8(0, 1, -1, -1, 8, 9, -1, -1, 4, 5, -1, -1, 12, 13, -1, -1));
+            let f = _mm_add_ps(_mm_cvtepi32_ps(x), _mm_set1_ps(self.offset));
+            bilinear_sse(f, wi, wj)
+        }
+    }
 }
 
 /// The code of a `[density, code low byte, code high byte]` cell.
@@ -590,6 +630,46 @@ impl<'a> ByteCells<'a> {
     #[inline(always)]
     pub fn prefetch(&self, b: usize) {
         prefetch_cell(self.cells, b, self.n0);
+    }
+
+    /// Hints the cache to fetch both rows of the cells at stack indices
+    /// `b − n01`, `b` and `b + n01` (one slice before and after), addresses
+    /// formed once: no effect on results.
+    #[inline(always)]
+    pub fn prefetch_around(&self, b: usize, n01: usize) {
+        let at = self.cells.as_ptr().wrapping_add(b);
+        let (row, slice) = (self.n0, n01);
+        for p in [at.wrapping_sub(slice), at, at.wrapping_add(slice)] {
+            prefetch_ptr(p);
+            prefetch_ptr(p.wrapping_add(row));
+        }
+    }
+
+    /// [`crate::data::slices::bilinear`] of [`ByteCells::densities`] at `(wi, wj)`, bit for bit:
+    /// each row's first voxel and the next one's density in one 4-byte load,
+    /// the four densities moved into one vector by a byte shuffle
+    /// ([`bilinear_sse`]).
+    ///
+    /// # Safety
+    /// The CPU must have SSSE3, and the caller be compiled with it.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub unsafe fn sample_ssse3(&self, b: usize, wi: f32, wj: f32) -> f32 {
+        use std::arch::x86_64::*;
+        assert!(b < self.end, "a cell outside the stack");
+        let p = self.cells.as_flattened().as_ptr();
+        // SAFETY: as in `pairs`, the six bytes from voxel `b` and those from
+        // voxel `b + n0` lie in `cells`; each read takes the first four of
+        // them, unaligned. The intrinsics need SSSE3 (pshufb) and SSE3, which
+        // the caller guarantees.
+        unsafe {
+            let (r0, r1) = (p.add(3 * b).cast::<i32>().read_unaligned(), p.add(3 * (b + self.n0)).cast::<i32>().read_unaligned());
+            // bytes: row 0 [d00 c00 c00 d10], row 1 [d01 c01 c01 d11]; lanes
+            // [d00, d01, d10, d11] zero-extended, converted exactly
+            let x =
+                _mm_shuffle_epi8(_mm_setr_epi32(r0, r1, 0, 0), _mm_setr_epi8(0, -1, -1, -1, 4, -1, -1, -1, 3, -1, -1, -1, 7, -1, -1, -1));
+            bilinear_sse(_mm_cvtepi32_ps(x), wi, wj)
+        }
     }
 }
 

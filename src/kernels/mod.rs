@@ -63,7 +63,8 @@ impl CpuLevel {
         self.min(detected())
     }
 
-    /// True when this level runs the kernels compiled for `lzcnt`/`tzcnt`/AVX2.
+    /// True when this level runs the kernels compiled for `lzcnt`/`tzcnt`/AVX2
+    /// (and SSSE3).
     pub fn has_avx2(self) -> bool {
         self >= CpuLevel::Avx2
     }
@@ -76,7 +77,8 @@ pub fn detected() -> CpuLevel {
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::is_x86_feature_detected as has;
-            if has!("avx2") && has!("lzcnt") && has!("bmi1") {
+            // (every AVX2 CPU has SSSE3 too; the lean frame's gathers use it)
+            if has!("avx2") && has!("lzcnt") && has!("bmi1") && has!("ssse3") {
                 return CpuLevel::Avx2;
             }
         }
@@ -130,6 +132,6 @@ mod tests {
     #[test]
     fn detection_matches_the_cpu() {
         use std::arch::is_x86_feature_detected as has;
-        assert_eq!(detected() == CpuLevel::Avx2, has!("avx2") && has!("lzcnt") && has!("bmi1"));
+        assert_eq!(detected() == CpuLevel::Avx2, has!("avx2") && has!("lzcnt") && has!("bmi1") && has!("ssse3"));
     }
 }

@@ -49,7 +49,13 @@ impl ShadeTable {
     /// bridge marker, index a real entry).
     #[inline(always)]
     pub fn get(&self, code: u16) -> ShadeEntry {
-        self.shade[code as usize & (NORMAL_CODES - 1)]
+        *self.entry(code)
+    }
+
+    /// [`ShadeTable::get`], by reference (for loads straight into a vector).
+    #[inline(always)]
+    pub fn entry(&self, code: u16) -> &ShadeEntry {
+        &self.shade[code as usize & (NORMAL_CODES - 1)]
     }
 
     /// The bilinear blend of the entries of a cell's four corner codes (order of

@@ -47,6 +47,7 @@
 //!   float operation is the general path's.
 
 use crate::classify::shade_table::ShadeTable;
+use crate::classify::shading::ShadeEntry;
 use crate::classify::shading::apply_shade;
 use crate::composite::raycast::{Cells, MISS, RayContext, RowOut, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
@@ -399,7 +400,7 @@ impl<W: Word> Frame<'_, W> {
                 let e = self.slice(k);
                 let d = s.sample(v, b, e);
                 if d >= self.iso {
-                    return self.hit::<V, ASC>(v, ray, Visit { k, b, d }, below, px);
+                    return self.hit::<V, S, ASC>(v, s, ray, Visit { k, b, d }, below, px);
                 }
                 below = Below { k, d };
             }
@@ -417,8 +418,8 @@ impl<W: Word> Frame<'_, W> {
     /// `below` is the ray's last sample below the iso value: when it is the
     /// slice before, its density is the one the refinement needs (the same
     /// cell, weights and arithmetic) and is not sampled again.
-    #[inline(never)]
-    fn hit<V: Cells, const ASC: bool>(&self, v: &V, ray: LeanRay, at: Visit, below: Below, px: Pixel) {
+    #[inline(always)]
+    fn hit<V: Cells, S: Sampler, const ASC: bool>(&self, v: &V, s: S, ray: LeanRay, at: Visit, below: Below, px: Pixel) {
         let (iso, Visit { k, b, d }) = (self.iso, at);
         let e = self.slice(k);
         let kp = if ASC { k.checked_sub(1) } else { Some(k + 1).filter(|&kp| kp < self.nk) };
@@ -431,7 +432,7 @@ impl<W: Word> Frame<'_, W> {
                 // (a visited cell: inside the volume)
                 Some((ray.rb.wrapping_add_signed(ep.base), below.d))
             } else {
-                self.cell(ep, ray).map(|bp| (bp, bilinear(v.densities(bp), ep.wi, ep.wj)))
+                self.cell(ep, ray).map(|bp| (bp, s.sample(v, bp, ep)))
             };
             if let Some((bp, dp)) = prev
                 && dp < iso
@@ -481,9 +482,39 @@ struct Pixel<'a> {
 
 /// [`ShadeTable::blend`] of two cells at once, lane for lane the same float
 /// operations: lanes 0–1 the entry of `codes` at weights `w`, lanes 2–3 that of
-/// `codes_p` at `wp`.
+/// `codes_p` at `wp`. On x86-64 each corner's two entries are loaded straight
+/// into the halves of one SSE vector ([`blend_pair_plain`] elsewhere; tested
+/// equal bit for bit).
+#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn blend_pair(table: &ShadeTable, codes: [u16; 4], w: [f32; 2], codes_p: [u16; 4], wp: [f32; 2]) -> [f32; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE and SSE2 are the x86-64 baseline; each read takes the 8
+    // bytes of one `ShadeEntry` (`[f32; 2]`) through a reference to it,
+    // unaligned, as the bits of its two floats. Exercised by every lean frame (tests/it/lean_frame.rs)
+    // and by `blend_pair_is_the_plain_blend`.
+    unsafe {
+        let e = |i: usize| {
+            let bits = |c: u16| (table.entry(c) as *const ShadeEntry).cast::<i64>().read_unaligned();
+            _mm_castsi128_ps(_mm_set_epi64x(bits(codes_p[i]), bits(codes[i])))
+        };
+        let (e00, e10, e01, e11) = (e(0), e(1), e(2), e(3));
+        let (wi, wj) = (_mm_setr_ps(w[0], w[0], wp[0], wp[0]), _mm_setr_ps(w[1], w[1], wp[1], wp[1]));
+        let top = _mm_add_ps(e00, _mm_mul_ps(_mm_sub_ps(e10, e00), wi));
+        let bot = _mm_add_ps(e01, _mm_mul_ps(_mm_sub_ps(e11, e01), wi));
+        let mut out = [0f32; 4];
+        _mm_storeu_ps(out.as_mut_ptr(), _mm_add_ps(top, _mm_mul_ps(_mm_sub_ps(bot, top), wj)));
+        out
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+use blend_pair_plain as blend_pair;
+
+/// [`blend_pair`] lane by lane in plain code.
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+#[inline(always)]
+fn blend_pair_plain(table: &ShadeTable, codes: [u16; 4], w: [f32; 2], codes_p: [u16; 4], wp: [f32; 2]) -> [f32; 4] {
     let e = |i: usize| {
         let (a, b) = (table.get(codes[i]), table.get(codes_p[i]));
         [a[0], a[1], b[0], b[1]]
@@ -630,5 +661,32 @@ impl Sampler for Ssse3 {
         // frame at the AVX2 level (tests/it/lean_frame.rs compares it with the
         // scalar level and the brute force).
         unsafe { v.sample_ssse3(b, e.wi, e.wj) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classify::shading::Shading;
+
+    #[test]
+    fn blend_pair_is_the_plain_blend() {
+        let mut table = ShadeTable::default();
+        table.update([0.3, -0.5, 0.81], Shading::default());
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for _ in 0..20_000 {
+            let codes = [0; 4].map(|_: u16| next() as u16);
+            let codes_p = [0; 4].map(|_: u16| next() as u16);
+            let w = |r: u64| [0.0, 1.0, 0.5, (r >> 40) as f32 / (1u64 << 24) as f32][(r & 3) as usize];
+            let (wa, wb) = ([w(next()), w(next())], [w(next()), w(next())]);
+            let (a, b) = (blend_pair(&table, codes, wa, codes_p, wb), blend_pair_plain(&table, codes, wa, codes_p, wb));
+            assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits), "{codes:?} {codes_p:?} {wa:?} {wb:?}");
+        }
     }
 }

@@ -288,7 +288,7 @@ impl<W: Word> Frame<'_, W> {
     #[inline(always)]
     fn first<const ASC: bool, const ONE: bool>(&self, start: usize, nw: usize) -> Walk<W> {
         let (w, kbase) = if ASC { (start, 0) } else { (start + nw - 1, (nw - 1) * self.slots) };
-        let cur = self.hits::<ONE>(self.words[w]);
+        let cur = self.hits::<ONE>(self.word(w));
         let mut walk = Walk { w, cur, kbase, left: nw - 1 };
         self.settle::<ASC, ONE>(&mut walk);
         walk
@@ -309,9 +309,22 @@ impl<W: Word> Frame<'_, W> {
                 walk.w -= 1;
                 walk.kbase -= self.slots;
             }
-            walk.cur = self.hits::<ONE>(self.words[walk.w]);
+            walk.cur = self.hits::<ONE>(self.word(walk.w));
         }
         true
+    }
+
+    /// Word `w` of the mask, which must lie in a depth row of the row of
+    /// rays being rendered.
+    #[inline(always)]
+    fn word(&self, w: usize) -> W {
+        debug_assert!(w < self.words.len());
+        // SAFETY: a walk reads only the words of its ray's depth row, `[start,
+        // start + nw)` (`first` starts at either end, `settle` moves at most
+        // `nw − 1` words inwards); `lean_row` asserted that the depth rows of
+        // every ray of its row lie in `words`. Exercised by every lean frame
+        // (tests/it/lean_frame.rs).
+        unsafe { *self.words.get_unchecked(w) }
     }
 
     /// The matching slots of word `w` ([`Matcher::hits`]; `ONE`: the codes
@@ -569,6 +582,17 @@ fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool,
     let RowOut { q, p0, rgba: crow, depth: drow } = out;
     crow.fill(MISS.rgba);
     drow.fill(MISS.depth);
+    // the depth rows of all rays lie in the mask (what `Frame::word` relies
+    // on): the last ray's column is the row's last
+    let n = crow.len();
+    let columns = if !CHECKED || n == 0 {
+        n
+    } else if n <= row.left {
+        1
+    } else {
+        (n - 1 - row.left) / row.s + 2
+    };
+    assert!(row.start + columns * row.nw <= f.words.len(), "a row of rays past the mask");
     let mut pending = [Pending::<W>::default(); GROUP];
     let mut last_line = usize::MAX;
     // ray (p0 + dp, q)'s base index is the row's plus dp

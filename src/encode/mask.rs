@@ -53,6 +53,21 @@ use crate::view::shear::ShearState;
 /// direct path on 28 of 120 frames in the viewer, at 86 ms each.
 pub const MAX_INCREMENTAL_STEPS: u32 = 16;
 
+/// A move along i this many bits away or more runs in one pass
+/// ([`BinaryMask::move_columns`]), when every word's slots move by at most
+/// [`MOVE_TERMS`] distances, rather than as steps, each a pass over the whole
+/// occupied mask: on a large scan's mask (a 512×512×413 CT's under the tissue
+/// presets is a quarter of a gigabyte, 16 words a depth row) the steps are
+/// bound by memory. Below it, the step kernels, whose few passes over a
+/// small mask stay in cache and run fewer instructions, are kept.
+pub const MIN_ONE_PASS_BITS: u32 = 3;
+
+/// Most distances the slots of one word may move by for the one-pass move
+/// along i (the slices' moves grow linearly with depth, so a word's slots
+/// usually share one or two; the pass runs with as many terms a word as the
+/// busiest word needs).
+const MOVE_TERMS: usize = 4;
+
 /// Longest column (words per depth row) with shift kernels compiled for its
 /// length; longer columns run the general kernels, one step per pass.
 pub const MAX_FIXED_COLUMN: usize = 16;
@@ -125,6 +140,10 @@ pub struct BinaryMask<W: Word> {
     /// Scratch of a fused step along j: old row q − 2, and a row of zeros.
     row_buf2: Vec<W>,
     zero_row: Vec<W>,
+    /// Scratch of a one-pass move along i ([`BinaryMask::move_columns`]):
+    /// per word of a depth row, [`MOVE_TERMS`] terms (the old word's offset in
+    /// a row buffer with zero margins, and the slots moving by that distance).
+    terms: Vec<(usize, W)>,
     /// The block occupancy of the last scaled frame ([`BinaryMask::update_occupancy`]),
     /// its tables reused across frames.
     occupancy: BlockOccupancy,
@@ -211,6 +230,7 @@ impl<W: Word> BinaryMask<W> {
             moves: std::array::from_fn(|_| vec![W::ZERO; nw]),
             row_buf2: vec![W::ZERO; grid[0] * nw],
             zero_row: vec![W::ZERO; grid[0] * nw],
+            terms: vec![(0, W::ZERO); nw * MOVE_TERMS],
             occupancy: Default::default(),
         };
         m.scatter();
@@ -399,7 +419,20 @@ impl<W: Word> BinaryMask<W> {
             ShearWork::default()
         } else if dist <= MAX_INCREMENTAL_STEPS {
             let mut w = ShearWork::default();
-            let mut left = dist;
+            let along_i = self.off[0].iter().zip(&target[0]).map(|(x, y)| (x - y).unsigned_abs()).max().unwrap_or(0);
+            if self.fused
+                && along_i >= MIN_ONE_PASS_BITS
+                && let Some(t) = self.column_terms(&target[0])
+            {
+                w.words += match t {
+                    0 | 1 => self.move_columns::<1>(&target[0]),
+                    2 => self.move_columns::<2>(&target[0]),
+                    3 => self.move_columns::<3>(&target[0]),
+                    _ => self.move_columns::<MOVE_TERMS>(&target[0]),
+                };
+                w.steps += along_i;
+            }
+            let mut left = (0..2).flat_map(|a| self.off[a].iter().zip(&target[a]).map(|(x, y)| (x - y).unsigned_abs())).max().unwrap_or(0);
             while left > 0 {
                 let by = if self.fused && left >= 2 && self.nw <= MAX_FUSED_COLUMN { 2 } else { 1 };
                 w.words += self.step_towards(&target, by as i32);
@@ -651,6 +684,81 @@ impl<W: Word> BinaryMask<W> {
                 _ => shift_row_any(row, next, prev, nw, up, down, keep));
         }
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
+    }
+
+    /// Fills `terms` for a move of every slice along i from its offset to
+    /// `target`; the most terms a word needs, or `None` when some word's slots
+    /// move by more than [`MOVE_TERMS`] distances.
+    fn column_terms(&mut self, target: &[i32]) -> Option<usize> {
+        let (nw, nb) = (self.nw, self.nb);
+        let slots = (W::BITS / nb) as usize;
+        let m = MAX_INCREMENTAL_STEPS as usize;
+        // a term of no slots reads the word at distance 0 and keeps nothing
+        self.terms.fill((0, W::ZERO));
+        for w in 0..nw {
+            self.terms[w * MOVE_TERMS].0 = m * nw + w;
+        }
+        let mut used = vec![0usize; nw];
+        for (k, (&o, &t)) in self.off[0].iter().zip(target).enumerate() {
+            let (d, w) = (t - o, k / slots);
+            debug_assert!(d.unsigned_abs() <= MAX_INCREMENTAL_STEPS);
+            // the old word of column p − d sits at (p − ps + m − d)·nw + w
+            // in the row buffer (zero margins of m columns on both sides)
+            let at = (m as i32 - d) as usize * nw + w;
+            let terms = &mut self.terms[w * MOVE_TERMS..(w + 1) * MOVE_TERMS];
+            let slot = crate::encode::depth::slot_mask::<W>(nb, k);
+            match terms[..used[w]].iter_mut().find(|t| t.0 == at) {
+                Some(t) => t.1 |= slot,
+                None if used[w] < MOVE_TERMS => {
+                    terms[used[w]] = (at, slot);
+                    used[w] += 1;
+                }
+                None => return None,
+            }
+        }
+        used.into_iter().max()
+    }
+
+    /// Moves every slice along i to `target` in one pass over the occupied
+    /// rectangle, one grid row per task: word `w` of column `p` becomes
+    /// `OR_d old[p − d][w] & slots_d[w]` over the (at most [`MOVE_TERMS`])
+    /// distances its slots move by ([`BinaryMask::column_terms`] filled
+    /// them; `T` of them, the busiest word's), read from a copy of the row's
+    /// old columns between zero margins. The steps' words, and the direct
+    /// shear's (tested against both).
+    fn move_columns<const T: usize>(&mut self, target: &[i32]) -> u64 {
+        let before = self.occupied_rect();
+        // (`prev_off` is scratch between steps)
+        let mut next = std::mem::take(&mut self.prev_off);
+        next[0].copy_from_slice(target);
+        next[1].copy_from_slice(&self.off[1]);
+        let after = self.occupied(&next);
+        self.prev_off = next;
+        let Some(r) = Rect::union(before, after) else {
+            self.off[0].copy_from_slice(target);
+            return 0;
+        };
+        let (nw, gw, m) = (self.nw, self.grid[0], MAX_INCREMENTAL_STEPS as usize);
+        let (ps, pe) = (r.p0, r.p1.min(gw - 1));
+        let cols = pe - ps + 1;
+        let terms = &self.terms[..];
+        let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
+        rows.par_chunks_mut(gw * nw).for_each_init(Vec::new, |old: &mut Vec<W>, row| {
+            // columns outside [ps, pe] hold nothing before the move
+            old.clear();
+            old.resize(m * nw, W::ZERO);
+            old.extend_from_slice(&row[ps * nw..(pe + 1) * nw]);
+            old.resize((cols + 2 * m) * nw, W::ZERO);
+            for (p, out) in row[ps * nw..(pe + 1) * nw].chunks_exact_mut(nw).enumerate() {
+                let old = &old[p * nw..];
+                for (o, t) in out.iter_mut().zip(terms.chunks_exact(MOVE_TERMS)) {
+                    // (offsets are below (2m + 1)·nw: inside `old` from column p on)
+                    *o = t[..T].iter().fold(W::ZERO, |acc, &(at, slots)| acc | (old[at] & slots));
+                }
+            }
+        });
+        self.off[0].copy_from_slice(target);
+        (r.q1 - r.q0 + 1) as u64 * (cols * nw) as u64
     }
 
     /// Two steps along i in one pass: `new[p] = OR_d old[p − d] & moves[2 − d]`
@@ -1094,6 +1202,65 @@ mod tests {
         check_far_jumps::<u64>([19, 23, 90], 2, 1);
         check_far_jumps::<u64>([24, 20, 140], 1, 2);
         check_far_jumps::<u32>([17, 16, 75], 2, 3);
+    }
+
+    /// Moves of [`MIN_ONE_PASS_BITS`] to [`MAX_INCREMENTAL_STEPS`] super cells
+    /// along i take the one-pass move ([`BinaryMask::move_columns`]), each
+    /// slice by its own distance, in both directions, with moves along j
+    /// beside them, for 1-, 2- and 4-bit codes, both word sizes and super
+    /// cells: the words of the steps and of the scatter.
+    fn check_one_pass<W: Word>(n: [usize; 3], nb: u32, s: usize) -> u32 {
+        let v = blob(n, 5);
+        let st = SliceStack::new(&v, 2);
+        let codes = CellCodes::build(&st, nb, |_, hi| (hi / 40.0).min(((1u32 << nb) - 1) as f32) as u8);
+        let mut m = BinaryMask::<W>::from_codes(&codes, s);
+        let mut steps = m.clone();
+        steps.set_fused(false);
+        let lim = ((n[2] - 1) / 2) as f64;
+        let mut seed = 5u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((seed >> 33) % 2001) as f64 / 1000.0 - 1.0
+        };
+        let mut ends = [0.0f64; 2];
+        let mut one_pass = 0;
+        for jump in 0..40 {
+            // up to 4 bits at the stack's ends (8 apart), along i,
+            // j or both; now and then every slice shifted alike as well
+            let reach = 4.0;
+            for (a, e) in ends.iter_mut().enumerate() {
+                if jump % 3 != a {
+                    *e = (*e + (rnd() * reach).round()).clamp(-lim, lim);
+                }
+            }
+            let shift = if jump % 5 == 4 { 2.0 } else { 0.0 };
+            let state = ShearState::from_ends(n[2], [0, 1].map(|a| [shift - ends[a], shift + ends[a]]));
+            let before = m.off[0].clone();
+            let w = m.shear_to(&state);
+            let along_i = before.iter().zip(&m.off[0]).map(|(x, y)| (x - y).unsigned_abs()).max().unwrap_or(0);
+            one_pass += (w.direct == 0 && along_i >= MIN_ONE_PASS_BITS) as u32;
+            steps.shear_to(&state);
+            let mut d = BinaryMask::<W>::from_codes(&codes, s);
+            d.shear_direct(&state);
+            assert_eq!(m.words, d.words, "jump {jump} to {ends:?}: one pass and scatter");
+            assert_eq!(steps.words, d.words, "jump {jump} to {ends:?}: steps and scatter");
+        }
+        one_pass
+    }
+
+    #[test]
+    fn one_pass_moves_equal_the_steps_and_the_direct_shear() {
+        // (a word of 64 one-bit slots spans more distances than the pass
+        // takes on long stacks: those moves take the steps)
+        let n = [
+            check_one_pass::<u64>([21, 17, 130], 1, 1),
+            check_one_pass::<u32>([21, 17, 100], 1, 1),
+            check_one_pass::<u64>([19, 23, 90], 2, 1),
+            check_one_pass::<u64>([15, 13, 70], 4, 1),
+            check_one_pass::<u64>([24, 20, 140], 1, 2),
+            check_one_pass::<u32>([17, 16, 75], 2, 3),
+        ];
+        assert!(n[2] >= 10 && n[3] >= 10 && n.iter().sum::<u32>() >= 40, "jumps along i in one pass: {n:?}");
     }
 
     #[test]

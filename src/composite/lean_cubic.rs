@@ -13,7 +13,20 @@
 //! - **A per-slice table** ([`SliceEntry`]): in parallel projection every ray of
 //!   slice `k` shares the offset of its cell and the bilinear weights, so a
 //!   ray locates its sample in a slice by one table entry and one in-volume
-//!   test on two integers, instead of the general ray's sample map.
+//!   test on two integers, instead of the general ray's sample map. With
+//!   the cubic in the slice, every ray of a slice also shares its fraction
+//!   along the cubic's axis, so the table holds that fraction's
+//!   [`Weights`] (Catmull–Rom for the sample, B-spline for the normal),
+//!   computed once a slice instead of once a sample.
+//! - **A walk of its own** (`Walk`): each word of a depth row is matched
+//!   once, when the walk reaches it, and a visit takes one bit scan and one
+//!   bit clear (the general [`crate::encode::depth::SetBits`] matches the
+//!   remaining codes of the word again at every visit); the walking
+//!   direction is a constant of the compiled row.
+//! - **In the slice, the axis a constant**: the sample and the gradient are
+//!   compiled for the cubic along stack axis 0 and along 1, so their voxel
+//!   offsets are fixed strides, read without per-voxel bounds checks (one
+//!   check of the range).
 //! - **Along the slices, a register of four densities**: a candidate `k`
 //!   tests the cubic through the samples of the slices `k − 2 … k + 1` (in
 //!   walking order); a ray keeps the four of its last candidate and shifts
@@ -29,11 +42,12 @@
 //!
 //! Invariants (what keeps the image the general path's and the brute
 //! force's, bit for bit):
-//! - the candidate slices are the general walk's ([`SetBits`] with the same
-//!   matcher and search), in the same order;
+//! - the candidate slices are the general walk's ([`crate::encode::depth::SetBits`]
+//!   with the same matcher and the bit scan), in the same order;
 //! - a sample's cell, weights and density are the general ray's
 //!   ([`super::raycast::GridRay`] over the same [`crate::view::plan::SliceMap`]s,
-//!   the same in-volume test, `RayContext::sample_cubic`'s arithmetic);
+//!   the same in-volume test, `RayContext::sample_cubic_with`'s arithmetic
+//!   on the same [`Weights`] of the same fraction);
 //! - the four samples of a segment, their fallbacks at the ends of the
 //!   volume, the bound, the crossing and the hit are the general path's
 //!   (`RayContext::hit_along`, `RayContext::hit_in_slice`,
@@ -43,21 +57,25 @@ use crate::composite::lean::{SliceEntry, slice_table};
 use crate::composite::raycast::{At, MISS, RayContext, RayResult, RowOut, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::slices::{bilinear, prefetch_cell};
-use crate::encode::depth::{Matcher, Search, SetBits, Word};
+use crate::encode::depth::{Matcher, Search, Word};
 use crate::encode::mask::BinaryMask;
-use crate::kernels::reconstruct;
+use crate::kernels::reconstruct::{self, Weights};
 use crate::view::plan::{FramePlan, MapKind};
 
 /// The per-slice table of the lean cubic frame, kept across frames.
 #[derive(Clone, Debug, Default)]
 pub struct LeanCubic {
     slices: Vec<SliceEntry>,
+    /// In the slice, the [`Weights`] of each slice's fraction along the
+    /// cubic's axis.
+    weights: Vec<Weights>,
 }
 
 /// What the rays of one frame read.
 struct Frame<'c, 'a> {
     ctx: &'c RayContext<'a>,
     slices: &'c [SliceEntry],
+    weights: &'c [Weights],
     n0: usize,
     cells: [u32; 2],
     /// The cubic's stack axis (2: along the slices).
@@ -80,9 +98,13 @@ impl LeanCubic {
             && !plan.intermediate()
     }
 
-    /// The table of the frame of `ctx`.
-    fn fill(&mut self, ctx: &RayContext) {
+    /// The tables of the frame of `ctx` with the cubic along stack axis `za`.
+    fn fill(&mut self, ctx: &RayContext, za: usize) {
         slice_table(ctx, &mut self.slices);
+        self.weights.clear();
+        if za < 2 {
+            self.weights.extend(self.slices.iter().map(|e| Weights::new(if za == 0 { e.wi } else { e.wj })));
+        }
     }
 
     /// Renders the rays of `rect` of a cubic frame for which
@@ -102,23 +124,114 @@ impl LeanCubic {
     ) {
         assert!(LeanCubic::applies(ctx.plan, ctx.mode, Search::Bitscan), "a frame the lean cubic path does not cover");
         assert_eq!(m.width(), mask.code_width(), "a matcher of another code width");
-        self.fill(ctx);
-        let f = Frame { ctx, slices: &self.slices, n0: ctx.stack.n[0], cells: ctx.cell_counts(), za, last: ctx.stack.n[2] - 1 };
+        self.fill(ctx, za);
+        let f = Frame {
+            ctx,
+            slices: &self.slices,
+            weights: &self.weights,
+            n0: ctx.stack.n[0],
+            cells: ctx.cell_counts(),
+            za,
+            last: ctx.stack.n[2] - 1,
+        };
         let avx2 = mask.cpu_level().has_avx2();
-        render_rows(rect, out, |row| {
-            #[cfg(target_arch = "x86_64")]
-            if avx2 {
-                // SAFETY: the mask's CPU level has AVX2; a mask's level is
-                // capped to at most `kernels::detected()`, which is `Avx2`
-                // only when `is_x86_feature_detected!` found lzcnt and bmi1
-                // on this CPU at run time, all that `row_lzcnt` requires;
-                // its body is the safe `cubic_row`.
-                unsafe { row_lzcnt(&f, mask, m, row) };
-                return;
+        if ctx.ascending { rows::<W, true>(&f, mask, m, rect, out, avx2) } else { rows::<W, false>(&f, mask, m, rect, out, avx2) }
+    }
+}
+
+/// The rows of `rect` of the frame `f`, walking the slices in ascending
+/// (`ASC`) or descending order; `avx2`: the mask's CPU level has AVX2.
+fn rows<W: Word, const ASC: bool>(f: &Frame, mask: &BinaryMask<W>, m: &Matcher, rect: Option<Rect>, out: &mut Intermediate, avx2: bool) {
+    render_rows(rect, out, |row| {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: the mask's CPU level has AVX2; a mask's level is
+            // capped to at most `kernels::detected()`, which is `Avx2`
+            // only when `is_x86_feature_detected!` found lzcnt and bmi1
+            // on this CPU at run time, all that `row_lzcnt` requires;
+            // its body is the safe `cubic_row`.
+            unsafe { row_lzcnt::<W, ASC>(f, mask, m, row) };
+            return;
+        }
+        let _ = avx2;
+        cubic_row::<W, ASC>(f, mask, m, row)
+    });
+}
+
+/// The candidate slices of one depth row in walking order (ascending:
+/// `ASC`): the slots whose code the matcher takes, the same slices in the
+/// same order as [`crate::encode::depth::SetBits`] with the same matcher and the bit scan. Each
+/// word is matched once as it is reached; a visit then takes one bit scan
+/// and one bit clear.
+struct Walk<'a, W: Word, const ASC: bool> {
+    row: &'a [W],
+    m: &'a Matcher,
+    /// `log₂` of the code width (a slot's bit position to its slot).
+    log_nb: u32,
+    /// The index of the current word.
+    w: usize,
+    /// The matching slots of the current word not yet taken (the top bit of each).
+    cur: W,
+}
+
+impl<'a, W: Word, const ASC: bool> Walk<'a, W, ASC> {
+    #[inline(always)]
+    fn new(row: &'a [W], m: &'a Matcher) -> Self {
+        let w = if ASC { 0 } else { row.len().wrapping_sub(1) };
+        let cur = row.get(w).map_or(W::ZERO, |&x| m.hits(x));
+        Walk { row, m, log_nb: m.width().trailing_zeros(), w, cur }
+    }
+
+    /// Moves past words with no matching slot left; false at the row's end.
+    #[inline(always)]
+    fn settle(&mut self) -> bool {
+        while self.cur == W::ZERO {
+            if ASC {
+                self.w += 1;
+                if self.w >= self.row.len() {
+                    return false;
+                }
+            } else {
+                if self.w == 0 {
+                    return false;
+                }
+                self.w -= 1;
             }
-            let _ = avx2;
-            cubic_row(&f, mask, m, row)
-        });
+            self.cur = self.m.hits(self.row[self.w]);
+        }
+        true
+    }
+
+    /// The bit position (from the MSB) of the next matching slot's top bit
+    /// (the walk must be settled).
+    #[inline(always)]
+    fn pos(&self) -> u32 {
+        if ASC { self.cur.lz() } else { W::BITS - 1 - self.cur.tz() }
+    }
+
+    /// The slice of the slot at `pos` of the current word.
+    #[inline(always)]
+    fn slice(&self, pos: u32) -> usize {
+        (self.w << (W::BITS.trailing_zeros() - self.log_nb)) + (pos >> self.log_nb) as usize
+    }
+
+    /// The slice the next step takes, without taking it.
+    #[inline(always)]
+    fn peek(&mut self) -> Option<usize> {
+        self.settle().then(|| self.slice(self.pos()))
+    }
+}
+
+impl<W: Word, const ASC: bool> Iterator for Walk<'_, W, ASC> {
+    type Item = usize;
+    #[inline(always)]
+    fn next(&mut self) -> Option<usize> {
+        if !self.settle() {
+            return None;
+        }
+        let pos = self.pos();
+        self.cur = if ASC { self.cur & !(W::MSB >> pos) } else { self.cur.clear_lowest() };
+        Some(self.slice(pos))
     }
 }
 
@@ -132,17 +245,16 @@ const GROUP: usize = super::raycast::PREFETCH_GROUP;
 /// [`GROUP`] rays, first every ray's first candidate is found and the
 /// voxels its first test reads are prefetched, then the rays are traced.
 #[inline(always)]
-fn cubic_row<W: Word>(f: &Frame, mask: &BinaryMask<W>, m: &Matcher, row: RowOut) {
+fn cubic_row<W: Word, const ASC: bool>(f: &Frame, mask: &BinaryMask<W>, m: &Matcher, row: RowOut) {
     let RowOut { q, p0, rgba, depth } = row;
     let (mut sp, mut left) = mask.column_run(p0);
     let sq = mask.ray_column(p0, q).1;
     let s = mask.cell_size();
-    let asc = f.ctx.ascending;
-    let mut walks: [Option<SetBits<W>>; GROUP] = std::array::from_fn(|_| None);
+    let mut walks: [Option<Walk<W, ASC>>; GROUP] = std::array::from_fn(|_| None);
     for (g, (cg, dg)) in rgba.chunks_mut(GROUP).zip(depth.chunks_mut(GROUP)).enumerate() {
         let pg = p0 + g * GROUP;
         for (dp, w) in walks[..cg.len()].iter_mut().enumerate() {
-            let mut walk = SetBits::with_matcher(mask.row(sp, sq), asc, Search::Bitscan, m);
+            let mut walk = Walk::<W, ASC>::new(mask.row(sp, sq), m);
             *w = walk.peek().map(|k0| {
                 f.prefetch(pg + dp, q, k0);
                 walk
@@ -169,8 +281,8 @@ fn cubic_row<W: Word>(f: &Frame, mask: &BinaryMask<W>, m: &Matcher, row: RowOut)
 /// [`crate::kernels::detected`] (that level implies lzcnt and bmi1).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "lzcnt,bmi1")]
-unsafe fn row_lzcnt<W: Word>(f: &Frame, mask: &BinaryMask<W>, m: &Matcher, row: RowOut) {
-    cubic_row(f, mask, m, row)
+unsafe fn row_lzcnt<W: Word, const ASC: bool>(f: &Frame, mask: &BinaryMask<W>, m: &Matcher, row: RowOut) {
+    cubic_row::<W, ASC>(f, mask, m, row)
 }
 
 impl Frame<'_, '_> {
@@ -236,21 +348,35 @@ impl Frame<'_, '_> {
         if self.ctx.ascending { (k < self.last).then_some(k + 1) } else { k.checked_sub(1) }
     }
 
-    /// Traces ray `(p, q)` over its candidate slices `walk`.
+    /// [`Frame::trace`] with the cubic in the slice, along stack axis `ZA`.
     #[inline(always)]
-    fn trace<W: Word>(&self, p: usize, q: usize, walk: SetBits<W>) -> RayResult {
+    fn trace_in_slice<const ZA: usize>(&self, p: usize, q: usize, walk: impl Iterator<Item = usize>) -> RayResult {
         let ctx = self.ctx;
         let (iso, rgb) = (ctx.iso, ctx.iso_rgb);
-        if self.za < 2 {
-            for k in walk {
-                let Some((at, _)) = self.at(p, q, k) else { continue };
-                let d = ctx.sample_cubic(self.za, at);
-                if d >= iso {
-                    let prev = self.prev(k).and_then(|kp| self.at(p, q, kp)).map(|(ap, _)| (ap, ctx.sample_cubic(self.za, ap)));
-                    return ctx.hit_in_slice(self.za, (iso, rgb), (at, d), prev);
-                }
+        for k in walk {
+            let Some((at, b)) = self.at(p, q, k) else { continue };
+            let w = &self.weights[k];
+            let d = ctx.sample_in_slice::<ZA>(at, b, &w.cr);
+            if d >= iso {
+                let prev = self.prev(k).and_then(|kp| self.at(p, q, kp)).map(|(ap, bp)| {
+                    let wp = &self.weights[ap.k];
+                    (ap, ctx.sample_in_slice::<ZA>(ap, bp, &wp.cr), wp)
+                });
+                return ctx.hit_in_slice_za::<ZA>((iso, rgb), (at, d, w), prev);
             }
-            return MISS;
+        }
+        MISS
+    }
+
+    /// Traces ray `(p, q)` over its candidate slices `walk`.
+    #[inline(always)]
+    fn trace(&self, p: usize, q: usize, walk: impl Iterator<Item = usize>) -> RayResult {
+        let ctx = self.ctx;
+        let (iso, rgb) = (ctx.iso, ctx.iso_rgb);
+        match self.za {
+            0 => return self.trace_in_slice::<0>(p, q, walk),
+            1 => return self.trace_in_slice::<1>(p, q, walk),
+            _ => {}
         }
         // the densities of the slices before the slice before, before, at and
         // after the last candidate (walking order; None: no such slice, or
@@ -288,7 +414,8 @@ impl Frame<'_, '_> {
                 continue;
             }
             if let Some(t) = reconstruct::crossing(v, iso as f64) {
-                let four = four.map(|(k, d)| (self.at(p, q, k).expect("sampled").0, d));
+                let at = |(k, d): (usize, f32)| (self.at(p, q, k).expect("sampled").0, d);
+                let four = [at(four[0]), at(four[1]), at(four[2]), at(four[3])];
                 return ctx.hit_along(rgb, four, t);
             }
         }

@@ -36,7 +36,7 @@ use crate::encode::mask::BinaryMask;
 use crate::encode::mask::BlockOccupancy;
 use crate::encode::mask::SliceSpan;
 use crate::encode::walk::{ColumnWalk, Drift, StillWalk};
-use crate::kernels::reconstruct;
+use crate::kernels::reconstruct::{self, Weights};
 use crate::view::plan::{FramePlan, MapKind, SliceMap, floor_i64};
 
 /// Everything a ray needs, borrowed for one frame.
@@ -401,8 +401,7 @@ impl<'a> RayContext<'a> {
     }
 
     /// The cubic reconstruction's sample at `at` (`za`: its stack axis):
-    /// bilinear along the slices, else Catmull–Rom across the four voxel
-    /// lines along `za` (clamped), each linear along the other axis.
+    /// bilinear along the slices, else [`RayContext::sample_cubic_with`].
     #[inline(always)]
     pub(crate) fn sample_cubic(&self, za: usize, at: At) -> f32 {
         let At { k, ci, cj, wi, wj } = at;
@@ -410,83 +409,112 @@ impl<'a> RayContext<'a> {
         if za == 2 {
             return bilinear(st.cell_at(st.index(ci, cj, k)), wi, wj);
         }
-        let data = st.data();
-        let b = st.index(ci, cj, k);
+        let w_z = if za == 0 { wi } else { wj };
+        self.sample_cubic_with(za, at, st.index(ci, cj, k), &Weights::new(w_z).cr)
+    }
+
+    /// The cubic reconstruction's sample at `at` in the slice (`za` 0 or
+    /// 1), whose cell's first voxel has stack index `b` and whose fraction
+    /// along `za` has the Catmull–Rom weights `cr` ([`Weights`]): the
+    /// Catmull–Rom cubic (`f32`) across the four voxel lines along `za`
+    /// (clamped), each linear along the other axis.
+    #[inline(always)]
+    pub(crate) fn sample_cubic_with(&self, za: usize, at: At, b: usize, cr: &[f32; 4]) -> f32 {
+        if za == 0 { self.sample_in_slice::<0>(at, b, cr) } else { self.sample_in_slice::<1>(at, b, cr) }
+    }
+
+    /// [`RayContext::sample_cubic_with`] along stack axis `ZA` (0 or 1).
+    #[inline(always)]
+    pub(crate) fn sample_in_slice<const ZA: usize>(&self, at: At, b: usize, cr: &[f32; 4]) -> f32 {
+        let data = self.stack.data();
+        let n0 = self.stack.n[0];
         // the step to the next line along za, and to the other voxel of a line
-        let (n0, cells) = (st.n[0], self.cells);
-        let (step, other, c, w_z, w_o) = if za == 0 { (1, n0, ci, wi, wj) } else { (n0, 1, cj, wj, wi) };
-        let last = cells[za] as usize; // the last voxel line along za
-        let at_line = |o: usize| {
-            let (a, z) = (data[o] as f64, data[o + other] as f64);
-            a + (z - a) * w_o as f64
-        };
+        let (step, other, c, w_o) = if ZA == 0 { (1, n0, at.ci, at.wj) } else { (n0, 1, at.cj, at.wi) };
+        let last = self.cells[ZA] as usize; // the last voxel line along za
         let before = if c > 0 { b - step } else { b };
-        let after = if c < last - 1 { b + 2 * step } else { b + step };
-        reconstruct::eval([at_line(before), at_line(b), at_line(b + step), at_line(after)], w_z as f64) as f32
+        let after = if c + 1 < last { b + 2 * step } else { b + step };
+        // every voxel read lies in [before, after + other] (step, other ≥ 1,
+        // before ≤ b < b + step ≤ after)
+        assert!(after + other < data.len(), "a cubic sample outside the stack");
+        let line = |o: usize| {
+            // SAFETY: o + other ≤ after + other < data.len() (asserted above)
+            let (a, z) = unsafe { (*data.get_unchecked(o), *data.get_unchecked(o + other)) };
+            a + (z - a) * w_o
+        };
+        cr[0] * line(before) + cr[1] * line(b) + cr[2] * line(b + step) + cr[3] * line(after)
     }
 
     /// The cubic reconstruction's gradient at the sample `at` (stack axes,
-    /// voxel units) when it runs in the slice (`za` 0 or 1), the gradient of
-    /// the cubic B-spline smoothing of the four voxel lines along `za` (as
-    /// the reference's): along `za` the B-spline's derivative of the lines'
+    /// voxel units) when it runs in the slice (`za` 0 or 1; `w`: the
+    /// [`Weights`] of its fraction along `za`), the gradient of the cubic
+    /// B-spline smoothing of the four voxel lines along `za` (as the
+    /// reference's): along `za` the B-spline's derivative of the lines'
     /// samples, along the other axes the lines' central differences blended
-    /// by the B-spline's weights. Each line's sample and central differences
-    /// are linear along the other in-slice axis, so away from the borders
-    /// they are read as eight voxels a line ([`RayContext::gradient_cubic_border`]
-    /// elsewhere: one-sided differences at a border).
-    fn gradient_cubic(&self, za: usize, at: At) -> [f32; 3] {
+    /// by the B-spline's weights, in `f32`. Each line's sample and central
+    /// differences are linear along the other in-slice axis, so away from
+    /// the borders they are read as eight voxels a line
+    /// ([`RayContext::gradient_cubic_border`] elsewhere: one-sided
+    /// differences at a border).
+    #[inline(always)]
+    fn gradient_cubic<const ZA: usize>(&self, at: At, w: &Weights) -> [f32; 3] {
         let At { k, ci, cj, wi, wj } = at;
         let st = self.stack;
         let n = st.n;
         // the other in-slice axis: its cell and weight
-        let (c, w_z, oa, co, w_o) = if za == 0 { (ci, wi, 1, cj, wj) } else { (cj, wj, 0, ci, wi) };
+        let (c, oa, co, w_o) = if ZA == 0 { (ci, 1, cj, wj) } else { (cj, 0, ci, wi) };
         if !(co >= 1 && co + 2 < n[oa] && k >= 1 && k + 1 < n[2]) {
-            return self.gradient_cubic_border(za, at);
+            return self.gradient_cubic_border(ZA, at, w);
         }
         let n01 = n[0] * n[1];
         // the steps to the next voxel line along za and along the other axis
-        let (s_l, s_o) = if za == 0 { (1, n[0]) } else { (n[0], 1) };
-        let (b, db) = (reconstruct::b_spline(w_z as f64), reconstruct::b_spline_derivative(w_z as f64));
+        let (s_l, s_o) = if ZA == 0 { (1, n[0]) } else { (n[0], 1) };
         let data = st.data();
-        let lerp = |a: f32, c: f32, w: f32| a + (c - a) * w;
-        let mut g = [0f64; 3];
-        for (m, l) in four(c, n[za]).into_iter().enumerate() {
-            let o = l * s_l + co * s_o + k * n01;
-            let (vm, v0, v1, v2) = (data[o - s_o], data[o], data[o + s_o], data[o + 2 * s_o]);
-            let (p0, p1, m0, m1) = (data[o + n01], data[o + n01 + s_o], data[o - n01], data[o - n01 + s_o]);
-            let value = lerp(v0, v1, w_o);
-            let d_o = lerp((v1 - vm) * 0.5, (v2 - v0) * 0.5, w_o);
-            let d_k = lerp((p0 - m0) * 0.5, (p1 - m1) * 0.5, w_o);
-            g[za] += db[m] * value as f64;
-            g[oa] += b[m] * d_o as f64;
-            g[2] += b[m] * d_k as f64;
-        }
-        g.map(|x| x as f32)
+        let lines = four(c, n[ZA]);
+        // the voxels read lie in [o₀ − n₀n₁ − s_o, o₃ + n₀n₁ + 2s_o] of the
+        // first and last line's o (k ≥ 1 and co ≥ 1 above, lines ascending)
+        let o_at = |l: usize| l * s_l + co * s_o + k * n01;
+        assert!(o_at(lines[0]) >= n01 + s_o && o_at(lines[3]) + n01 + 2 * s_o < data.len(), "a cubic gradient outside the stack");
+        // SAFETY: every index below lies in the range asserted above
+        let v = |o: usize| unsafe { *data.get_unchecked(o) };
+        let lerp = |a: f32, c: f32| a + (c - a) * w_o;
+        // per line: the sample, and twice the central differences along the
+        // other axis and along the slices
+        let line = |l: usize| {
+            let o = o_at(l);
+            let (vm, v0, v1, v2) = (v(o - s_o), v(o), v(o + s_o), v(o + 2 * s_o));
+            let (p0, p1, m0, m1) = (v(o + n01), v(o + n01 + s_o), v(o - n01), v(o - n01 + s_o));
+            [lerp(v0, v1), lerp(v1 - vm, v2 - v0), lerp(p0 - m0, p1 - m1)]
+        };
+        let (l0, l1, l2, l3) = (line(lines[0]), line(lines[1]), line(lines[2]), line(lines[3]));
+        let dot = |w: [f32; 4], x: usize| w[0] * l0[x] + w[1] * l1[x] + w[2] * l2[x] + w[3] * l3[x];
+        let mut g = [0.5 * dot(w.bs, 2); 3];
+        g[ZA] = dot(w.dbs, 0);
+        g[oa] = 0.5 * dot(w.bs, 1);
+        g
     }
 
     /// [`RayContext::gradient_cubic`] at any sample: each line's gradient
     /// by [`SliceStack::gradient`] (one-sided at the borders).
     #[inline(never)]
-    fn gradient_cubic_border(&self, za: usize, at: At) -> [f32; 3] {
+    fn gradient_cubic_border(&self, za: usize, at: At, w: &Weights) -> [f32; 3] {
         let At { k, ci, cj, wi, wj } = at;
         let st = self.stack;
-        let (c, w_z) = if za == 0 { (ci, wi) } else { (cj, wj) };
+        let c = if za == 0 { ci } else { cj };
         let last = self.cells[za] as usize - 1;
-        let (b, db) = (reconstruct::b_spline(w_z as f64), reconstruct::b_spline_derivative(w_z as f64));
-        let mut g = [0f64; 3];
+        let mut g = [0f32; 3];
         for (m, l) in four(c, last + 2).into_iter().enumerate() {
             // voxel line l: the cell starting there, or the last cell's far side
-            let (cell, w) = if l > last { (last, 1.0) } else { (l, 0.0) };
+            let (cell, f) = if l > last { (last, 1.0) } else { (l, 0.0) };
             let (gl, value) = if za == 0 {
-                (st.gradient(cell, cj, k, w, wj), st.bilinear(cell, cj, k, w, wj))
+                (st.gradient(cell, cj, k, f, wj), st.bilinear(cell, cj, k, f, wj))
             } else {
-                (st.gradient(ci, cell, k, wi, w), st.bilinear(ci, cell, k, wi, w))
+                (st.gradient(ci, cell, k, wi, f), st.bilinear(ci, cell, k, wi, f))
             };
             for (a, (x, y)) in g.iter_mut().zip(gl).enumerate() {
-                *x += if a == za { db[m] * value as f64 } else { b[m] * y as f64 };
+                *x += if a == za { w.dbs[m] * value } else { w.bs[m] * y };
             }
         }
-        g.map(|x| x as f32)
+        g
     }
 
     /// The slice after `k` in walking order within `[lo, hi]`, if any.
@@ -515,21 +543,29 @@ impl<'a> RayContext<'a> {
         [lo, hi]: [usize; 2],
         foc: [usize; 2],
     ) -> RayResult {
-        let sample = |k: usize| -> Option<(At, f32)> {
+        let locate = |k: usize| -> Option<At> {
             let (ci, cj, wi, wj) = ray.locate(self, k)?;
-            let at = At { k, ci, cj, wi, wj };
-            Some((at, self.sample_cubic(za, at)))
+            Some(At { k, ci, cj, wi, wj })
         };
         if za < 2 {
+            // a sample, its weights along za and its density
+            let sample = |k: usize| {
+                locate(k).map(|at| {
+                    let w = Weights::new(if za == 0 { at.wi } else { at.wj });
+                    (at, w, self.sample_cubic_with(za, at, self.stack.index(at.ci, at.cj, k), &w.cr))
+                })
+            };
             for k in ks {
-                let Some((at, d)) = sample(k) else { continue };
+                let Some((at, w, d)) = sample(k) else { continue };
                 let (iso, rgb) = self.iso_at(k, foc);
                 if d >= iso {
-                    return self.hit_in_slice(za, (iso, rgb), (at, d), self.prev_slice(k, lo, hi).and_then(sample));
+                    let prev = self.prev_slice(k, lo, hi).and_then(sample);
+                    return self.hit_in_slice(za, (iso, rgb), (at, d, &w), prev.as_ref().map(|(ap, wp, dp)| (*ap, *dp, wp)));
                 }
             }
             return MISS;
         }
+        let sample = |k: usize| locate(k).map(|at| (at, self.sample_cubic(za, at)));
         let mut window = Window::default();
         let mut sample = |k: usize| window.get(k, sample);
         for k in ks {
@@ -556,20 +592,38 @@ impl<'a> RayContext<'a> {
         MISS
     }
 
-    /// The hit `(at, d)` of the cubic in the slice (`za` 0 or 1) against
-    /// the iso value and colour `(iso, rgb)`: refined linearly against the
-    /// sample before it in walking order (`prev`, when it is below iso), as
+    /// The hit `(at, d)` of the cubic in the slice (`za` 0 or 1; `w` the
+    /// [`Weights`] of its fraction along `za`) against the iso value and
+    /// colour `(iso, rgb)`: refined linearly against the sample before it in
+    /// walking order (`prev`, with its weights, when it is below iso), as
     /// the linear reconstruction does, and shaded by the blend of both
     /// samples' [`RayContext::gradient_cubic`].
+    #[inline(always)]
+    pub(crate) fn hit_in_slice(
+        &self,
+        za: usize,
+        hit: (f32, [f32; 3]),
+        at: (At, f32, &Weights),
+        prev: Option<(At, f32, &Weights)>,
+    ) -> RayResult {
+        if za == 0 { self.hit_in_slice_za::<0>(hit, at, prev) } else { self.hit_in_slice_za::<1>(hit, at, prev) }
+    }
+
+    /// [`RayContext::hit_in_slice`] along stack axis `ZA` (0 or 1).
     #[inline(never)]
-    pub(crate) fn hit_in_slice(&self, za: usize, (iso, rgb): (f32, [f32; 3]), (at, d): (At, f32), prev: Option<(At, f32)>) -> RayResult {
+    pub(crate) fn hit_in_slice_za<const ZA: usize>(
+        &self,
+        (iso, rgb): (f32, [f32; 3]),
+        (at, d, w): (At, f32, &Weights),
+        prev: Option<(At, f32, &Weights)>,
+    ) -> RayResult {
         let k = at.k;
-        let before = prev.filter(|&(_, dp)| dp < iso).map(|(ap, dp)| (ap, ((iso - dp) / (d - dp)).clamp(0.0, 1.0)));
-        let mut g = self.gradient_cubic(za, at);
+        let before = prev.filter(|&(_, dp, _)| dp < iso).map(|(ap, dp, wp)| (ap, wp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0)));
+        let mut g = self.gradient_cubic::<ZA>(at, w);
         let depth = match before {
             None => k as f32,
-            Some((ap, t)) => {
-                let gp = self.gradient_cubic(za, ap);
+            Some((ap, wp, t)) => {
+                let gp = self.gradient_cubic::<ZA>(ap, wp);
                 g = [0, 1, 2].map(|c| gp[c] + (g[c] - gp[c]) * t);
                 ap.k as f32 + (k as f32 - ap.k as f32) * t
             }
@@ -593,21 +647,20 @@ impl<'a> RayContext<'a> {
     #[inline(never)]
     pub(crate) fn hit_along(&self, rgb: [f32; 3], four: [(At, f32); 4], t: f64) -> RayResult {
         let (ap, at) = (four[1].0, four[2].0);
-        let (b, db) = (reconstruct::b_spline(t), reconstruct::b_spline_derivative(t));
-        let (mut g, mut along) = ([0f64; 3], 0f64);
-        for ((w, dw), (a, d)) in b.iter().zip(db).zip(four) {
+        let w = Weights::new(t as f32);
+        let (mut g, mut along) = ([0f32; 3], 0f32);
+        for ((b, db), (a, d)) in w.bs.into_iter().zip(w.dbs).zip(four) {
             let ga = self.stack.gradient_in_slice(a.ci, a.cj, a.k, a.wi, a.wj);
-            for c in 0..2 {
-                g[c] += w * ga[c] as f64;
-            }
-            along += dw * d as f64;
+            g[0] += b * ga[0];
+            g[1] += b * ga[1];
+            along += db * d;
         }
-        let pos = |a: At| [a.ci as f64 + a.wi as f64, a.cj as f64 + a.wj as f64];
-        let (x0, x1) = (pos(ap), pos(at));
-        let across = g[0] * (x1[0] - x0[0]) + g[1] * (x1[1] - x0[1]);
+        // how far the ray moves across the slice from the slice before to k
+        let dx = [(at.ci as f32 - ap.ci as f32) + (at.wi - ap.wi), (at.cj as f32 - ap.cj as f32) + (at.wj - ap.wj)];
+        let across = g[0] * dx[0] + g[1] * dx[1];
         g[2] = if self.ascending { along - across } else { across - along };
         let depth = ap.k as f32 + (at.k as f32 - ap.k as f32) * t as f32;
-        self.shade_hit(rgb, g.map(|x| x as f32), depth)
+        self.shade_hit(rgb, g, depth)
     }
 
     /// An opaque iso hit at `depth` in `iso_rgb`, shaded by the gradient `g`.

@@ -62,15 +62,17 @@
 //!
 //! [`crossing`] finds the first `t ∈ [0, 1]` where the cubic through four
 //! samples reaches an iso value: the segment is split at the roots of `f'`
-//! into monotone pieces and the first piece that rises through iso is
-//! bisected, so no crossing between two samples is lost, whatever the
-//! samples (the bracket ends at 2⁻¹² of a slice and the secant across it
-//! places the crossing). The normal of a hit is the gradient of the B-spline smoothing of
+//! into monotone pieces and the crossing in the first piece that rises
+//! through iso is solved there (Newton's method kept inside the piece's
+//! bracket), so no crossing between two samples is lost, whatever the
+//! samples. The normal of a hit is the gradient of the B-spline smoothing of
 //! the same four slices: along the slice axis `Σ b'ⱼ(t)·pⱼ` (`b` the
 //! [`b_spline`] weights), in-plane the central differences of the four
 //! slices (bilinear in each) blended with the weights `bⱼ(t)` — C² along the
 //! slice axis, exact on densities linear and quadratic along it (the
 //! smoothing adds only a constant to a quadratic), with no quantization.
+//! The fast paths evaluate the weights in `f32` ([`Weights`]), once a slice
+//! where every ray of the slice shares its fraction.
 
 /// How densities between slices are reconstructed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -132,6 +134,43 @@ pub fn b_spline_derivative(t: f64) -> [f64; 4] {
     [-0.5 * u * u, 0.5 * (3.0 * t2 - 4.0 * t), 0.5 * (-3.0 * t2 + 2.0 * t + 1.0), 0.5 * t2]
 }
 
+/// The weights a fast path reads at in-slice fraction `t` (`f32`, the
+/// same polynomials as [`catmull_rom`], [`b_spline`] and
+/// [`b_spline_derivative`]): one set a slice in a lean frame, where every
+/// ray of a slice shares its fraction, or one a sample elsewhere (the same
+/// numbers either way).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Weights {
+    /// Catmull–Rom's weights (the density).
+    pub cr: [f32; 4],
+    /// The B-spline's weights (the normal across the axis).
+    pub bs: [f32; 4],
+    /// The B-spline's derivatives (the normal along the axis).
+    pub dbs: [f32; 4],
+}
+
+impl Weights {
+    /// The weights at `t ∈ [0, 1]`.
+    #[inline(always)]
+    pub fn new(t: f32) -> Self {
+        let (u, t2) = (1.0 - t, t * t);
+        let t3 = t2 * t;
+        const SIXTH: f32 = 1.0 / 6.0;
+        Weights {
+            cr: [0.5 * (-t3 + 2.0 * t2 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0), 0.5 * (-3.0 * t3 + 4.0 * t2 + t), 0.5 * (t3 - t2)],
+            bs: [u * u * u * SIXTH, (3.0 * t3 - 6.0 * t2 + 4.0) * SIXTH, (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) * SIXTH, t3 * SIXTH],
+            dbs: [-0.5 * u * u, 0.5 * (3.0 * t2 - 4.0 * t), 0.5 * (-3.0 * t2 + 2.0 * t + 1.0), 0.5 * t2],
+        }
+    }
+
+    /// The Catmull–Rom cubic through the four samples `p` at this fraction.
+    #[inline(always)]
+    pub fn eval(&self, p: [f32; 4]) -> f32 {
+        let w = self.cr;
+        w[0] * p[0] + w[1] * p[1] + w[2] * p[2] + w[3] * p[3]
+    }
+}
+
 /// The cubic through `p` at `t`.
 #[inline(always)]
 pub fn eval(p: [f64; 4], t: f64) -> f64 {
@@ -183,9 +222,13 @@ pub fn coefficients(p: [f64; 4]) -> [f64; 4] {
     [p[1], 0.5 * (p[2] - p[0]), p[0] - 2.5 * p[1] + 2.0 * p[2] - 0.5 * p[3], 0.5 * (-p[0] + 3.0 * p[1] - 3.0 * p[2] + p[3])]
 }
 
-/// Bisection steps of [`crossing`] (the bracket shrinks to 2⁻¹² of a slice
-/// before the secant across it).
-const BISECTIONS: u32 = 12;
+/// Newton steps of [`crossing`] at most (each from inside the bracket; a
+/// step that would leave it bisects instead).
+const STEPS: u32 = 12;
+
+/// [`crossing`] stops once a Newton step moves `t` by less than this (a
+/// slice's 2⁻³⁰: the step after it is far below any sample's resolution).
+const TOL: f64 = 1.0 / (1u64 << 30) as f64;
 
 /// The first `t ∈ [0, 1]` where the cubic through `p` reaches `iso` (0 when
 /// it starts there), or `None` when it stays below on the whole segment.
@@ -193,10 +236,11 @@ const BISECTIONS: u32 = 12;
 /// A segment whose [`upper_bound`] is below iso is rejected at once (most
 /// segments a ray tests). Otherwise the segment is cut at the roots of the
 /// derivative into at most three monotone pieces; the first piece whose end
-/// reaches iso holds the first crossing, which bisection brackets to 2⁻¹²
-/// and the secant across the bracket places (exact for a cubic that is
-/// linear there; off by the order of the bracket's square, 10⁻⁷ of a
-/// slice, elsewhere).
+/// reaches iso holds the first crossing, found by Newton's method from the
+/// secant across the piece, safeguarded by the bracket: each step shrinks
+/// the bracket to the side of the crossing, and a step that would leave it
+/// bisects instead (a monotone cubic: a few steps, quadratic near the
+/// crossing).
 pub fn crossing(p: [f64; 4], iso: f64) -> Option<f64> {
     if upper_bound(p[1].max(p[2]), p[0].min(p[3])) < iso {
         return None;
@@ -211,6 +255,7 @@ pub fn crossing(p: [f64; 4], iso: f64) -> Option<f64> {
     let mut cuts = [0.0f64, 1.0, 1.0, 1.0];
     let mut n = 1;
     let (a, b, cc) = (3.0 * c[3], 2.0 * c[2], c[1]);
+    let df = |t: f64| (a * t + b) * t + cc;
     let mut push = |r: f64| {
         if r > 0.0 && r < 1.0 {
             cuts[n] = r;
@@ -231,26 +276,32 @@ pub fn crossing(p: [f64; 4], iso: f64) -> Option<f64> {
     cuts[n] = 1.0;
     for w in cuts[..=n].windows(2) {
         let (mut lo, mut hi) = (w[0], w[1]);
-        let mut f_hi = f(hi);
+        let f_hi = f(hi);
         if f_hi < iso {
             continue;
         }
-        // f(lo) < iso ≤ f(hi) (lo is 0 or a piece's start below iso)
-        let mut f_lo = f(lo);
-        for _ in 0..BISECTIONS {
-            let m = 0.5 * (lo + hi);
-            if m <= lo || m >= hi {
+        // f(lo) < iso ≤ f(hi) (lo is 0 or a piece's start below iso), f rising between
+        let f_lo = f(lo);
+        let mut t = if f_hi > f_lo { lo + (hi - lo) * ((iso - f_lo) / (f_hi - f_lo)).clamp(0.0, 1.0) } else { hi };
+        for _ in 0..STEPS {
+            let ft = f(t) - iso;
+            if ft == 0.0 {
+                break;
+            } else if ft > 0.0 {
+                hi = t;
+            } else {
+                lo = t;
+            }
+            let d = df(t);
+            let next = t - ft / d;
+            let next = if d > 0.0 && next >= lo && next <= hi { next } else { 0.5 * (lo + hi) };
+            let moved = (next - t).abs();
+            t = next;
+            if moved < TOL || hi - lo < TOL {
                 break;
             }
-            let fm = f(m);
-            if fm >= iso {
-                (hi, f_hi) = (m, fm);
-            } else {
-                (lo, f_lo) = (m, fm);
-            }
         }
-        let frac = if f_hi > f_lo { ((iso - f_lo) / (f_hi - f_lo)).clamp(0.0, 1.0) } else { 1.0 };
-        return Some(lo + (hi - lo) * frac);
+        return Some(t.clamp(0.0, 1.0));
     }
     None
 }
@@ -271,6 +322,20 @@ mod tests {
         }
         assert_eq!(catmull_rom(0.0), [0.0, 1.0, 0.0, 0.0]);
         assert_eq!(catmull_rom(1.0), [0.0, 0.0, 1.0, 0.0]);
+    }
+
+    #[test]
+    fn the_f32_weights_are_the_f64_ones() {
+        for i in 0..=64 {
+            let t = i as f32 / 64.0;
+            let w = Weights::new(t);
+            let t = t as f64;
+            for (a, b) in [(w.cr, catmull_rom(t)), (w.bs, b_spline(t)), (w.dbs, b_spline_derivative(t))] {
+                for (x, y) in a.iter().zip(b) {
+                    assert!((*x as f64 - y).abs() < 1e-6, "{t}: {a:?} {b:?}");
+                }
+            }
+        }
     }
 
     #[test]

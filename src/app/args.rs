@@ -115,8 +115,8 @@ pub struct RenderArgs {
     /// z axis, the normal the gradient of their B-spline smoothing, no normal
     /// codes): no terraces or rings on thick-slice scans (on a 0.6×0.6×5
     /// ellipsoid the normal error drops from 3.3° to 0.85° mean). A cubic
-    /// frame costs about 2× linear's on a 5 mm-slice CT and 3–6× on an
-    /// isotropic 256³ head (benches/README.md), and on isotropic scans both
+    /// frame costs about 1.4–1.6× linear's on a 5 mm-slice CT and 2.5–3.5× on
+    /// an isotropic 256³ head (benches/README.md), and on isotropic scans both
     /// err alike. Default: `render` (a still frame) takes cubic for a scan
     /// whose slices are at least 1.5× as far apart as its pixels, when the
     /// method and mode render it; `rotate`, `view` (the interactive

@@ -534,7 +534,8 @@ impl PackedCells<'_> {
 
     /// [`crate::data::slices::bilinear`] of [`PackedCells::densities`] at `(wi, wj)`, bit for bit:
     /// each row's two voxels in one 8-byte load, the four densities moved
-    /// into one vector by a byte shuffle ([`bilinear_sse`]).
+    /// into one vector by a byte shuffle, interpolated there with the same
+    /// float operations.
     ///
     /// # Safety
     /// The CPU must have SSSE3, and the caller be compiled with it.
@@ -647,8 +648,8 @@ impl<'a> ByteCells<'a> {
 
     /// [`crate::data::slices::bilinear`] of [`ByteCells::densities`] at `(wi, wj)`, bit for bit:
     /// each row's first voxel and the next one's density in one 4-byte load,
-    /// the four densities moved into one vector by a byte shuffle
-    /// ([`bilinear_sse`]).
+    /// the four densities moved into one vector by a byte shuffle,
+    /// interpolated there with the same float operations.
     ///
     /// # Safety
     /// The CPU must have SSSE3, and the caller be compiled with it.

@@ -29,7 +29,10 @@
 //! word. Two incremental steps are fused into one pass
 //! over the words where the target is two or more bits away (each slice moves
 //! −2..=+2, five shift vectors): the same words, half the memory traffic.
-//! Either way only the occupied rectangle of the grid is touched.
+//! A move of [`MIN_ONE_PASS_BITS`] or more along i runs in a single pass:
+//! every word is OR-ed from the old columns at the distances its slots move
+//! by (at most four), read from a copy of its grid row. Either way only the occupied rectangle of the grid is
+//! touched.
 
 use rayon::prelude::*;
 
@@ -53,10 +56,9 @@ use crate::view::shear::ShearState;
 /// direct path on 28 of 120 frames in the viewer, at 86 ms each.
 pub const MAX_INCREMENTAL_STEPS: u32 = 16;
 
-/// A move along i this many bits away or more runs in one pass
-/// ([`BinaryMask::move_columns`]), when every word's slots move by at most
-/// [`MOVE_TERMS`] distances, rather than as steps, each a pass over the whole
-/// occupied mask: on a large scan's mask (a 512×512×413 CT's under the tissue
+/// A move along i this many bits away or more runs in one pass (when every
+/// word's slots move by at most four distances) rather than as steps, each a
+/// pass over the whole occupied mask: on a large scan's mask (a 512×512×413 CT's under the tissue
 /// presets is a quarter of a gigabyte, 16 words a depth row) the steps are
 /// bound by memory. Below it, the step kernels, whose few passes over a
 /// small mask stay in cache and run fewer instructions, are kept.
@@ -144,6 +146,10 @@ pub struct BinaryMask<W: Word> {
     /// per word of a depth row, [`MOVE_TERMS`] terms (the old word's offset in
     /// a row buffer with zero margins, and the slots moving by that distance).
     terms: Vec<(usize, W)>,
+    /// How many terms each word uses, and the row buffers of the bands of
+    /// grid rows the pass runs in (kept: steady frames allocate nothing).
+    term_used: Vec<usize>,
+    move_bufs: Vec<Vec<W>>,
     /// The block occupancy of the last scaled frame ([`BinaryMask::update_occupancy`]),
     /// its tables reused across frames.
     occupancy: BlockOccupancy,
@@ -231,6 +237,8 @@ impl<W: Word> BinaryMask<W> {
             row_buf2: vec![W::ZERO; grid[0] * nw],
             zero_row: vec![W::ZERO; grid[0] * nw],
             terms: vec![(0, W::ZERO); nw * MOVE_TERMS],
+            term_used: vec![0; nw],
+            move_bufs: Vec::new(),
             occupancy: Default::default(),
         };
         m.scatter();
@@ -698,7 +706,8 @@ impl<W: Word> BinaryMask<W> {
         for w in 0..nw {
             self.terms[w * MOVE_TERMS].0 = m * nw + w;
         }
-        let mut used = vec![0usize; nw];
+        let used = &mut self.term_used;
+        used.fill(0);
         for (k, (&o, &t)) in self.off[0].iter().zip(target).enumerate() {
             let (d, w) = (t - o, k / slots);
             debug_assert!(d.unsigned_abs() <= MAX_INCREMENTAL_STEPS);
@@ -716,7 +725,7 @@ impl<W: Word> BinaryMask<W> {
                 None => return None,
             }
         }
-        used.into_iter().max()
+        used.iter().copied().max()
     }
 
     /// Moves every slice along i to `target` in one pass over the occupied
@@ -742,18 +751,27 @@ impl<W: Word> BinaryMask<W> {
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
         let cols = pe - ps + 1;
         let terms = &self.terms[..];
+        // bands of grid rows, a row buffer each (grown once, then reused)
+        let nrows = r.q1 - r.q0 + 1;
+        let bands = (rayon::current_num_threads() * 4).min(nrows);
+        let band = nrows.div_ceil(bands);
+        if self.move_bufs.len() < bands {
+            self.move_bufs.resize_with(bands, Vec::new);
+        }
         let rows = &mut self.words[r.q0 * gw * nw..(r.q1 + 1) * gw * nw];
-        rows.par_chunks_mut(gw * nw).for_each_init(Vec::new, |old: &mut Vec<W>, row| {
-            // columns outside [ps, pe] hold nothing before the move
-            old.clear();
-            old.resize(m * nw, W::ZERO);
-            old.extend_from_slice(&row[ps * nw..(pe + 1) * nw]);
-            old.resize((cols + 2 * m) * nw, W::ZERO);
-            for (p, out) in row[ps * nw..(pe + 1) * nw].chunks_exact_mut(nw).enumerate() {
-                let old = &old[p * nw..];
-                for (o, t) in out.iter_mut().zip(terms.chunks_exact(MOVE_TERMS)) {
-                    // (offsets are below (2m + 1)·nw: inside `old` from column p on)
-                    *o = t[..T].iter().fold(W::ZERO, |acc, &(at, slots)| acc | (old[at] & slots));
+        rows.par_chunks_mut(band * gw * nw).zip(self.move_bufs.par_iter_mut()).for_each(|(rows, old)| {
+            for row in rows.chunks_exact_mut(gw * nw) {
+                // columns outside [ps, pe] hold nothing before the move
+                old.clear();
+                old.resize(m * nw, W::ZERO);
+                old.extend_from_slice(&row[ps * nw..(pe + 1) * nw]);
+                old.resize((cols + 2 * m) * nw, W::ZERO);
+                for (p, out) in row[ps * nw..(pe + 1) * nw].chunks_exact_mut(nw).enumerate() {
+                    let old = &old[p * nw..];
+                    for (o, t) in out.iter_mut().zip(terms.chunks_exact(MOVE_TERMS)) {
+                        // (offsets are below (2m + 1)·nw: inside `old` from column p on)
+                        *o = t[..T].iter().fold(W::ZERO, |acc, &(at, slots)| acc | (old[at] & slots));
+                    }
                 }
             }
         });

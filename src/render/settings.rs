@@ -307,9 +307,9 @@ pub struct Settings {
     /// (Catmull–Rom along the volume's z axis, the normal the gradient of the
     /// B-spline smoothing, no normal codes). The default stays
     /// [`Reconstruction::Linear`], chosen by measurement
-    /// (`benches/README.md`): the cubic preview frame costs about 2× the
-    /// linear one's on a 5 mm-slice CT and 3–6× on an isotropic 256³ head
-    /// (the linear frame keeps its normal codes), and on isotropic
+    /// (`benches/README.md`): the cubic preview frame costs about 1.4–1.6×
+    /// the linear one's on a 5 mm-slice CT and 2.5–3.5× on an isotropic 256³
+    /// head (the linear frame keeps its normal codes), and on isotropic
     /// volumes the two err alike; on thick slices the cubic's normal error
     /// is a quarter of the linear's. Blend mode ignores it; the RLE paths and
     /// Deluxe I refuse it.

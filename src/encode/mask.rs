@@ -29,7 +29,8 @@
 //! word. Two incremental steps are fused into one pass
 //! over the words where the target is two or more bits away (each slice moves
 //! −2..=+2, five shift vectors): the same words, half the memory traffic.
-//! A move of [`MIN_ONE_PASS_BITS`] or more along i runs in a single pass:
+//! A move of [`MIN_ONE_PASS_BITS`] or more along i, of depth rows longer
+//! than the fused kernels take, runs in a single pass:
 //! every word is OR-ed from the old columns at the distances its slots move
 //! by (at most four), read from a copy of its grid row. Either way only the occupied rectangle of the grid is
 //! touched.
@@ -56,12 +57,13 @@ use crate::view::shear::ShearState;
 /// direct path on 28 of 120 frames in the viewer, at 86 ms each.
 pub const MAX_INCREMENTAL_STEPS: u32 = 16;
 
-/// A move along i this many bits away or more runs in one pass (when every
-/// word's slots move by at most four distances) rather than as steps, each a
-/// pass over the whole occupied mask: on a large scan's mask (a 512×512×413 CT's under the tissue
-/// presets is a quarter of a gigabyte, 16 words a depth row) the steps are
-/// bound by memory. Below it, the step kernels, whose few passes over a
-/// small mask stay in cache and run fewer instructions, are kept.
+/// A move along i this many bits away or more, of depth rows longer than
+/// [`MAX_FUSED_COLUMN`] words, runs in one pass (when every word's slots move
+/// by at most four distances) rather than as single steps, each a pass over
+/// the whole occupied mask: on a large scan's mask under the tissue presets
+/// (a 512×512×413 CT's is a quarter of a gigabyte, 16 words a depth row) the
+/// steps are bound by memory. Shorter rows keep the fused two-step kernels,
+/// which run fewer instructions there.
 pub const MIN_ONE_PASS_BITS: u32 = 3;
 
 /// Most distances the slots of one word may move by for the one-pass move
@@ -429,6 +431,7 @@ impl<W: Word> BinaryMask<W> {
             let mut w = ShearWork::default();
             let along_i = self.off[0].iter().zip(&target[0]).map(|(x, y)| (x - y).unsigned_abs()).max().unwrap_or(0);
             if self.fused
+                && self.nw > MAX_FUSED_COLUMN
                 && along_i >= MIN_ONE_PASS_BITS
                 && let Some(t) = self.column_terms(&target[0])
             {
@@ -1223,7 +1226,8 @@ mod tests {
     }
 
     /// Moves of [`MIN_ONE_PASS_BITS`] to [`MAX_INCREMENTAL_STEPS`] super cells
-    /// along i take the one-pass move ([`BinaryMask::move_columns`]), each
+    /// along i of depth rows longer than [`MAX_FUSED_COLUMN`] words take the
+    /// one-pass move ([`BinaryMask::move_columns`]), each
     /// slice by its own distance, in both directions, with moves along j
     /// beside them, for 1-, 2- and 4-bit codes, both word sizes and super
     /// cells: the words of the steps and of the scatter.
@@ -1268,14 +1272,14 @@ mod tests {
 
     #[test]
     fn one_pass_moves_equal_the_steps_and_the_direct_shear() {
-        // (a word of 64 one-bit slots spans more distances than the pass
-        // takes on long stacks: those moves take the steps)
+        // (depth rows of 5 to 8 words; a word of 64 one-bit slots can span
+        // more distances than the pass takes: those moves take the steps)
         let n = [
-            check_one_pass::<u64>([21, 17, 130], 1, 1),
-            check_one_pass::<u32>([21, 17, 100], 1, 1),
-            check_one_pass::<u64>([19, 23, 90], 2, 1),
-            check_one_pass::<u64>([15, 13, 70], 4, 1),
-            check_one_pass::<u64>([24, 20, 140], 1, 2),
+            check_one_pass::<u64>([13, 11, 330], 1, 1),
+            check_one_pass::<u32>([13, 11, 170], 1, 1),
+            check_one_pass::<u64>([11, 13, 200], 2, 1),
+            check_one_pass::<u64>([11, 9, 70], 4, 1),
+            check_one_pass::<u64>([16, 14, 300], 1, 2),
             check_one_pass::<u32>([17, 16, 75], 2, 3),
         ];
         assert!(n[2] >= 10 && n[3] >= 10 && n.iter().sum::<u32>() >= 40, "jumps along i in one pass: {n:?}");

@@ -66,6 +66,9 @@ pub const MAX_INCREMENTAL_STEPS: u32 = 16;
 /// which run fewer instructions there.
 pub const MIN_ONE_PASS_BITS: u32 = 3;
 
+/// Distances a slice may move by in one incremental shear, −m..=m.
+const SPAN: usize = 2 * MAX_INCREMENTAL_STEPS as usize + 1;
+
 /// Most distances the slots of one word may move by for the one-pass move
 /// along i (the slices' moves grow linearly with depth, so a word's slots
 /// usually share one or two; the pass runs with as many terms a word as the
@@ -429,11 +432,15 @@ impl<W: Word> BinaryMask<W> {
             ShearWork::default()
         } else if dist <= MAX_INCREMENTAL_STEPS {
             let mut w = ShearWork::default();
-            let along_i = self.off[0].iter().zip(&target[0]).map(|(x, y)| (x - y).unsigned_abs()).max().unwrap_or(0);
+            let (nw, m) = (self.nw, MAX_INCREMENTAL_STEPS as i32);
+            let along = |o: &[i32], t: &[i32]| o.iter().zip(t).map(|(x, y)| (x - y).unsigned_abs()).max().unwrap_or(0);
+            let along_i = along(&self.off[0], &target[0]);
+            // the old word of column p − d sits at (p − ps + m − d)·nw + w in
+            // the row buffer (zero margins of m columns on both sides)
             if self.fused
-                && self.nw > MAX_FUSED_COLUMN
+                && nw > MAX_FUSED_COLUMN
                 && along_i >= MIN_ONE_PASS_BITS
-                && let Some(t) = self.column_terms(&target[0])
+                && let Some(t) = self.word_terms(0, &target[0], |d, w| (m - d) as usize * nw + w)
             {
                 w.words += match t {
                     0 | 1 => self.move_columns::<1>(&target[0]),
@@ -442,6 +449,21 @@ impl<W: Word> BinaryMask<W> {
                     _ => self.move_columns::<MOVE_TERMS>(&target[0]),
                 };
                 w.steps += along_i;
+            }
+            let along_j = along(&self.off[1], &target[1]);
+            // along j a term names its distance: d + m
+            if self.fused
+                && nw > MAX_FUSED_COLUMN
+                && along_j >= MIN_ONE_PASS_BITS
+                && let Some(t) = self.word_terms(1, &target[1], |d, _| (d + m) as usize)
+            {
+                w.words += match t {
+                    0 | 1 => self.move_rows::<1>(&target[1]),
+                    2 => self.move_rows::<2>(&target[1]),
+                    3 => self.move_rows::<3>(&target[1]),
+                    _ => self.move_rows::<MOVE_TERMS>(&target[1]),
+                };
+                w.steps += along_j;
             }
             let mut left = (0..2).flat_map(|a| self.off[a].iter().zip(&target[a]).map(|(x, y)| (x - y).unsigned_abs())).max().unwrap_or(0);
             while left > 0 {
@@ -697,26 +719,23 @@ impl<W: Word> BinaryMask<W> {
         ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
     }
 
-    /// Fills `terms` for a move of every slice along i from its offset to
-    /// `target`; the most terms a word needs, or `None` when some word's slots
-    /// move by more than [`MOVE_TERMS`] distances.
-    fn column_terms(&mut self, target: &[i32]) -> Option<usize> {
+    /// Fills `terms` for a move of every slice along `axis` from its offset
+    /// to `target`, each term as `(at(d, w), slots)` for the slots of word `w`
+    /// moving by `d`; the most terms a word needs, or `None` when some word's
+    /// slots move by more than [`MOVE_TERMS`] distances. A term of no slots
+    /// (`at(0, w)`, nothing kept) pads the rest.
+    fn word_terms(&mut self, axis: usize, target: &[i32], at: impl Fn(i32, usize) -> usize) -> Option<usize> {
         let (nw, nb) = (self.nw, self.nb);
         let slots = (W::BITS / nb) as usize;
-        let m = MAX_INCREMENTAL_STEPS as usize;
-        // a term of no slots reads the word at distance 0 and keeps nothing
-        self.terms.fill((0, W::ZERO));
         for w in 0..nw {
-            self.terms[w * MOVE_TERMS].0 = m * nw + w;
+            self.terms[w * MOVE_TERMS..(w + 1) * MOVE_TERMS].fill((at(0, w), W::ZERO));
         }
         let used = &mut self.term_used;
         used.fill(0);
-        for (k, (&o, &t)) in self.off[0].iter().zip(target).enumerate() {
+        for (k, (&o, &t)) in self.off[axis].iter().zip(target).enumerate() {
             let (d, w) = (t - o, k / slots);
             debug_assert!(d.unsigned_abs() <= MAX_INCREMENTAL_STEPS);
-            // the old word of column p − d sits at (p − ps + m − d)·nw + w
-            // in the row buffer (zero margins of m columns on both sides)
-            let at = (m as i32 - d) as usize * nw + w;
+            let at = at(d, w);
             let terms = &mut self.terms[w * MOVE_TERMS..(w + 1) * MOVE_TERMS];
             let slot = crate::encode::depth::slot_mask::<W>(nb, k);
             match terms[..used[w]].iter_mut().find(|t| t.0 == at) {
@@ -734,7 +753,7 @@ impl<W: Word> BinaryMask<W> {
     /// Moves every slice along i to `target` in one pass over the occupied
     /// rectangle, one grid row per task: word `w` of column `p` becomes
     /// `OR_d old[p − d][w] & slots_d[w]` over the (at most [`MOVE_TERMS`])
-    /// distances its slots move by ([`BinaryMask::column_terms`] filled
+    /// distances its slots move by ([`BinaryMask::word_terms`] filled
     /// them; `T` of them, the busiest word's), read from a copy of the row's
     /// old columns between zero margins. The steps' words, and the direct
     /// shear's (tested against both).
@@ -780,6 +799,95 @@ impl<W: Word> BinaryMask<W> {
         });
         self.off[0].copy_from_slice(target);
         (r.q1 - r.q0 + 1) as u64 * (cols * nw) as u64
+    }
+
+    /// Moves every slice along j to `target` in one pass over the occupied
+    /// rectangle: word `w` of row `q` becomes `OR_d old[q − d][w] & slots_d[w]`
+    /// over its (`T`) terms ([`BinaryMask::word_terms`]). The rectangle's
+    /// columns are split into bands, one task each, that go down the rows:
+    /// a row's old words are kept in the band's ring (as deep as the largest
+    /// forward move) before they are overwritten, the rows below are still
+    /// old, and rows outside the rectangle read as zero. The steps' words, and
+    /// the direct shear's (tested against both).
+    fn move_rows<const T: usize>(&mut self, target: &[i32]) -> u64 {
+        let before = self.occupied_rect();
+        let mut next = std::mem::take(&mut self.prev_off);
+        next[0].copy_from_slice(&self.off[0]);
+        next[1].copy_from_slice(target);
+        let after = self.occupied(&next);
+        self.prev_off = next;
+        let Some(r) = Rect::union(before, after) else {
+            self.off[1].copy_from_slice(target);
+            return 0;
+        };
+        let (nw, gw, m) = (self.nw, self.grid[0], MAX_INCREMENTAL_STEPS as usize);
+        let (ps, pe) = (r.p0, r.p1.min(gw - 1));
+        let cols = pe - ps + 1;
+        let (q0, q1) = (r.q0, r.q1);
+        let forward = self.terms.iter().filter(|t| t.1 != W::ZERO).map(|t| t.0.saturating_sub(m)).max().unwrap_or(0);
+        let depth = forward + 1;
+        let bands = (rayon::current_num_threads() * 2).min(cols);
+        let band = cols.div_ceil(bands);
+        if self.move_bufs.len() < bands {
+            self.move_bufs.resize_with(bands, Vec::new);
+        }
+        let terms = &self.terms[..];
+        let row_len = gw * nw;
+        let words = SharedWords(self.words.as_mut_ptr());
+        self.move_bufs[..bands].par_iter_mut().enumerate().for_each(|(b, buf)| {
+            let (c0, c1) = (ps + b * band, (ps + (b + 1) * band).min(pe + 1));
+            if c0 >= c1 {
+                return;
+            }
+            let width = (c1 - c0) * nw;
+            // the ring of old rows
+            buf.clear();
+            buf.resize(depth * width, W::ZERO);
+            let ring = &mut buf[..];
+            // per distance d + m: where its old row is, as the index of its
+            // first word in the ring, or in the mask (rows after q are still
+            // old there), or none (outside the rectangle: zeros)
+            let mut rows = [Src::Zero; SPAN];
+            for q in q0..=q1 {
+                let at = q * row_len + c0 * nw;
+                // SAFETY: `words` is the mask's word array, borrowed mutably
+                // by this function for the whole pass; this task reads and
+                // writes only the words of columns c0..c1 (of any row), and
+                // the bands' column ranges are disjoint, so no word is touched
+                // by two tasks; every index is below `len` (rows q0..=q1 of the
+                // grid, columns below gw). Exercised by
+                // `one_pass_moves_equal_the_steps_and_the_direct_shear`.
+                let row = unsafe { std::slice::from_raw_parts_mut(words.ptr().add(at), width) };
+                let slot = (q % depth) * width;
+                ring[slot..slot + width].copy_from_slice(row);
+                for (i, r) in rows.iter_mut().enumerate() {
+                    let src = q as i64 + m as i64 - i as i64;
+                    *r = if src < q0 as i64 || src > q1 as i64 {
+                        Src::Zero
+                    } else if src as usize <= q {
+                        Src::Ring((src as usize % depth) * width)
+                    } else {
+                        Src::Mask(src as usize * row_len + c0 * nw)
+                    };
+                }
+                for (x, out) in row.iter_mut().enumerate() {
+                    let mut acc = W::ZERO;
+                    for &(d, slots) in &terms[(x % nw) * MOVE_TERMS..][..T] {
+                        let v = match rows[d] {
+                            Src::Zero => W::ZERO,
+                            Src::Ring(o) => ring[o + x],
+                            // SAFETY: as above: a later row of this task's
+                            // columns inside the rectangle, not yet written
+                            Src::Mask(o) => unsafe { *words.ptr().add(o + x) },
+                        };
+                        acc |= v & slots;
+                    }
+                    *out = acc;
+                }
+            }
+        });
+        self.off[1].copy_from_slice(target);
+        (q1 - q0 + 1) as u64 * (cols * nw) as u64
     }
 
     /// Two steps along i in one pass: `new[p] = OR_d old[p − d] & moves[2 − d]`
@@ -874,6 +982,33 @@ impl<W: Word> BinaryMask<W> {
         next
     }
 }
+
+/// Where [`BinaryMask::move_rows`] reads an old row from.
+#[derive(Clone, Copy)]
+enum Src {
+    /// Outside the occupied rectangle: nothing.
+    Zero,
+    /// The band's ring, from this word on.
+    Ring(usize),
+    /// The mask itself (a row not yet moved), from this word on.
+    Mask(usize),
+}
+
+/// The mask's words shared by the bands of [`BinaryMask::move_rows`], each of
+/// which touches only its own columns.
+#[derive(Clone, Copy)]
+struct SharedWords<W>(*mut W);
+
+impl<W> SharedWords<W> {
+    fn ptr(&self) -> *mut W {
+        self.0
+    }
+}
+
+// SAFETY: the tasks that share it write disjoint words (`move_rows`), and
+// the pointer outlives them (the pass borrows the mask mutably throughout).
+unsafe impl<W: Send> Send for SharedWords<W> {}
+unsafe impl<W: Send> Sync for SharedWords<W> {}
 
 /// Rounding margin on the drift `u` (voxels): the maps are computed per slice
 /// in f64, affine in `k` to far below this.
@@ -1257,10 +1392,10 @@ mod tests {
             }
             let shift = if jump % 5 == 4 { 2.0 } else { 0.0 };
             let state = ShearState::from_ends(n[2], [0, 1].map(|a| [shift - ends[a], shift + ends[a]]));
-            let before = m.off[0].clone();
+            let before = m.off.clone();
             let w = m.shear_to(&state);
-            let along_i = before.iter().zip(&m.off[0]).map(|(x, y)| (x - y).unsigned_abs()).max().unwrap_or(0);
-            one_pass += (w.direct == 0 && along_i >= MIN_ONE_PASS_BITS) as u32;
+            let moved = |a: usize| before[a].iter().zip(&m.off[a]).map(|(x, y)| (x - y).unsigned_abs()).max().unwrap_or(0);
+            one_pass += (w.direct == 0 && moved(0) >= MIN_ONE_PASS_BITS) as u32 + (w.direct == 0 && moved(1) >= MIN_ONE_PASS_BITS) as u32;
             steps.shear_to(&state);
             let mut d = BinaryMask::<W>::from_codes(&codes, s);
             d.shear_direct(&state);

@@ -29,11 +29,12 @@
 //! word. Two incremental steps are fused into one pass
 //! over the words where the target is two or more bits away (each slice moves
 //! −2..=+2, five shift vectors): the same words, half the memory traffic.
-//! A move of [`MIN_ONE_PASS_BITS`] or more along i, of depth rows longer
-//! than the fused kernels take, runs in a single pass:
-//! every word is OR-ed from the old columns at the distances its slots move
-//! by (at most four), read from a copy of its grid row. Either way only the occupied rectangle of the grid is
-//! touched.
+//! A move of [`MIN_ONE_PASS_BITS`] or more along an axis, of depth rows
+//! longer than the fused kernels take, runs in a single pass: every word is
+//! OR-ed from the old columns (rows) at the distances its slots move by (at
+//! most four), read from a copy of its grid row (from a ring of the old rows
+//! above it, per band of columns). Either way only the occupied rectangle of
+//! the grid is touched.
 
 use rayon::prelude::*;
 
@@ -57,7 +58,7 @@ use crate::view::shear::ShearState;
 /// direct path on 28 of 120 frames in the viewer, at 86 ms each.
 pub const MAX_INCREMENTAL_STEPS: u32 = 16;
 
-/// A move along i this many bits away or more, of depth rows longer than
+/// A move along i or j this many bits away or more, of depth rows longer than
 /// [`MAX_FUSED_COLUMN`] words, runs in one pass (when every word's slots move
 /// by at most four distances) rather than as single steps, each a pass over
 /// the whole occupied mask: on a large scan's mask under the tissue presets

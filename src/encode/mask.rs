@@ -751,6 +751,21 @@ impl<W: Word> BinaryMask<W> {
         used.iter().copied().max()
     }
 
+    /// The rectangle a move of every slice along `axis` to `target` touches:
+    /// the occupied rectangles before and after it, joined (`None`: the mask
+    /// is empty).
+    fn move_rect(&mut self, axis: usize, target: &[i32]) -> Option<Rect> {
+        let before = self.occupied_rect();
+        // (`prev_off` is scratch between steps)
+        let mut next = std::mem::take(&mut self.prev_off);
+        for (a, n) in next.iter_mut().enumerate() {
+            n.copy_from_slice(if a == axis { target } else { &self.off[a] });
+        }
+        let after = self.occupied(&next);
+        self.prev_off = next;
+        Rect::union(before, after)
+    }
+
     /// Moves every slice along i to `target` in one pass over the occupied
     /// rectangle, one grid row per task: word `w` of column `p` becomes
     /// `OR_d old[p − d][w] & slots_d[w]` over the (at most [`MOVE_TERMS`])
@@ -759,14 +774,7 @@ impl<W: Word> BinaryMask<W> {
     /// old columns between zero margins. The steps' words, and the direct
     /// shear's (tested against both).
     fn move_columns<const T: usize>(&mut self, target: &[i32]) -> u64 {
-        let before = self.occupied_rect();
-        // (`prev_off` is scratch between steps)
-        let mut next = std::mem::take(&mut self.prev_off);
-        next[0].copy_from_slice(target);
-        next[1].copy_from_slice(&self.off[1]);
-        let after = self.occupied(&next);
-        self.prev_off = next;
-        let Some(r) = Rect::union(before, after) else {
+        let Some(r) = self.move_rect(0, target) else {
             self.off[0].copy_from_slice(target);
             return 0;
         };
@@ -811,13 +819,7 @@ impl<W: Word> BinaryMask<W> {
     /// old, and rows outside the rectangle read as zero. The steps' words, and
     /// the direct shear's (tested against both).
     fn move_rows<const T: usize>(&mut self, target: &[i32]) -> u64 {
-        let before = self.occupied_rect();
-        let mut next = std::mem::take(&mut self.prev_off);
-        next[0].copy_from_slice(&self.off[0]);
-        next[1].copy_from_slice(target);
-        let after = self.occupied(&next);
-        self.prev_off = next;
-        let Some(r) = Rect::union(before, after) else {
+        let Some(r) = self.move_rect(1, target) else {
             self.off[1].copy_from_slice(target);
             return 0;
         };

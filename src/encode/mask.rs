@@ -134,7 +134,6 @@ pub struct BinaryMask<W: Word> {
     up: Vec<W>,
     down: Vec<W>,
     keep: Vec<W>,
-    row_buf: Vec<W>,
     target: [Vec<i32>; 2],
     prev_off: [Vec<i32>; 2],
     /// Which shift kernels run: at [`CpuLevel::Avx2`] the copies compiled for
@@ -145,16 +144,15 @@ pub struct BinaryMask<W: Word> {
     fused: bool,
     /// Scratch of a fused step: the shift vectors of the moves +2, +1, 0, −1, −2.
     moves: [Vec<W>; 5],
-    /// Scratch of a fused step along j: old row q − 2, and a row of zeros.
-    row_buf2: Vec<W>,
-    zero_row: Vec<W>,
     /// Scratch of a one-pass move along i ([`BinaryMask::move_columns`]):
     /// per word of a depth row, [`MOVE_TERMS`] terms (the old word's offset in
     /// a row buffer with zero margins, and the slots moving by that distance).
     terms: Vec<(usize, W)>,
-    /// How many terms each word uses, and the row buffers of the bands of
-    /// grid rows the pass runs in (kept: steady frames allocate nothing).
+    /// How many terms each word uses.
     term_used: Vec<usize>,
+    /// The buffers of the bands a pass runs in (the one-pass moves' rows, the
+    /// old rows around [`BinaryMask::row_bands`]' bands), kept: steady frames
+    /// allocate nothing.
     move_bufs: Vec<Vec<W>>,
     /// The block occupancy of the last scaled frame ([`BinaryMask::update_occupancy`]),
     /// its tables reused across frames.
@@ -234,14 +232,11 @@ impl<W: Word> BinaryMask<W> {
             up: vec![W::ZERO; nw],
             down: vec![W::ZERO; nw],
             keep: vec![W::ZERO; nw],
-            row_buf: vec![W::ZERO; grid[0] * nw],
             target: [vec![0; nk], vec![0; nk]],
             prev_off: [vec![0; nk], vec![0; nk]],
             cpu: kernels::level(),
             fused: true,
             moves: std::array::from_fn(|_| vec![W::ZERO; nw]),
-            row_buf2: vec![W::ZERO; grid[0] * nw],
-            zero_row: vec![W::ZERO; grid[0] * nw],
             terms: vec![(0, W::ZERO); nw * MOVE_TERMS],
             term_used: vec![0; nw],
             move_bufs: Vec::new(),
@@ -685,39 +680,80 @@ impl<W: Word> BinaryMask<W> {
         ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
     }
 
-    /// `new[q] = old[q] & keep | old[q−1] & up | old[q+1] & down` over the rect;
-    /// columns of 1 to 16 words run with the column length fixed at compile time.
+    /// `new[q] = old[q] & keep | old[q−1] & up | old[q+1] & down` over the rect
+    /// ([`BinaryMask::row_bands`]); columns of 1 to 16 words run with the
+    /// column length fixed at compile time.
     fn shift_rows(&mut self, r: Rect) -> u64 {
         let nw = self.nw;
-        let gw = self.grid[0];
-        let gh = self.grid[1];
+        let (up, down, keep) = (std::mem::take(&mut self.up), std::mem::take(&mut self.down), std::mem::take(&mut self.keep));
+        let avx2 = self.cpu.has_avx2();
+        let words = by_column_length!(nw, N => self.row_bands::<1>(r, |row, [next, _], [prev, _]| {
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
+                    // so AVX2 was detected at run time.
+                    unsafe { shift_row_n_avx2::<W, N>(row, next, prev, &up, &down, &keep) };
+                    return;
+                }
+                let _ = avx2;
+                shift_row_n::<W, N>(row, next, prev, &up, &down, &keep)
+            }),
+            _ => self.row_bands::<1>(r, |row, [next, _], [prev, _]| shift_row_any(row, next, prev, nw, &up, &down, &keep)));
+        (self.up, self.down, self.keep) = (up, down, keep);
+        words
+    }
+
+    /// Runs `kernel` over grid rows `r.q0..=r.q1` of the mask (the words of
+    /// columns `r.p0..=r.p1` of each), in place from the top, where a row's new
+    /// words depend on the old words of the `D` (1 or 2) rows before and after
+    /// it: the kernel gets the row, the old rows after it (`[q + 1, q + 2]`;
+    /// zeros past the grid) and before it (`[q − 1, q − 2]`, zeros before the
+    /// grid), which it must rotate (the row's old words into `prev[0]`, the
+    /// old `prev[0]` into `prev[1]`). The rows run in bands, one task each, as
+    /// the render splits its rows (so a band's words stay in the cache of the
+    /// thread that reads them next); the old rows around each band are copied
+    /// before any band moves. Returns the words touched.
+    fn row_bands<const D: usize>(&mut self, r: Rect, kernel: impl Fn(&mut [W], [&[W]; 2], [&mut [W]; 2]) + Sync) -> u64 {
+        let (nw, gw, gh) = (self.nw, self.grid[0], self.grid[1]);
         let (ps, pe) = (r.p0 * nw, (r.p1 + 1).min(gw) * nw);
-        let prev = &mut self.row_buf[..pe - ps];
-        prev.fill(W::ZERO);
-        if r.q0 > 0 {
-            let s = (r.q0 - 1) * gw * nw;
-            prev.copy_from_slice(&self.words[s + ps..s + pe]);
+        let (len, row_len) = (pe - ps, gw * nw);
+        let nrows = r.q1 - r.q0 + 1;
+        let bands = rayon::current_num_threads().clamp(1, nrows);
+        let band = nrows.div_ceil(bands);
+        let bands = nrows.div_ceil(band);
+        if self.move_bufs.len() < bands {
+            self.move_bufs.resize_with(bands, Vec::new);
         }
-        let (up, down, keep) = (&self.up[..], &self.down[..], &self.keep[..]);
-        let zeros = [W::ZERO; 0];
-        for q in r.q0..=r.q1 {
-            let (head, tail) = self.words.split_at_mut((q + 1) * gw * nw);
-            let row = &mut head[q * gw * nw + ps..q * gw * nw + pe];
-            // the row below, or nothing past the grid's last row
-            let next = if q + 1 < gh { &tail[ps..pe] } else { &zeros[..] };
-            by_column_length!(nw, N => {
-                    #[cfg(target_arch = "x86_64")]
-                    if self.cpu.has_avx2() {
-                        // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
-                        // so AVX2 was detected at run time.
-                        unsafe { shift_row_n_avx2::<W, N>(row, next, prev, up, down, keep) };
-                        continue;
-                    }
-                    shift_row_n::<W, N>(row, next, prev, up, down, keep)
-                },
-                _ => shift_row_any(row, next, prev, nw, up, down, keep));
+        // per band: old rows qa − 1, qa − 2, qe, qe + 1 (its first row qa, one
+        // past its last qe), zeros outside the grid
+        for (b, buf) in self.move_bufs[..bands].iter_mut().enumerate() {
+            let (qa, qe) = (r.q0 + b * band, (r.q0 + (b + 1) * band).min(r.q1 + 1));
+            buf.clear();
+            for q in [qa.checked_sub(1), qa.checked_sub(2), Some(qe), Some(qe + 1)] {
+                match q.filter(|&q| q < gh) {
+                    Some(q) => buf.extend_from_slice(&self.words[q * row_len + ps..q * row_len + pe]),
+                    None => buf.resize(buf.len() + len, W::ZERO),
+                }
+            }
         }
-        ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
+        let rows = &mut self.words[r.q0 * row_len..(r.q1 + 1) * row_len];
+        rows.par_chunks_mut(band * row_len).zip(self.move_bufs[..bands].par_iter_mut()).for_each(|(rows, buf)| {
+            let n = rows.len() / row_len;
+            let (prev, after) = buf.split_at_mut(2 * len);
+            let (p1, p2) = prev.split_at_mut(len);
+            let (p2, after) = (&mut p2[..len], &after[..2 * len]);
+            for t in 0..n {
+                let (head, tail) = rows.split_at_mut((t + 1) * row_len);
+                let row = &mut head[t * row_len + ps..t * row_len + pe];
+                // old row t + 1 + x: in the band (not yet moved) or after it
+                let next = |x: usize| {
+                    if t + 1 + x < n { &tail[x * row_len + ps..x * row_len + pe] } else { &after[(t + 1 + x - n) * len..][..len] }
+                };
+                let next2 = if D == 2 { next(1) } else { &after[..0] };
+                kernel(row, [next(0), next2], [&mut *p1, &mut *p2]);
+            }
+        });
+        (nrows * len) as u64
     }
 
     /// Fills `terms` for a move of every slice along `axis` from its offset
@@ -922,42 +958,26 @@ impl<W: Word> BinaryMask<W> {
         ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64
     }
 
-    /// Two steps along j in one pass: `new[q] = OR_d old[q − d] & moves[2 − d]`.
+    /// Two steps along j in one pass: `new[q] = OR_d old[q − d] & moves[2 − d]`
+    /// ([`BinaryMask::row_bands`]).
     fn shift_rows2(&mut self, r: Rect) -> u64 {
-        let nw = self.nw;
-        let gw = self.grid[0];
-        let gh = self.grid[1];
-        let (ps, pe) = (r.p0 * nw, (r.p1 + 1).min(gw) * nw);
-        let (prev1, prev2) = (&mut self.row_buf[..pe - ps], &mut self.row_buf2[..pe - ps]);
-        for (buf, back) in [(&mut *prev1, 1), (&mut *prev2, 2)] {
-            match r.q0.checked_sub(back) {
-                Some(q) => buf.copy_from_slice(&self.words[q * gw * nw + ps..q * gw * nw + pe]),
-                None => buf.fill(W::ZERO),
-            }
-        }
-        let m = &self.moves;
-        let zeros = &self.zero_row[..pe - ps];
-        let row_len = gw * nw;
-        for q in r.q0..=r.q1 {
-            let (head, tail) = self.words.split_at_mut((q + 1) * row_len);
-            let row = &mut head[q * row_len + ps..q * row_len + pe];
-            // the two rows below, or zeros past the grid's last row
-            let next1 = if q + 1 < gh { &tail[ps..pe] } else { zeros };
-            let next2 = if q + 2 < gh { &tail[row_len + ps..row_len + pe] } else { zeros };
-            by_column_length!(@arms nw, N, {
-                    let m = m.each_ref().map(|v| fixed::<W, N>(v));
-                    #[cfg(target_arch = "x86_64")]
-                    if self.cpu.has_avx2() {
-                        // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
-                        // so AVX2 was detected at run time.
-                        unsafe { shift_row2_n_avx2::<W, N>(row, next1, next2, prev1, prev2, m) };
-                        continue;
-                    }
-                    shift_row2_n::<W, N>(row, next1, next2, prev1, prev2, m)
-                },
-                unreachable!("fused steps only for columns of 1 to 4 words"), [1 2 3 4]);
-        }
-        ((r.q1 - r.q0 + 1) * (pe - ps)) as u64
+        let moves = std::mem::take(&mut self.moves);
+        let avx2 = self.cpu.has_avx2();
+        let words = by_column_length!(@arms self.nw, N, self.row_bands::<2>(r, |row, [next1, next2], [prev1, prev2]| {
+                let m = moves.each_ref().map(|v| fixed::<W, N>(v));
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
+                    // so AVX2 was detected at run time.
+                    unsafe { shift_row2_n_avx2::<W, N>(row, next1, next2, prev1, prev2, m) };
+                    return;
+                }
+                let _ = avx2;
+                shift_row2_n::<W, N>(row, next1, next2, prev1, prev2, m)
+            }),
+            unreachable!("fused steps only for columns of 1 to 4 words"), [1 2 3 4]);
+        self.moves = moves;
+        words
     }
 
     /// Rebuilds the block occupancy of the mask, sheared to `state`, for
@@ -1421,6 +1441,48 @@ mod tests {
             check_one_pass::<u32>([17, 16, 75], 2, 3),
         ];
         assert!(n[2] >= 10 && n[3] >= 10 && n.iter().sum::<u32>() >= 40, "jumps along i in one pass: {n:?}");
+    }
+
+    /// The moves along j run in bands of grid rows, one a thread
+    /// ([`BinaryMask::row_bands`]): with 1 to 7 threads (bands of one row and
+    /// more, and fewer rows than threads), single and fused steps end in the
+    /// scatter's words, for short and long depth rows, 1- and 2-bit codes and
+    /// super cells.
+    #[test]
+    fn row_bands_equal_the_direct_shear_for_any_thread_count() {
+        fn check<W: Word>(n: [usize; 3], nb: u32, s: usize, fused: bool) {
+            let st = SliceStack::new(&blob(n, 13), 2);
+            let codes = CellCodes::build(&st, nb, |_, hi| (hi / 40.0).min(((1u32 << nb) - 1) as f32) as u8);
+            let lim = ((n[2] - 1) / 2) as i64;
+            for threads in [1, 2, 3, 5, 7] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let mut m = BinaryMask::<W>::from_codes(&codes, s);
+                m.set_fused(fused);
+                let mut seed = 17u64 + threads as u64;
+                let mut ends = [0i64; 2];
+                for jump in 0..30 {
+                    seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    // 1 to 3 steps along j (and now and then along i)
+                    let d = (seed >> 40) as i64 % 7 - 3;
+                    ends[1] = (ends[1] + d).clamp(-lim, lim);
+                    if jump % 4 == 0 {
+                        ends[0] = (ends[0] + d.signum()).clamp(-lim, lim);
+                    }
+                    let state = ShearState::from_ends(n[2], [0, 1].map(|a| [-ends[a] as f64, ends[a] as f64]));
+                    pool.install(|| m.shear_to(&state));
+                    let mut direct = BinaryMask::<W>::from_codes(&codes, s);
+                    direct.shear_direct(&state);
+                    assert_eq!(m.words, direct.words, "{threads} threads, jump {jump} to {ends:?}");
+                }
+            }
+        }
+        for fused in [true, false] {
+            check::<u64>([9, 5, 40], 1, 1, fused);
+            check::<u32>([7, 11, 100], 1, 1, fused);
+            check::<u64>([8, 13, 90], 2, 1, fused);
+            check::<u64>([12, 10, 330], 1, 1, fused);
+            check::<u32>([10, 14, 60], 2, 2, fused);
+        }
     }
 
     #[test]

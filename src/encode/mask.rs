@@ -849,11 +849,15 @@ impl<W: Word> BinaryMask<W> {
     /// Moves every slice along j to `target` in one pass over the occupied
     /// rectangle: word `w` of row `q` becomes `OR_d old[q − d][w] & slots_d[w]`
     /// over its (`T`) terms ([`BinaryMask::word_terms`]). The rectangle's
-    /// columns are split into bands, one task each, that go down the rows:
-    /// a row's old words are kept in the band's ring (as deep as the largest
-    /// forward move) before they are overwritten, the rows below are still
-    /// old, and rows outside the rectangle read as zero. The steps' words, and
-    /// the direct shear's (tested against both).
+    /// rows are split into bands, one task each, as the render splits its
+    /// rows (so a band's words stay in the cache of the thread that reads them
+    /// next), that go down their rows: a row's old words are kept in the
+    /// band's ring (as deep as the largest forward move) before they are
+    /// overwritten, the rows below are still old, the old rows just before
+    /// and after the band are copied before any band moves, and rows outside
+    /// the rectangle read as zero. Each row looks up where its terms' old rows
+    /// are once, so a word is its terms' loads and nothing else. The steps'
+    /// words, and the direct shear's (tested against both).
     fn move_rows<const T: usize>(&mut self, target: &[i32]) -> u64 {
         let Some(r) = self.move_rect(1, target) else {
             self.off[1].copy_from_slice(target);
@@ -861,72 +865,84 @@ impl<W: Word> BinaryMask<W> {
         };
         let (nw, gw, m) = (self.nw, self.grid[0], MAX_INCREMENTAL_STEPS as usize);
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
-        let cols = pe - ps + 1;
-        let (q0, q1) = (r.q0, r.q1);
-        let forward = self.terms.iter().filter(|t| t.1 != W::ZERO).map(|t| t.0.saturating_sub(m)).max().unwrap_or(0);
+        let (q0, q1, width, row_len) = (r.q0, r.q1, (pe - ps + 1) * nw, gw * nw);
+        // the farthest rows a term reads: above (moving down, d > 0) and below
+        let live = || self.terms.iter().filter(|t| t.1 != W::ZERO);
+        let forward = live().map(|t| t.0.saturating_sub(m)).max().unwrap_or(0);
+        let backward = live().map(|t| m.saturating_sub(t.0)).max().unwrap_or(0);
         let depth = forward + 1;
-        let bands = (rayon::current_num_threads() * 2).min(cols);
-        let band = cols.div_ceil(bands);
+        let nrows = q1 - q0 + 1;
+        let band = nrows.div_ceil(rayon::current_num_threads().clamp(1, nrows));
+        let bands = nrows.div_ceil(band);
         if self.move_bufs.len() < bands {
             self.move_bufs.resize_with(bands, Vec::new);
         }
-        let terms = &self.terms[..];
-        let row_len = gw * nw;
-        let words = SharedWords(self.words.as_mut_ptr());
-        self.move_bufs[..bands].par_iter_mut().enumerate().for_each(|(b, buf)| {
-            let (c0, c1) = (ps + b * band, (ps + (b + 1) * band).min(pe + 1));
-            if c0 >= c1 {
-                return;
-            }
-            let width = (c1 - c0) * nw;
-            // the ring of old rows
+        // per band (rows qa..qe): its ring, holding the old rows qa − forward
+        // .. qa − 1 at their slots; the old rows qe .. qe + backward − 1; a
+        // row of zeros (rows outside the rectangle)
+        for (b, buf) in self.move_bufs[..bands].iter_mut().enumerate() {
+            let (qa, qe) = (q0 + b * band, (q0 + (b + 1) * band).min(q1 + 1));
             buf.clear();
-            buf.resize(depth * width, W::ZERO);
-            let ring = &mut buf[..];
-            // per distance d + m: where its old row is, as the index of its
-            // first word in the ring, or in the mask (rows after q are still
-            // old there), or none (outside the rectangle: zeros)
-            let mut rows = [Src::Zero; SPAN];
-            for q in q0..=q1 {
-                let at = q * row_len + c0 * nw;
-                // SAFETY: `words` is the mask's word array, borrowed mutably
-                // by this function for the whole pass; this task reads and
-                // writes only the words of columns c0..c1 (of any row), and
-                // the bands' column ranges are disjoint, so no word is touched
-                // by two tasks; every index is below `len` (rows q0..=q1 of the
-                // grid, columns below gw). Exercised by
-                // `one_pass_moves_equal_the_steps_and_the_direct_shear`.
-                let row = unsafe { std::slice::from_raw_parts_mut(words.ptr().add(at), width) };
-                let slot = (q % depth) * width;
-                ring[slot..slot + width].copy_from_slice(row);
-                for (i, r) in rows.iter_mut().enumerate() {
-                    let src = q as i64 + m as i64 - i as i64;
-                    *r = if src < q0 as i64 || src > q1 as i64 {
-                        Src::Zero
-                    } else if src as usize <= q {
-                        Src::Ring((src as usize % depth) * width)
-                    } else {
-                        Src::Mask(src as usize * row_len + c0 * nw)
-                    };
-                }
-                for (x, out) in row.iter_mut().enumerate() {
-                    let mut acc = W::ZERO;
-                    for &(d, slots) in &terms[(x % nw) * MOVE_TERMS..][..T] {
-                        let v = match rows[d] {
-                            Src::Zero => W::ZERO,
-                            Src::Ring(o) => ring[o + x],
-                            // SAFETY: as above: a later row of this task's
-                            // columns inside the rectangle, not yet written
-                            Src::Mask(o) => unsafe { *words.ptr().add(o + x) },
-                        };
-                        acc |= v & slots;
+            buf.resize((depth + backward + 1) * width, W::ZERO);
+            for q in qa.saturating_sub(forward).max(q0)..qa {
+                buf[(q % depth) * width..][..width].copy_from_slice(&self.words[q * row_len + ps * nw..][..width]);
+            }
+            for (x, q) in (qe..(qe + backward).min(q1 + 1)).enumerate() {
+                buf[(depth + x) * width..][..width].copy_from_slice(&self.words[q * row_len + ps * nw..][..width]);
+            }
+        }
+        let terms = &self.terms[..];
+        let rows = &mut self.words[q0 * row_len..(q1 + 1) * row_len];
+        rows.par_chunks_mut(band * row_len).zip(self.move_bufs[..bands].par_iter_mut()).enumerate().for_each(|(b, (rows, buf))| {
+            let (qa, n) = (q0 + b * band, rows.len() / row_len);
+            let base = rows.as_mut_ptr();
+            let bufp = buf.as_mut_ptr();
+            let (ring, after, zeros) = (bufp, bufp.wrapping_add(depth * width), bufp.wrapping_add((depth + backward) * width));
+            let mut srcs = [zeros.cast_const(); SPAN];
+            for t in 0..n {
+                let q = qa + t;
+                // SAFETY: every pointer below stays in its allocation: `base`
+                // is this task's rows (`n` whole grid rows, of which columns
+                // ps..=pe are the `width` words from `ps·nw`), `bufp` its buffer
+                // of `depth + backward + 1` rows of `width` words. Row `t` is
+                // read (into the ring) before it is written; the rows after it
+                // in the band are only read, and written later; the ring's and
+                // the after-rows' words are this task's own. No reference into
+                // the rows or the buffer is alive while they are read and
+                // written through these raw pointers. Exercised by
+                // `one_pass_moves_equal_the_steps_and_the_direct_shear` and
+                // `row_bands_equal_the_direct_shear_for_any_thread_count`.
+                unsafe {
+                    let row = base.add(t * row_len + ps * nw);
+                    std::ptr::copy_nonoverlapping(row, ring.add((q % depth) * width), width);
+                    for (i, src) in srcs.iter_mut().enumerate() {
+                        // term i reads old row q + m − i: outside the rectangle
+                        // zeros; moved already (this row or above) in the ring;
+                        // in the band, the mask; after it, the copy
+                        let sq = (q + m).wrapping_sub(i);
+                        *src = if sq < q0 || sq > q1 || sq + forward < q || sq >= qa + n + backward {
+                            zeros
+                        } else if sq <= q {
+                            ring.add((sq % depth) * width)
+                        } else if sq < qa + n {
+                            base.add((sq - qa) * row_len + ps * nw)
+                        } else {
+                            after.add((sq - qa - n) * width)
+                        }
+                        .cast_const();
                     }
-                    *out = acc;
+                    for c in 0..width / nw {
+                        for w in 0..nw {
+                            let x = c * nw + w;
+                            *row.add(x) =
+                                terms[w * MOVE_TERMS..][..T].iter().fold(W::ZERO, |acc, &(d, slots)| acc | (*srcs[d].add(x) & slots));
+                        }
+                    }
                 }
             }
         });
         self.off[1].copy_from_slice(target);
-        (q1 - q0 + 1) as u64 * (cols * nw) as u64
+        (q1 - q0 + 1) as u64 * width as u64
     }
 
     /// Two steps along i in one pass: `new[p] = OR_d old[p − d] & moves[2 − d]`
@@ -1005,33 +1021,6 @@ impl<W: Word> BinaryMask<W> {
         next
     }
 }
-
-/// Where [`BinaryMask::move_rows`] reads an old row from.
-#[derive(Clone, Copy)]
-enum Src {
-    /// Outside the occupied rectangle: nothing.
-    Zero,
-    /// The band's ring, from this word on.
-    Ring(usize),
-    /// The mask itself (a row not yet moved), from this word on.
-    Mask(usize),
-}
-
-/// The mask's words shared by the bands of [`BinaryMask::move_rows`], each of
-/// which touches only its own columns.
-#[derive(Clone, Copy)]
-struct SharedWords<W>(*mut W);
-
-impl<W> SharedWords<W> {
-    fn ptr(&self) -> *mut W {
-        self.0
-    }
-}
-
-// SAFETY: the tasks that share it write disjoint words (`move_rows`), and
-// the pointer outlives them (the pass borrows the mask mutably throughout).
-unsafe impl<W: Send> Send for SharedWords<W> {}
-unsafe impl<W: Send> Sync for SharedWords<W> {}
 
 /// Rounding margin on the drift `u` (voxels): the maps are computed per slice
 /// in f64, affine in `k` to far below this.

@@ -154,6 +154,9 @@ pub struct BinaryMask<W: Word> {
     /// old rows around [`BinaryMask::row_bands`]' bands), kept: steady frames
     /// allocate nothing.
     move_bufs: Vec<Vec<W>>,
+    /// Scratch of a one-pass move along j ([`BinaryMask::move_rows`]): per
+    /// distance, the slots of each word that move by it.
+    dist_masks: Vec<W>,
     /// The block occupancy of the last scaled frame ([`BinaryMask::update_occupancy`]),
     /// its tables reused across frames.
     occupancy: BlockOccupancy,
@@ -240,6 +243,7 @@ impl<W: Word> BinaryMask<W> {
             terms: vec![(0, W::ZERO); nw * MOVE_TERMS],
             term_used: vec![0; nw],
             move_bufs: Vec::new(),
+            dist_masks: Vec::new(),
             occupancy: Default::default(),
         };
         m.scatter();
@@ -453,12 +457,8 @@ impl<W: Word> BinaryMask<W> {
                 && along_j >= MIN_ONE_PASS_BITS
                 && let Some(t) = self.word_terms(1, &target[1], |d, _| (d + m) as usize)
             {
-                w.words += match t {
-                    0 | 1 => self.move_rows::<1>(&target[1]),
-                    2 => self.move_rows::<2>(&target[1]),
-                    3 => self.move_rows::<3>(&target[1]),
-                    _ => self.move_rows::<MOVE_TERMS>(&target[1]),
-                };
+                let _ = t;
+                w.words += self.move_rows(&target[1]);
                 w.steps += along_j;
             }
             let mut left = (0..2).flat_map(|a| self.off[a].iter().zip(&target[a]).map(|(x, y)| (x - y).unsigned_abs())).max().unwrap_or(0);
@@ -848,17 +848,18 @@ impl<W: Word> BinaryMask<W> {
 
     /// Moves every slice along j to `target` in one pass over the occupied
     /// rectangle: word `w` of row `q` becomes `OR_d old[q − d][w] & slots_d[w]`
-    /// over its (`T`) terms ([`BinaryMask::word_terms`]). The rectangle's
+    /// over its terms ([`BinaryMask::word_terms`]). The rectangle's
     /// rows are split into bands, one task each, as the render splits its
     /// rows (so a band's words stay in the cache of the thread that reads them
     /// next), that go down their rows: a row's old words are kept in the
     /// band's ring (as deep as the largest forward move) before they are
     /// overwritten, the rows below are still old, the old rows just before
     /// and after the band are copied before any band moves, and rows outside
-    /// the rectangle read as zero. Each row looks up where its terms' old rows
-    /// are once, so a word is its terms' loads and nothing else. The steps'
-    /// words, and the direct shear's (tested against both).
-    fn move_rows<const T: usize>(&mut self, target: &[i32]) -> u64 {
+    /// the rectangle read as zero. A row looks up once where the old row of
+    /// each distance its slots move by is, then builds each column in
+    /// registers from those rows ([`move_row_n`]) and writes it once. The
+    /// steps' words, and the direct shear's (tested against both).
+    fn move_rows(&mut self, target: &[i32]) -> u64 {
         let Some(r) = self.move_rect(1, target) else {
             self.off[1].copy_from_slice(target);
             return 0;
@@ -866,10 +867,22 @@ impl<W: Word> BinaryMask<W> {
         let (nw, gw, m) = (self.nw, self.grid[0], MAX_INCREMENTAL_STEPS as usize);
         let (ps, pe) = (r.p0, r.p1.min(gw - 1));
         let (q0, q1, width, row_len) = (r.q0, r.q1, (pe - ps + 1) * nw, gw * nw);
-        // the farthest rows a term reads: above (moving down, d > 0) and below
-        let live = || self.terms.iter().filter(|t| t.1 != W::ZERO);
-        let forward = live().map(|t| t.0.saturating_sub(m)).max().unwrap_or(0);
-        let backward = live().map(|t| m.saturating_sub(t.0)).max().unwrap_or(0);
+        // per distance index i (d = i − m): the slots of each word moving by
+        // d, and whether any slot does
+        let masks = &mut self.dist_masks;
+        masks.clear();
+        masks.resize(SPAN * nw, W::ZERO);
+        let mut any = [false; SPAN];
+        for (x, &(i, slots)) in self.terms.iter().enumerate() {
+            if slots != W::ZERO {
+                masks[i * nw + x / MOVE_TERMS] |= slots;
+                any[i] = true;
+            }
+        }
+        // the farthest rows a distance reads: above (moving down, d > 0) and below
+        let used = || (0..SPAN).filter(|&i| any[i]);
+        let forward = used().map(|i| i.saturating_sub(m)).max().unwrap_or(0);
+        let backward = used().map(|i| m.saturating_sub(i)).max().unwrap_or(0);
         let depth = forward + 1;
         let nrows = q1 - q0 + 1;
         let band = nrows.div_ceil(rayon::current_num_threads().clamp(1, nrows));
@@ -878,12 +891,11 @@ impl<W: Word> BinaryMask<W> {
             self.move_bufs.resize_with(bands, Vec::new);
         }
         // per band (rows qa..qe): its ring, holding the old rows qa − forward
-        // .. qa − 1 at their slots; the old rows qe .. qe + backward − 1; a
-        // row of zeros (rows outside the rectangle)
+        // .. qa − 1 at their slots; the old rows qe .. qe + backward − 1
         for (b, buf) in self.move_bufs[..bands].iter_mut().enumerate() {
             let (qa, qe) = (q0 + b * band, (q0 + (b + 1) * band).min(q1 + 1));
             buf.clear();
-            buf.resize((depth + backward + 1) * width, W::ZERO);
+            buf.resize((depth + backward) * width, W::ZERO);
             for q in qa.saturating_sub(forward).max(q0)..qa {
                 buf[(q % depth) * width..][..width].copy_from_slice(&self.words[q * row_len + ps * nw..][..width]);
             }
@@ -891,54 +903,88 @@ impl<W: Word> BinaryMask<W> {
                 buf[(depth + x) * width..][..width].copy_from_slice(&self.words[q * row_len + ps * nw..][..width]);
             }
         }
-        let terms = &self.terms[..];
+        let masks = &self.dist_masks[..];
         let rows = &mut self.words[q0 * row_len..(q1 + 1) * row_len];
+        let avx2 = self.cpu.has_avx2();
         rows.par_chunks_mut(band * row_len).zip(self.move_bufs[..bands].par_iter_mut()).enumerate().for_each(|(b, (rows, buf))| {
             let (qa, n) = (q0 + b * band, rows.len() / row_len);
             let base = rows.as_mut_ptr();
             let bufp = buf.as_mut_ptr();
-            let (ring, after, zeros) = (bufp, bufp.wrapping_add(depth * width), bufp.wrapping_add((depth + backward) * width));
-            let mut srcs = [zeros.cast_const(); SPAN];
+            let (ring, after) = (bufp, bufp.wrapping_add(depth * width));
             for t in 0..n {
                 let q = qa + t;
                 // SAFETY: every pointer below stays in its allocation: `base`
                 // is this task's rows (`n` whole grid rows, of which columns
                 // ps..=pe are the `width` words from `ps·nw`), `bufp` its buffer
-                // of `depth + backward + 1` rows of `width` words. Row `t` is
-                // read (into the ring) before it is written; the rows after it
-                // in the band are only read, and written later; the ring's and
-                // the after-rows' words are this task's own. No reference into
-                // the rows or the buffer is alive while they are read and
-                // written through these raw pointers. Exercised by
+                // of `depth + backward` rows of `width` words. Row `t` is
+                // copied into the ring before it is written; the rows after
+                // it in the band are only read, and written later; the ring's
+                // and the after-rows' words are this task's own. A distance's
+                // old row is read only where it lies in the rectangle and
+                // within `forward` rows above or `backward` below (which the
+                // ring and the copies hold). No reference into the rows or
+                // the buffer is alive while they are read and written through
+                // these raw pointers. Exercised by
                 // `one_pass_moves_equal_the_steps_and_the_direct_shear` and
                 // `row_bands_equal_the_direct_shear_for_any_thread_count`.
-                unsafe {
+                let row = unsafe {
                     let row = base.add(t * row_len + ps * nw);
                     std::ptr::copy_nonoverlapping(row, ring.add((q % depth) * width), width);
-                    for (i, src) in srcs.iter_mut().enumerate() {
-                        // term i reads old row q + m − i: outside the rectangle
-                        // zeros; moved already (this row or above) in the ring;
-                        // in the band, the mask; after it, the copy
-                        let sq = (q + m).wrapping_sub(i);
-                        *src = if sq < q0 || sq > q1 || sq + forward < q || sq >= qa + n + backward {
-                            zeros
-                        } else if sq <= q {
-                            ring.add((sq % depth) * width)
-                        } else if sq < qa + n {
-                            base.add((sq - qa) * row_len + ps * nw)
-                        } else {
-                            after.add((sq - qa - n) * width)
-                        }
-                        .cast_const();
+                    std::slice::from_raw_parts_mut(row, width)
+                };
+                // distance d = i − m reads old row q − d: outside the
+                // rectangle nothing; this row or above (moved already) in the
+                // ring; in the band, the mask; after it, the copy
+                let source = |i: usize| -> Option<&[W]> {
+                    let sq = (q + m).wrapping_sub(i);
+                    if sq < q0 || sq > q1 {
+                        return None;
                     }
-                    for c in 0..width / nw {
-                        for w in 0..nw {
-                            let x = c * nw + w;
-                            *row.add(x) =
-                                terms[w * MOVE_TERMS..][..T].iter().fold(W::ZERO, |acc, &(d, slots)| acc | (*srcs[d].add(x) & slots));
+                    let at = if sq <= q {
+                        ring.wrapping_add((sq % depth) * width)
+                    } else if sq < qa + n {
+                        base.wrapping_add((sq - qa) * row_len + ps * nw)
+                    } else {
+                        after.wrapping_add((sq - qa - n) * width)
+                    };
+                    // SAFETY: (as above) a row of `width` words in this task's
+                    // rows or buffer, other than row q's words in the mask,
+                    // read only while `row` is written
+                    Some(unsafe { std::slice::from_raw_parts(at.cast_const(), width) })
+                };
+                by_column_length!(nw, N => {
+                    let mut srcs: [MoveSource<W, N>; SPAN] = [(&[], fixed(&masks[..N])); SPAN];
+                    let mut used_n = 0;
+                    for i in used() {
+                        if let Some(src) = source(i) {
+                            srcs[used_n] = (src.as_chunks::<N>().0, fixed(&masks[i * nw..][..N]));
+                            used_n += 1;
                         }
                     }
-                }
+                    let (row, _) = row.as_chunks_mut::<N>();
+                    let srcs = &srcs[..used_n];
+                    #[cfg(target_arch = "x86_64")]
+                    if avx2 {
+                        // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
+                        // so AVX2 was detected at run time.
+                        unsafe { move_row_n_avx2::<W, N>(row, srcs) };
+                        continue;
+                    }
+                    move_row_n::<W, N>(row, srcs)
+                },
+                _ => {
+                    row.fill(W::ZERO);
+                    for i in used() {
+                        if let Some(src) = source(i) {
+                            let mk = &masks[i * nw..][..nw];
+                            for (out, old) in row.chunks_exact_mut(nw).zip(src.chunks_exact(nw)) {
+                                for w in 0..nw {
+                                    out[w] |= old[w] & mk[w];
+                                }
+                            }
+                        }
+                    }
+                });
             }
         });
         self.off[1].copy_from_slice(target);

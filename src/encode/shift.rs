@@ -169,6 +169,37 @@ pub(crate) fn shift_row2_n<W: Word, const N: usize>(
     }
 }
 
+/// A source of [`move_row_n`]: an old row (its columns of `N` words) and,
+/// per word, the slots taken from it.
+pub(crate) type MoveSource<'a, W, const N: usize> = (&'a [[W; N]], &'a [W; N]);
+
+/// One grid row of [`BinaryMask::move_rows`](crate::encode::mask::BinaryMask)
+/// for columns of `N` words: word `w` of column `c` becomes
+/// `OR_s src_s[c][w] & slots_s[w]` over the sources (each old row the row's
+/// slots move from, with the slots moving from it), so each column is built
+/// in registers and written once.
+#[inline(always)]
+pub(crate) fn move_row_n<W: Word, const N: usize>(row: &mut [[W; N]], srcs: &[MoveSource<W, N>]) {
+    for (c, out) in row.iter_mut().enumerate() {
+        let mut acc = [W::ZERO; N];
+        for &(src, slots) in srcs {
+            let s = &src[c];
+            for w in 0..N {
+                acc[w] |= s[w] & slots[w];
+            }
+        }
+        *out = acc;
+    }
+}
+
+/// [`move_row_n`] compiled for AVX2. Callers must hold a [`CpuLevel`] with
+/// AVX2 that is at most [`kernels::detected`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn move_row_n_avx2<W: Word, const N: usize>(row: &mut [[W; N]], srcs: &[MoveSource<W, N>]) {
+    move_row_n::<W, N>(row, srcs)
+}
+
 /// [`shift_columns2_n`] compiled for AVX2. Callers must hold a [`CpuLevel`]
 /// with AVX2 that is at most [`kernels::detected`].
 #[cfg(target_arch = "x86_64")]

@@ -13,7 +13,8 @@
 # Environment:
 #   FRAMES=360      frames per run (1° steps about the volume's y axis)
 #   ROUNDS=1        repeat every case; the table takes the median of the runs
-#   VOLUMES="brainsmall brainsmall-up2 head256 chest"   which volumes
+#   VOLUMES="brainsmall brainsmall-up2 head256 chest"   which volumes (also chest413:
+#                   the chest CT resampled to 512×512×413, about 5 minutes more)
 #   SIZES="256 512" output sizes
 #   NO_VTK=1        skip VTK (its runs dominate the wall time)
 #   NO_SHEAR_BENCH=1  skip the criterion shear-step-vs-memcpy bench at the end
@@ -89,6 +90,16 @@ for v in $VOLUMES; do
         [ -n "$CHEST" ] || { log "chest-ct-lung1.nrrd not found (skip it: VOLUMES=...)"; exit 1; }
         DEN[$v]=$OUT/data/chest256.den; THR[$v]=50
         [ -f "${DEN[$v]}" ] || "$SW" export "$CHEST" --window -1000,1550 --max-dim 256 -o "${DEN[$v]}" >&2 ;;
+    chest413)
+        # the same CT resampled along z to 413 slices (0.57 mm: a thin-slice
+        # 512x512x413 stand-in, benches/scripts/resample-nrrd.py), full size
+        [ -n "$CHEST" ] || { log "chest-ct-lung1.nrrd not found (skip it: VOLUMES=...)"; exit 1; }
+        DEN[$v]=$OUT/data/chest413.den; THR[$v]=50
+        if [ ! -f "${DEN[$v]}" ]; then
+            python3 "$ROOT/benches/scripts/resample-nrrd.py" "$CHEST" "$OUT/data/chest413.nrrd" 413 >&2
+            "$SW" export "$OUT/data/chest413.nrrd" --window -1000,1550 -o "${DEN[$v]}" >&2
+            rm -f "$OUT/data/chest413.nrrd"
+        fi ;;
     *) log "unknown volume $v"; exit 1 ;;
     esac
 done

@@ -144,9 +144,10 @@ pub struct BinaryMask<W: Word> {
     fused: bool,
     /// Scratch of a fused step: the shift vectors of the moves +2, +1, 0, −1, −2.
     moves: [Vec<W>; 5],
-    /// Scratch of a one-pass move along i ([`BinaryMask::move_columns`]):
-    /// per word of a depth row, [`MOVE_TERMS`] terms (the old word's offset in
-    /// a row buffer with zero margins, and the slots moving by that distance).
+    /// Scratch of a one-pass move ([`BinaryMask::word_terms`]): per word of a
+    /// depth row, [`MOVE_TERMS`] terms (where the old word is: along i its
+    /// offset in a row buffer with zero margins, along j its distance plus
+    /// [`MAX_INCREMENTAL_STEPS`]; and the slots moving by that distance).
     terms: Vec<(usize, W)>,
     /// How many terms each word uses.
     term_used: Vec<usize>,
@@ -455,9 +456,8 @@ impl<W: Word> BinaryMask<W> {
             if self.fused
                 && nw > MAX_FUSED_COLUMN
                 && along_j >= MIN_ONE_PASS_BITS
-                && let Some(t) = self.word_terms(1, &target[1], |d, _| (d + m) as usize)
+                && self.word_terms(1, &target[1], |d, _| (d + m) as usize).is_some()
             {
-                let _ = t;
                 w.words += self.move_rows(&target[1]);
                 w.steps += along_j;
             }

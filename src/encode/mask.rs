@@ -703,6 +703,18 @@ impl<W: Word> BinaryMask<W> {
         words
     }
 
+    /// Splits `nrows` grid rows into bands, one a thread of the current pool
+    /// (the render's split of its rows): the rows a band and the bands, with
+    /// a buffer each in `move_bufs` (grown once, then reused).
+    fn thread_bands(&mut self, nrows: usize) -> (usize, usize) {
+        let band = nrows.div_ceil(rayon::current_num_threads().clamp(1, nrows.max(1)));
+        let bands = nrows.div_ceil(band);
+        if self.move_bufs.len() < bands {
+            self.move_bufs.resize_with(bands, Vec::new);
+        }
+        (band, bands)
+    }
+
     /// Runs `kernel` over grid rows `r.q0..=r.q1` of the mask (the words of
     /// columns `r.p0..=r.p1` of each), in place from the top, where a row's new
     /// words depend on the old words of the `D` (1 or 2) rows before and after
@@ -718,12 +730,7 @@ impl<W: Word> BinaryMask<W> {
         let (ps, pe) = (r.p0 * nw, (r.p1 + 1).min(gw) * nw);
         let (len, row_len) = (pe - ps, gw * nw);
         let nrows = r.q1 - r.q0 + 1;
-        let bands = rayon::current_num_threads().clamp(1, nrows);
-        let band = nrows.div_ceil(bands);
-        let bands = nrows.div_ceil(band);
-        if self.move_bufs.len() < bands {
-            self.move_bufs.resize_with(bands, Vec::new);
-        }
+        let (band, bands) = self.thread_bands(nrows);
         // per band: old rows qa − 1, qa − 2, qe, qe + 1 (its first row qa, one
         // past its last qe), zeros outside the grid
         for (b, buf) in self.move_bufs[..bands].iter_mut().enumerate() {
@@ -884,12 +891,7 @@ impl<W: Word> BinaryMask<W> {
         let forward = used().map(|i| i.saturating_sub(m)).max().unwrap_or(0);
         let backward = used().map(|i| m.saturating_sub(i)).max().unwrap_or(0);
         let depth = forward + 1;
-        let nrows = q1 - q0 + 1;
-        let band = nrows.div_ceil(rayon::current_num_threads().clamp(1, nrows));
-        let bands = nrows.div_ceil(band);
-        if self.move_bufs.len() < bands {
-            self.move_bufs.resize_with(bands, Vec::new);
-        }
+        let (band, bands) = self.thread_bands(q1 - q0 + 1);
         // per band (rows qa..qe): its ring, holding the old rows qa − forward
         // .. qa − 1 at their slots; the old rows qe .. qe + backward − 1
         for (b, buf) in self.move_bufs[..bands].iter_mut().enumerate() {

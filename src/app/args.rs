@@ -131,9 +131,16 @@ pub struct RenderArgs {
     /// high (other volumes, from the histogram); or auto (the first).
     #[arg(long)]
     pub tissue: Option<String>,
-    /// Super-cell size S (1..=8): the mask shrinks by S², a shear step moves S voxels.
-    #[arg(long, default_value_t = 1)]
-    pub cell: usize,
+    /// Super-cell size S (1..=8) or auto: the mask shrinks by S², a shear
+    /// step moves S voxels; every size renders the same image. auto: `rotate`
+    /// and `view` take the smallest S at which a ray's depth row of the mask
+    /// is at most one cache line (64 bytes): 1 for a one-bit mask of up to
+    /// 512 slices, 2 for the tissue presets (two-bit codes) of a scan with
+    /// more than 256 slices, where the shear's memory traffic would otherwise
+    /// set the frame rate; `render`, `bench` and --distributed take 1 (a
+    /// still frame shears once).
+    #[arg(long, default_value = "auto", value_parser = parse_cell)]
+    pub cell: CellArg,
     /// Iso value (overrides the preset's threshold).
     #[arg(long, allow_negative_numbers = true)]
     pub iso: Option<f32>,
@@ -264,6 +271,44 @@ fn parse_phantom_spacing(s: &str) -> std::result::Result<[f64; 3], String> {
 
 /// `--opacity`: a blend-mode transfer function from (density, opacity) control
 /// points, in a constant bone-white colour.
+/// `--cell`: a super-cell size, or auto (chosen by the command).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellArg {
+    Auto,
+    Size(usize),
+}
+
+impl CellArg {
+    /// The size given, or `auto` for auto.
+    pub fn or(self, auto: usize) -> usize {
+        match self {
+            CellArg::Auto => auto,
+            CellArg::Size(s) => s,
+        }
+    }
+
+    /// The size given, or the cell size `r` takes for a rotation
+    /// ([`Renderer::auto_cell`]), set on `r`.
+    pub fn resolve(self, r: &mut Renderer) -> Result<usize> {
+        let cell = self.or(r.auto_cell());
+        if r.settings().cell != cell {
+            r.set_settings(Settings { cell, ..r.settings() })?;
+        }
+        Ok(cell)
+    }
+}
+
+fn parse_cell(s: &str) -> std::result::Result<CellArg, String> {
+    let max = shearwarp::encode::mask::MAX_CELL;
+    match s {
+        "auto" => Ok(CellArg::Auto),
+        _ => match s.parse::<usize>() {
+            Ok(n) if (1..=max).contains(&n) => Ok(CellArg::Size(n)),
+            _ => Err(format!("must be auto or 1..={max}, got '{s}'")),
+        },
+    }
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct OpacityCurve(pub shearwarp::classify::TransferFunction);
 
@@ -537,9 +582,6 @@ impl RenderArgs {
 
     /// Render settings.
     pub fn settings(&self) -> Result<Settings> {
-        if !(1..=shearwarp::encode::mask::MAX_CELL).contains(&self.cell) {
-            usage!("--cell must be 1..={}, got {}", shearwarp::encode::mask::MAX_CELL, self.cell);
-        }
         if !(self.ert > 0.0 && self.ert <= 1.0) {
             usage!("--ert must be in (0, 1], got {}", self.ert);
         }
@@ -559,7 +601,7 @@ impl RenderArgs {
             rle_reuse: self.rle_reuse,
             reconstruction: self.reconstruction.unwrap_or_default(),
             ert: self.ert,
-            cell: self.cell,
+            cell: self.cell.or(1),
             threads: self.threads,
             ..Settings::default()
         })

@@ -364,21 +364,24 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let load_ms = crate::app::since_start_ms();
     let dims = vol.dims();
     let step = match cmd.step_deg.as_str() {
-        "auto" => one_bit_step_deg(vol.dims()) * cmd.render.cell as f64,
+        "auto" => None,
         s => match s.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0) {
-            Some(x) => x,
+            Some(x) => Some(x),
             None => usage!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'"),
         },
     };
     if !(cmd.degrees.is_finite() && cmd.degrees > 0.0) {
         usage!("--degrees must be a positive number, got {}", cmd.degrees);
     }
+    let cam0 = cmd.render.camera(vol.frame())?;
+    let (mut r, scene) = cmd.render.renderer_and_scene(vol)?;
+    // a rotation takes the cell size that balances shear and render (`--cell auto`)
+    let cell = cmd.render.cell.resolve(&mut r)?;
+    let step = step.unwrap_or_else(|| one_bit_step_deg(dims) * cell as f64);
     let frames = ((cmd.degrees / step).round() as usize).max(1);
     if frames > 1_000_000 {
         usage!("{frames} frames is too many (raise --step-deg)");
     }
-    let cam0 = cmd.render.camera(vol.frame())?;
-    let (mut r, scene) = cmd.render.renderer_and_scene(vol)?;
     if cmd.cycle_tissues > 0 && r.tissues().is_none_or(|(t, _)| t.len() < 2) {
         usage!("--cycle-tissues needs tissue presets (it cannot be combined with --iso)");
     }

@@ -568,7 +568,7 @@ pub fn rotate(cmd: &RotateJob) -> Result<()> {
     let universe = init()?;
     let mut node = node_of(&universe, cmd.volume, cmd.render);
     let step = match cmd.step_deg {
-        "auto" => one_bit_step_deg(node.dims) * cmd.render.cell as f64,
+        "auto" => one_bit_step_deg(node.dims) * cmd.render.cell.or(1) as f64,
         s => match s.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0) {
             Some(x) => x,
             None => usage!("--step-deg must be 'auto' or a positive number of degrees, got '{s}'"),

@@ -79,10 +79,15 @@ impl PackedCodes {
             *w = c.iter().enumerate().fold(0u64, |acc, (t, &x)| acc | (x as u64) << (t as u32 * nb));
         }
     }
-    /// Unpacks row `r` into `out` (`len` codes).
+    /// Unpacks row `r` into the first `len` bytes of `out` (one code a
+    /// byte), a word at a time; an all-zero word is one fill.
     pub fn unpack_row(&self, r: usize, out: &mut [u8]) {
-        for (i, o) in out.iter_mut().enumerate().take(self.len) {
-            *o = self.get(r, i);
+        let row = &self.words[r * self.row_words..(r + 1) * self.row_words];
+        let n = self.len.min(out.len());
+        match self.nb {
+            1 => unpack_words::<1>(row, &mut out[..n]),
+            2 => unpack_words::<2>(row, &mut out[..n]),
+            _ => unpack_words::<4>(row, &mut out[..n]),
         }
     }
     /// Calls `f(i, code)` for every non-zero cell `i` in `[from, to]` of row `r`,
@@ -448,6 +453,22 @@ impl CellCodes {
             }
         });
         (sc, Arc::new(out), bbox)
+    }
+}
+
+/// The `NB`-bit codes of `words` into `out`, one a byte (slot `t` of a word
+/// is bits `[t·NB, (t + 1)·NB)`, as in [`PackedCodes`]).
+#[inline]
+fn unpack_words<const NB: u32>(words: &[u64], out: &mut [u8]) {
+    let per = 64 / NB as usize;
+    for (o, &w) in out.chunks_mut(per).zip(words) {
+        if w == 0 {
+            o.fill(0);
+            continue;
+        }
+        for (t, x) in o.iter_mut().enumerate() {
+            *x = ((w >> (t as u32 * NB)) & ((1 << NB) - 1)) as u8;
+        }
     }
 }
 

@@ -92,6 +92,26 @@ const _: () = assert!(MAX_FUSED_COLUMN == 4);
 /// Largest super-cell size.
 pub const MAX_CELL: usize = 8;
 
+/// The bytes of mask a ray's depth row may hold before super cells pay for a
+/// rotation: one cache line. Every frame of a rotation moves every word of
+/// the mask (each depth row shifts by the change of its slices' shear), while
+/// a ray reads only the one or two words around its first candidates; once a
+/// depth row is longer than a cache line, the shear's memory traffic per ray
+/// exceeds the render's, and super cells of size `S` divide it by `S²` (the
+/// render pays for the dilation with more false candidates).
+pub const AUTO_CELL_ROW_BYTES: usize = 64;
+
+/// The cell size a rotation takes by default: the smallest `S` in
+/// `1..=`[`MAX_CELL`] at which a depth row of `nk` slices of `nb`-bit codes in
+/// words of `word_bits` bits, shared by the `S²` rays of a super cell, is at
+/// most [`AUTO_CELL_ROW_BYTES`] per ray. (A 256-slice one-bit mask: 32 bytes,
+/// `S = 1`; 512 slices of two-bit tissue codes in u64 words: 128 bytes, `S = 2`.)
+pub fn auto_cell(nk: usize, nb: u32, word_bits: u32) -> usize {
+    let per_word = (word_bits / nb.max(1)).max(1) as usize;
+    let row_bytes = nk.div_ceil(per_word).max(1) * (word_bits / 8) as usize;
+    (1..=MAX_CELL).find(|s| row_bytes <= AUTO_CELL_ROW_BYTES * s * s).unwrap_or(MAX_CELL)
+}
+
 /// How much a shear did (for the "limit of the shear step" report).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ShearWork {
@@ -1409,6 +1429,30 @@ mod tests {
             assert_eq!(m.words, d.words, "jump {jump} to {e:?}");
         }
         assert!(far >= 11, "only {far} of 12 jumps were far");
+    }
+
+    /// The default cell size keeps a ray's share of its depth row within a
+    /// cache line, and is the smallest size that does.
+    #[test]
+    fn auto_cell_keeps_a_rays_depth_row_within_a_cache_line() {
+        assert_eq!(auto_cell(256, 1, 64), 1);
+        assert_eq!(auto_cell(512, 1, 64), 1);
+        assert_eq!(auto_cell(513, 1, 64), 2);
+        assert_eq!(auto_cell(256, 2, 64), 1);
+        assert_eq!(auto_cell(413, 2, 64), 2);
+        assert_eq!(auto_cell(512, 2, 32), 2);
+        assert_eq!(auto_cell(1, 4, 32), 1);
+        assert_eq!(auto_cell(usize::MAX / 4, 4, 64), MAX_CELL);
+        for nb in [1u32, 2, 4] {
+            for bits in [32u32, 64] {
+                for nk in (1usize..3000).step_by(7) {
+                    let row = nk.div_ceil((bits / nb) as usize) * (bits / 8) as usize;
+                    let s = auto_cell(nk, nb, bits);
+                    assert!(row <= AUTO_CELL_ROW_BYTES * s * s || s == MAX_CELL, "{nk} {nb} {bits}");
+                    assert!(s == 1 || row > AUTO_CELL_ROW_BYTES * (s - 1) * (s - 1), "{nk} {nb} {bits}");
+                }
+            }
+        }
     }
 
     #[test]

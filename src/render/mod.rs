@@ -202,6 +202,21 @@ impl Renderer {
         self.settings
     }
 
+    /// The cell size a rotation of this volume takes by default
+    /// ([`crate::encode::mask::auto_cell`]): for its longest axis, the current
+    /// classification's code width (one bit, or two or four for tissue
+    /// presets) and the settings' word size. Every cell size renders the same
+    /// image; this one balances the shear's memory traffic against the
+    /// render's false candidates.
+    pub fn auto_cell(&self) -> usize {
+        let nk = self.volume.dims().into_iter().max().unwrap_or(1);
+        let word_bits = match self.settings.word {
+            WordSize::U32 => 32,
+            WordSize::U64 => 64,
+        };
+        crate::encode::mask::auto_cell(nk, self.code_bits(), word_bits)
+    }
+
     /// Changes settings (rebuilding the thread pool if the count changed; masks
     /// follow on the next frame if the word size or cell size changed, normal
     /// codes if the packing did).

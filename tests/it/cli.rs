@@ -47,6 +47,53 @@ fn rotate_json_has_the_promised_fields() {
     assert!(j["frames"].as_u64().unwrap() >= 1);
 }
 
+/// `--cell auto` (the default): a rotation of tissue presets (two-bit codes)
+/// over more than 256 slices takes super cells of 2, a one-bit mask of the
+/// same volume cell size 1, and a still frame 1; the frames are those of
+/// cell size 1, byte for byte.
+#[test]
+fn rotate_takes_the_cell_size_of_its_depth_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str], gif: &str| -> serde_json::Value {
+        let out = sw()
+            .args([
+                "rotate",
+                "--phantom-dims",
+                "24,20,300",
+                "--view",
+                "anterior",
+                "--size",
+                "48",
+                "--degrees",
+                "4",
+                "--step-deg",
+                "2",
+                "--json",
+            ])
+            .args(args)
+            .arg("--gif")
+            .arg(dir.path().join(gif))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    assert_eq!(run(&["--tissue", "bone"], "auto.gif")["cell"], 2);
+    assert_eq!(run(&["--tissue", "bone", "--cell", "1"], "one.gif")["cell"], 1);
+    assert_eq!(run(&["--iso", "300"], "iso.gif")["cell"], 1);
+    let read = |f: &str| std::fs::read(dir.path().join(f)).unwrap();
+    assert!(read("auto.gif") == read("one.gif"), "super cells changed the frames");
+    let out = sw()
+        .args(["render", "--phantom-dims", "24,20,300", "--tissue", "bone", "--size", "32", "--json", "-o"])
+        .arg(dir.path().join("r.png"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["cell"], 1, "{j}");
+    sw().args(["rotate", "--cell", "9"]).assert().code(2).stderr(predicate::str::contains("must be auto or 1..=8"));
+}
+
 #[test]
 fn rotate_cycles_tissues_and_writes_animations() {
     let dir = tempfile::tempdir().unwrap();

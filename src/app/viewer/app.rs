@@ -61,6 +61,9 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let range = vol.value_range();
     let spacing = vol.spacing();
     let mut preview = Renderers::new(vol.clone(), &tissues, Settings { mode: Mode::Iso, ..settings })?;
+    // the preview rotates: it takes the cell size that balances shear and
+    // render for the tissue presets' codes (`--cell auto`); the keys change it
+    let settings = Settings { cell: cmd.render.cell.or(preview.auto_cell()), ..settings };
     let sorted = preview.tissue_list();
     let class = initial_class(&cmd.render.tissue, cmd.render.iso, &sorted)?;
     let mut blend = Renderers::new(vol, &tissues, Settings { mode: Mode::Blend, ..settings })?;

@@ -122,7 +122,7 @@ mod tests {
         ])
         .expect("parses");
         let Command::View(v) = cli.command else { panic!("not the view command") };
-        assert_eq!(v.render.cell, 2);
+        assert_eq!(v.render.cell, crate::app::args::CellArg::Size(2));
         assert_eq!(v.save_dir, std::path::PathBuf::from("shots"));
         assert!(v.verbose);
         assert_eq!(v.drag_speed, 0.5);
@@ -147,9 +147,11 @@ mod tests {
 
     #[test]
     fn bad_view_options_fail_before_any_window_opens() {
-        let cli = Cli::try_parse_from(["shearwarp", "view", "--cell", "9"]).expect("parses");
+        let err = Cli::try_parse_from(["shearwarp", "view", "--cell", "9"]).expect_err("cell 9 is out of range");
+        assert!(err.to_string().contains("must be auto or 1..=8, got '9'"), "{err}");
+        let cli = Cli::try_parse_from(["shearwarp", "view", "--ert", "2"]).expect("parses");
         let Command::View(v) = cli.command else { panic!("not the view command") };
-        let err = super::run(&v).expect_err("cell 9 is out of range");
+        let err = super::run(&v).expect_err("an ert of 2 is out of range");
         assert!(err.chain().any(|e| e.downcast_ref::<crate::app::Usage>().is_some()), "{err:#}");
     }
 }

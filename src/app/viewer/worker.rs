@@ -237,6 +237,12 @@ impl Renderers {
         }
     }
 
+    /// The cell size a rotation takes by default for the tissue presets
+    /// ([`Renderer::auto_cell`]).
+    pub fn auto_cell(&self) -> usize {
+        self.tissues.auto_cell()
+    }
+
     /// The renderer for `class` at `cell`, switched to it.
     pub fn select(&mut self, class: Class, cell: usize) -> shearwarp::Result<&mut Renderer> {
         if self.needs_rebuild(class, cell) {

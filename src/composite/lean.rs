@@ -286,18 +286,21 @@ impl<W: Word> Frame<'_, W> {
     /// The walk of the depth row starting at word `start`, at its first
     /// matching slot (no slot left: no candidate).
     #[inline(always)]
-    fn first<const ASC: bool, const ONE: bool>(&self, start: usize, nw: usize) -> Walk<W> {
+    fn first<S: Sampler, const ASC: bool, const ONE: bool>(&self, s: S, start: usize, nw: usize) -> Walk<W> {
         let (w, kbase) = if ASC { (start, 0) } else { (start + nw - 1, (nw - 1) * self.slots) };
         let cur = self.hits::<ONE>(self.word(w));
         let mut walk = Walk { w, cur, kbase, left: nw - 1 };
-        self.settle::<ASC, ONE>(&mut walk);
+        self.settle::<S, ASC, ONE>(s, &mut walk);
         walk
     }
 
     /// Moves `walk` past words with no matching slot; false at the row's end.
+    /// Where the CPU level can ([`Sampler::skip`]), whole groups of four
+    /// words with no matching slot are passed first.
     #[inline(always)]
-    fn settle<const ASC: bool, const ONE: bool>(&self, walk: &mut Walk<W>) -> bool {
+    fn settle<S: Sampler, const ASC: bool, const ONE: bool>(&self, s: S, walk: &mut Walk<W>) -> bool {
         while walk.cur == W::ZERO {
+            s.skip::<W, ASC>(self, walk);
             if walk.left == 0 {
                 return false;
             }
@@ -417,7 +420,7 @@ impl<W: Word> Frame<'_, W> {
                 }
                 below = Below { k, d };
             }
-            if !self.settle::<ASC, ONE>(&mut walk) {
+            if !self.settle::<S, ASC, ONE>(s, &mut walk) {
                 return;
             }
             k = self.take::<ASC, ONE>(&mut walk);
@@ -601,7 +604,7 @@ fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool,
     for (g, (cg, dg)) in crow.chunks_mut(GROUP).zip(drow.chunks_mut(GROUP)).enumerate() {
         let pending = &mut pending[..cg.len()];
         for (dp, r) in pending.iter_mut().enumerate() {
-            let mut walk = f.first::<ASC, ONE>(row.start, row.nw);
+            let mut walk = f.first::<S, ASC, ONE>(s, row.start, row.nw);
             r.k = usize::MAX;
             if walk.cur != W::ZERO {
                 let k = f.take::<ASC, ONE>(&mut walk);
@@ -622,31 +625,41 @@ fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool,
 }
 
 /// [`lean_row`] compiled with `lzcnt`/`tzcnt` (single instructions for the
-/// bit scans) and SSSE3 (the visits' gathers, [`Ssse3`]). Callers must hold a
-/// CPU level with AVX2 that is at most [`crate::kernels::detected`] (that
-/// level implies lzcnt, bmi1 and SSSE3).
+/// bit scans), SSSE3 (the visits' gathers) and AVX2 (the walk's four-word
+/// skips; both [`Avx2`]). Callers must hold a CPU level with AVX2 that is at
+/// most [`crate::kernels::detected`] (that level implies lzcnt, bmi1 and
+/// SSSE3).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "lzcnt,bmi1,sse3,ssse3")]
+#[target_feature(enable = "lzcnt,bmi1,sse3,ssse3,avx,avx2")]
 unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(
     f: &Frame<W>,
     v: &V,
     row: RowStart,
     out: RowOut,
 ) {
-    // SAFETY: the caller holds a CPU level that has SSSE3 (this function's
-    // contract)
-    let s = unsafe { Ssse3::new() };
-    lean_row::<W, V, Ssse3, ASC, CHECKED, ONE>(f, v, s, row, out)
+    // SAFETY: the caller holds a CPU level that has AVX2, so SSSE3 (this
+    // function's contract)
+    let s = unsafe { Avx2::new() };
+    lean_row::<W, V, Avx2, ASC, CHECKED, ONE>(f, v, s, row, out)
 }
 
-/// How a visit samples its cell: [`Plain`] or [`Ssse3`], the same value bit
-/// for bit.
+/// What the CPU level changes in a row of the lean frame: how a visit
+/// samples its cell, and whether the walk passes words four at a time
+/// ([`Plain`] or [`Avx2`]; the same values and walk, bit for bit).
 trait Sampler: Copy {
     /// The density of `v`'s cell at stack index `b` at the weights of slice entry `e`.
     fn sample<V: Cells>(self, v: &V, b: usize, e: &SliceEntry) -> f32;
+
+    /// Moves `walk`, whose current word has no matching slot left, past
+    /// whole groups of four further words that have none either (at most to
+    /// its row's end); nothing where the level has no vector for it.
+    #[inline(always)]
+    fn skip<W: Word, const ASC: bool>(self, f: &Frame<W>, walk: &mut Walk<W>) {
+        let _ = (f, walk);
+    }
 }
 
-/// [`bilinear`] of the four corner densities.
+/// [`bilinear`] of the four corner densities; words one at a time.
 #[derive(Clone, Copy, Debug)]
 struct Plain;
 
@@ -658,33 +671,66 @@ impl Sampler for Plain {
 }
 
 /// The layout's SSSE3 gather and [`crate::data::slices::bilinear_sse`]
-/// ([`Cells::sample_ssse3`]); a value of it proves the CPU has SSSE3.
+/// ([`Cells::sample_ssse3`]), and the matcher's four-word test
+/// ([`Matcher::any_hits4`]) on u64 words; a value of it proves the CPU has
+/// AVX2 (and so SSSE3).
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
-struct Ssse3 {
+struct Avx2 {
     _proof: (),
 }
 
 #[cfg(target_arch = "x86_64")]
-impl Ssse3 {
+impl Avx2 {
     /// # Safety
-    /// The CPU must have SSSE3 (and so SSE3).
+    /// The CPU must have AVX2 (and so SSSE3 and SSE3).
     #[inline(always)]
     unsafe fn new() -> Self {
-        Ssse3 { _proof: () }
+        Avx2 { _proof: () }
     }
 }
 
 #[cfg(target_arch = "x86_64")]
-impl Sampler for Ssse3 {
+impl Sampler for Avx2 {
     #[inline(always)]
     fn sample<V: Cells>(self, v: &V, b: usize, e: &SliceEntry) -> f32 {
-        // SAFETY: an `Ssse3` exists only where the CPU has SSSE3
-        // (`Ssse3::new`'s contract); it is made in `lean_row_lzcnt`, whose
-        // code has the feature, so the gathers inline. Exercised by every lean
+        // SAFETY: an `Avx2` exists only where the CPU has AVX2 and so SSSE3
+        // (`Avx2::new`'s contract); it is made in `lean_row_lzcnt`, whose
+        // code has the features, so the gathers inline. Exercised by every lean
         // frame at the AVX2 level (tests/it/lean_frame.rs compares it with the
         // scalar level and the brute force).
         unsafe { v.sample_ssse3(b, e.wi, e.wj) }
+    }
+
+    #[inline(always)]
+    fn skip<W: Word, const ASC: bool>(self, f: &Frame<W>, walk: &mut Walk<W>) {
+        if W::BITS != 64 {
+            return;
+        }
+        let words = f.words.as_ptr().cast::<u64>();
+        while walk.left >= 4 {
+            // the next four words in walking order
+            let at = if ASC { walk.w + 1 } else { walk.w - 4 };
+            debug_assert!(at + 4 <= f.words.len());
+            // SAFETY: `W` is 64 bits wide (checked above; `Word` is u32 or
+            // u64), so the words are u64s. `left ≥ 4` words of the ray's
+            // depth row follow word `w` in walking order, so `[at, at + 4)`
+            // lies in the row, which lies in `words` (`Frame::word`). The
+            // CPU has AVX2 (a value of `Avx2` proves it). Exercised by the lean
+            // frames of depth rows longer than four words at the AVX2 level
+            // (tests/it/lean_frame.rs).
+            if unsafe { f.m.any_hits4(words.add(at)) } {
+                return;
+            }
+            walk.left -= 4;
+            if ASC {
+                walk.w += 4;
+                walk.kbase += 4 * f.slots;
+            } else {
+                walk.w -= 4;
+                walk.kbase -= 4 * f.slots;
+            }
+        }
     }
 }
 

@@ -341,6 +341,28 @@ impl Matcher {
         W::from_u64((xt & at) | ((xt ^ at) & cin))
     }
 
+    /// Whether any of the four u64 words at `words` has a matching slot
+    /// ([`Matcher::hits`] of each, in one AVX2 vector).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2, and the four words from `words` be readable.
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn any_hits4(&self, words: *const u64) -> bool {
+        use std::arch::x86_64::*;
+        let (top, add) = (_mm256_set1_epi64x(self.top as i64), self.add);
+        let (add_low, add_top) = (_mm256_set1_epi64x((add & !self.top) as i64), _mm256_set1_epi64x((add & self.top) as i64));
+        // SAFETY: the caller guarantees the four words readable (unaligned
+        // load) and AVX2.
+        let x = unsafe { _mm256_loadu_si256(words.cast::<__m256i>()) };
+        // the lanes of `hits`: cin, then the majority of the top bits and cin
+        let cin = _mm256_and_si256(_mm256_add_epi64(_mm256_andnot_si256(top, x), add_low), top);
+        let xt = _mm256_and_si256(x, top);
+        let h = _mm256_or_si256(_mm256_and_si256(xt, add_top), _mm256_and_si256(_mm256_xor_si256(xt, add_top), cin));
+        _mm256_testz_si256(h, h) == 0
+    }
+
     /// The reference of [`Matcher::hits`]: a bit-plane comparator over the
     /// slots from their top bit down.
     pub fn hits_planes<W: Word>(&self, w: W) -> W {
@@ -563,6 +585,33 @@ mod tests {
                     let want = naive_hits(y as u64, nb, c, 32) as u32;
                     assert_eq!(m.hits(y), want, "u32 nb {nb} c {c} x {y:#x}");
                     assert_eq!(m.hits_planes(y), want, "planes u32 nb {nb} c {c} x {y:#x}");
+                }
+            }
+        }
+    }
+
+    /// The four-word AVX2 test is `hits` of each word, for every width and
+    /// threshold, with groups where one word or none matches.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn any_hits4_is_the_hits_of_four_words() {
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut next = crate::testing::xorshift(0x2545_F491_4F6C_DD1D);
+        for nb in CODE_WIDTHS {
+            for c in 1..(1u32 << nb) {
+                let m = Matcher::new(nb, c);
+                for _ in 0..4000 {
+                    // words of codes below c, each slot drawn from 0..c
+                    let mut below = || (0..64 / nb).fold(0u64, |w, slot| w | ((next() % c as u64) << (64 - nb * (slot + 1))));
+                    let mut g = [below(), below(), below(), below()];
+                    if next().is_multiple_of(2) {
+                        g[(next() % 4) as usize] = next();
+                    }
+                    let want = g.iter().any(|&x| m.hits(x) != 0);
+                    // SAFETY: AVX2 detected above; `g` holds four words.
+                    assert_eq!(unsafe { m.any_hits4(g.as_ptr()) }, want, "nb {nb} c {c} {g:x?}");
                 }
             }
         }

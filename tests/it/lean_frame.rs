@@ -148,6 +148,29 @@ fn lean_frame_at_word_boundaries() {
     assert!(covered > 10_000, "only {covered} covered pixels");
 }
 
+/// Depth rows of many words (up to 17 u64 words of two-bit codes) with long
+/// empty stretches before and between the blobs, seen along the long axis
+/// both ways: the walk's four-word skips (AVX2 level) give the general
+/// path's and the brute force's image, for one iso value and each preset,
+/// u32 and u64 words, cell sizes 1 and 2, one and two threads.
+#[test]
+fn lean_frame_over_long_depth_rows() {
+    let mut covered = 0;
+    for (i, nk) in [140usize, 300, 520].into_iter().enumerate() {
+        let vol = random_volume([13, 11, nk], 0x5eed + i as u64, [1.0; 3]);
+        let cams = [cam(0.0, 0.0, 0.0), cam(0.0, std::f64::consts::PI, 0.2), cam(0.12, -0.15, 0.1), cam(-0.1, 3.0, 0.5)];
+        for c in &cams {
+            assert_eq!(Factorization::new(c, vol.dims(), vol.spacing()).unwrap().axis, 2);
+        }
+        for tissue in [None, Some(0), Some(1), Some(2)] {
+            for (word, cell, threads) in [(WordSize::U64, 1, 1), (WordSize::U64, 2, 2), (WordSize::U32, 1, 2)] {
+                covered += check(&vol, tissue, Settings { word, cell, threads, ..Settings::default() }, &cams);
+            }
+        }
+    }
+    assert!(covered > 5_000, "only {covered} covered pixels");
+}
+
 /// Frames the lean path does not cover keep the general path: Deluxe I,
 /// gradient shading, blend mode, the paper's byte-table search, perspective
 /// (the same image either way; asserted through the frame statistics).

@@ -98,6 +98,13 @@ impl Reconstruction {
     }
 }
 
+/// The stack axis (0: i, 1: j, 2: the slices) of a slice stack of axis
+/// permutation `perm` (stack axis `a` is object axis `perm[a]`) along which
+/// the cubic reconstruction runs: the volume's z, whatever the principal axis.
+pub fn cubic_axis(perm: [usize; 3]) -> usize {
+    perm.iter().position(|&a| a == 2).unwrap_or(2)
+}
+
 /// The largest negative weight mass of the Catmull–Rom kernel on `[0, 1]`
 /// (`max t(1 − t)/2`): how far past its samples the cubic can overshoot, as a
 /// fraction of their spread.

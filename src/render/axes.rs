@@ -11,6 +11,7 @@ use super::settings::{Lattice, Normals, Settings, WordSize};
 use super::stats::BuildTimes;
 use super::{MAX_INTERMEDIATE_PIXELS, MAX_MASK_BYTES, Renderer};
 use crate::kernels::reconstruct::Reconstruction;
+pub(super) use crate::kernels::reconstruct::cubic_axis;
 
 use std::time::Instant;
 
@@ -91,12 +92,6 @@ pub(super) struct AxisMask {
 /// True when the binary path keeps no f32 stack for `volume`: table shading
 /// with packed cells, whose 8- or 16-bit densities are all its rays read (8-
 /// and 16-bit scans). Every other path samples a resident [`SliceStack`].
-/// The stack axis (0: i, 1: j, 2: the slices) of a stack of permutation
-/// `perm` along which the cubic reconstruction runs: the volume's z.
-pub fn cubic_axis(perm: [usize; 3]) -> usize {
-    perm.iter().position(|&a| a == 2).unwrap_or(2)
-}
-
 pub(super) fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
     settings.method.uses_mask()
         && settings.normals == Normals::Codes

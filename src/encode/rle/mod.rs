@@ -17,7 +17,7 @@
 //!   instead the cubic's B-spline gradient along the volume's z at the voxel
 //!   ([`crate::data::normals::cubic_voxel_normal`], read through
 //!   [`crate::data::normals::StackNormals`] by the encoder and the brute force
-//!   alike), which does not terrace on thick slices; the samples stay as below.
+//!   alike), which terraces less on thick slices; the samples stay as below.
 //! - [`RleVolume`]: one principal axis's encoding. Every scanline (row `j` of
 //!   slice `k`, along `i`) is a list of `(transparent, non-transparent)` run-length
 //!   pairs (u16; the transparent run after the last pair is implicit), and only

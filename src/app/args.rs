@@ -121,7 +121,7 @@ pub struct RenderArgs {
     /// --method rle and brute-rle (both modes, pre-classified or --deluxe P)
     /// cubic keeps the samples and gives each voxel the cubic's normal there
     /// as its normal code (the B-spline gradient along z instead of central
-    /// differences), so the shading follows thick slices without terraces (on
+    /// differences), so the shading terraces less on thick slices (on
     /// the 0.6×0.6×5 ellipsoid the codes' error drops from 4.4° to 1.8° mean):
     /// frames composite as before, only the encoding's normals take more
     /// arithmetic. Default: `render`

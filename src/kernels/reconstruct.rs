@@ -84,7 +84,8 @@ pub enum Reconstruction {
     Linear,
     /// The Catmull–Rom cubic through four slices along the slice axis,
     /// bilinear in-plane; the normal from the cubic B-spline smoothing of
-    /// the same slices (see the module docs).
+    /// the same slices (see the module docs). The RLE paths take that
+    /// normal at each voxel as its normal code.
     Cubic,
 }
 

@@ -11,8 +11,15 @@
 //!   non-transparent voxel; [`NormalStack`] stores it for every voxel of one
 //!   principal axis, laid out like the stack, for the binary path and its
 //!   brute-force reference.
+//! - [`cubic_voxel_normal`]: the code of one voxel under the cubic
+//!   reconstruction ([`crate::kernels::reconstruct`]): the gradient of the
+//!   cubic B-spline smoothing of the slices along the volume's z at the
+//!   voxel, the normal the raycast paths' cubic hits are shaded with,
+//!   evaluated at voxels. On thick slices it follows the surface where the
+//!   central differences terrace.
 //! - [`VoxelSource`]: what the pre-classified paths read voxels and their
-//!   codes from (a cartesian stack, or the BCC grid's slices).
+//!   codes from (a cartesian stack, its codes chosen by the reconstruction
+//!   with [`StackNormals`], or the BCC grid's slices).
 //!
 //! The per-view table of shades by code is
 //! [`crate::classify::shade_table::ShadeTable`]: a sample shades as
@@ -95,6 +102,50 @@ pub(crate) fn boxed<T: Clone, const N: usize>(v: T) -> Box<[T; N]> {
 #[inline]
 pub fn voxel_normal(stack: &SliceStack, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
     object_normal(stack.gradient_at(i, j, k), stack.perm(), inv_spacing)
+}
+
+/// The gradient (stack axes, voxel units) of the cubic reconstruction's
+/// normal at voxel `(i, j, k)` of `stack`: the gradient of the cubic
+/// B-spline smoothing of the slices along stack axis `za` (the volume's z,
+/// [`crate::kernels::reconstruct::cubic_axis`]) evaluated at the voxel,
+/// where the B-spline's fraction is 0 and its weights are `[1, 4, 1]/6` on
+/// the voxels `z − 1, z, z + 1` and its derivatives `[−½, 0, ½]`
+/// ([`crate::kernels::reconstruct::b_spline`]). Along `za` that is the
+/// central difference `(p₊ − p₋)/2`; along each other axis the central
+/// differences of the three voxels (one-sided at an in-plane border, as
+/// [`SliceStack::gradient_at`]) blended by `[1, 4, 1]/6` — the function the
+/// raycast paths' cubic hit is shaded with (its bilinear in-plane blend is
+/// the voxel's own differences at a voxel), evaluated at voxels. A border
+/// along `za` repeats its slice, as the cubic's four slices do (there the
+/// difference along `za` is half the one-sided one). Every component is the
+/// same float arithmetic on the same voxels whatever the stack's
+/// permutation, so the code of a voxel is the same from every axis's stack.
+#[inline]
+pub fn cubic_voxel_gradient(stack: &SliceStack, i: usize, j: usize, k: usize, za: usize) -> [f32; 3] {
+    let (n, d) = (stack.n, stack.data());
+    let stride = [1, n[0], n[0] * n[1]];
+    let c = [i, j, k];
+    // the steps to the voxel before and after along each axis (0 at a border)
+    let down: [usize; 3] = std::array::from_fn(|a| if c[a] > 0 { stride[a] } else { 0 });
+    let up: [usize; 3] = std::array::from_fn(|a| if c[a] + 1 < n[a] { stride[a] } else { 0 });
+    let b = stack.index(i, j, k);
+    // the central difference along axis a at voxel index v (of this voxel's row along a)
+    let cd = |v: usize, a: usize| {
+        let span = (down[a] > 0) as u32 + (up[a] > 0) as u32;
+        if span > 0 { (d[v + up[a]] - d[v - down[a]]) / span as f32 } else { 0.0 }
+    };
+    let (below, above) = (b - down[za], b + up[za]);
+    std::array::from_fn(|a| if a == za { 0.5 * (d[above] - d[below]) } else { (cd(below, a) + 4.0 * cd(b, a) + cd(above, a)) / 6.0 })
+}
+
+/// The normal code of voxel `(i, j, k)` of `stack` under the cubic
+/// reconstruction: [`cubic_voxel_gradient`] along the volume's z, mapped to
+/// object space with the voxel spacing (`inv_spacing` = `1 / spacing` per
+/// object axis, as [`voxel_normal`]) and encoded.
+#[inline]
+pub fn cubic_voxel_normal(stack: &SliceStack, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
+    let za = crate::kernels::reconstruct::cubic_axis(stack.perm());
+    object_normal(cubic_voxel_gradient(stack, i, j, k, za), stack.perm(), inv_spacing)
 }
 
 /// The normal code of a voxel-space gradient `g` of a stack with axis
@@ -701,6 +752,36 @@ impl VoxelSource for SliceStack {
     }
 }
 
+/// A cartesian [`SliceStack`] whose voxels' normal codes are those of a
+/// reconstruction ([`crate::kernels::Reconstruction`]): the linear one's
+/// central differences ([`voxel_normal`], what the stack as its own source
+/// gives), or the cubic one's B-spline gradient ([`cubic_voxel_normal`]).
+/// What the RLE paths encode and their brute force classifies under
+/// `--reconstruction`: both read the same codes, so they stay equal.
+#[derive(Clone, Copy, Debug)]
+pub struct StackNormals<'a> {
+    stack: &'a SliceStack,
+    cubic: bool,
+}
+
+impl<'a> StackNormals<'a> {
+    /// `stack` with the normal codes of `reconstruction`.
+    pub fn new(stack: &'a SliceStack, reconstruction: crate::kernels::Reconstruction) -> Self {
+        StackNormals { stack, cubic: reconstruction == crate::kernels::Reconstruction::Cubic }
+    }
+}
+
+impl VoxelSource for StackNormals<'_> {
+    #[inline(always)]
+    fn slices(&self) -> &SliceStack {
+        self.stack
+    }
+    #[inline]
+    fn normal(&self, i: usize, j: usize, k: usize, inv_spacing: [f32; 3]) -> u16 {
+        if self.cubic { cubic_voxel_normal(self.stack, i, j, k, inv_spacing) } else { voxel_normal(self.stack, i, j, k, inv_spacing) }
+    }
+}
+
 /// Phase 2 of the packed cells: their normal codes (phase 1, the packing, is
 /// [`InPlace::new`]).
 impl<E: crate::memory::Zeroable + Send + Sync, const K: usize> InPlace<E, K> {
@@ -866,6 +947,83 @@ mod tests {
             }
             let b = s.index(2, 3, 1);
             assert_eq!(ns.corners(b), [ns.at(b), ns.at(b + 1), ns.at(b + s.n[0]), ns.at(b + s.n[0] + 1)]);
+        }
+    }
+
+    /// The cubic normal at a voxel is the reference's cubic gradient
+    /// ([`crate::accuracy::reference::ReferenceRenderer::gradient_cubic`],
+    /// f64) evaluated there, borders and flat axes included; its code is
+    /// the same from the stack of every principal axis, bit for bit; and
+    /// [`StackNormals`] gives each reconstruction's codes.
+    #[test]
+    fn cubic_normal_is_the_b_spline_gradient_at_the_voxel_from_every_axis() {
+        use crate::accuracy::reference::ReferenceRenderer;
+        use crate::kernels::Reconstruction;
+        use crate::kernels::reconstruct::cubic_axis;
+        for dims in [[7, 6, 5], [5, 4, 2], [4, 5, 1], [1, 3, 4]] {
+            let sp = [0.6, 0.9, 2.5];
+            let v =
+                Volume::from_fn(dims, sp, |x, y, z| ((x * 7 + y * 13 + z * 29) % 11) as f32 * 3.0 - (x * z) as f32 * 0.7 + (y * y) as f32)
+                    .unwrap();
+            let model = ReferenceRenderer::new(&v);
+            let inv = sp.map(|s| 1.0 / s);
+            let stacks: Vec<SliceStack> = (0..3).map(|a| SliceStack::new(&v, a)).collect();
+            for z in 0..dims[2] {
+                for y in 0..dims[1] {
+                    for x in 0..dims[0] {
+                        let want = model.gradient_cubic(glam::DVec3::new(x as f64, y as f64, z as f64));
+                        let mut codes = vec![];
+                        for s in &stacks {
+                            let p = s.perm();
+                            let c = p.map(|a| [x, y, z][a]);
+                            let g = cubic_voxel_gradient(s, c[0], c[1], c[2], cubic_axis(p));
+                            for a in 0..3 {
+                                let w = want[p[a]];
+                                assert!(
+                                    (g[a] as f64 - w).abs() <= 1e-5 * (1.0 + w.abs()),
+                                    "{dims:?} ({x}, {y}, {z}) axis {}: {g:?} vs {want}",
+                                    s.axis
+                                );
+                            }
+                            let code = cubic_voxel_normal(s, c[0], c[1], c[2], inv);
+                            assert_eq!(StackNormals::new(s, Reconstruction::Cubic).normal(c[0], c[1], c[2], inv), code);
+                            assert_eq!(
+                                StackNormals::new(s, Reconstruction::Linear).normal(c[0], c[1], c[2], inv),
+                                voxel_normal(s, c[0], c[1], c[2], inv)
+                            );
+                            codes.push(code);
+                        }
+                        assert!(codes.iter().all(|&c| c == codes[0]), "{dims:?} ({x}, {y}, {z}): {codes:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// Away from the volume's first and last slice the cubic normal's
+    /// gradient is exact on a density linear in-plane and quadratic along z
+    /// (the B-spline's derivative at a voxel is the central difference).
+    #[test]
+    fn cubic_normal_is_exact_on_quadratics_along_z() {
+        let f = |x: usize, y: usize, z: usize| 3.0 * x as f32 - 2.0 * y as f32 + 0.25 * (z * z) as f32;
+        let v = Volume::from_fn([5, 4, 6], [1.0, 1.0, 4.0], f).unwrap();
+        for axis in 0..3 {
+            let s = SliceStack::new(&v, axis);
+            let p = s.perm();
+            for z in 1..5 {
+                for y in 0..4 {
+                    for x in 0..5 {
+                        let c = p.map(|a| [x, y, z][a]);
+                        let g = cubic_voxel_gradient(&s, c[0], c[1], c[2], crate::kernels::reconstruct::cubic_axis(p));
+                        let want = [3.0, -2.0, 0.5 * z as f32];
+                        assert_eq!(
+                            (0..3).map(|a| g[a]).collect::<Vec<_>>(),
+                            (0..3).map(|a| want[p[a]]).collect::<Vec<_>>(),
+                            "({x}, {y}, {z})"
+                        );
+                    }
+                }
+            }
         }
     }
 

@@ -84,7 +84,8 @@ pub enum Reconstruction {
     Linear,
     /// The Catmull–Rom cubic through four slices along the slice axis,
     /// bilinear in-plane; the normal from the cubic B-spline smoothing of
-    /// the same slices (see the module docs).
+    /// the same slices (see the module docs). The RLE paths take that
+    /// normal at each voxel as its normal code.
     Cubic,
 }
 
@@ -96,6 +97,13 @@ impl Reconstruction {
             Reconstruction::Cubic => "cubic",
         }
     }
+}
+
+/// The stack axis (0: i, 1: j, 2: the slices) of a slice stack of axis
+/// permutation `perm` (stack axis `a` is object axis `perm[a]`) along which
+/// the cubic reconstruction runs: the volume's z, whatever the principal axis.
+pub fn cubic_axis(perm: [usize; 3]) -> usize {
+    perm.iter().position(|&a| a == 2).unwrap_or(2)
 }
 
 /// The largest negative weight mass of the Catmull–Rom kernel on `[0, 1]`

@@ -11,13 +11,14 @@ use super::settings::{Lattice, Normals, Settings, WordSize};
 use super::stats::BuildTimes;
 use super::{MAX_INTERMEDIATE_PIXELS, MAX_MASK_BYTES, Renderer};
 use crate::kernels::reconstruct::Reconstruction;
+pub(super) use crate::kernels::reconstruct::cubic_axis;
 
 use std::time::Instant;
 
 use crate::classify::Classifier;
 use crate::composite::Mode;
 use crate::data::bcc::{BccLattice, BccStack};
-use crate::data::normals::{CellSource, NormalStack};
+use crate::data::normals::{CellSource, NormalStack, StackNormals};
 use crate::data::slices::{Densities, SliceStack};
 use crate::data::volume::Volume;
 use crate::encode::mask::{BinaryMask, CellCodes, PackedCodes};
@@ -91,12 +92,6 @@ pub(super) struct AxisMask {
 /// True when the binary path keeps no f32 stack for `volume`: table shading
 /// with packed cells, whose 8- or 16-bit densities are all its rays read (8-
 /// and 16-bit scans). Every other path samples a resident [`SliceStack`].
-/// The stack axis (0: i, 1: j, 2: the slices) of a stack of permutation
-/// `perm` along which the cubic reconstruction runs: the volume's z.
-pub fn cubic_axis(perm: [usize; 3]) -> usize {
-    perm.iter().position(|&a| a == 2).unwrap_or(2)
-}
-
 pub(super) fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
     settings.method.uses_mask()
         && settings.normals == Normals::Codes
@@ -374,10 +369,14 @@ impl Renderer {
     }
 
     /// What a post-classified encoding depends on (the key without the
-    /// tissue: it keeps the cells every tissue preset may show), and the lattice.
+    /// tissue: it keeps the cells every tissue preset may show), the lattice,
+    /// and the reconstruction whose normal codes the voxels carry
+    /// ([`StackNormals`]).
     pub(super) fn rle_enc_key(&self) -> ClassKey {
         let bcc = (self.settings.lattice == Lattice::Bcc) as u64;
+        let cubic = (self.settings.reconstruction == Reconstruction::Cubic) as u64;
         (self.classes.generation << 20)
+            | (cubic << 10)
             | (bcc << 9)
             | ((self.settings.deluxe.post as u64) << 1)
             | (self.settings.mode == Mode::Blend) as u64
@@ -597,8 +596,10 @@ impl Renderer {
                 let src = self.axes.bcc[axis].as_ref().expect("BCC slices built above");
                 !rle.is_current(src) && self.pool.install(|| rle.ensure_axis(src))
             } else {
+                // the voxels' normal codes: the reconstruction's (the key above tells them apart)
                 let stack = self.axes.stacks[axis].as_ref().expect("stack built above");
-                !rle.is_current(stack) && self.pool.install(|| rle.ensure_axis(stack))
+                let src = StackNormals::new(stack, self.settings.reconstruction);
+                !rle.is_current(&src) && self.pool.install(|| rle.ensure_axis(&src))
             };
             if built {
                 self.axes.build_times.rle[axis] = t.elapsed().as_secs_f64() * 1e3;

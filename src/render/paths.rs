@@ -14,7 +14,7 @@ use crate::composite::raycast::{
     RayContext, cubic_walks, occupied_scaled_rays, render_binary, render_brute, volume_rect, volume_rect_with_mids,
 };
 use crate::composite::{Intermediate, Mode, Rect};
-use crate::data::normals::NormalStack;
+use crate::data::normals::{NormalStack, StackNormals};
 use crate::data::slices::SliceStack;
 use crate::encode::depth::{Matcher, binary_matcher};
 use crate::encode::mask::ShearWork;
@@ -172,7 +172,8 @@ impl Renderer {
                     match (settings.method, bcc) {
                         (Method::Rle, _) => rle.render(plan, settings.ert, rect, inter),
                         (_, Some(b)) => rle.render_brute(b, plan, settings.ert, rect, inter),
-                        (_, None) => rle.render_brute(stack, plan, settings.ert, rect, inter),
+                        // (the encoding's normal codes: the reconstruction's)
+                        (_, None) => rle.render_brute(&StackNormals::new(stack, settings.reconstruction), plan, settings.ert, rect, inter),
                     }
                     stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
                     rect

@@ -300,19 +300,23 @@ pub struct Settings {
     /// separate encodings' to float rounding; about a third less RLE memory.
     /// A perspective frame uses the separate encodings (cyclic permutations).
     pub rle_reuse: bool,
-    /// Raycast paths, iso mode: how the iso surface is reconstructed between
-    /// samples ([`Reconstruction`]; see
-    /// [`crate::composite::raycast::RayContext::with_cubic`]).
+    /// How the iso surface is reconstructed between samples
+    /// ([`Reconstruction`]). Raycast paths, iso mode (see
+    /// [`crate::composite::raycast::RayContext::with_cubic`]):
     /// [`Reconstruction::Cubic`] follows the surface between thick slices
     /// (Catmull–Rom along the volume's z axis, the normal the gradient of the
-    /// B-spline smoothing, no normal codes). The default stays
-    /// [`Reconstruction::Linear`], chosen by measurement
+    /// B-spline smoothing, no normal codes); blend mode ignores it. The RLE
+    /// paths (both modes, pre- and post-classified: Deluxe P) keep their
+    /// samples and take the cubic's normal at each voxel as its normal code
+    /// ([`crate::data::normals::cubic_voxel_normal`]: the B-spline gradient
+    /// along z instead of central differences), so their shading follows the
+    /// surface between thick slices where the central differences terrace.
+    /// The default stays [`Reconstruction::Linear`], chosen by measurement
     /// (`benches/README.md`): the cubic preview frame costs about 1.4–1.6×
     /// the linear one's on a 5 mm-slice CT and 2.5–3.5× on an isotropic 256³
     /// head (the linear frame keeps its normal codes), and on isotropic
     /// volumes the two err alike; on thick slices the cubic's normal error
-    /// is a quarter of the linear's. Blend mode ignores it; the RLE paths and
-    /// Deluxe I refuse it.
+    /// is a quarter of the linear's. Deluxe I and the BCC grid refuse it.
     pub reconstruction: Reconstruction,
 }
 
@@ -361,6 +365,12 @@ pub(super) fn check_settings(s: &Settings) -> Result<()> {
 ///   accepted there and changes nothing.
 /// - M (matched sampling): every method (a producer of plans: the pitch,
 ///   [`Renderer::finish_plan`]).
+///
+/// The cubic reconstruction ([`Settings::reconstruction`]): every method on
+/// the cartesian grid, without I (the raycast paths' midpoint samples and the
+/// RLE paths' intermediate slices are linear). The BCC grid refuses it: its
+/// interleaved slices differentiate across two sub-grids, not along the
+/// volume's z slices.
 pub(super) fn check_deluxe(s: &Settings) -> Result<()> {
     let unsupported = |what: &str| Err(Error::value("settings", format!("{what} is not available with --method {}", s.method.name())));
     // the BCC grid: the pre-classified paths (parallel projection; the
@@ -368,8 +378,10 @@ pub(super) fn check_deluxe(s: &Settings) -> Result<()> {
     if s.lattice == Lattice::Bcc && !s.method.is_rle() {
         return unsupported("the BCC grid (--grid bcc)");
     }
-    if s.reconstruction == Reconstruction::Cubic && !s.method.is_raycast() {
-        return unsupported("the cubic reconstruction (--reconstruction cubic)");
+    // the cubic reconstruction: the raycast paths, and the cartesian RLE
+    // paths' normal codes (the BCC grid's slices are not the volume's z slices)
+    if s.reconstruction == Reconstruction::Cubic && s.lattice == Lattice::Bcc {
+        return Err(Error::value("settings", "--reconstruction cubic does not combine with the BCC grid (--grid bcc)"));
     }
     if s.reconstruction == Reconstruction::Cubic && s.deluxe.intermediate {
         return Err(Error::value("settings", "--reconstruction cubic does not combine with Deluxe I (intermediate slices)"));

@@ -5,7 +5,9 @@
 //!   colours at the ray's midpoint between two slices;
 //! - two half steps through a homogeneous medium equal one full step;
 //! - the accelerated path equals its brute force bit for bit with I, P and IP
-//!   (parallel, perspective, ray limits from clip planes);
+//!   (parallel, perspective, ray limits from clip planes), and with P and S
+//!   under the cubic reconstruction's normal codes;
+//! - switching the reconstruction re-encodes;
 //! - I lowers the staircase error of a cube seen along its diagonal;
 //! - P sharpens a step edge that pre-classification blurs;
 //! - a tissue switch under P re-classifies without re-encoding.
@@ -24,6 +26,7 @@ use shearwarp::classify::shading::Shading;
 use shearwarp::composite::{Mode, composite_premultiplied};
 use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::encode::rle::{PostTables, Preclass, RleVoxel, ViewTables};
+use shearwarp::kernels::Reconstruction;
 use shearwarp::render::{Deluxe, Method, Renderer, Settings};
 use shearwarp::view::clip::{ClipPlane, ClipPlanes};
 use shearwarp::view::{Camera, Projection};
@@ -32,6 +35,7 @@ use shearwarp::warp::Image;
 const I: Deluxe = Deluxe { intermediate: true, post: false, matched: false };
 const P: Deluxe = Deluxe { intermediate: false, post: true, matched: false };
 const IP: Deluxe = Deluxe { intermediate: true, post: true, matched: false };
+const S: Deluxe = Deluxe::STANDARD;
 
 fn volume(dims: [usize; 3], f: impl Fn(usize, usize, usize) -> f32) -> Volume {
     let mut data = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
@@ -215,6 +219,11 @@ fn case(mode: Mode, deluxe: Deluxe, threads: usize, ert: f32) -> Settings {
     Settings { mode, ert, threads, deluxe, ..Settings::default() }
 }
 
+/// [`case`] with the cubic reconstruction's normal codes.
+fn cubic(s: Settings) -> Settings {
+    Settings { reconstruction: Reconstruction::Cubic, ..s }
+}
+
 /// The case rendered by the RLE path and its brute force (`base`'s method is
 /// replaced by each in turn).
 fn rle_pair(
@@ -251,33 +260,36 @@ fn rle_pair(
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(cases(24)))]
 
-    /// The RLE path equals its brute force bit for bit with I, P and IP:
-    /// parallel and perspective (eye inside the volume included), with and
-    /// without clip planes limiting the rays, with early termination off and
-    /// at several thresholds (the runs of midpoints stop at a terminated
-    /// pixel as the brute force's per-pixel test does).
+    /// The RLE path equals its brute force bit for bit with I, P and IP, and
+    /// with P and S under the cubic reconstruction's normal codes (on thick
+    /// slices): parallel and perspective (eye inside the volume included),
+    /// with and without clip planes limiting the rays, with early termination
+    /// off and at several thresholds (the runs of midpoints stop at a
+    /// terminated pixel as the brute force's per-pixel test does).
     #[test]
     fn deluxe_rle_equals_brute_force_bit_for_bit(
         nx in 2usize..20, ny in 2usize..20, nz in 2usize..24, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2, blend in any::<bool>(),
-        which in 0usize..3, persp in any::<bool>(), fov in 20.0f64..70.0, dist in 0.05f64..3.0,
+        which in 0usize..5, persp in any::<bool>(), fov in 20.0f64..70.0, dist in 0.05f64..3.0,
         clip in any::<bool>(), plane in ((-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0), -4.0f64..4.0),
         ert in prop::sample::select(vec![0.3f32, 0.9, 0.99, 1.0]),
     ) {
-        let vol = blobs([nx, ny, nz], seed);
+        let is_cubic = which >= 3;
+        let vol = common::blobs([nx, ny, nz], seed, if is_cubic { [0.7, 0.7, 2.5] } else { [1.0; 3] });
         let tf = tf_of(tfs);
-        let deluxe = [I, P, IP][which];
+        let deluxe = [I, P, IP, P, S][which];
         let mode = if blend { Mode::Blend } else { Mode::Iso };
         let rot = DMat3::from_euler(EulerRot::XYZ, rx, ry, rz);
         let ((a, b, c), d) = plane;
         let planes: Vec<ClipPlane> = ClipPlane::new([a, b, c], d).ok().into_iter().filter(|_| clip).collect();
         let planes = (!planes.is_empty()).then_some(&planes[..]);
         let persp = persp.then_some((fov, dist));
-        let got = rle_pair(&vol, &tf, case(mode, deluxe, 2, ert), rot, persp, planes);
+        let s = if is_cubic { cubic(case(mode, deluxe, 2, ert)) } else { case(mode, deluxe, 2, ert) };
+        let got = rle_pair(&vol, &tf, s, rot, persp, planes);
         prop_assert!(got.is_some() || persp.is_some(), "a parallel view failed");
         if let Some([(ri, rpx), (bi, bpx)]) = got {
-            prop_assert!(same_bits(&rpx, &bpx), "{} {:?}: intermediate images differ", deluxe.label(), persp);
-            prop_assert!(same_bits(&ri.data, &bi.data), "{} {:?}: final images differ", deluxe.label(), persp);
+            prop_assert!(same_bits(&rpx, &bpx), "{} cubic {is_cubic} {:?}: intermediate images differ", deluxe.label(), persp);
+            prop_assert!(same_bits(&ri.data, &bi.data), "{} cubic {is_cubic} {:?}: final images differ", deluxe.label(), persp);
         }
     }
 }
@@ -386,6 +398,31 @@ fn deluxe_p_tissue_switch_keeps_the_encoding() {
             let (want, _) = frame(&mut fresh, &cam);
             assert_eq!(common::bits(&img), common::bits(&want), "{} tissue {t}", mode.name());
         }
+    }
+}
+
+/// The reconstruction is part of the encoding's key: after a switch on a
+/// renderer (pre-classified and under P) each frame is a fresh renderer's of
+/// that reconstruction, bit for bit, and on thick slices the cubic's codes
+/// change the image — so the switch re-encoded.
+#[test]
+fn reconstruction_switch_reencodes() {
+    let vol = common::blobs([30, 26, 14], 5, [0.7, 0.7, 3.0]);
+    let tf = tf_of(1);
+    let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, 0.9, 0.4, 0.0), [48, 48]);
+    for (mode, deluxe) in [(Mode::Blend, P), (Mode::Iso, P), (Mode::Blend, S)] {
+        let linear = case(mode, deluxe, 2, 1.0);
+        let mut r = Renderer::new(vol.clone(), &tf, Settings { method: Method::Rle, ..linear }).unwrap();
+        let mut images = vec![];
+        for s in [linear, cubic(linear), linear] {
+            let s = Settings { method: Method::Rle, ..s };
+            r.set_settings(s).unwrap();
+            let (img, _) = frame(&mut r, &cam);
+            let (want, _) = frame(&mut Renderer::new(vol.clone(), &tf, s).unwrap(), &cam);
+            assert_eq!(common::bits(&img), common::bits(&want), "{} {} {}", mode.name(), deluxe.label(), s.reconstruction.name());
+            images.push(common::bits(&img));
+        }
+        assert!(images[0] != images[1], "{} {}: the cubic codes change nothing", mode.name(), deluxe.label());
     }
 }
 

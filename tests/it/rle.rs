@@ -1,5 +1,6 @@
 //! Invariants of the run-length-encoded pre-classified path: it equals its
-//! brute-force reference (runs and skip links lose nothing), it is deterministic
+//! brute-force reference (runs and skip links lose nothing; with the central
+//! differences' normal codes or the cubic reconstruction's), it is deterministic
 //! across thread counts, its encoding round-trips to the classified voxels, it
 //! follows classification changes, and it draws the same object as the binary path.
 
@@ -11,10 +12,12 @@ use proptest::prelude::*;
 use shearwarp::classify::presets::{Tissue, ct_tissues};
 use shearwarp::classify::{Classifier, TransferFunction};
 use shearwarp::composite::Mode;
+use shearwarp::data::normals::StackNormals;
 use shearwarp::data::phantom;
 use shearwarp::data::slices::SliceStack;
 use shearwarp::data::volume::Volume;
 use shearwarp::encode::rle::{BRIDGE_NORMAL, Preclass, RleVolume};
+use shearwarp::kernels::Reconstruction;
 use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::{Camera, Projection, rotate_eye};
 use shearwarp::warp::Image;
@@ -53,19 +56,21 @@ proptest! {
 
     /// The RLE image equals the brute-force pre-classified image within float
     /// rounding (TOL per channel), intermediate and final, in both modes, for
-    /// several early-termination thresholds.
+    /// several early-termination thresholds, with either reconstruction's
+    /// normal codes.
     #[test]
     fn rle_equals_brute_preclassified(
         nx in 2usize..24, ny in 2usize..24, nz in 2usize..40, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2,
         blend in any::<bool>(), aniso in any::<bool>(), ert in prop::sample::select(vec![0.5f32, 0.9, 0.99, 1.0]),
+        cubic in any::<bool>(),
     ) {
         let sp = if aniso { [1.0, 0.7, 2.5] } else { [1.0; 3] };
         let vol = random_volume([nx, ny, nz], seed, sp);
         let tf = random_tf(tfs);
         let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, rx, ry, rz), [48, 40]);
         let mode = if blend { Mode::Blend } else { Mode::Iso };
-        let base = Settings { mode, ert, threads: 2, ..Settings::default() };
+        let base = Settings { mode, ert, threads: 2, reconstruction: recon(cubic), ..Settings::default() };
         let (ri, rpx) = render(&vol, &tf, Settings { method: Method::Rle, ..base }, &cam);
         let (bi, bpx) = render(&vol, &tf, Settings { method: Method::BruteRle, ..base }, &cam);
         let d = max_diff(&rpx, &bpx);
@@ -75,17 +80,19 @@ proptest! {
     }
 
     /// Lossless skipping: with early termination off (ert = 1), runs and skip
-    /// links give exactly the brute-force image, bit for bit.
+    /// links give exactly the brute-force image, bit for bit, with either
+    /// reconstruction's normal codes (the cubic's on thick slices).
     #[test]
     fn skipping_is_lossless_without_ert(
         nx in 2usize..30, ny in 2usize..30, nz in 2usize..30, seed in any::<u64>(), tfs in any::<u64>(),
-        rx in -3.2f64..3.2, ry in -3.2f64..3.2, blend in any::<bool>(),
+        rx in -3.2f64..3.2, ry in -3.2f64..3.2, blend in any::<bool>(), cubic in any::<bool>(),
     ) {
-        let vol = random_volume([nx, ny, nz], seed, [1.0; 3]);
+        let sp = if cubic { [0.8, 0.8, 3.0] } else { [1.0; 3] };
+        let vol = random_volume([nx, ny, nz], seed, sp);
         let tf = random_tf(tfs);
         let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, rx, ry, 0.4), [40, 40]);
         let mode = if blend { Mode::Blend } else { Mode::Iso };
-        let base = Settings { mode, ert: 1.0, threads: 1, ..Settings::default() };
+        let base = Settings { mode, ert: 1.0, threads: 1, reconstruction: recon(cubic), ..Settings::default() };
         let (ri, rpx) = render(&vol, &tf, Settings { method: Method::Rle, ..base }, &cam);
         let (bi, bpx) = render(&vol, &tf, Settings { method: Method::BruteRle, ..base }, &cam);
         prop_assert!(same_bits(&rpx, &bpx), "intermediate images differ by {}", max_diff(&rpx, &bpx));
@@ -96,20 +103,21 @@ proptest! {
     /// equals its brute force bit for bit (intermediate and final images):
     /// random volumes and transfer functions, both modes, fields of view
     /// 15–80°, the eye 0.05–4 diagonals away (inside the volume and the
-    /// pyramid split included), anisotropic voxels.
+    /// pyramid split included), anisotropic voxels, either reconstruction's
+    /// normal codes.
     #[test]
     fn rle_equals_brute_force_in_perspective_with_termination(
         nx in 2usize..22, ny in 2usize..22, nz in 2usize..30, seed in any::<u64>(), tfs in any::<u64>(),
         rx in -3.2f64..3.2, ry in -3.2f64..3.2, rz in -3.2f64..3.2, blend in any::<bool>(), aniso in any::<bool>(),
         fov in 15.0f64..80.0, dist in prop_oneof![0.05f64..1.0, 1.0f64..4.0],
-        ert in prop::sample::select(vec![0.3f32, 0.9, 0.99, 1.0]),
+        ert in prop::sample::select(vec![0.3f32, 0.9, 0.99, 1.0]), cubic in any::<bool>(),
     ) {
         let sp = if aniso { [1.0, 0.7, 2.5] } else { [1.0; 3] };
         let vol = random_volume([nx, ny, nz], seed, sp);
         let tf = random_tf(tfs);
         let cam = Camera::new(DMat3::from_euler(EulerRot::XYZ, rx, ry, rz), [44, 40]);
         let mode = if blend { Mode::Blend } else { Mode::Iso };
-        let base = Settings { mode, ert, threads: 2, ..Settings::default() };
+        let base = Settings { mode, ert, threads: 2, reconstruction: recon(cubic), ..Settings::default() };
         let proj = Projection::perspective(fov, dist).unwrap();
         let run = |method| {
             let mut r = Renderer::new(vol.clone(), &tf, Settings { method, ..base }).unwrap();
@@ -138,13 +146,14 @@ proptest! {
     }
 
     /// Decoding the runs of every scanline gives back exactly the classified
-    /// non-transparent voxels (position, class, normal), the raw opacity and
-    /// colour a voxel stands for are its classifier node's, and bridged gap
-    /// voxels are transparent.
+    /// non-transparent voxels (position, class, normal: the central
+    /// differences' or the cubic's code), the raw opacity and colour a voxel
+    /// stands for are its classifier node's, and bridged gap voxels are
+    /// transparent.
     #[test]
     fn encoding_round_trips(
         nx in 1usize..26, ny in 1usize..26, nz in 1usize..26, seed in any::<u64>(), tfs in any::<u64>(),
-        axis in 0usize..3, aniso in any::<bool>(),
+        axis in 0usize..3, aniso in any::<bool>(), cubic in any::<bool>(),
     ) {
         let sp = if aniso { [0.8, 1.0, 2.0] } else { [1.0; 3] };
         let vol = random_volume([nx, ny, nz], seed, sp);
@@ -152,9 +161,10 @@ proptest! {
         let (lo, hi) = vol.value_range();
         let cls = Classifier::new(&tf, lo, hi);
         let pre = Preclass::new(&cls, sp);
-        let stack = SliceStack::new(&vol, axis);
+        let slices = SliceStack::new(&vol, axis);
+        let stack = StackNormals::new(&slices, recon(cubic));
         let rle = RleVolume::encode(&stack, &pre);
-        let [ni, nj, nk] = stack.n;
+        let [ni, nj, nk] = slices.n;
         let mut count = 0;
         for k in 0..nk {
             for j in 0..nj {
@@ -184,6 +194,11 @@ proptest! {
         prop_assert_eq!(count + rle.bridged_count(), rle.voxel_count());
         prop_assert!(rle.bytes() >= 4 * rle.voxel_count());
     }
+}
+
+/// The reconstruction whose normal codes the RLE paths read.
+fn recon(cubic: bool) -> Reconstruction {
+    if cubic { Reconstruction::Cubic } else { Reconstruction::Linear }
 }
 
 fn tissues() -> Vec<Tissue> {

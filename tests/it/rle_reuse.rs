@@ -18,6 +18,7 @@ use shearwarp::data::phantom;
 use shearwarp::data::slices::SliceStack;
 use shearwarp::data::volume::Volume;
 use shearwarp::encode::rle::{Preclass, RleVolume};
+use shearwarp::kernels::Reconstruction;
 use shearwarp::render::{Method, Renderer, Settings};
 use shearwarp::view::{Camera, Factorization, Projection, permutation, reuse_permutation, rotate_eye};
 use shearwarp::warp::Image;
@@ -83,14 +84,21 @@ fn tf(seed: u64) -> TransferFunction {
 
 /// With reuse the images equal the separate encodings' within 1e-5 per
 /// channel, over random volumes (anisotropic too) and views of every axis in
-/// both slice orders, blend and iso, early termination off; the z views really
-/// read the mirrored permutation, and the iso depth follows it.
+/// both slice orders, blend and iso, early termination off, with the cubic
+/// reconstruction's normal codes too (a voxel's code is the same from every
+/// axis's stack); the z views really read the mirrored permutation, and the
+/// iso depth follows it.
 #[test]
 fn reuse_equals_separate_encodings_deluxe() {
-    for (seed, dims, sp) in [(3u64, [19, 23, 17], [1.0f32; 3]), (11, [16, 13, 26], [1.0, 0.7, 1.6]), (29, [9, 31, 12], [0.8, 1.0, 1.3])] {
+    for (seed, dims, sp, reconstruction) in [
+        (3u64, [19, 23, 17], [1.0f32; 3], Reconstruction::Linear),
+        (11, [16, 13, 26], [1.0, 0.7, 1.6], Reconstruction::Linear),
+        (29, [9, 31, 12], [0.8, 1.0, 1.3], Reconstruction::Linear),
+        (11, [16, 13, 26], [0.7, 0.7, 2.5], Reconstruction::Cubic),
+    ] {
         let vol = blobs(dims, seed, sp);
         for mode in [Mode::Blend, Mode::Iso] {
-            let base = Settings { method: Method::Rle, mode, ert: 1.0, threads: 2, ..Settings::default() };
+            let base = Settings { method: Method::Rle, mode, ert: 1.0, threads: 2, reconstruction, ..Settings::default() };
             let t = tf(seed);
             let mut sep = Renderer::new(vol.clone(), &t, base).unwrap();
             let mut reu = Renderer::new(vol.clone(), &t, Settings { rle_reuse: true, ..base }).unwrap();

@@ -12,7 +12,12 @@
 //!   ([`crate::data::slices::SliceStack::gradient_at`]) mapped to object (world) space with the voxel
 //!   spacing, up to sign because the headlight shading is two-sided; code
 //!   [`crate::data::normals::ZERO_NORMAL`] is a zero gradient, which faces the viewer like
-//!   [`crate::classify::shading::headlight_ndl`]'s.
+//!   [`crate::classify::shading::headlight_ndl`]'s. Under the cubic
+//!   reconstruction ([`crate::render::Settings::reconstruction`]) the gradient is
+//!   instead the cubic's B-spline gradient along the volume's z at the voxel
+//!   ([`crate::data::normals::cubic_voxel_normal`], read through
+//!   [`crate::data::normals::StackNormals`] by the encoder and the brute force
+//!   alike), which terraces less on thick slices; the samples stay as below.
 //! - [`RleVolume`]: one principal axis's encoding. Every scanline (row `j` of
 //!   slice `k`, along `i`) is a list of `(transparent, non-transparent)` run-length
 //!   pairs (u16; the transparent run after the last pair is implicit), and only

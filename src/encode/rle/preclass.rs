@@ -26,7 +26,8 @@ pub const BRIDGE_NORMAL: u16 = u16::MAX;
 pub struct RleVoxel {
     /// Classifier table node of the voxel's density: indexes its raw opacity and colour.
     pub class: u16,
-    /// Hemi-octahedral code of its object-space gradient direction ([`crate::data::normals::ZERO_NORMAL`] if none).
+    /// Hemi-octahedral code of its object-space gradient direction ([`crate::data::normals::ZERO_NORMAL`] if none):
+    /// the [`VoxelSource`]'s normal.
     pub normal: u16,
 }
 

@@ -601,10 +601,20 @@ fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool,
     // ray (p0 + dp, q)'s base index is the row's plus dp
     let rb0 = p0 + f.n0 * q;
     let ray = |dp: usize| LeanRay { p: p0 + dp, q, rb: rb0 + dp };
+    // with super cells the rays of a super cell read one column: its first
+    // matching slot is found once, for the first of them
+    let mut shared: Option<(usize, Walk<W>)> = None;
     for (g, (cg, dg)) in crow.chunks_mut(GROUP).zip(drow.chunks_mut(GROUP)).enumerate() {
         let pending = &mut pending[..cg.len()];
         for (dp, r) in pending.iter_mut().enumerate() {
-            let mut walk = f.first::<S, ASC, ONE>(s, row.start, row.nw);
+            let mut walk = match shared {
+                Some((start, walk)) if CHECKED && start == row.start => walk,
+                _ => {
+                    let walk = f.first::<S, ASC, ONE>(s, row.start, row.nw);
+                    shared = CHECKED.then_some((row.start, walk));
+                    walk
+                }
+            };
             r.k = usize::MAX;
             if walk.cur != W::ZERO {
                 let k = f.take::<ASC, ONE>(&mut walk);

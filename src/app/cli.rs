@@ -294,7 +294,11 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     }
     if cmd.render.reconstruction.is_none() && thick_slices(spacing) {
         let s = r.settings();
-        if s.mode == shearwarp::Mode::Iso && s.method.is_raycast() && !s.deluxe.intermediate {
+        // the raycast paths' iso hit, or the RLE paths' normal codes (either
+        // mode: their shading reads them), where the method renders it
+        let raycast = s.mode == shearwarp::Mode::Iso && s.method.is_raycast();
+        let rle = s.method.is_rle() && s.lattice == shearwarp::render::Lattice::Cartesian;
+        if (raycast || rle) && !s.deluxe.intermediate {
             r.set_settings(Settings { reconstruction: shearwarp::kernels::Reconstruction::Cubic, ..s })?;
         }
     }

@@ -480,7 +480,10 @@ fn render_takes_the_cubic_for_thick_slices() {
     let thick = ["render", "--phantom", "ellipsoid", "--phantom-spacing", "0.6,0.6,5", "--iso", "100"];
     assert_eq!(recon(&thick), "cubic");
     assert_eq!(recon(&[&thick[..], &["--reconstruction", "linear"]].concat()), "linear");
-    assert_eq!(recon(&[&thick[..], &["--method", "rle"]].concat()), "linear");
+    assert_eq!(recon(&[&thick[..], &["--method", "rle"]].concat()), "cubic");
+    assert_eq!(recon(&[&thick[..], &["--method", "rle", "--deluxe", "P", "--mode", "blend"]].concat()), "cubic");
+    assert_eq!(recon(&[&thick[..], &["--method", "rle", "--deluxe", "I"]].concat()), "linear");
+    assert_eq!(recon(&[&thick[..], &["--method", "rle", "--grid", "bcc"]].concat()), "linear");
     assert_eq!(recon(&["render", "--phantom", "ellipsoid", "--phantom-spacing", "1,1,1.4", "--iso", "100"]), "linear");
     assert_eq!(recon(&["render", "--phantom", "sphere", "--iso", "100"]), "linear");
 }

@@ -126,6 +126,22 @@ struct Walk<W: Word> {
     left: usize,
 }
 
+impl<W: Word> Walk<W> {
+    /// Moves on by `n` of the words left, in walking order (`slots` slices
+    /// a word); the current word's slots are the caller's to set.
+    #[inline(always)]
+    fn pass<const ASC: bool>(&mut self, n: usize, slots: usize) {
+        self.left -= n;
+        if ASC {
+            self.w += n;
+            self.kbase += n * slots;
+        } else {
+            self.w -= n;
+            self.kbase -= n * slots;
+        }
+    }
+}
+
 /// A ray of a group between the two passes: its walk after its first
 /// candidate, that candidate's slice `k` and stack index `b` (`usize::MAX`:
 /// its cell is outside the volume; `k == usize::MAX`: no candidate).
@@ -304,14 +320,7 @@ impl<W: Word> Frame<'_, W> {
             if walk.left == 0 {
                 return false;
             }
-            walk.left -= 1;
-            if ASC {
-                walk.w += 1;
-                walk.kbase += self.slots;
-            } else {
-                walk.w -= 1;
-                walk.kbase -= self.slots;
-            }
+            walk.pass::<ASC>(1, self.slots);
             walk.cur = self.hits::<ONE>(self.word(walk.w));
         }
         true
@@ -732,14 +741,7 @@ impl Sampler for Avx2 {
             if unsafe { f.m.any_hits4(words.add(at)) } {
                 return;
             }
-            walk.left -= 4;
-            if ASC {
-                walk.w += 4;
-                walk.kbase += 4 * f.slots;
-            } else {
-                walk.w -= 4;
-                walk.kbase -= 4 * f.slots;
-            }
+            walk.pass::<ASC>(4, f.slots);
         }
     }
 }

@@ -10,8 +10,7 @@
 use super::settings::{Lattice, Normals, Settings, WordSize};
 use super::stats::BuildTimes;
 use super::{MAX_INTERMEDIATE_PIXELS, MAX_MASK_BYTES, Renderer};
-use crate::kernels::reconstruct::Reconstruction;
-pub(super) use crate::kernels::reconstruct::cubic_axis;
+use crate::kernels::reconstruct::{Reconstruction, cubic_axis};
 
 use std::time::Instant;
 

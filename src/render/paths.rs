@@ -5,7 +5,6 @@ use super::{FrameStats, Lattice, Method, Normals, Renderer, Settings};
 
 use std::time::Instant;
 
-use super::axes::cubic_axis;
 use crate::classify::Classifier;
 use crate::classify::shade_table::{ShadeTable, headlight_object};
 use crate::composite::lean::LeanFrame;
@@ -20,7 +19,7 @@ use crate::encode::depth::{Matcher, binary_matcher};
 use crate::encode::mask::ShearWork;
 use crate::encode::walk::Drift;
 use crate::error::Result;
-use crate::kernels::reconstruct::Reconstruction;
+use crate::kernels::reconstruct::{Reconstruction, cubic_axis};
 use crate::view::plan::{FramePlan, MapKind};
 
 impl Renderer {

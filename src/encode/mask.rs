@@ -202,6 +202,36 @@ macro_rules! by_column_length {
     };
 }
 
+/// Runs `$body` with the constant `$c` set to [`column_chunk`]`($nw)`: the
+/// chunk in which the `_chunks` kernels build columns longer than
+/// [`by_column_length!`]'s.
+macro_rules! by_column_chunk {
+    ($nw:expr, $c:ident => $body:expr) => {
+        match column_chunk($nw) {
+            16 => {
+                const $c: usize = 16;
+                $body
+            }
+            8 => {
+                const $c: usize = 8;
+                $body
+            }
+            4 => {
+                const $c: usize = 4;
+                $body
+            }
+            2 => {
+                const $c: usize = 2;
+                $body
+            }
+            _ => {
+                const $c: usize = 1;
+                $body
+            }
+        }
+    };
+}
+
 impl<W: Word> BinaryMask<W> {
     /// Builds the 1-bit mask of `stack` (cell size 1): cell `(ci, cj, k)` is set
     /// when `visible(lo, hi)` for the range `[lo, hi]` of its four corner densities.
@@ -702,23 +732,32 @@ impl<W: Word> BinaryMask<W> {
 
     /// `new[q] = old[q] & keep | old[q−1] & up | old[q+1] & down` over the rect
     /// ([`BinaryMask::row_bands`]); columns of 1 to 16 words run with the
-    /// column length fixed at compile time.
+    /// column length fixed at compile time, longer ones a chunk of words at a
+    /// time ([`shift_row_chunks`]).
     fn shift_rows(&mut self, r: Rect) -> u64 {
         let nw = self.nw;
         let (up, down, keep) = (std::mem::take(&mut self.up), std::mem::take(&mut self.down), std::mem::take(&mut self.keep));
         let avx2 = self.cpu.has_avx2();
         let words = by_column_length!(nw, N => self.row_bands::<1>(r, |row, [next, _], [prev, _]| {
-                #[cfg(target_arch = "x86_64")]
-                if avx2 {
-                    // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
-                    // so AVX2 was detected at run time.
-                    unsafe { shift_row_n_avx2::<W, N>(row, next, prev, &up, &down, &keep) };
-                    return;
-                }
-                let _ = avx2;
-                shift_row_n::<W, N>(row, next, prev, &up, &down, &keep)
-            }),
-            _ => self.row_bands::<1>(r, |row, [next, _], [prev, _]| shift_row_any(row, next, prev, nw, &up, &down, &keep)));
+            #[cfg(target_arch = "x86_64")]
+            if avx2 {
+                // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
+                // so AVX2 was detected at run time.
+                unsafe { shift_row_n_avx2::<W, N>(row, next, prev, &up, &down, &keep) };
+                return;
+            }
+            let _ = avx2;
+            shift_row_n::<W, N>(row, next, prev, &up, &down, &keep)
+        }),
+        _ => by_column_chunk!(nw, C => self.row_bands::<1>(r, |row, [next, _], [prev, _]| {
+            #[cfg(target_arch = "x86_64")]
+            if avx2 {
+                // SAFETY: as above.
+                unsafe { shift_row_chunks_avx2::<W, C>(row, next, prev, nw, [&up, &down, &keep]) };
+                return;
+            }
+            shift_row_chunks::<W, C>(row, next, prev, nw, [&up, &down, &keep])
+        })));
         (self.up, self.down, self.keep) = (up, down, keep);
         words
     }
@@ -884,7 +923,8 @@ impl<W: Word> BinaryMask<W> {
     /// and after the band are copied before any band moves, and rows outside
     /// the rectangle read as zero. A row looks up once where the old row of
     /// each distance its slots move by is, then builds each column in
-    /// registers from those rows ([`move_row_n`]) and writes it once. The
+    /// registers from those rows ([`move_row_n`]; a column longer than 16
+    /// words a chunk at a time, [`move_row_chunks`]) and writes it once. The
     /// steps' words, and the direct shear's (tested against both).
     fn move_rows(&mut self, target: &[i32]) -> u64 {
         let Some(r) = self.move_rect(1, target) else {
@@ -995,17 +1035,26 @@ impl<W: Word> BinaryMask<W> {
                     move_row_n::<W, N>(row, srcs)
                 },
                 _ => {
-                    row.fill(W::ZERO);
+                    // longer columns: built a chunk of words at a time
+                    let mut srcs: [MoveSourceAny<W>; SPAN] = [(&[], &[]); SPAN];
+                    let mut used_n = 0;
                     for i in used() {
                         if let Some(src) = source(i) {
-                            let mk = &masks[i * nw..][..nw];
-                            for (out, old) in row.chunks_exact_mut(nw).zip(src.chunks_exact(nw)) {
-                                for w in 0..nw {
-                                    out[w] |= old[w] & mk[w];
-                                }
-                            }
+                            srcs[used_n] = (src, &masks[i * nw..][..nw]);
+                            used_n += 1;
                         }
                     }
+                    let srcs = &srcs[..used_n];
+                    by_column_chunk!(nw, C => {
+                        #[cfg(target_arch = "x86_64")]
+                        if avx2 {
+                            // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
+                            // so AVX2 was detected at run time.
+                            unsafe { move_row_chunks_avx2::<W, C>(row, nw, srcs) };
+                            continue;
+                        }
+                        move_row_chunks::<W, C>(row, nw, srcs)
+                    })
                 });
             }
         });
@@ -1522,6 +1571,25 @@ mod tests {
             check_one_pass::<u32>([17, 16, 75], 2, 3),
         ];
         assert!(n[2] >= 10 && n[3] >= 10 && n.iter().sum::<u32>() >= 40, "jumps along i in one pass: {n:?}");
+    }
+
+    /// Depth rows longer than the fixed column lengths (17 to 66 words)
+    /// move and step a chunk of words at a time ([`column_chunk`]): at every
+    /// chunk size, in one pass and in single steps, in bands on two
+    /// threads, the words end as the scatter's.
+    #[test]
+    fn long_depth_rows_equal_the_direct_shear() {
+        // (slices, code width, word bits, the chunk its rows take)
+        let cases: [(usize, u32, u32, usize); 5] = [(1024, 2, 64, 16), (384, 4, 64, 8), (320, 2, 32, 4), (1100, 1, 64, 2), (520, 4, 64, 1)];
+        for (nk, nb, bits, chunk) in cases {
+            let nw = nk.div_ceil((bits / nb) as usize);
+            assert!(nw > 16 && column_chunk(nw) == chunk, "{nk} slices of {nb} bits: {nw} words");
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+            pool.install(|| match bits {
+                32 => check_one_pass::<u32>([7, 6, nk], nb, 1),
+                _ => check_one_pass::<u64>([6, 7, nk], nb, 1),
+            });
+        }
     }
 
     /// The moves along j run in bands of grid rows, one a thread

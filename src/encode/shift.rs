@@ -192,6 +192,82 @@ pub(crate) fn move_row_n<W: Word, const N: usize>(row: &mut [[W; N]], srcs: &[Mo
     }
 }
 
+/// The chunk, in words, in which the `_chunks` kernels build a column of `nw`
+/// words, for columns longer than the fixed lengths (1 to 16): the largest of
+/// 16, 8, 4, 2 and 1 that divides `nw`.
+pub(crate) fn column_chunk(nw: usize) -> usize {
+    [16, 8, 4, 2].into_iter().find(|c| nw.is_multiple_of(*c)).unwrap_or(1)
+}
+
+/// A source of [`move_row_chunks`]: an old row and, per word of a column,
+/// the slots taken from it.
+pub(crate) type MoveSourceAny<'a, W> = (&'a [W], &'a [W]);
+
+/// [`move_row_n`] for columns of any length `nw`, a multiple of `C`
+/// ([`column_chunk`]): each column built in chunks of `C` words, each chunk
+/// in registers from every source and written once.
+#[inline(always)]
+pub(crate) fn move_row_chunks<W: Word, const C: usize>(row: &mut [W], nw: usize, srcs: &[MoveSourceAny<W>]) {
+    debug_assert!(nw.is_multiple_of(C));
+    for (c, column) in row.chunks_exact_mut(nw).enumerate() {
+        for (h, out) in column.as_chunks_mut::<C>().0.iter_mut().enumerate() {
+            let (at, w0) = (c * nw + h * C, h * C);
+            let mut acc = [W::ZERO; C];
+            for &(src, slots) in srcs {
+                let (s, m): (&[W; C], &[W; C]) = (fixed(&src[at..]), fixed(&slots[w0..]));
+                for w in 0..C {
+                    acc[w] |= s[w] & m[w];
+                }
+            }
+            *out = acc;
+        }
+    }
+}
+
+/// [`move_row_chunks`] compiled for AVX2. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn move_row_chunks_avx2<W: Word, const C: usize>(row: &mut [W], nw: usize, srcs: &[MoveSourceAny<W>]) {
+    move_row_chunks::<W, C>(row, nw, srcs)
+}
+
+/// [`shift_row_n`] for columns of any length `nw`, a multiple of `C`
+/// ([`column_chunk`]), a chunk of `C` words at a time.
+#[inline(always)]
+pub(crate) fn shift_row_chunks<W: Word, const C: usize>(row: &mut [W], next: &[W], prev: &mut [W], nw: usize, [up, down, keep]: [&[W]; 3]) {
+    debug_assert!(nw.is_multiple_of(C));
+    let zero = [W::ZERO; C];
+    for (c, (cw, pw)) in row.chunks_exact_mut(nw).zip(prev.chunks_exact_mut(nw)).enumerate() {
+        let (cw, pw) = (cw.as_chunks_mut::<C>().0, pw.as_chunks_mut::<C>().0);
+        for (h, (cw, pw)) in cw.iter_mut().zip(pw.iter_mut()).enumerate() {
+            let w0 = h * C;
+            // past the grid's last row: the row below reads as zero
+            let nx: &[W; C] = if next.is_empty() { &zero } else { fixed(&next[c * nw + w0..]) };
+            let (u, d, k): (&[W; C], &[W; C], &[W; C]) = (fixed(&up[w0..]), fixed(&down[w0..]), fixed(&keep[w0..]));
+            for w in 0..C {
+                let old = cw[w];
+                cw[w] = (old & k[w]) | (pw[w] & u[w]) | (nx[w] & d[w]);
+                pw[w] = old;
+            }
+        }
+    }
+}
+
+/// [`shift_row_chunks`] compiled for AVX2. Callers must hold a
+/// [`CpuLevel`] with AVX2 that is at most [`kernels::detected`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn shift_row_chunks_avx2<W: Word, const C: usize>(
+    row: &mut [W],
+    next: &[W],
+    prev: &mut [W],
+    nw: usize,
+    masks: [&[W]; 3],
+) {
+    shift_row_chunks::<W, C>(row, next, prev, nw, masks)
+}
+
 /// [`move_row_n`] compiled for AVX2. Callers must hold a [`CpuLevel`] with
 /// AVX2 that is at most [`kernels::detected`].
 #[cfg(target_arch = "x86_64")]
@@ -245,18 +321,6 @@ pub(crate) unsafe fn shift_row_n_avx2<W: Word, const N: usize>(
     keep: &[W],
 ) {
     shift_row_n::<W, N>(row, next, prev, up, down, keep)
-}
-
-/// [`shift_row_n`] for any column length `nw`.
-pub(crate) fn shift_row_any<W: Word>(row: &mut [W], next: &[W], prev: &mut [W], nw: usize, up: &[W], down: &[W], keep: &[W]) {
-    for (c, (cw, pw)) in row.chunks_exact_mut(nw).zip(prev.chunks_exact_mut(nw)).enumerate() {
-        for w in 0..nw {
-            let old = cw[w];
-            let nx = if next.is_empty() { W::ZERO } else { next[c * nw + w] };
-            cw[w] = (old & keep[w]) | (pw[w] & up[w]) | (nx & down[w]);
-            pw[w] = old;
-        }
-    }
 }
 
 /// Per-word shift vectors for one step along one axis, for rows of `nb`-bit

@@ -21,6 +21,17 @@ fn tissues(scale: f32) -> Vec<Tissue> {
     crate::common::three_tissues(scale, 1.0, [0.5, 0.9])
 }
 
+/// Four presets (as many as the CT presets): five levels, so 4-bit codes.
+fn four_tissues(scale: f32) -> Vec<Tissue> {
+    let mut t = tissues(scale);
+    let mut top = t[2].clone();
+    top.name = "d";
+    top.threshold = 210.0 * scale;
+    top.tf = TransferFunction::threshold(top.threshold, [0.4, 0.6, 0.8]);
+    t.push(top);
+    t
+}
+
 /// What a frame produced: the final image, the whole intermediate grid
 /// (transparent outside the valid rectangle) and its depths, as bits.
 struct Frame {
@@ -53,6 +64,11 @@ fn renderer(vol: &Volume, tissue: Option<usize>, s: Settings) -> Renderer {
             let tf = TransferFunction::threshold(90.0 * scale, [0.9, 0.8, 0.7]);
             Renderer::new(vol.clone(), &tf, s).unwrap()
         }
+        Some(i) if i >= FOUR => {
+            let mut r = Renderer::with_tissues(vol.clone(), &four_tissues(scale), s).unwrap();
+            r.select_tissue(i - FOUR).unwrap();
+            r
+        }
         Some(i) => {
             let mut r = Renderer::with_tissues(vol.clone(), &tissues(scale), s).unwrap();
             r.select_tissue(i).unwrap();
@@ -60,6 +76,9 @@ fn renderer(vol: &Volume, tissue: Option<usize>, s: Settings) -> Renderer {
         }
     }
 }
+
+/// `Some(FOUR + i)` selects tissue `i` of [`four_tissues`] in [`check`].
+const FOUR: usize = 100;
 
 /// Renders `frames` views with the lean frame, the general ray loop and the
 /// brute force and asserts the three equal bit for bit (intermediate image,
@@ -165,6 +184,25 @@ fn lean_frame_over_long_depth_rows() {
         for tissue in [None, Some(0), Some(1), Some(2)] {
             for (word, cell, threads) in [(WordSize::U64, 1, 1), (WordSize::U64, 2, 2), (WordSize::U32, 1, 2)] {
                 covered += check(&vol, tissue, Settings { word, cell, threads, ..Settings::default() }, &cams);
+            }
+        }
+    }
+    assert!(covered > 5_000, "only {covered} covered pixels");
+}
+
+/// Four presets (as many as the CT presets) take 4-bit codes: at depth rows
+/// of 5 to 33 code words (the longer ones sheared a chunk of words at a
+/// time), u64 and u32 words, cell sizes 1 and 2, one and two threads, every
+/// preset, the lean frame equals the general path and the brute force.
+#[test]
+fn lean_frame_over_four_bit_codes() {
+    let mut covered = 0;
+    for (i, nk) in [70usize, 300, 520].into_iter().enumerate() {
+        let vol = random_volume([13, 11, nk], 0xc0de + i as u64, [1.0; 3]);
+        let cams = [cam(0.0, 0.0, 0.0), cam(0.0, std::f64::consts::PI, 0.2), cam(0.12, -0.15, 0.1), cam(-0.1, 3.0, 0.5)];
+        for tissue in 0..4 {
+            for (word, cell, threads) in [(WordSize::U64, 1, 1), (WordSize::U64, 2, 2), (WordSize::U32, 2, 1)] {
+                covered += check(&vol, Some(FOUR + tissue), Settings { word, cell, threads, ..Settings::default() }, &cams);
             }
         }
     }

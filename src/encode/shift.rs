@@ -3,9 +3,11 @@
 //! by −2..=+2 (two fused steps; five vectors).
 //!
 //! Each kernel is compiled for the column lengths it is called with (`N`
-//! words per depth row, 1 to [`crate::encode::mask::MAX_FIXED_COLUMN`]), with
-//! a general loop beside it for longer columns, and every fixed-length kernel
-//! has an AVX2 copy (`*_avx2`, `#[target_feature(enable = "avx2")]`) whose body
+//! words per depth row, 1 to [`crate::encode::mask::MAX_FIXED_COLUMN`]). For
+//! longer columns (4-bit preset codes on 512 slices: 32 words) the one-pass
+//! move along j and the single step along j build each column a chunk of
+//! `column_chunk` words at a time (`*_chunks`); the other kernels keep a
+//! general loop. Every fixed-length and chunked kernel has an AVX2 copy (`*_avx2`, `#[target_feature(enable = "avx2")]`) whose body
 //! is the plain one: [`crate::encode::mask::BinaryMask`] picks between them by
 //! its [`crate::kernels::CpuLevel`], and the invariant tests compare every
 //! level with the scalar kernels word for word.

@@ -207,28 +207,7 @@ macro_rules! by_column_length {
 /// [`by_column_length!`]'s.
 macro_rules! by_column_chunk {
     ($nw:expr, $c:ident => $body:expr) => {
-        match column_chunk($nw) {
-            16 => {
-                const $c: usize = 16;
-                $body
-            }
-            8 => {
-                const $c: usize = 8;
-                $body
-            }
-            4 => {
-                const $c: usize = 4;
-                $body
-            }
-            2 => {
-                const $c: usize = 2;
-                $body
-            }
-            _ => {
-                const $c: usize = 1;
-                $body
-            }
-        }
+        by_column_length!(@arms column_chunk($nw), $c, $body, unreachable!("a chunk of 16, 8, 4, 2 or 1 words"), [16 8 4 2 1])
     };
 }
 

@@ -167,11 +167,12 @@ fn lean_frame_at_word_boundaries() {
     assert!(covered > 10_000, "only {covered} covered pixels");
 }
 
-/// Depth rows of many words (up to 17 u64 words of two-bit codes) with long
+/// Depth rows of many words (up to 17 u64 words of two-bit codes, 33 of the
+/// four presets' 4-bit codes, sheared a chunk of words at a time) with long
 /// empty stretches before and between the blobs, seen along the long axis
 /// both ways: the walk's four-word skips (AVX2 level) give the general
-/// path's and the brute force's image, for one iso value and each preset,
-/// u32 and u64 words, cell sizes 1 and 2, one and two threads.
+/// path's and the brute force's image, for one iso value and each preset of
+/// three and of four, u32 and u64 words, cell sizes 1 and 2, one and two threads.
 #[test]
 fn lean_frame_over_long_depth_rows() {
     let mut covered = 0;
@@ -181,28 +182,10 @@ fn lean_frame_over_long_depth_rows() {
         for c in &cams {
             assert_eq!(Factorization::new(c, vol.dims(), vol.spacing()).unwrap().axis, 2);
         }
-        for tissue in [None, Some(0), Some(1), Some(2)] {
+        let four = (0..4).map(|t| Some(FOUR + t));
+        for tissue in [None, Some(0), Some(1), Some(2)].into_iter().chain(four) {
             for (word, cell, threads) in [(WordSize::U64, 1, 1), (WordSize::U64, 2, 2), (WordSize::U32, 1, 2)] {
                 covered += check(&vol, tissue, Settings { word, cell, threads, ..Settings::default() }, &cams);
-            }
-        }
-    }
-    assert!(covered > 5_000, "only {covered} covered pixels");
-}
-
-/// Four presets (as many as the CT presets) take 4-bit codes: at depth rows
-/// of 5 to 33 code words (the longer ones sheared a chunk of words at a
-/// time), u64 and u32 words, cell sizes 1 and 2, one and two threads, every
-/// preset, the lean frame equals the general path and the brute force.
-#[test]
-fn lean_frame_over_four_bit_codes() {
-    let mut covered = 0;
-    for (i, nk) in [70usize, 300, 520].into_iter().enumerate() {
-        let vol = random_volume([13, 11, nk], 0xc0de + i as u64, [1.0; 3]);
-        let cams = [cam(0.0, 0.0, 0.0), cam(0.0, std::f64::consts::PI, 0.2), cam(0.12, -0.15, 0.1), cam(-0.1, 3.0, 0.5)];
-        for tissue in 0..4 {
-            for (word, cell, threads) in [(WordSize::U64, 1, 1), (WordSize::U64, 2, 2), (WordSize::U32, 2, 1)] {
-                covered += check(&vol, Some(FOUR + tissue), Settings { word, cell, threads, ..Settings::default() }, &cams);
             }
         }
     }

@@ -731,7 +731,8 @@ impl<W: Word> BinaryMask<W> {
         _ => by_column_chunk!(nw, C => self.row_bands::<1>(r, |row, [next, _], [prev, _]| {
             #[cfg(target_arch = "x86_64")]
             if avx2 {
-                // SAFETY: as above.
+                // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
+                // so AVX2 was detected at run time.
                 unsafe { shift_row_chunks_avx2::<W, C>(row, next, prev, nw, [&up, &down, &keep]) };
                 return;
             }
@@ -993,17 +994,24 @@ impl<W: Word> BinaryMask<W> {
                     // read only while `row` is written
                     Some(unsafe { std::slice::from_raw_parts(at.cast_const(), width) })
                 };
+                // the row's sources: each old row a distance reads, with the
+                // slots of each word that move from it
+                let mut any: [MoveSourceAny<W>; SPAN] = [(&[], &[]); SPAN];
+                let mut used_n = 0;
+                for i in used() {
+                    if let Some(src) = source(i) {
+                        any[used_n] = (src, &masks[i * nw..][..nw]);
+                        used_n += 1;
+                    }
+                }
+                let any = &any[..used_n];
                 by_column_length!(nw, N => {
                     let mut srcs: [MoveSource<W, N>; SPAN] = [(&[], fixed(&masks[..N])); SPAN];
-                    let mut used_n = 0;
-                    for i in used() {
-                        if let Some(src) = source(i) {
-                            srcs[used_n] = (src.as_chunks::<N>().0, fixed(&masks[i * nw..][..N]));
-                            used_n += 1;
-                        }
+                    for (to, &(src, slots)) in srcs.iter_mut().zip(any) {
+                        *to = (src.as_chunks::<N>().0, fixed(slots));
                     }
                     let (row, _) = row.as_chunks_mut::<N>();
-                    let srcs = &srcs[..used_n];
+                    let srcs = &srcs[..any.len()];
                     #[cfg(target_arch = "x86_64")]
                     if avx2 {
                         // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
@@ -1013,28 +1021,17 @@ impl<W: Word> BinaryMask<W> {
                     }
                     move_row_n::<W, N>(row, srcs)
                 },
-                _ => {
-                    // longer columns: built a chunk of words at a time
-                    let mut srcs: [MoveSourceAny<W>; SPAN] = [(&[], &[]); SPAN];
-                    let mut used_n = 0;
-                    for i in used() {
-                        if let Some(src) = source(i) {
-                            srcs[used_n] = (src, &masks[i * nw..][..nw]);
-                            used_n += 1;
-                        }
+                // longer columns: built a chunk of words at a time
+                _ => by_column_chunk!(nw, C => {
+                    #[cfg(target_arch = "x86_64")]
+                    if avx2 {
+                        // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
+                        // so AVX2 was detected at run time.
+                        unsafe { move_row_chunks_avx2::<W, C>(row, nw, any) };
+                        continue;
                     }
-                    let srcs = &srcs[..used_n];
-                    by_column_chunk!(nw, C => {
-                        #[cfg(target_arch = "x86_64")]
-                        if avx2 {
-                            // SAFETY: as in `shift_columns`: `self.cpu <= kernels::detected()`,
-                            // so AVX2 was detected at run time.
-                            unsafe { move_row_chunks_avx2::<W, C>(row, nw, srcs) };
-                            continue;
-                        }
-                        move_row_chunks::<W, C>(row, nw, srcs)
-                    })
-                });
+                    move_row_chunks::<W, C>(row, nw, any)
+                }));
             }
         });
         self.off[1].copy_from_slice(target);

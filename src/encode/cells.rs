@@ -130,6 +130,32 @@ impl PackedCodes {
             }
         }
     }
+    /// One-bit codes of the same rows: 1 where this code is at least `c`
+    /// (1..2^nb; a tissue preset's cells in a mask of threshold codes), a
+    /// word at a time (every field compared at once, the flags gathered
+    /// into `64 / nb` bits), in parallel over rows.
+    pub fn at_least(&self, c: u8) -> PackedCodes {
+        assert!(c >= 1 && (c as u32) < (1 << self.nb), "code {c} of {} bits", self.nb);
+        let rows = self.words.len().checked_div(self.row_words).unwrap_or(0);
+        let mut out = PackedCodes::new(1, self.len, rows);
+        if self.nb == 1 || out.row_words == 0 {
+            if self.nb == 1 {
+                out.words.clone_from(&self.words);
+            }
+            return out;
+        }
+        let (nb, rw, orw) = (self.nb, self.row_words, out.row_words);
+        let per = self.per();
+        // input words per output word
+        let group = 64 / per;
+        out.words.par_chunks_mut(orw).zip(self.words.par_chunks(rw)).for_each(|(o, row)| {
+            for (ow, ws) in o.iter_mut().zip(row.chunks(group)) {
+                *ow = ws.iter().enumerate().fold(0u64, |acc, (t, &w)| acc | field_flags(w, nb, c) << (t * per));
+            }
+        });
+        out
+    }
+
     /// The first and last non-zero cell of row `r`, if any.
     pub fn nonzero_span(&self, r: usize) -> Option<(usize, usize)> {
         let (nb, per) = (self.nb, self.per());
@@ -407,19 +433,7 @@ impl CellCodes {
         let mut bbox: Vec<Option<[usize; 4]>> = vec![None; self.nk];
         if s == 1 {
             // no dilation: the codes themselves, plus each slice's bounding box
-            if per > 0 {
-                let codes = &self.codes;
-                bbox.par_iter_mut().enumerate().for_each(|(k, bb)| {
-                    for cj in 0..cj_n {
-                        let Some((a, b)) = codes.nonzero_span(k * cj_n + cj) else { continue };
-                        *bb = Some(match *bb {
-                            None => [a, b, cj, cj],
-                            Some([p, q, r, _]) => [p.min(a), q.max(b), r, cj],
-                        });
-                    }
-                });
-            }
-            return (sc, self.codes.clone(), bbox);
+            return (sc, self.codes.clone(), slice_boxes(&self.codes, self.cells, self.nk));
         }
         let mut out = PackedCodes::new(self.nb, sc[0], sc[1] * self.nk);
         if per == 0 {
@@ -456,6 +470,26 @@ impl CellCodes {
     }
 }
 
+/// Per slice `k` of `codes` (rows `k·cells[1] …`, `cells[0]` long), the
+/// bounding box `[i0, i1, j0, j1]` of its non-zero codes, if any.
+pub(crate) fn slice_boxes(codes: &PackedCodes, cells: [usize; 2], nk: usize) -> Vec<Option<[usize; 4]>> {
+    let mut bbox: Vec<Option<[usize; 4]>> = vec![None; nk];
+    let cj_n = cells[1];
+    if cells[0] * cj_n == 0 {
+        return bbox;
+    }
+    bbox.par_iter_mut().enumerate().for_each(|(k, bb)| {
+        for cj in 0..cj_n {
+            let Some((a, b)) = codes.nonzero_span(k * cj_n + cj) else { continue };
+            *bb = Some(match *bb {
+                None => [a, b, cj, cj],
+                Some([p, q, r, _]) => [p.min(a), q.max(b), r, cj],
+            });
+        }
+    });
+    bbox
+}
+
 /// The `NB`-bit codes of `words` into `out`, one a byte (slot `t` of a word
 /// is bits `[t·NB, (t + 1)·NB)`, as in [`PackedCodes`]).
 #[inline]
@@ -469,6 +503,50 @@ fn unpack_words<const NB: u32>(words: &[u64], out: &mut [u8]) {
         for (t, x) in o.iter_mut().enumerate() {
             *x = ((w >> (t as u32 * NB)) & ((1 << NB) - 1)) as u8;
         }
+    }
+}
+
+/// Of the `64 / nb` `nb`-bit codes of `w` (`nb` 2 or 4), those at least `c`
+/// (`1 ≤ c < 2^nb`) as one bit each, code `t` at bit `t`.
+#[inline]
+pub(crate) fn field_flags(w: u64, nb: u32, c: u8) -> u64 {
+    const ONES: u64 = 0x0101_0101_0101_0101;
+    if nb == 2 {
+        // per 2-bit field v = (h, l): v ≥ 1 is h | l, v ≥ 2 is h, v ≥ 3 is h & l
+        let (l, h) = (w & 0x5555_5555_5555_5555, (w >> 1) & 0x5555_5555_5555_5555);
+        let f = match c {
+            1 => h | l,
+            2 => h,
+            _ => h & l,
+        };
+        return compress_every(f, 2);
+    }
+    // 4-bit fields: the even and the odd ones in byte lanes, where
+    // v + 0x80 − c reaches bit 7 exactly when v ≥ c (v ≤ 15, no carry out)
+    let bias = ONES * (0x80 - c as u64);
+    let lo = (((w & 0x0F0F_0F0F_0F0F_0F0F) + bias) >> 7) & ONES;
+    let hi = ((((w >> 4) & 0x0F0F_0F0F_0F0F_0F0F) + bias) >> 7) & ONES;
+    // field 2m's flag at bit 8m, field 2m + 1's at bit 8m + 4: each at its field's lowest bit
+    compress_every(lo | hi << 4, 4)
+}
+
+/// The bits of `x` at multiples of `nb` (2 or 4; the others zero) gathered
+/// into the low `64 / nb` bits.
+#[inline]
+fn compress_every(x: u64, nb: u32) -> u64 {
+    if nb == 2 {
+        let mut x = x & 0x5555_5555_5555_5555;
+        x = (x | x >> 1) & 0x3333_3333_3333_3333;
+        x = (x | x >> 2) & 0x0F0F_0F0F_0F0F_0F0F;
+        x = (x | x >> 4) & 0x00FF_00FF_00FF_00FF;
+        x = (x | x >> 8) & 0x0000_FFFF_0000_FFFF;
+        (x | x >> 16) & 0x0000_0000_FFFF_FFFF
+    } else {
+        let mut x = x & 0x1111_1111_1111_1111;
+        x = (x | x >> 3) & 0x0303_0303_0303_0303;
+        x = (x | x >> 6) & 0x000F_000F_000F_000F;
+        x = (x | x >> 12) & 0x0000_00FF_0000_00FF;
+        (x | x >> 24) & 0x0000_0000_0000_FFFF
     }
 }
 
@@ -493,6 +571,30 @@ fn next_down(x: f32, v: f64) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The one-bit codes "code ≥ c" of packed codes equal the comparison
+    /// cell by cell, for every width, code and row length.
+    #[test]
+    fn at_least_equals_the_comparison_of_each_code() {
+        let mut rnd = crate::testing::xorshift(0x13198A2E03707344);
+        for nb in [1u32, 2, 4] {
+            for len in [1usize, 15, 16, 17, 31, 32, 33, 64, 65, 130, 200] {
+                let rows = 4;
+                let plain: Vec<Vec<u8>> = (0..rows).map(|_| (0..len).map(|_| (rnd() % (1 << nb)) as u8).collect()).collect();
+                let mut p = PackedCodes::new(nb, len, rows);
+                p.chunks_mut(1).enumerate().for_each(|(r, o)| PackedCodes::pack_row(nb, &plain[r], o));
+                for c in 1..(1u8 << nb) {
+                    let one = p.at_least(c);
+                    assert_eq!((one.nb, one.len, one.row_words), (1, len, len.div_ceil(64)));
+                    for (r, row) in plain.iter().enumerate() {
+                        for (i, &v) in row.iter().enumerate() {
+                            assert_eq!(one.get(r, i), (v >= c) as u8, "{nb}-bit code {v} at ({r}, {i}) against {c}");
+                        }
+                    }
+                }
+            }
+        }
+    }
 
     /// Packing, reading and the non-zero walk agree with plain byte codes, for
     /// every width, row length (word boundaries included) and sub-range.

@@ -247,8 +247,61 @@ impl<W: Word> BinaryMask<W> {
         let s = s.clamp(1, MAX_CELL);
         let (vpad, pad, grid, nw) = Self::layout(codes.cells, codes.nk, codes.nb, s);
         let (cells, sc, bbox) = codes.supercells(s);
-        let nb = codes.nb;
-        let nk = codes.nk;
+        Self::with_codes(s, codes.nb, cells, codes.nk, [vpad, pad, nw], grid, sc, bbox, true)
+    }
+
+    /// The one-bit mask of the super cells whose code is at least `c`
+    /// (`1 ≤ c < 2^nb`), at the same cell size, layout *and shear*: each
+    /// depth row's slots compared at once, a word at a time, the unsheared
+    /// codes likewise ([`PackedCodes::at_least`]). It equals the mask
+    /// [`BinaryMask::from_codes`] packs from one-bit codes "code ≥ c" sheared
+    /// to the same state, since a super cell's code is the highest of its
+    /// cells'. With threshold codes, one tissue preset's mask: the same rays'
+    /// candidates as this mask with that preset's [`Matcher`], from a code
+    /// width's fraction of the words, and no shear to catch up.
+    pub fn at_least(&self, c: u8) -> Self {
+        let codes = std::sync::Arc::new(self.codes.at_least(c));
+        let bbox = crate::encode::cells::slice_boxes(&codes, self.cells, self.nk);
+        let nw = self.nk.div_ceil(W::BITS as usize).max(1);
+        let mut m = Self::with_codes(self.s, 1, self.cells, self.nk, [self.vpad, self.pad, nw], self.grid, codes, bbox, false);
+        m.off.clone_from(&self.off);
+        m.cpu = self.cpu;
+        m.fused = self.fused;
+        let (nb, cnw) = (self.nb, self.nw);
+        // one-bit slots per code word; slot 0 is the most significant bits
+        let per = W::BITS / nb;
+        m.words.par_chunks_mut(nw * self.grid[0]).zip(self.words.par_chunks(cnw * self.grid[0])).for_each(|(out, src)| {
+            for (o, row) in out.chunks_mut(nw).zip(src.chunks(cnw)) {
+                if row.iter().all(|w| *w == W::ZERO) {
+                    continue;
+                }
+                for (ow, ws) in o.iter_mut().zip(row.chunks(nb as usize)) {
+                    let bits = ws.iter().enumerate().fold(0u64, |acc, (g, w)| {
+                        acc | crate::encode::cells::field_flags(w.as_u64(), nb, c) << ((nb - 1 - g as u32) * per)
+                    });
+                    *ow = W::from_u64(bits);
+                }
+            }
+        });
+        m
+    }
+
+    /// A mask of super-cell codes `codes` (`cells` super cells along i and
+    /// j, `nk` slices of `nb` bits) and their slices' boxes, in a grid of
+    /// `grid` super columns: `[vpad, pad, nw]` as [`BinaryMask::layout`]
+    /// gives them; unsheared with `scatter`, else with every word zero.
+    #[allow(clippy::too_many_arguments)]
+    fn with_codes(
+        s: usize,
+        nb: u32,
+        cells: [usize; 2],
+        nk: usize,
+        [vpad, pad, nw]: [usize; 3],
+        grid: [usize; 2],
+        sc: std::sync::Arc<PackedCodes>,
+        bbox: Vec<Option<[usize; 4]>>,
+        scatter: bool,
+    ) -> Self {
         let mut m = BinaryMask {
             s,
             nb,
@@ -276,7 +329,9 @@ impl<W: Word> BinaryMask<W> {
             dist_masks: Vec::new(),
             occupancy: Default::default(),
         };
-        m.scatter();
+        if scatter {
+            m.scatter();
+        }
         m
     }
 
@@ -376,6 +431,11 @@ impl<W: Word> BinaryMask<W> {
     /// its own super-cell codes when the cell size is above 1.
     pub fn held_bytes(&self) -> usize {
         self.bytes() + if self.s > 1 { self.codes.bytes() } else { 0 }
+    }
+    /// Bytes of the super-cell codes it reads (shared with the cell codes at
+    /// cell size 1).
+    pub fn code_bytes(&self) -> usize {
+        self.codes.bytes()
     }
     /// The unsheared code of super cell `(si, sj, k)`.
     pub fn code(&self, si: usize, sj: usize, k: usize) -> u8 {
@@ -1566,6 +1626,45 @@ mod tests {
                 _ => check_one_pass::<u64>([6, 7, nk], nb, 1),
             });
         }
+    }
+
+    /// A tissue preset's one-bit mask ([`BinaryMask::at_least`]) of a code
+    /// mask sheared anywhere equals, word for word, the mask of the one-bit
+    /// codes "code ≥ c" sheared to the same state, and keeps equal to it
+    /// through further shears: for 2- and 4-bit codes, every code `c`, u32
+    /// and u64 words, depth rows of one word and of several (partial groups
+    /// of code words included), and super cells.
+    #[test]
+    fn a_presets_mask_equals_the_mask_of_its_one_bit_codes() {
+        fn check<W: Word>(n: [usize; 3], nb: u32, s: usize) {
+            let st = SliceStack::new(&blob(n, 29), 2);
+            let top = ((1u32 << nb) - 1) as f32;
+            let codes = CellCodes::build(&st, nb, |_, hi| (hi / 25.0).min(top) as u8);
+            let lim = ((n[2] - 1) / 2) as i64;
+            let at = |e: [i64; 2]| ShearState::from_ends(n[2], [0, 1].map(|a| [-e[a] as f64, e[a] as f64]));
+            for c in 1..(1u8 << nb) {
+                let ones = CellCodes::build(&st, 1, |_, hi| ((hi / 25.0).min(top) as u8 >= c) as u8);
+                let mut coded = BinaryMask::<W>::from_codes(&codes, s);
+                coded.shear_to(&at([lim / 2, -lim / 3]));
+                let mut one = coded.at_least(c);
+                assert_eq!((one.nb, one.nw, one.s), (1, n[2].div_ceil(W::BITS as usize), s));
+                let mut direct = BinaryMask::<W>::from_codes(&ones, s);
+                direct.shear_direct(&at([lim / 2, -lim / 3]));
+                assert_eq!(one.words, direct.words, "{n:?} {nb}-bit codes, cell {s}, code {c}: as built");
+                assert_eq!(one.codes, direct.codes);
+                assert_eq!(one.bbox, direct.bbox);
+                for e in [[lim / 2 + 1, -lim / 3 + 2], [-lim, lim], [0, 0]] {
+                    one.shear_to(&at(e));
+                    direct.shear_direct(&at(e));
+                    assert_eq!(one.words, direct.words, "{n:?} {nb}-bit codes, cell {s}, code {c}: sheared to {e:?}");
+                }
+            }
+        }
+        check::<u64>([9, 8, 40], 2, 1);
+        check::<u64>([10, 7, 300], 4, 1);
+        check::<u32>([8, 9, 70], 4, 1);
+        check::<u32>([7, 10, 50], 2, 2);
+        check::<u64>([12, 11, 90], 4, 3);
     }
 
     /// The moves along j run in bands of grid rows, one a thread

@@ -37,6 +37,9 @@ pub(super) struct Axes {
     pub(super) normals: [Option<NormalStack>; 3],
     pub(super) codes: [Option<(u64, CellCodes)>; 3],
     pub(super) masks: [Option<AxisMask>; 3],
+    /// Per axis, the current tissue preset's one-bit mask, packed from
+    /// [`Axes::masks`]' threshold codes ([`TissueMask`]).
+    pub(super) tissue: [Option<TissueMask>; 3],
     /// Classification, encodings and tables of the pre-classified paths.
     pub(super) rle: RleCache,
     /// Largest total of [`super::Renderer::memory`] a new structure may bring about.
@@ -64,6 +67,43 @@ impl AnyMask {
             AnyMask::W64(m) => m.set_cpu_level(cpu),
         }
     }
+    /// Bytes held beyond shared cell codes ([`BinaryMask::held_bytes`]).
+    pub(super) fn held_bytes(&self) -> usize {
+        match self {
+            AnyMask::W32(m) => m.held_bytes(),
+            AnyMask::W64(m) => m.held_bytes(),
+        }
+    }
+    /// Bytes of the words and the super-cell codes, shared or not.
+    fn own_bytes(&self) -> usize {
+        match self {
+            AnyMask::W32(m) => m.bytes() + m.code_bytes(),
+            AnyMask::W64(m) => m.bytes() + m.code_bytes(),
+        }
+    }
+    /// The one-bit mask of codes at least `c` ([`BinaryMask::at_least`]).
+    fn at_least(&self, c: u8) -> AnyMask {
+        match self {
+            AnyMask::W32(m) => AnyMask::W32(m.at_least(c)),
+            AnyMask::W64(m) => AnyMask::W64(m.at_least(c)),
+        }
+    }
+}
+
+/// One tissue preset's one-bit mask: the super cells whose threshold code
+/// is at least the preset's (`code`, its index + 1), packed from the code
+/// mask of `key`. A frame of that preset reads it instead of the code mask
+/// when it is current (no focus region, which needs two presets' codes):
+/// the same candidates, so the same image, from a code width's fraction of
+/// the words to shear and walk. A tissue switch leaves it stale and keeps
+/// O(1): the frames read the code mask until [`super::Renderer::prefetch_axis`]
+/// (an idle moment) builds the new preset's, and the code mask is not
+/// sheared while this one serves.
+#[derive(Debug)]
+pub(super) struct TissueMask {
+    pub(super) key: MaskKey,
+    pub(super) code: u8,
+    pub(super) mask: AnyMask,
 }
 
 /// What a cached mask was built for.
@@ -147,12 +187,33 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
     if settings.method.uses_mask() {
         let nb = code_bits.max(1);
         m.cell_codes[a] = PackedCodes::bytes_for(nb, cells[0], cells[1] * n[2]);
-        m.masks[a] = match settings.word {
-            WordSize::U32 => BinaryMask::<u32>::bytes_for(cells, n[2], nb, settings.cell),
-            WordSize::U64 => BinaryMask::<u64>::bytes_for(cells, n[2], nb, settings.cell),
-        };
+        let (code, tissue) = mask_parts(cells, n[2], nb, settings);
+        m.masks[a] = code + tissue;
     }
     m
+}
+
+/// The bytes of the code mask of `cells` cells and `nk` slices of `nb`-bit
+/// codes, and of its [`TissueMask`] (none for one-bit codes).
+fn mask_parts(cells: [usize; 2], nk: usize, nb: u32, settings: &Settings) -> (u64, u64) {
+    (code_mask_bytes(cells, nk, nb, settings), if nb > 1 { tissue_mask_bytes(cells, nk, settings) } else { 0 })
+}
+
+/// The bytes of a mask of `nb`-bit codes ([`BinaryMask::bytes_for`]).
+fn code_mask_bytes(cells: [usize; 2], nk: usize, nb: u32, settings: &Settings) -> u64 {
+    match settings.word {
+        WordSize::U32 => BinaryMask::<u32>::bytes_for(cells, nk, nb, settings.cell),
+        WordSize::U64 => BinaryMask::<u64>::bytes_for(cells, nk, nb, settings.cell),
+    }
+}
+
+/// The bytes of a [`TissueMask`]: a one-bit mask, and its own super-cell codes
+/// at every cell size.
+fn tissue_mask_bytes(cells: [usize; 2], nk: usize, settings: &Settings) -> u64 {
+    let s = settings.cell.clamp(1, crate::encode::mask::MAX_CELL);
+    let sc = crate::encode::cells::super_cells(cells, s);
+    let codes = PackedCodes::bytes_for(1, sc[0], sc[1] * nk);
+    code_mask_bytes(cells, nk, 1, settings) + if s == 1 { codes } else { 0 }
 }
 
 /// A pipeline's artefact that `ensure_axis` should have built is missing: an
@@ -195,9 +256,11 @@ impl Renderer {
         !self.volume.is_parked() && self.volume.data_handles() == 1
     }
 
-    /// Bytes of the packed masks that exist now.
+    /// Bytes of the packed masks' words that exist now (the presets' code
+    /// masks and the current preset's one-bit masks).
     pub fn mask_bytes(&self) -> usize {
-        self.axes.masks.iter().flatten().map(|m| m.mask.bytes()).sum()
+        let tissue: usize = self.axes.tissue.iter().flatten().map(|t| t.mask.bytes()).sum();
+        self.axes.masks.iter().flatten().map(|m| m.mask.bytes()).sum::<usize>() + tissue
     }
 
     /// Bytes of the run-length encodings that exist now, per axis.
@@ -231,10 +294,8 @@ impl Renderer {
             normals: per(&|a| self.axes.normals[a].as_ref().map_or(0, NormalStack::bytes)),
             cell_codes: per(&|a| self.axes.codes[a].as_ref().map_or(0, |c| c.1.bytes())),
             masks: per(&|a| {
-                self.axes.masks[a].as_ref().map_or(0, |m| match &m.mask {
-                    AnyMask::W32(m) => m.held_bytes(),
-                    AnyMask::W64(m) => m.held_bytes(),
-                })
+                self.axes.masks[a].as_ref().map_or(0, |m| m.mask.held_bytes())
+                    + self.axes.tissue[a].as_ref().map_or(0, |t| t.mask.own_bytes())
             }),
             rle: self.axes.rle.bytes().map(|b| b as u64),
             intermediate: self.inter.bytes() as u64,
@@ -271,9 +332,21 @@ impl Renderer {
         if self.axes.normals[axis].is_some() {
             m.normals[axis] = 0;
         }
-        if self.axes.masks[axis].as_ref().map(|m| m.key) == Some(self.mask_key()) {
-            m.masks[axis] = 0;
-            m.cell_codes[axis] = 0;
+        if self.settings.method.uses_mask() {
+            let dims = self.volume.dims();
+            let p = crate::view::permutation(axis);
+            let cells = [dims[p[0]].saturating_sub(1), dims[p[1]].saturating_sub(1)];
+            let (code, tissue) = mask_parts(cells, dims[p[2]], self.code_bits(), &self.settings);
+            let key = Some(self.mask_key());
+            if self.axes.masks[axis].as_ref().map(|m| m.key) == key {
+                m.masks[axis] -= code;
+                m.cell_codes[axis] = 0;
+            }
+            // (a stale preset's mask is replaced by one of the same size; none
+            // is built with the knob off)
+            if self.tissue_code().is_none() || self.axes.tissue[axis].as_ref().map(|t| t.key) == key {
+                m.masks[axis] -= tissue;
+            }
         }
         m.volume = 0;
         m.intermediate = m.intermediate.saturating_sub(self.inter.bytes() as u64);
@@ -291,6 +364,7 @@ impl Renderer {
         self.axes.normals[axis] = None;
         self.axes.codes[axis] = None;
         self.axes.masks[axis] = None;
+        self.axes.tissue[axis] = None;
         self.axes.rle.drop_axis(axis);
         Ok(())
     }
@@ -545,6 +619,8 @@ impl Renderer {
                     WordSize::U64 => AnyMask::W64(BinaryMask::from_codes(codes, key.cell)),
                 });
                 self.axes.masks[axis] = Some(AxisMask { key, mask });
+                // the current preset's own mask with it: this frame pays for a build anyway
+                self.build_tissue_mask(axis);
                 self.axes.build_times.masks[axis] = ms(t);
             }
             // the mask carries the settings' CPU level to its shear kernels and to
@@ -552,11 +628,46 @@ impl Renderer {
             if let Some(m) = self.axes.masks[axis].as_mut() {
                 m.mask.set_cpu_level(self.settings.cpu);
             }
+            if let Some(m) = self.axes.tissue[axis].as_mut() {
+                m.mask.set_cpu_level(self.settings.cpu);
+            }
         }
         if self.settings.method.is_rle() {
             self.ensure_rle(axis, false);
         }
         Ok(t.elapsed().as_secs_f64() * 1e3)
+    }
+
+    /// The threshold code of the current tissue preset when the masks hold
+    /// codes of more than one bit (a [`TissueMask`] then pays).
+    pub(super) fn tissue_code(&self) -> Option<u8> {
+        let ts = self.classes.tissues.as_ref()?;
+        (self.preset_masks && self.code_bits() > 1).then_some(ts.current as u8 + 1)
+    }
+
+    /// True when `axis` has the current preset's [`TissueMask`] for the
+    /// current code mask.
+    pub(super) fn tissue_mask_current(&self, axis: usize) -> bool {
+        let (Some(code), Some(t), Some(m)) = (self.tissue_code(), &self.axes.tissue[axis], &self.axes.masks[axis]) else { return false };
+        t.code == code && t.key == m.key && m.key == self.mask_key()
+    }
+
+    /// Builds the current preset's [`TissueMask`] of `axis` from its code
+    /// mask, if that is current and the preset's is not (the old preset's
+    /// mask goes first, so the two never coexist).
+    pub(super) fn build_tissue_mask(&mut self, axis: usize) {
+        let Some(code) = self.tissue_code() else {
+            self.axes.tissue[axis] = None;
+            return;
+        };
+        let key = self.mask_key();
+        let Some(m) = self.axes.masks[axis].as_ref().filter(|m| m.key == key) else { return };
+        if self.tissue_mask_current(axis) {
+            return;
+        }
+        self.axes.tissue[axis] = None;
+        let mask = self.pool.install(|| m.mask.at_least(code));
+        self.axes.tissue[axis] = Some(TissueMask { key, code, mask });
     }
 
     /// The pre-classified state of `axis`: the classification, and (for
@@ -625,12 +736,26 @@ impl Renderer {
     /// memory budget beside everything held now: unlike [`Renderer::prepare_axis`]
     /// it never frees another axis to make room (a prefetch that evicted the
     /// axis on screen would make the next frame rebuild it). Returns whether
-    /// the axis is built now.
+    /// the axis is built now. It also builds the current tissue preset's
+    /// one-bit mask, which a tissue switch (O(1): it builds nothing, and
+    /// neither does [`Renderer::prepare_axis`]) leaves stale: the frames read
+    /// the threshold-coded mask until then.
     pub fn prefetch_axis(&mut self, axis: usize) -> Result<bool> {
         let axis = axis.min(2);
         if !self.fits_budget(axis) {
             return Ok(false);
         }
-        self.ensure_axis(axis).map(|_| true)
+        self.ensure_axis(axis)?;
+        self.build_tissue_mask(axis);
+        Ok(true)
+    }
+
+    /// True when the frames along principal axis `axis` read the code mask
+    /// for want of the current tissue preset's own one-bit mask (after a
+    /// tissue switch): [`Renderer::prefetch_axis`] builds it.
+    pub fn preset_mask_pending(&self, axis: usize) -> bool {
+        let axis = axis.min(2);
+        let code_mask = self.axes.masks[axis].as_ref().is_some_and(|m| m.key == self.mask_key());
+        self.settings.method.uses_mask() && self.tissue_code().is_some() && code_mask && !self.tissue_mask_current(axis)
     }
 }

@@ -89,7 +89,11 @@ impl Renderer {
         self.classes.tissues.as_ref().map(|t| (t.tissues.as_slice(), t.current))
     }
 
-    /// Switches to tissue `i` of the set: O(1), no mask rebuild and no re-shear.
+    /// Switches to tissue `i` of the set: O(1), no mask rebuild. The frames
+    /// after it read the presets' threshold-coded mask (the first one shears
+    /// it to the view when the previous preset's own one-bit mask served the
+    /// frames before) until [`Renderer::prefetch_axis`] builds the new
+    /// preset's own mask.
     pub fn select_tissue(&mut self, i: usize) -> Result<()> {
         let ts = self.classes.tissues.as_mut().ok_or_else(|| Error::value("tissue", "this renderer has no tissue presets"))?;
         if i >= ts.tissues.len() {

@@ -6,7 +6,8 @@
 //! [`NormalStack`](crate::data::normals::NormalStack) (table shading) and one
 //! sheared mask per principal axis (each built only when a
 //! view first needs it, and rebuilt only when the classification or cell size
-//! changes), the reusable intermediate image and per-slice parameters, and a rayon
+//! changes; with tissue presets, also the current preset's one-bit mask
+//! packed from it, which that preset's frames read), the reusable intermediate image and per-slice parameters, and a rayon
 //! pool of the requested size. [`Renderer::render`] runs one frame and reports how
 //! long each stage took. The output is the same for any thread count: every pixel
 //! is computed by exactly one task from the same inputs. The pre-classified paths
@@ -98,6 +99,9 @@ pub struct Renderer {
     lean: LeanFrame,
     lean_cubic: LeanCubic,
     lean_on: bool,
+    /// Whether frames of a tissue preset read its own one-bit mask when it
+    /// is built ([`Renderer::set_preset_masks`]).
+    preset_masks: bool,
     inter: Intermediate,
     pool: rayon::ThreadPool,
 }
@@ -123,6 +127,7 @@ impl Renderer {
             lean: LeanFrame::default(),
             lean_cubic: LeanCubic::default(),
             lean_on: true,
+            preset_masks: true,
             inter: Intermediate::default(),
             pool,
         })
@@ -130,7 +135,11 @@ impl Renderer {
 
     /// A renderer that switches between `tissues` (1..=15 presets with distinct
     /// lower thresholds) in O(1): one mask of adaptive threshold codes serves
-    /// them all, so a switch changes a table, never the mask. Starts at tissue 0.
+    /// them all, so a switch changes a table, never the mask. The current
+    /// preset's frames read its own one-bit mask, packed from the code mask
+    /// when that is built and by [`Renderer::prefetch_axis`] after a switch
+    /// (the same image from a code width's fraction of the words;
+    /// [`Renderer::set_preset_masks`]). Starts at tissue 0.
     pub fn with_tissues(volume: Volume, tissues: &[Tissue], settings: Settings) -> Result<Self> {
         let first = tissues.first().ok_or_else(|| Error::value("tissues", "need at least one preset"))?;
         let mut r = Self::new(volume, &first.tf, settings)?;
@@ -195,6 +204,18 @@ impl Renderer {
     /// loop (`false`): the same image either way, a knob for comparisons.
     pub fn set_lean_frame(&mut self, on: bool) {
         self.lean_on = on;
+    }
+
+    /// Whether a tissue preset's frames read its own one-bit mask, packed
+    /// from the presets' threshold-coded mask when that is built and by
+    /// [`Renderer::prefetch_axis`] after a switch (`true`, the default), or
+    /// always the threshold-coded mask (`false`): the same image either way,
+    /// a knob for comparisons. Off, the one-bit masks are freed.
+    pub fn set_preset_masks(&mut self, on: bool) {
+        self.preset_masks = on;
+        if !on {
+            self.axes.tissue = [None, None, None];
+        }
     }
 
     /// Current settings.

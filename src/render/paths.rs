@@ -72,8 +72,20 @@ impl Renderer {
             _ => (None, matcher),
         };
         let settings = self.settings;
+        // the current preset's one-bit mask where it is current (a focus reads two presets' codes)
+        let one_bit = focus.is_none() && self.tissue_mask_current(axis);
+        if !one_bit && self.axes.tissue[axis].as_ref().is_some_and(|t| Some(t.code) != self.tissue_code()) {
+            // another preset's: stale until rebuilt for this one (and, left
+            // unsheared, a long shear to catch up if its preset came back)
+            self.axes.tissue[axis] = None;
+        }
+        let matcher = if one_bit { binary_matcher() } else { matcher };
         let classes = FrameClasses { cls, iso, focus };
-        let (inter, masks, rle) = (&mut self.inter, &mut self.axes.masks, &mut self.axes.rle);
+        let (inter, rle) = (&mut self.inter, &mut self.axes.rle);
+        let mask = match one_bit {
+            true => self.axes.tissue[axis].as_mut().map(|t| &mut t.mask),
+            false => self.axes.masks[axis].as_mut().map(|m| &mut m.mask),
+        };
         let (normals, shade) = (&self.axes.normals, &mut self.shade);
         let (lean, lean_cubic) = (&mut self.lean, &mut self.lean_cubic);
         // the lean binary iso frame, chosen once for the frame from its plan
@@ -91,8 +103,8 @@ impl Renderer {
             let t = Instant::now();
             let rect: Option<Rect> = match settings.method {
                 Method::Binary => {
-                    let m = masks[axis].as_mut().ok_or_else(|| missing("the sheared mask", axis))?;
-                    let w: ShearWork = match &mut m.mask {
+                    let mask = mask.ok_or_else(|| missing("the sheared mask", axis))?;
+                    let w: ShearWork = match mask {
                         AnyMask::W32(m) => m.shear_to(&plan.shear),
                         AnyMask::W64(m) => m.shear_to(&plan.shear),
                     };
@@ -100,7 +112,7 @@ impl Renderer {
                         // what the diverging rays' walks skip blocks by (rays
                         // that do not drift read the shear's fractions only)
                         let tables = !Drift::for_plan(plan).is_still();
-                        match &mut m.mask {
+                        match mask {
                             AnyMask::W32(m) => m.update_occupancy(matcher, &plan.shear, tables),
                             AnyMask::W64(m) => m.update_occupancy(matcher, &plan.shear, tables),
                         }
@@ -108,7 +120,8 @@ impl Renderer {
                     (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);
                     let scaled = plan.kind == MapKind::ScaleTranslate;
                     let cubic = settings.reconstruction == Reconstruction::Cubic && mode == Mode::Iso;
-                    let rect = match &m.mask {
+                    let mask: &AnyMask = mask;
+                    let rect = match mask {
                         // (a scaled plan's occupied-ray rectangle misses rays the cubic
                         // hits: the cubic casts every ray of the volume there)
                         _ if !settings.occupied_rect || (scaled && cubic) => volume_rect(plan, stack.cells()),
@@ -126,7 +139,7 @@ impl Renderer {
                     // the cubic along the slices when a ray moves farther than its codes
                     // assume (a perspective eye near the volume): every slice, as brute force
                     let walks = !cubic || cubic_axis(stack.perm()) != 2 || cubic_walks(plan);
-                    match (&m.mask, lean_frame) {
+                    match (mask, lean_frame) {
                         _ if !walks => render_brute(&ctx, volume_rect(plan, stack.cells()), inter),
                         (AnyMask::W32(m), _) if lean_cubic_frame => {
                             lean_cubic.render(&ctx, cubic_axis(stack.perm()), m, matcher, rect, inter)
@@ -141,6 +154,7 @@ impl Renderer {
                     }
                     stats.render_ms += t.elapsed().as_secs_f64() * 1e3;
                     stats.lean = (lean_frame || lean_cubic_frame) && walks;
+                    stats.preset_mask = one_bit;
                     rect
                 }
                 Method::Brute => {

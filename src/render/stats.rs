@@ -37,6 +37,10 @@ pub struct FrameStats {
     /// ([`crate::composite::lean`], or [`crate::composite::lean_cubic`]
     /// under the cubic reconstruction; every plan of the frame did).
     pub lean: bool,
+    /// True when the binary frame read the current tissue preset's own
+    /// one-bit mask rather than the presets' threshold-coded one (the same
+    /// image; see [`crate::render::Renderer::prefetch_axis`]).
+    pub preset_mask: bool,
     /// True when nothing changed since this renderer last wrote the same image,
     /// so nothing was rendered.
     pub skipped: bool,

@@ -313,7 +313,8 @@ fn focus_tissue_switches_rebuild_no_mask_and_no_encoding() {
         frame(&mut r, rot, 64);
         // (a structure built again would have a new build time)
         assert_eq!(format!("{:?}", r.build_times()), built, "switch {i} built something");
-        assert_eq!(r.mask_bytes(), bytes);
+        // (the first preset's own one-bit mask goes once the code mask serves another preset)
+        assert!(r.mask_bytes() <= bytes);
     }
     // rle with Deluxe P: the encoding keeps every preset's voxels
     let p = Deluxe { post: true, ..Deluxe::STANDARD };

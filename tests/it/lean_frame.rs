@@ -2,8 +2,9 @@
 //! the general ray loop's and the brute force's intermediate image and final
 //! image, bit for bit: over random volumes (f32, 8- and 16-bit: the three cell
 //! layouts), views, cell sizes, one transfer function or the tissue presets'
-//! threshold codes, u32 and u64 words, slice counts below and above one
-//! word, and 1, 2 or 3 threads.
+//! threshold codes (read from the presets' code mask and from the current
+//! preset's own one-bit mask), u32 and u64 words, slice counts below and
+//! above one word, and 1, 2 or 3 threads.
 
 use glam::{DMat3, EulerRot};
 use proptest::prelude::*;
@@ -91,11 +92,23 @@ pub(crate) fn check(vol: &Volume, tissue: Option<usize>, s: Settings, cams: &[Ca
     let mut general = renderer(vol, tissue, s);
     general.set_lean_frame(false);
     let mut brute = renderer(vol, tissue, Settings { method: Method::Brute, ..s });
+    // the presets' threshold-coded mask, where the others read the preset's own one-bit one
+    let mut coded = tissue.map(|_| {
+        let mut r = renderer(vol, tissue, s);
+        r.set_preset_masks(false);
+        r
+    });
     let mut covered = 0;
     for (f, cam) in cams.iter().enumerate() {
         let a = frame(&mut lean, cam);
         let b = frame(&mut general, cam);
         let c = frame(&mut brute, cam);
+        if let Some(r) = coded.as_mut() {
+            let d = frame(r, cam);
+            assert!(a.stats.preset_mask && !d.stats.preset_mask, "frame {f}: the preset's own mask and the code mask");
+            assert!(d.stats.lean, "frame {f}: the code mask's renderer took the general path");
+            assert!(a.inter == d.inter && a.image == d.image, "frame {f}: the preset's own mask and the code mask differ");
+        }
         assert!(a.stats.lean, "frame {f}: the lean renderer took the general path");
         assert!(!b.stats.lean, "frame {f}: the general renderer took the lean path");
         assert!(a.inter == b.inter, "frame {f}: lean and general intermediate images differ");

@@ -11,7 +11,8 @@ use shearwarp::data::slices::SliceStack;
 use shearwarp::data::volume::{Volume, VoxelData};
 use shearwarp::encode::depth::{Matcher, Search, SetBits};
 use shearwarp::encode::mask::{BinaryMask, CellCodes};
-use shearwarp::render::{Method, Renderer, Settings, WordSize};
+use shearwarp::render::{Focus, Method, Renderer, Settings, WordSize};
+use shearwarp::view::clip::Region;
 use shearwarp::view::shear::ShearState;
 use shearwarp::view::{Camera, Factorization, rotate_eye};
 use shearwarp::warp::Image;
@@ -69,6 +70,56 @@ fn render_with(r: &mut Renderer, cam: &Camera) -> Image {
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(cases(24)))]
+
+    /// A preset's own one-bit mask renders the code mask's image bit for
+    /// bit, through a rotation with tissue switches and prefetches: random
+    /// volumes, two to four presets (2- and 4-bit codes), cell sizes, word
+    /// sizes, thread counts, iso and blend.
+    #[test]
+    fn a_presets_own_mask_renders_the_code_masks_image(
+        seed in any::<u64>(), n in 2usize..=4, cell in 1usize..5, u32w in any::<bool>(), threads in 1usize..=3,
+        blend in any::<bool>(), rx in -3.2f64..3.2, step in -9.0f64..9.0,
+    ) {
+        let vol = random_volume([23, 18, 29], seed);
+        let mut ts = tissues();
+        if n == 4 {
+            let mut top = ts[2].clone();
+            (top.name, top.threshold) = ("d", 260.0);
+            top.tf = TransferFunction::threshold(260.0, [0.4, 0.6, 0.8]);
+            ts.push(top);
+        }
+        ts.truncate(n);
+        let s = Settings {
+            cell,
+            word: if u32w { WordSize::U32 } else { WordSize::U64 },
+            threads,
+            mode: if blend { Mode::Blend } else { Mode::Iso },
+            ..Settings::default()
+        };
+        let mut own = Renderer::with_tissues(vol.clone(), &ts, s).unwrap();
+        let mut coded = Renderer::with_tissues(vol, &ts, s).unwrap();
+        coded.set_preset_masks(false);
+        let mut served = 0;
+        for f in 0..16 {
+            let cam = Camera::new(rotate_eye(DMat3::from_rotation_x(rx), 1, f as f64 * step), [40, 36]);
+            if f % 5 == 4 {
+                for r in [&mut own, &mut coded] {
+                    r.select_tissue((f / 5) % n).unwrap();
+                }
+            }
+            if f % 5 == 1 {
+                let axis = Factorization::new(&cam, own.dims(), own.spacing()).unwrap().axis;
+                own.prefetch_axis(axis).unwrap();
+            }
+            let (mut a, mut b) = (Image::new(40, 36), Image::new(40, 36));
+            let st = own.render(&cam, &mut a).unwrap();
+            prop_assert!(!coded.render(&cam, &mut b).unwrap().preset_mask);
+            served += st.preset_mask as usize;
+            let diff = a.data.iter().zip(&b.data).filter(|(x, y)| x != y).count();
+            prop_assert_eq!(diff, 0, "frame {}: {} pixels differ (preset mask: {})", f, diff, st.preset_mask);
+        }
+        prop_assert!(served >= 4, "the preset's own mask served {} frames", served);
+    }
 
     /// For every cell size 1..=8, at every CPU level, the image is identical to
     /// cell size 1 (and to brute force).
@@ -176,30 +227,65 @@ proptest! {
     }
 }
 
-/// A tissue switch changes no mask: the shear state and words stay the same,
-/// and the factorization is untouched.
+/// A tissue switch changes no mask: the masks' words stay the same, and
+/// the frame after it builds nothing. It reads the presets' code mask (the
+/// new preset's own one-bit mask is not built yet), so it shears only that
+/// mask to the view; with the preset masks off, where the code mask served
+/// every frame, it shears nothing.
 #[test]
 fn tissue_switch_is_constant_time_and_keeps_the_mask() {
-    let vol = random_volume([40, 40, 40], 3);
-    let mut r = Renderer::with_tissues(vol, &tissues(), Settings::default()).unwrap();
-    let cam = Camera::new(rotate_eye(DMat3::IDENTITY, 1, 20.0), [64, 64]);
-    render_with(&mut r, &cam);
-    let bytes = r.mask_bytes();
-    let t = std::time::Instant::now();
-    for i in 0..3000 {
-        r.select_tissue(i % 3).unwrap();
-    }
-    let per = t.elapsed().as_secs_f64() / 3000.0;
-    assert!(per < 1e-4, "a switch took {per} s");
-    assert_eq!(r.mask_bytes(), bytes);
-    // and the next frame builds nothing
-    let st = {
+    for preset_masks in [true, false] {
+        let vol = random_volume([40, 40, 40], 3);
+        let mut r = Renderer::with_tissues(vol, &tissues(), Settings::default()).unwrap();
+        r.set_preset_masks(preset_masks);
+        let cam = Camera::new(rotate_eye(DMat3::IDENTITY, 1, 20.0), [64, 64]);
         let mut img = Image::new(64, 64);
-        r.render(&cam, &mut img).unwrap()
-    };
-    assert!(st.build_ms < 5.0, "the next frame built for {} ms", st.build_ms);
-    assert_eq!(st.shear_steps + st.shear_direct, 0, "no re-shear after a switch");
-    let _ = Factorization::new(&cam, [40, 40, 40], [1.0; 3]).unwrap();
+        assert_eq!(r.render(&cam, &mut img).unwrap().preset_mask, preset_masks);
+        let bytes = r.mask_bytes();
+        let t = std::time::Instant::now();
+        for i in 0..3000 {
+            r.select_tissue(i % 3).unwrap();
+        }
+        let per = t.elapsed().as_secs_f64() / 3000.0;
+        assert!(per < 1e-4, "a switch took {per} s");
+        assert_eq!(r.mask_bytes(), bytes);
+        // and the next frame builds nothing
+        let st = r.render(&cam, &mut img).unwrap();
+        assert!(!st.preset_mask);
+        assert!(st.build_ms < 5.0, "the next frame built for {} ms", st.build_ms);
+        if !preset_masks {
+            assert_eq!(st.shear_steps + st.shear_direct, 0, "no re-shear after a switch");
+        }
+        let _ = Factorization::new(&cam, [40, 40, 40], [1.0; 3]).unwrap();
+    }
+}
+
+/// The life of a preset's own one-bit mask: built with the code mask, read
+/// by its preset's frames; after a switch the frames read the code mask
+/// until [`Renderer::prefetch_axis`] builds the new preset's (at the code
+/// mask's shear: its first frame shears incrementally); a focus region,
+/// which needs two presets' codes, reads the code mask.
+#[test]
+fn a_presets_own_mask_serves_its_frames_until_a_switch() {
+    let vol = random_volume([30, 34, 38], 11);
+    let mut r = Renderer::with_tissues(vol, &tissues(), Settings::default()).unwrap();
+    let mut img = Image::new(64, 64);
+    let mut frame = |r: &mut Renderer, deg: f64| r.render(&Camera::new(rotate_eye(DMat3::IDENTITY, 1, deg), [64, 64]), &mut img).unwrap();
+    assert!(frame(&mut r, 10.0).preset_mask, "built with the code mask");
+    assert!(frame(&mut r, 11.0).preset_mask);
+    r.select_tissue(2).unwrap();
+    let st = frame(&mut r, 12.0);
+    assert!(!st.preset_mask && st.build_ms < 5.0, "after a switch: the code mask, no build ({st:?})");
+    assert!(r.preset_mask_pending(st.axis));
+    assert!(r.prefetch_axis(st.axis).unwrap());
+    assert!(!r.preset_mask_pending(st.axis));
+    let st = frame(&mut r, 13.0);
+    assert!(st.preset_mask, "after the prefetch: the preset's own mask");
+    assert_eq!(st.shear_direct, 0, "built at the code mask's shear");
+    r.set_focus(Some(Focus::new(Region::Sphere { centre: [15.0, 17.0, 19.0], radius: 6.0 }, "a"))).unwrap();
+    assert!(!frame(&mut r, 14.0).preset_mask, "a focus region reads the code mask");
+    r.set_focus(None).unwrap();
+    assert!(frame(&mut r, 15.0).preset_mask);
 }
 
 /// Case count: `PROPTEST_CASES` when set (for long soak runs), else `default`.

@@ -10,7 +10,9 @@
 //! reports [`Reply::Busy`], so the window can show it; after a rebuild it builds
 //! the other principal axes' masks while no request waits, so a later axis
 //! switch does not stall a drag, and reports [`Reply::Prefetched`] when they are
-//! all built.
+//! all built. After a tissue switch (O(1) on the presets' code mask) the idle
+//! worker likewise builds the new preset's own one-bit mask of every axis
+//! ([`Renderer::prefetch_axis`]), which the frames after it read.
 
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
@@ -250,6 +252,11 @@ impl Renderers {
         }
         let (r, slot) = match class {
             Class::Tissue(i) => {
+                if self.tissues.tissues().is_some_and(|(_, c)| c != i) {
+                    // O(1): the frames read the threshold-coded mask until the
+                    // idle worker has built the new preset's own mask
+                    self.stale = [true; 3];
+                }
                 self.tissues.select_tissue(i)?;
                 (&mut self.tissues, 0)
             }
@@ -424,7 +431,7 @@ impl Renderers {
             }
             st => st?,
         };
-        self.stale[st.axis] = false;
+        self.stale[st.axis] = r.preset_mask_pending(st.axis);
         Ok(st)
     }
 

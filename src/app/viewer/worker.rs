@@ -1088,6 +1088,39 @@ mod tests {
         w.stop();
     }
 
+    /// A tissue switch: the frame after it reads the presets' code mask
+    /// (nothing rebuilt, no busy report); the idle worker then builds the new
+    /// preset's own one-bit mask (and says so), which the next frame reads.
+    #[test]
+    fn the_idle_worker_builds_a_switched_presets_own_mask() {
+        let (r, spec) = setup(Mode::Iso);
+        assert!(r.tissue_list().len() > 1);
+        let (tx, rx) = mpsc::channel();
+        let w = Worker::spawn(Kind::Preview, r, false, move |m| {
+            let _ = tx.send(m);
+        });
+        let prefetched = |rx: &mpsc::Receiver<Reply>| loop {
+            match rx.recv_timeout(Duration::from_secs(60)).expect("a reply") {
+                Reply::Prefetched { .. } => break,
+                Reply::Failed { error, .. } => panic!("{error}"),
+                Reply::Busy { what, .. } => panic!("busy: {what}"),
+                Reply::Frame(_) => {}
+            }
+        };
+        w.post(spec);
+        assert!(frame(&rx).stats.preset_mask, "built with the code mask");
+        prefetched(&rx);
+        w.post(Spec { seq: 2, class: Class::Tissue(1), ..spec });
+        let f = frame(&rx);
+        assert!(!f.stats.preset_mask && f.prefetch, "after the switch: the code mask, the preset's mask to build");
+        prefetched(&rx);
+        let moved = Camera { rotation: spec.camera.rotation * glam::DMat3::from_rotation_z(0.02), ..spec.camera };
+        w.post(Spec { seq: 3, class: Class::Tissue(1), camera: moved, ..spec });
+        let f = frame(&rx);
+        assert!(f.stats.preset_mask && !f.prefetch, "after the idle build: the preset's own mask");
+        w.stop();
+    }
+
     #[test]
     fn recycled_pixel_buffers_are_reused() {
         let (r, spec) = setup(Mode::Iso);

@@ -38,8 +38,8 @@ pub(super) struct Axes {
     pub(super) codes: [Option<(u64, CellCodes)>; 3],
     pub(super) masks: [Option<AxisMask>; 3],
     /// Per axis, the current tissue preset's one-bit mask, packed from
-    /// [`Axes::masks`]' threshold codes ([`TissueMask`]).
-    pub(super) tissue: [Option<TissueMask>; 3],
+    /// [`Axes::masks`]' threshold codes ([`PresetMask`]).
+    pub(super) preset: [Option<PresetMask>; 3],
     /// Classification, encodings and tables of the pre-classified paths.
     pub(super) rle: RleCache,
     /// Largest total of [`super::Renderer::memory`] a new structure may bring about.
@@ -100,7 +100,7 @@ impl AnyMask {
 /// (an idle moment) builds the new preset's, and the code mask is not
 /// sheared while this one serves.
 #[derive(Debug)]
-pub(super) struct TissueMask {
+pub(super) struct PresetMask {
     pub(super) key: MaskKey,
     pub(super) code: u8,
     pub(super) mask: AnyMask,
@@ -187,16 +187,16 @@ pub fn estimate_axis(volume: &Volume, settings: &Settings, code_bits: u32, axis:
     if settings.method.uses_mask() {
         let nb = code_bits.max(1);
         m.cell_codes[a] = PackedCodes::bytes_for(nb, cells[0], cells[1] * n[2]);
-        let (code, tissue) = mask_parts(cells, n[2], nb, settings);
-        m.masks[a] = code + tissue;
+        let (code, preset) = mask_parts(cells, n[2], nb, settings);
+        m.masks[a] = code + preset;
     }
     m
 }
 
 /// The bytes of the code mask of `cells` cells and `nk` slices of `nb`-bit
-/// codes, and of its [`TissueMask`] (none for one-bit codes).
+/// codes, and of its [`PresetMask`] (none for one-bit codes).
 fn mask_parts(cells: [usize; 2], nk: usize, nb: u32, settings: &Settings) -> (u64, u64) {
-    (code_mask_bytes(cells, nk, nb, settings), if nb > 1 { tissue_mask_bytes(cells, nk, settings) } else { 0 })
+    (code_mask_bytes(cells, nk, nb, settings), if nb > 1 { preset_mask_bytes(cells, nk, settings) } else { 0 })
 }
 
 /// The bytes of a mask of `nb`-bit codes ([`BinaryMask::bytes_for`]).
@@ -207,9 +207,9 @@ fn code_mask_bytes(cells: [usize; 2], nk: usize, nb: u32, settings: &Settings) -
     }
 }
 
-/// The bytes of a [`TissueMask`]: a one-bit mask, and its own super-cell codes
+/// The bytes of a [`PresetMask`]: a one-bit mask, and its own super-cell codes
 /// at every cell size.
-fn tissue_mask_bytes(cells: [usize; 2], nk: usize, settings: &Settings) -> u64 {
+fn preset_mask_bytes(cells: [usize; 2], nk: usize, settings: &Settings) -> u64 {
     let s = settings.cell.clamp(1, crate::encode::mask::MAX_CELL);
     let sc = crate::encode::cells::super_cells(cells, s);
     let codes = PackedCodes::bytes_for(1, sc[0], sc[1] * nk);
@@ -259,8 +259,8 @@ impl Renderer {
     /// Bytes of the packed masks' words that exist now (the presets' code
     /// masks and the current preset's one-bit masks).
     pub fn mask_bytes(&self) -> usize {
-        let tissue: usize = self.axes.tissue.iter().flatten().map(|t| t.mask.bytes()).sum();
-        self.axes.masks.iter().flatten().map(|m| m.mask.bytes()).sum::<usize>() + tissue
+        let preset: usize = self.axes.preset.iter().flatten().map(|t| t.mask.bytes()).sum();
+        self.axes.masks.iter().flatten().map(|m| m.mask.bytes()).sum::<usize>() + preset
     }
 
     /// Bytes of the run-length encodings that exist now, per axis.
@@ -295,7 +295,7 @@ impl Renderer {
             cell_codes: per(&|a| self.axes.codes[a].as_ref().map_or(0, |c| c.1.bytes())),
             masks: per(&|a| {
                 self.axes.masks[a].as_ref().map_or(0, |m| m.mask.held_bytes())
-                    + self.axes.tissue[a].as_ref().map_or(0, |t| t.mask.own_bytes())
+                    + self.axes.preset[a].as_ref().map_or(0, |t| t.mask.own_bytes())
             }),
             rle: self.axes.rle.bytes().map(|b| b as u64),
             intermediate: self.inter.bytes() as u64,
@@ -336,7 +336,7 @@ impl Renderer {
             let dims = self.volume.dims();
             let p = crate::view::permutation(axis);
             let cells = [dims[p[0]].saturating_sub(1), dims[p[1]].saturating_sub(1)];
-            let (code, tissue) = mask_parts(cells, dims[p[2]], self.code_bits(), &self.settings);
+            let (code, preset) = mask_parts(cells, dims[p[2]], self.code_bits(), &self.settings);
             let key = Some(self.mask_key());
             if self.axes.masks[axis].as_ref().map(|m| m.key) == key {
                 m.masks[axis] -= code;
@@ -344,8 +344,8 @@ impl Renderer {
             }
             // (a stale preset's mask is replaced by one of the same size; none
             // is built with the knob off)
-            if self.tissue_code().is_none() || self.axes.tissue[axis].as_ref().map(|t| t.key) == key {
-                m.masks[axis] -= tissue;
+            if self.preset_code().is_none() || self.axes.preset[axis].as_ref().map(|t| t.key) == key {
+                m.masks[axis] -= preset;
             }
         }
         m.volume = 0;
@@ -364,7 +364,7 @@ impl Renderer {
         self.axes.normals[axis] = None;
         self.axes.codes[axis] = None;
         self.axes.masks[axis] = None;
-        self.axes.tissue[axis] = None;
+        self.axes.preset[axis] = None;
         self.axes.rle.drop_axis(axis);
         Ok(())
     }
@@ -620,7 +620,7 @@ impl Renderer {
                 });
                 self.axes.masks[axis] = Some(AxisMask { key, mask });
                 // the current preset's own mask with it: this frame pays for a build anyway
-                self.build_tissue_mask(axis);
+                self.build_preset_mask(axis);
                 self.axes.build_times.masks[axis] = ms(t);
             }
             // the mask carries the settings' CPU level to its shear kernels and to
@@ -628,7 +628,7 @@ impl Renderer {
             if let Some(m) = self.axes.masks[axis].as_mut() {
                 m.mask.set_cpu_level(self.settings.cpu);
             }
-            if let Some(m) = self.axes.tissue[axis].as_mut() {
+            if let Some(m) = self.axes.preset[axis].as_mut() {
                 m.mask.set_cpu_level(self.settings.cpu);
             }
         }
@@ -639,35 +639,35 @@ impl Renderer {
     }
 
     /// The threshold code of the current tissue preset when the masks hold
-    /// codes of more than one bit (a [`TissueMask`] then pays).
-    pub(super) fn tissue_code(&self) -> Option<u8> {
+    /// codes of more than one bit (a [`PresetMask`] then pays).
+    pub(super) fn preset_code(&self) -> Option<u8> {
         let ts = self.classes.tissues.as_ref()?;
         (self.preset_masks && self.code_bits() > 1).then_some(ts.current as u8 + 1)
     }
 
-    /// True when `axis` has the current preset's [`TissueMask`] for the
+    /// True when `axis` has the current preset's [`PresetMask`] for the
     /// current code mask.
-    pub(super) fn tissue_mask_current(&self, axis: usize) -> bool {
-        let (Some(code), Some(t), Some(m)) = (self.tissue_code(), &self.axes.tissue[axis], &self.axes.masks[axis]) else { return false };
+    pub(super) fn preset_mask_current(&self, axis: usize) -> bool {
+        let (Some(code), Some(t), Some(m)) = (self.preset_code(), &self.axes.preset[axis], &self.axes.masks[axis]) else { return false };
         t.code == code && t.key == m.key && m.key == self.mask_key()
     }
 
-    /// Builds the current preset's [`TissueMask`] of `axis` from its code
+    /// Builds the current preset's [`PresetMask`] of `axis` from its code
     /// mask, if that is current and the preset's is not (the old preset's
     /// mask goes first, so the two never coexist).
-    pub(super) fn build_tissue_mask(&mut self, axis: usize) {
-        let Some(code) = self.tissue_code() else {
-            self.axes.tissue[axis] = None;
+    pub(super) fn build_preset_mask(&mut self, axis: usize) {
+        let Some(code) = self.preset_code() else {
+            self.axes.preset[axis] = None;
             return;
         };
         let key = self.mask_key();
         let Some(m) = self.axes.masks[axis].as_ref().filter(|m| m.key == key) else { return };
-        if self.tissue_mask_current(axis) {
+        if self.preset_mask_current(axis) {
             return;
         }
-        self.axes.tissue[axis] = None;
+        self.axes.preset[axis] = None;
         let mask = self.pool.install(|| m.mask.at_least(code));
-        self.axes.tissue[axis] = Some(TissueMask { key, code, mask });
+        self.axes.preset[axis] = Some(PresetMask { key, code, mask });
     }
 
     /// The pre-classified state of `axis`: the classification, and (for
@@ -746,7 +746,7 @@ impl Renderer {
             return Ok(false);
         }
         self.ensure_axis(axis)?;
-        self.build_tissue_mask(axis);
+        self.build_preset_mask(axis);
         Ok(true)
     }
 
@@ -756,6 +756,6 @@ impl Renderer {
     pub fn preset_mask_pending(&self, axis: usize) -> bool {
         let axis = axis.min(2);
         let code_mask = self.axes.masks[axis].as_ref().is_some_and(|m| m.key == self.mask_key());
-        self.settings.method.uses_mask() && self.tissue_code().is_some() && code_mask && !self.tissue_mask_current(axis)
+        self.settings.method.uses_mask() && self.preset_code().is_some() && code_mask && !self.preset_mask_current(axis)
     }
 }

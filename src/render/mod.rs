@@ -214,7 +214,7 @@ impl Renderer {
     pub fn set_preset_masks(&mut self, on: bool) {
         self.preset_masks = on;
         if !on {
-            self.axes.tissue = [None, None, None];
+            self.axes.preset = [None, None, None];
         }
     }
 

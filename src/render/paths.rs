@@ -73,17 +73,17 @@ impl Renderer {
         };
         let settings = self.settings;
         // the current preset's one-bit mask where it is current (a focus reads two presets' codes)
-        let one_bit = focus.is_none() && self.tissue_mask_current(axis);
-        if !one_bit && self.axes.tissue[axis].as_ref().is_some_and(|t| Some(t.code) != self.tissue_code()) {
+        let one_bit = focus.is_none() && self.preset_mask_current(axis);
+        if !one_bit && self.axes.preset[axis].as_ref().is_some_and(|t| Some(t.code) != self.preset_code()) {
             // another preset's: stale until rebuilt for this one (and, left
             // unsheared, a long shear to catch up if its preset came back)
-            self.axes.tissue[axis] = None;
+            self.axes.preset[axis] = None;
         }
         let matcher = if one_bit { binary_matcher() } else { matcher };
         let classes = FrameClasses { cls, iso, focus };
         let (inter, rle) = (&mut self.inter, &mut self.axes.rle);
         let mask = match one_bit {
-            true => self.axes.tissue[axis].as_mut().map(|t| &mut t.mask),
+            true => self.axes.preset[axis].as_mut().map(|t| &mut t.mask),
             false => self.axes.masks[axis].as_mut().map(|m| &mut m.mask),
         };
         let (normals, shade) = (&self.axes.normals, &mut self.shade);

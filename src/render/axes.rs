@@ -652,6 +652,19 @@ impl Renderer {
         t.code == code && t.key == m.key && m.key == self.mask_key()
     }
 
+    /// Whether a frame along `axis` reads the current preset's
+    /// [`PresetMask`] (it is current, and the frame has no focus region,
+    /// which needs two presets' codes) rather than the code mask. Another
+    /// preset's mask goes: stale until rebuilt for this one, and, left
+    /// unsheared while the code mask serves, a long shear to catch up if its
+    /// preset came back.
+    pub(super) fn preset_mask_serves(&mut self, axis: usize, focus: bool) -> bool {
+        if self.axes.preset[axis].as_ref().is_some_and(|t| Some(t.code) != self.preset_code()) {
+            self.axes.preset[axis] = None;
+        }
+        !focus && self.preset_mask_current(axis)
+    }
+
     /// Builds the current preset's [`PresetMask`] of `axis` from its code
     /// mask, if that is current and the preset's is not (the old preset's
     /// mask goes first, so the two never coexist).

@@ -39,6 +39,8 @@ impl Renderer {
         let axis = plan.view.axis;
         let mode = self.settings.mode;
         let focus = self.focus_tissue();
+        // the current preset's one-bit mask where it is current (a focus reads two presets' codes)
+        let one_bit = self.preset_mask_serves(axis, focus.is_some());
         if mode == Mode::Blend {
             match &mut self.classes.tissues {
                 Some(ts) => {
@@ -72,13 +74,6 @@ impl Renderer {
             _ => (None, matcher),
         };
         let settings = self.settings;
-        // the current preset's one-bit mask where it is current (a focus reads two presets' codes)
-        let one_bit = focus.is_none() && self.preset_mask_current(axis);
-        if !one_bit && self.axes.preset[axis].as_ref().is_some_and(|t| Some(t.code) != self.preset_code()) {
-            // another preset's: stale until rebuilt for this one (and, left
-            // unsheared, a long shear to catch up if its preset came back)
-            self.axes.preset[axis] = None;
-        }
         let matcher = if one_bit { binary_matcher() } else { matcher };
         let classes = FrameClasses { cls, iso, focus };
         let (inter, rle) = (&mut self.inter, &mut self.axes.rle);

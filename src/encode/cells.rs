@@ -510,6 +510,7 @@ fn unpack_words<const NB: u32>(words: &[u64], out: &mut [u8]) {
 /// (`1 ≤ c < 2^nb`) as one bit each, code `t` at bit `t`.
 #[inline]
 pub(crate) fn field_flags(w: u64, nb: u32, c: u8) -> u64 {
+    debug_assert!(matches!(nb, 2 | 4) && c >= 1 && (c as u32) < (1 << nb));
     const ONES: u64 = 0x0101_0101_0101_0101;
     if nb == 2 {
         // per 2-bit field v = (h, l): v ≥ 1 is h | l, v ≥ 2 is h, v ≥ 3 is h & l

@@ -260,6 +260,10 @@ impl<W: Word> BinaryMask<W> {
     /// candidates as this mask with that preset's [`Matcher`], from a code
     /// width's fraction of the words, and no shear to catch up.
     pub fn at_least(&self, c: u8) -> Self {
+        assert!(c >= 1 && (c as u32) < (1 << self.nb), "code {c} of {} bits", self.nb);
+        if self.nb == 1 {
+            return self.clone();
+        }
         let codes = std::sync::Arc::new(self.codes.at_least(c));
         let bbox = crate::encode::cells::slice_boxes(&codes, self.cells, self.nk);
         let nw = self.nk.div_ceil(W::BITS as usize).max(1);
@@ -1631,7 +1635,7 @@ mod tests {
     /// A tissue preset's one-bit mask ([`BinaryMask::at_least`]) of a code
     /// mask sheared anywhere equals, word for word, the mask of the one-bit
     /// codes "code ≥ c" sheared to the same state, and keeps equal to it
-    /// through further shears: for 2- and 4-bit codes, every code `c`, u32
+    /// through further shears: for 1-, 2- and 4-bit codes, every code `c`, u32
     /// and u64 words, depth rows of one word and of several (partial groups
     /// of code words included), and super cells.
     #[test]
@@ -1660,6 +1664,7 @@ mod tests {
                 }
             }
         }
+        check::<u64>([9, 8, 40], 1, 2);
         check::<u64>([9, 8, 40], 2, 1);
         check::<u64>([10, 7, 300], 4, 1);
         check::<u32>([8, 9, 70], 4, 1);

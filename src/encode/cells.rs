@@ -145,12 +145,11 @@ impl PackedCodes {
             return out;
         }
         let (nb, rw, orw) = (self.nb, self.row_words, out.row_words);
-        let per = self.per();
-        // input words per output word
-        let group = 64 / per;
+        let per = self.per() as u32;
+        // (`nb` code words to a one-bit word; slot 0 in the least significant bits)
         out.words.par_chunks_mut(orw).zip(self.words.par_chunks(rw)).for_each(|(o, row)| {
-            for (ow, ws) in o.iter_mut().zip(row.chunks(group)) {
-                *ow = ws.iter().enumerate().fold(0u64, |acc, (t, &w)| acc | field_flags(w, nb, c) << (t * per));
+            for (ow, ws) in o.iter_mut().zip(row.chunks(nb as usize)) {
+                *ow = group_flags(ws.iter().copied(), nb, c, per, false);
             }
         });
         out
@@ -506,10 +505,23 @@ fn unpack_words<const NB: u32>(words: &[u64], out: &mut [u8]) {
     }
 }
 
+/// The one-bit word of a group of (at most) `nb` words of `nb`-bit codes,
+/// `per` codes each (`u64` or `u32` words, 2- or 4-bit codes): each code at
+/// least `c` as one bit, every word's flags ([`field_flags`]) in `per` bits
+/// of the result, the group's first word in the lowest bits, or with
+/// `msb_first` (the mask's slot order) in the highest.
+#[inline]
+pub(crate) fn group_flags(ws: impl Iterator<Item = u64>, nb: u32, c: u8, per: u32, msb_first: bool) -> u64 {
+    ws.enumerate().fold(0u64, |acc, (g, w)| {
+        let at = if msb_first { nb - 1 - g as u32 } else { g as u32 };
+        acc | field_flags(w, nb, c) << (at * per)
+    })
+}
+
 /// Of the `64 / nb` `nb`-bit codes of `w` (`nb` 2 or 4), those at least `c`
 /// (`1 ≤ c < 2^nb`) as one bit each, code `t` at bit `t`.
 #[inline]
-pub(crate) fn field_flags(w: u64, nb: u32, c: u8) -> u64 {
+fn field_flags(w: u64, nb: u32, c: u8) -> u64 {
     debug_assert!(matches!(nb, 2 | 4) && c >= 1 && (c as u32) < (1 << nb));
     const ONES: u64 = 0x0101_0101_0101_0101;
     if nb == 2 {

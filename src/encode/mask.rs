@@ -39,6 +39,7 @@
 use rayon::prelude::*;
 
 use crate::data::slices::SliceStack;
+use crate::encode::cells::group_flags;
 pub use crate::encode::cells::{CellCodes, PackedCodes};
 use crate::encode::depth::{Matcher, Word, slot_shift};
 use crate::encode::shift::*;
@@ -245,9 +246,11 @@ impl<W: Word> BinaryMask<W> {
     /// Packs `codes` with super-cell size `s` (1..=[`MAX_CELL`]), unsheared.
     pub fn from_codes(codes: &CellCodes, s: usize) -> Self {
         let s = s.clamp(1, MAX_CELL);
-        let (vpad, pad, grid, nw) = Self::layout(codes.cells, codes.nk, codes.nb, s);
+        let layout = Self::layout(codes.cells, codes.nk, codes.nb, s);
         let (cells, sc, bbox) = codes.supercells(s);
-        Self::with_codes(s, codes.nb, cells, codes.nk, [vpad, pad, nw], grid, sc, bbox, true)
+        let mut m = Self::with_codes(s, codes.nb, cells, codes.nk, layout, sc, bbox);
+        m.scatter();
+        m
     }
 
     /// The one-bit mask of the super cells whose code is at least `c`
@@ -267,12 +270,12 @@ impl<W: Word> BinaryMask<W> {
         let codes = std::sync::Arc::new(self.codes.at_least(c));
         let bbox = crate::encode::cells::slice_boxes(&codes, self.cells, self.nk);
         let nw = self.nk.div_ceil(W::BITS as usize).max(1);
-        let mut m = Self::with_codes(self.s, 1, self.cells, self.nk, [self.vpad, self.pad, nw], self.grid, codes, bbox, false);
+        let mut m = Self::with_codes(self.s, 1, self.cells, self.nk, (self.vpad, self.pad, self.grid, nw), codes, bbox);
         m.off.clone_from(&self.off);
         m.cpu = self.cpu;
         m.fused = self.fused;
         let (nb, cnw) = (self.nb, self.nw);
-        // one-bit slots per code word; slot 0 is the most significant bits
+        // (slot 0 is the most significant bits: a group's first word fills the top)
         let per = W::BITS / nb;
         m.words.par_chunks_mut(nw * self.grid[0]).zip(self.words.par_chunks(cnw * self.grid[0])).for_each(|(out, src)| {
             for (o, row) in out.chunks_mut(nw).zip(src.chunks(cnw)) {
@@ -280,10 +283,7 @@ impl<W: Word> BinaryMask<W> {
                     continue;
                 }
                 for (ow, ws) in o.iter_mut().zip(row.chunks(nb as usize)) {
-                    let bits = ws.iter().enumerate().fold(0u64, |acc, (g, w)| {
-                        acc | crate::encode::cells::field_flags(w.as_u64(), nb, c) << ((nb - 1 - g as u32) * per)
-                    });
-                    *ow = W::from_u64(bits);
+                    *ow = W::from_u64(group_flags(ws.iter().map(|w| w.as_u64()), nb, c, per, true));
                 }
             }
         });
@@ -291,22 +291,18 @@ impl<W: Word> BinaryMask<W> {
     }
 
     /// A mask of super-cell codes `codes` (`cells` super cells along i and
-    /// j, `nk` slices of `nb` bits) and their slices' boxes, in a grid of
-    /// `grid` super columns: `[vpad, pad, nw]` as [`BinaryMask::layout`]
-    /// gives them; unsheared with `scatter`, else with every word zero.
-    #[allow(clippy::too_many_arguments)]
+    /// j, `nk` slices of `nb` bits) and their slices' boxes, laid out as
+    /// [`BinaryMask::layout`] gives it, with every word zero.
     fn with_codes(
         s: usize,
         nb: u32,
         cells: [usize; 2],
         nk: usize,
-        [vpad, pad, nw]: [usize; 3],
-        grid: [usize; 2],
+        (vpad, pad, grid, nw): (usize, usize, [usize; 2], usize),
         sc: std::sync::Arc<PackedCodes>,
         bbox: Vec<Option<[usize; 4]>>,
-        scatter: bool,
     ) -> Self {
-        let mut m = BinaryMask {
+        BinaryMask {
             s,
             nb,
             cells,
@@ -332,11 +328,7 @@ impl<W: Word> BinaryMask<W> {
             move_bufs: Vec::new(),
             dist_masks: Vec::new(),
             occupancy: Default::default(),
-        };
-        if scatter {
-            m.scatter();
         }
-        m
     }
 
     /// Super-cell size.

@@ -436,12 +436,15 @@ impl<'a> RayContext<'a> {
         // every voxel read lies in [before, after + other] (step, other ≥ 1,
         // before ≤ b < b + step ≤ after)
         assert!(after + other < data.len(), "a cubic sample outside the stack");
-        let line = |o: usize| {
-            // SAFETY: o + other ≤ after + other < data.len() (asserted above)
-            let (a, z) = unsafe { (*data.get_unchecked(o), *data.get_unchecked(o + other)) };
-            a + (z - a) * w_o
-        };
-        cr[0] * line(before) + cr[1] * line(b) + cr[2] * line(b + step) + cr[3] * line(after)
+        #[cfg(target_arch = "x86_64")]
+        if before + step == b && after == b + 2 * step {
+            // SAFETY: the four lines are `before + m·step` (m = 0..4), every
+            // voxel read is one of the plain code's, in range (asserted above).
+            return unsafe { cubic_sample_sse::<ZA>(data, before, n0, w_o, cr) };
+        }
+        // SAFETY: every line read is one of [before, b, b + step, after], each
+        // with its voxel `other` further, all ≤ after + other (asserted above)
+        unsafe { cubic_sample_plain(data, [before, b, b + step, after], other, w_o, cr) }
     }
 
     /// The cubic reconstruction's gradient at the sample `at` (stack axes,
@@ -474,19 +477,17 @@ impl<'a> RayContext<'a> {
         // first and last line's o (k ≥ 1 and co ≥ 1 above, lines ascending)
         let o_at = |l: usize| l * s_l + co * s_o + k * n01;
         assert!(o_at(lines[0]) >= n01 + s_o && o_at(lines[3]) + n01 + 2 * s_o < data.len(), "a cubic gradient outside the stack");
-        // SAFETY: every index below lies in the range asserted above
-        let v = |o: usize| unsafe { *data.get_unchecked(o) };
-        let lerp = |a: f32, c: f32| a + (c - a) * w_o;
         // per line: the sample, and twice the central differences along the
-        // other axis and along the slices
-        let line = |l: usize| {
-            let o = o_at(l);
-            let (vm, v0, v1, v2) = (v(o - s_o), v(o), v(o + s_o), v(o + 2 * s_o));
-            let (p0, p1, m0, m1) = (v(o + n01), v(o + n01 + s_o), v(o - n01), v(o - n01 + s_o));
-            [lerp(v0, v1), lerp(v1 - vm, v2 - v0), lerp(p0 - m0, p1 - m1)]
-        };
-        let (l0, l1, l2, l3) = (line(lines[0]), line(lines[1]), line(lines[2]), line(lines[3]));
-        let dot = |w: [f32; 4], x: usize| w[0] * l0[x] + w[1] * l1[x] + w[2] * l2[x] + w[3] * l3[x];
+        // other axis and along the slices (`l[x][m]`: quantity x of line m)
+        let o = lines.map(o_at);
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: every index either reads lies in the range asserted above
+        // (the same voxels of the same lines)
+        let l = unsafe { cubic_lines_sse::<ZA>(data, o, s_o, n01, w_o) };
+        #[cfg(not(target_arch = "x86_64"))]
+        // SAFETY: every index it reads lies in the range asserted above
+        let l = unsafe { cubic_lines_plain(data, o, s_o, n01, w_o) };
+        let dot = |w: [f32; 4], x: usize| w[0] * l[x][0] + w[1] * l[x][1] + w[2] * l[x][2] + w[3] * l[x][3];
         let mut g = [0.5 * dot(w.bs, 2); 3];
         g[ZA] = dot(w.dbs, 0);
         g[oa] = 0.5 * dot(w.bs, 1);
@@ -1070,6 +1071,143 @@ impl Window {
                 s
             }
         }
+    }
+}
+
+/// The cubic through the four lines `o` of `data` at weights `cr`, each line
+/// the lerp at `w_o` of its voxel and the one `other` further.
+///
+/// # Safety
+/// Every `o[m]` and `o[m] + other` must lie in `data`.
+#[inline(always)]
+unsafe fn cubic_sample_plain(data: &[f32], o: [usize; 4], other: usize, w_o: f32, cr: &[f32; 4]) -> f32 {
+    let line = |o: usize| {
+        // SAFETY: the caller's contract
+        let (a, z) = unsafe { (*data.get_unchecked(o), *data.get_unchecked(o + other)) };
+        a + (z - a) * w_o
+    };
+    cr[0] * line(o[0]) + cr[1] * line(o[1]) + cr[2] * line(o[2]) + cr[3] * line(o[3])
+}
+
+/// Per voxel line `o[m]` of `data` (the four lines of a cubic in the slice,
+/// `s_o` the step along the other in-slice axis, `n01` the slice's):
+/// `[lerp(v₀, v₁), lerp(v₁ − v₋₁, v₂ − v₀), lerp(p₀ − m₀, p₁ − m₁)]` at weight
+/// `w_o` (`vᵢ` the line's voxels along the other axis, `p`/`m` those of the
+/// slices after and before), quantity by quantity: `out[x][m]`.
+///
+/// # Safety
+/// Every index `o[m] − n01 … o[m] + n01 + 2·s_o` it reads must lie in `data`.
+#[inline(always)]
+unsafe fn cubic_lines_plain(data: &[f32], o: [usize; 4], s_o: usize, n01: usize, w_o: f32) -> [[f32; 4]; 3] {
+    // SAFETY: the caller's contract
+    let v = |o: usize| unsafe { *data.get_unchecked(o) };
+    let lerp = |a: f32, c: f32| a + (c - a) * w_o;
+    let mut out = [[0f32; 4]; 3];
+    for (m, &o) in o.iter().enumerate() {
+        let (vm, v0, v1, v2) = (v(o - s_o), v(o), v(o + s_o), v(o + 2 * s_o));
+        let (p0, p1, m0, m1) = (v(o + n01), v(o + n01 + s_o), v(o - n01), v(o - n01 + s_o));
+        out[0][m] = lerp(v0, v1);
+        out[1][m] = lerp(v1 - vm, v2 - v0);
+        out[2][m] = lerp(p0 - m0, p1 - m1);
+    }
+    out
+}
+
+/// [`cubic_lines_plain`] with the four lines in the lanes of SSE vectors,
+/// the same float operations lane for lane (tested equal bit for bit), for
+/// a cubic along stack axis `ZA`: along 0 the other axis is 1 (`s_o = n₀`)
+/// and four consecutive lines (`o[m] = o[0] + m`) load as one vector per
+/// voxel (lines repeated at a border take the plain code); along 1 the other
+/// axis is 0 (`s_o = 1`), a line's voxels along it load as one vector and
+/// are transposed into lanes.
+///
+/// # Safety
+/// [`cubic_lines_plain`]'s, with `s_o` as above.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn cubic_lines_sse<const ZA: usize>(data: &[f32], o: [usize; 4], s_o: usize, n01: usize, w_o: f32) -> [[f32; 4]; 3] {
+    use std::arch::x86_64::*;
+    debug_assert!(ZA == 0 || s_o == 1);
+    if ZA == 0 && !(o[1] == o[0] + 1 && o[2] == o[0] + 2 && o[3] == o[0] + 3) {
+        // SAFETY: the caller's contract (this function's is the same)
+        return unsafe { cubic_lines_plain(data, o, s_o, n01, w_o) };
+    }
+    let p = data.as_ptr();
+    // SAFETY: SSE and SSE2 are the x86-64 baseline. Along 0 each load takes
+    // the four lines' voxel at one offset (`o[0] + m + r` for m = 0..4, each a
+    // voxel the plain code reads); along 1 a line's `o − 1 … o + 2` and its
+    // pairs at `o ± n01`, each a voxel the plain code reads. All in `data`
+    // by the caller's contract.
+    unsafe {
+        let (vm, v0, v1, v2, p0, p1, m0, m1);
+        if ZA == 0 {
+            let ld = |r: usize| _mm_loadu_ps(p.add(r));
+            let b = o[0];
+            (vm, v0, v1, v2) = (ld(b - s_o), ld(b), ld(b + s_o), ld(b + 2 * s_o));
+            (p0, p1, m0, m1) = (ld(b + n01), ld(b + n01 + s_o), ld(b - n01), ld(b - n01 + s_o));
+        } else {
+            // rows: line m's [v₋₁, v₀, v₁, v₂] and [p₀, p₁, m₀, m₁]
+            let a = o.map(|o| _mm_loadu_ps(p.add(o - 1)));
+            let c = o.map(|o| _mm_castpd_ps(_mm_loadh_pd(_mm_load_sd(p.add(o + n01).cast::<f64>()), p.add(o - n01).cast::<f64>())));
+            (vm, v0, v1, v2) = transpose(a);
+            (p0, p1, m0, m1) = transpose(c);
+        }
+        let w = _mm_set1_ps(w_o);
+        let lerp = |a: __m128, c: __m128| _mm_add_ps(a, _mm_mul_ps(_mm_sub_ps(c, a), w));
+        let x = [lerp(v0, v1), lerp(_mm_sub_ps(v1, vm), _mm_sub_ps(v2, v0)), lerp(_mm_sub_ps(p0, m0), _mm_sub_ps(p1, m1))];
+        x.map(|x| {
+            let mut out = [0f32; 4];
+            _mm_storeu_ps(out.as_mut_ptr(), x);
+            out
+        })
+    }
+}
+
+/// The columns of four rows of four lanes.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn transpose(
+    r: [std::arch::x86_64::__m128; 4],
+) -> (std::arch::x86_64::__m128, std::arch::x86_64::__m128, std::arch::x86_64::__m128, std::arch::x86_64::__m128) {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE is the x86-64 baseline; no memory is touched
+    unsafe {
+        let (t0, t1) = (_mm_unpacklo_ps(r[0], r[1]), _mm_unpacklo_ps(r[2], r[3]));
+        let (t2, t3) = (_mm_unpackhi_ps(r[0], r[1]), _mm_unpackhi_ps(r[2], r[3]));
+        (_mm_movelh_ps(t0, t1), _mm_movehl_ps(t1, t0), _mm_movelh_ps(t2, t3), _mm_movehl_ps(t3, t2))
+    }
+}
+
+/// [`RayContext::sample_in_slice`] away from the borders, the four lines in
+/// the lanes of one SSE vector: the same float operations lane for lane and
+/// the same order of the sum (tested equal bit for bit). Line `m` starts at
+/// `before + m·step` (`step` 1 along 0, `n0` along 1), its other voxel one
+/// step along the other axis.
+///
+/// # Safety
+/// Every voxel the plain code reads (`before + m·step` and the next along
+/// the other axis, m = 0..4) must lie in `data`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn cubic_sample_sse<const ZA: usize>(data: &[f32], before: usize, n0: usize, w_o: f32, cr: &[f32; 4]) -> f32 {
+    use std::arch::x86_64::*;
+    let p = data.as_ptr();
+    // SAFETY: SSE and SSE2 are the x86-64 baseline; every lane read is a
+    // voxel of the contract
+    unsafe {
+        let (a, z) = if ZA == 0 {
+            (_mm_loadu_ps(p.add(before)), _mm_loadu_ps(p.add(before + n0)))
+        } else {
+            let pair = |m: usize| _mm_castpd_ps(_mm_load_sd(p.add(before + m * n0).cast::<f64>()));
+            let (x, y) = (_mm_movelh_ps(pair(0), pair(1)), _mm_movelh_ps(pair(2), pair(3)));
+            (_mm_shuffle_ps::<0b10_00_10_00>(x, y), _mm_shuffle_ps::<0b11_01_11_01>(x, y))
+        };
+        let line = _mm_add_ps(a, _mm_mul_ps(_mm_sub_ps(z, a), _mm_set1_ps(w_o)));
+        let t = _mm_mul_ps(_mm_loadu_ps(cr.as_ptr()), line);
+        // ((t₀ + t₁) + t₂) + t₃, the plain code's order
+        let s = _mm_add_ss(t, _mm_shuffle_ps::<1>(t, t));
+        let s = _mm_add_ss(s, _mm_movehl_ps(t, t));
+        _mm_cvtss_f32(_mm_add_ss(s, _mm_shuffle_ps::<3>(t, t)))
     }
 }
 
@@ -1794,6 +1932,54 @@ pub fn occupied_scaled_rays<W: Word>(plan: &FramePlan, mask: &BinaryMask<W>, cel
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The SSE cubic kernels of the slice (the four lines' quantities of the
+    /// gradient, the sample) equal the plain ones bit for bit, along both
+    /// in-slice axes, at borders (repeated lines) and inside.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn cubic_kernels_in_the_slice_equal_the_plain_ones() {
+        let mut next = crate::testing::xorshift(0x51ce_c0de_2545_f491);
+        let mut unit = move || (next() >> 40) as f32 / (1u64 << 24) as f32;
+        let (n0, n1, nk) = (9usize, 7usize, 5usize);
+        let n01 = n0 * n1;
+        let data: Vec<f32> = (0..n01 * nk).map(|_| unit() * 300.0 - 40.0).collect();
+        for _ in 0..4000 {
+            let w_o = [0.0, 1.0, 0.5, unit()][(unit() * 4.0) as usize % 4];
+            let cr = [unit() - 0.5, unit(), unit(), unit() - 0.5];
+            let k = 1 + (unit() * (nk - 2) as f32) as usize % (nk - 2);
+            // along 0: lines along i (step 1), the other axis j (n0)
+            let c = (unit() * (n0 - 1) as f32) as usize % (n0 - 1);
+            let co = 1 + (unit() * (n1 - 3) as f32) as usize % (n1 - 3);
+            let lines = four(c, n0);
+            let o = lines.map(|l| l + co * n0 + k * n01);
+            // SAFETY: k, co away from the borders: every read lies in data
+            let (a, b) = unsafe { (cubic_lines_sse::<0>(&data, o, n0, n01, w_o), cubic_lines_plain(&data, o, n0, n01, w_o)) };
+            assert_eq!(a.map(|x| x.map(f32::to_bits)), b.map(|x| x.map(f32::to_bits)), "along 0 at {o:?}");
+            // along 1: lines along j (step n0), the other axis i (1)
+            let c = (unit() * (n1 - 1) as f32) as usize % (n1 - 1);
+            let co = 1 + (unit() * (n0 - 3) as f32) as usize % (n0 - 3);
+            let o = four(c, n1).map(|l| co + l * n0 + k * n01);
+            // SAFETY: as above
+            let (a, b) = unsafe { (cubic_lines_sse::<1>(&data, o, 1, n01, w_o), cubic_lines_plain(&data, o, 1, n01, w_o)) };
+            assert_eq!(a.map(|x| x.map(f32::to_bits)), b.map(|x| x.map(f32::to_bits)), "along 1 at {o:?}");
+            // the sample inside: four consecutive lines from `before`
+            let before = k * n01 + (unit() * (n01 - 4 * n0 - 2) as f32) as usize % (n01 - 4 * n0 - 2);
+            for (za, step, other) in [(0, 1, n0), (1, n0, 1)] {
+                let o = [0, 1, 2, 3].map(|m| before + m * step);
+                // SAFETY: every read lies within three rows and a voxel of `before`, in data
+                let (a, b) = unsafe {
+                    let a = if za == 0 {
+                        cubic_sample_sse::<0>(&data, before, n0, w_o, &cr)
+                    } else {
+                        cubic_sample_sse::<1>(&data, before, n0, w_o, &cr)
+                    };
+                    (a, cubic_sample_plain(&data, o, other, w_o, &cr))
+                };
+                assert_eq!(a.to_bits(), b.to_bits(), "sample along {za} from {before}");
+            }
+        }
+    }
     use crate::classify::TransferFunction;
     use crate::data::volume::Volume;
     use crate::encode::depth::binary_matcher;

@@ -31,6 +31,17 @@
 //! - **A compact state per ray**: the group of rays whose first candidates are
 //!   found (and their voxels prefetched) before they are traced keeps a word
 //!   index, the remaining bits and the slice of the word's first slot.
+//! - **Prefetches for what the rays will read**: a group of rays' first
+//!   candidates are found first and their cells prefetched (with the slices
+//!   before and after), then the group is traced; and every visit prefetches
+//!   the voxel row that the ray of the next row of rays will read there. The
+//!   cell of ray `(p, q)` in slice `k` spans voxel rows `j` and `j + 1`; ray
+//!   `(p, q + 1)` meets the slice in rows `j + 1` and `j + 2`, and on a
+//!   surface neighbouring rays visit neighbouring slices, so row `j + 2` is
+//!   the line a visit of the next row would otherwise wait for (this row has
+//!   just read row `j + 1`). A row of rays takes microseconds, far longer
+//!   than a fetch from memory, and its lines (tens of kilobytes) stay in the
+//!   per-core cache until the next row reads them.
 //! - **One vector per sample**: where the CPU level has SSSE3, a visit gathers
 //!   its cell's four densities into one SSE vector and interpolates them
 //!   there ([`Cells::sample_ssse3`]): the same float operations, the same
@@ -103,6 +114,10 @@ struct Frame<'a, W: Word> {
     slots: usize,
     log_nb: u32,
     prefetch: bool,
+    /// How far past a visited cell's first voxel the voxel row the next
+    /// row of rays reads starts (two rows); 0 without prefetches, where a
+    /// visit's hint names the line it reads anyway, so it needs no branch.
+    ahead: usize,
 }
 
 /// Ray `(p, q)` of the intermediate image and its base stack index
@@ -224,6 +239,7 @@ impl LeanFrame {
             slots,
             log_nb: m.width().trailing_zeros(),
             prefetch,
+            ahead: if prefetch { 2 * n[0] } else { 0 },
         };
         let avx2 = mask.cpu_level().has_avx2();
         // at cell size 1 a ray's column is its own cells' (no dilation): a
@@ -422,6 +438,9 @@ impl<W: Word> Frame<'_, W> {
         let mut below = Below { k: usize::MAX, d: 0.0 };
         loop {
             if !CHECKED || b != usize::MAX {
+                // the row of the cell that the ray of the next row reads here
+                // and no ray of this row reads (module docs)
+                v.prefetch_voxel(b.wrapping_add(self.ahead));
                 let e = self.slice(k);
                 let d = s.sample(v, b, e);
                 if d >= self.iso {

@@ -36,6 +36,9 @@
 //! - **Prefetched first tests**: in groups of rays, every ray's first
 //!   candidate is found and the voxels its first test reads are prefetched
 //!   before the group is traced, so the cache misses of a group overlap.
+//! - **The next row's voxel row**: every sample prefetches the voxel row
+//!   that the ray of the next row of rays reads there and this row's rays do
+//!   not (the lean frame's reasoning, [`super::lean`]).
 //! - **The expensive parts only at the hit**: the crossing's solve
 //!   ([`reconstruct::crossing`]) runs where the bound admits one, and the
 //!   normal (the B-spline gradient) once, at the ray's hit.
@@ -308,6 +311,8 @@ impl Frame<'_, '_> {
         let cj = q as i32 + e.dj;
         if (ci as u32) < self.cells[0] && (cj as u32) < self.cells[1] {
             let b = (p + self.n0 * q).wrapping_add_signed(e.base);
+            // the row the next row of rays reads here and this one does not
+            self.ctx.stack.prefetch_voxel(b.wrapping_add(2 * self.n0));
             Some(bilinear(self.ctx.stack.cell_at(b), e.wi, e.wj))
         } else {
             None
@@ -355,6 +360,9 @@ impl Frame<'_, '_> {
         let (iso, rgb) = (ctx.iso, ctx.iso_rgb);
         for k in walk {
             let Some((at, b)) = self.at(p, q, k) else { continue };
+            // the row the next row of rays reads here and this one does not:
+            // along axis 1 a sample reads the cell's rows and one each side
+            self.ctx.stack.prefetch_voxel(b.wrapping_add(if ZA == 1 { 3 } else { 2 } * self.n0));
             let w = &self.weights[k];
             let d = ctx.sample_in_slice::<ZA>(at, b, &w.cr);
             if d >= iso {

@@ -144,6 +144,10 @@ pub trait Cells: Sync {
     fn prefetch_densities(&self, b: usize) {
         self.prefetch(b)
     }
+    /// Hints the cache to fetch voxel `b`'s line of densities and codes (no
+    /// effect on results): one row of a cell, where a ray of the next row of
+    /// rays will read ([`super::lean`]'s visits).
+    fn prefetch_voxel(&self, b: usize);
     /// Hints the cache to fetch the cell at stack index `b` and the cells
     /// `n01` indices (one slice) before and after it (no effect on results).
     #[inline(always)]
@@ -185,6 +189,11 @@ impl Cells for Split<'_> {
         self.stack.prefetch_cell(b);
         crate::data::slices::prefetch_cell(self.codes, b, self.stack.n[0]);
     }
+    #[inline(always)]
+    fn prefetch_voxel(&self, b: usize) {
+        self.stack.prefetch_voxel(b);
+        crate::data::slices::prefetch(self.codes, b);
+    }
 }
 
 impl Cells for PackedCells<'_> {
@@ -199,6 +208,10 @@ impl Cells for PackedCells<'_> {
     #[inline(always)]
     fn prefetch(&self, b: usize) {
         PackedCells::prefetch(self, b)
+    }
+    #[inline(always)]
+    fn prefetch_voxel(&self, b: usize) {
+        PackedCells::prefetch_voxel(self, b)
     }
     #[inline(always)]
     fn prefetch_around(&self, b: usize, n01: usize) {
@@ -224,6 +237,10 @@ impl Cells for ByteCells<'_> {
     #[inline(always)]
     fn prefetch(&self, b: usize) {
         ByteCells::prefetch(self, b)
+    }
+    #[inline(always)]
+    fn prefetch_voxel(&self, b: usize) {
+        ByteCells::prefetch_voxel(self, b)
     }
     #[inline(always)]
     fn prefetch_around(&self, b: usize, n01: usize) {

@@ -32,7 +32,7 @@ use rayon::prelude::*;
 use crate::data::packing::{BLOCK, InPlace, restride};
 #[cfg(target_arch = "x86_64")]
 use crate::data::slices::bilinear_sse;
-use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch_cell, prefetch_ptr};
+use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch, prefetch_cell, prefetch_ptr};
 use crate::data::volume::{Volume, VoxelData, VoxelType};
 
 /// Cells per side of the hemi-octahedral normal grid.
@@ -570,6 +570,13 @@ impl PackedCells<'_> {
         prefetch_cell(self.words, b, self.n0);
     }
 
+    /// Hints the cache to fetch the line of voxel `b` (densities and codes
+    /// share it): no effect on results.
+    #[inline(always)]
+    pub fn prefetch_voxel(&self, b: usize) {
+        prefetch(self.words, b);
+    }
+
     /// Hints the cache to fetch both rows of the cells at stack indices
     /// `b − n01`, `b` and `b + n01` (one slice before and after), addresses
     /// formed once: no effect on results.
@@ -682,6 +689,13 @@ impl<'a> ByteCells<'a> {
     #[inline(always)]
     pub fn prefetch(&self, b: usize) {
         prefetch_cell(self.cells, b, self.n0);
+    }
+
+    /// Hints the cache to fetch the line of voxel `b` (densities and codes
+    /// share it): no effect on results.
+    #[inline(always)]
+    pub fn prefetch_voxel(&self, b: usize) {
+        prefetch(self.cells, b);
     }
 
     /// Hints the cache to fetch both rows of the cells at stack indices

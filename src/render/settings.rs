@@ -268,7 +268,8 @@ pub struct Settings {
     /// a benchmark knob that shows what the rectangle skip buys (same image).
     pub occupied_rect: bool,
     /// Binary path: prefetch the voxel rows of each ray's first candidate slice
-    /// while a group of rays is bit-scanned, before the group is traced. `false`
+    /// while a group of rays is bit-scanned, before the group is traced, and
+    /// at every visit the voxel row the next row of rays reads there. `false`
     /// leaves the prefetches out: a benchmark knob that shows what they buy
     /// (same image).
     pub prefetch: bool,

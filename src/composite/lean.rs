@@ -28,20 +28,22 @@
 //!   bit is a cell of the volume; with super cells a visit tests its cell
 //!   against the slice's extent (two integer compares), as does every
 //!   refinement's previous-slice read.
-//! - **A compact state per ray**: the group of rays whose first candidates are
-//!   found (and their voxels prefetched) before they are traced keeps a word
-//!   index, the remaining bits and the slice of the word's first slot.
-//! - **Prefetches for what the rays will read**: a group of rays' first
-//!   candidates are found first and their cells prefetched (with the slices
-//!   before and after), then the group is traced; and every visit prefetches
-//!   the voxel row that the ray of the next row of rays will read there. The
-//!   cell of ray `(p, q)` in slice `k` spans voxel rows `j` and `j + 1`; ray
+//! - **A compact state per ray**: a ray's walk keeps a word index, the
+//!   remaining matching bits and the slice of the word's first slot.
+//! - **Each visit prefetches what the next row of rays reads**: the rays of a
+//!   row are traced one after the other, and every visit prefetches the voxel
+//!   row that the ray of the next row of rays will read there. The cell of
+//!   ray `(p, q)` in slice `k` spans voxel rows `j` and `j + 1`; ray
 //!   `(p, q + 1)` meets the slice in rows `j + 1` and `j + 2`, and on a
 //!   surface neighbouring rays visit neighbouring slices, so row `j + 2` is
 //!   the line a visit of the next row would otherwise wait for (this row has
 //!   just read row `j + 1`). A row of rays takes microseconds, far longer
 //!   than a fetch from memory, and its lines (tens of kilobytes) stay in the
-//!   per-core cache until the next row reads them.
+//!   per-core cache until the next row reads them. This covers a ray's first
+//!   candidate as well as the visits after it, with one hint a visit and no
+//!   state carried between rays (a pass that finds and prefetches a group of
+//!   rays' first candidates before tracing them is what the general path
+//!   does, [`super::raycast::PREFETCH_GROUP`]).
 //! - **One vector per sample**: where the CPU level has SSSE3, a visit gathers
 //!   its cell's four densities into one SSE vector and interpolates them
 //!   there ([`Cells::sample_ssse3`]): the same float operations, the same
@@ -66,11 +68,6 @@ use crate::data::slices::bilinear;
 use crate::encode::depth::{Matcher, Search, Word};
 use crate::encode::mask::BinaryMask;
 use crate::view::plan::{FramePlan, Grid, MapKind};
-
-/// Rays per group: the first candidates of a group are found and their voxels
-/// prefetched before the group is traced (the general path's
-/// [`super::raycast::PREFETCH_GROUP`]).
-const GROUP: usize = super::raycast::PREFETCH_GROUP;
 
 /// One slice of the per-slice table of a frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -107,13 +104,11 @@ struct Frame<'a, W: Word> {
     iso_rgb: [f32; 3],
     /// Cells per slice along `i` and `j`.
     cells: [u32; 2],
-    /// Voxels per row and per slice of the stack.
+    /// Voxels per row of the stack.
     n0: usize,
-    n01: usize,
     /// Slices per word and `log2` of the code width.
     slots: usize,
     log_nb: u32,
-    prefetch: bool,
     /// How far past a visited cell's first voxel the voxel row the next
     /// row of rays reads starts (two rows); 0 without prefetches, where a
     /// visit's hint names the line it reads anyway, so it needs no branch.
@@ -157,22 +152,6 @@ impl<W: Word> Walk<W> {
     }
 }
 
-/// A ray of a group between the two passes: its walk after its first
-/// candidate, that candidate's slice `k` and stack index `b` (`usize::MAX`:
-/// its cell is outside the volume; `k == usize::MAX`: no candidate).
-#[derive(Clone, Copy, Debug)]
-struct Pending<W: Word> {
-    walk: Walk<W>,
-    k: usize,
-    b: usize,
-}
-
-impl<W: Word> Default for Pending<W> {
-    fn default() -> Self {
-        Pending { walk: Walk::default(), k: usize::MAX, b: usize::MAX }
-    }
-}
-
 impl LeanFrame {
     /// Whether a frame of `plan` in `mode`, shaded by normal codes (`codes`),
     /// with depth search `search`, takes the lean path.
@@ -206,6 +185,9 @@ impl LeanFrame {
     /// holds (`ctx` shades by normal codes) through the sheared `mask` and
     /// its matcher `m`, into `out`; marks `rect` valid. The same image as
     /// [`super::raycast::render_binary`] of the same frame, bit for bit.
+    /// With `prefetch` every visit prefetches the voxel row the next row of
+    /// rays reads there (module docs); without, no hint names a line the
+    /// frame has not just read.
     pub fn render<W: Word>(
         &mut self,
         ctx: &RayContext,
@@ -235,10 +217,8 @@ impl LeanFrame {
             iso_rgb: ctx.iso_rgb,
             cells: ctx.cell_counts(),
             n0: n[0],
-            n01: n[0] * n[1],
             slots,
             log_nb: m.width().trailing_zeros(),
-            prefetch,
             ahead: if prefetch { 2 * n[0] } else { 0 },
         };
         let avx2 = mask.cpu_level().has_avx2();
@@ -400,18 +380,6 @@ impl<W: Word> Frame<'_, W> {
         ((ci as u32) < self.cells[0] && (cj as u32) < self.cells[1]).then(|| ray.rb.wrapping_add_signed(e.base))
     }
 
-    /// Hints the cache to fetch what a ray reads from its first candidate at
-    /// stack index `b` on: the cell there, at the slice before it (a hit's
-    /// refinement) and at the slice after it (the next visit when the first
-    /// misses), as [`RayContext::prefetch`] does; once per 16 indices.
-    #[inline(always)]
-    fn prefetch_at<V: Cells>(&self, v: &V, b: usize, last: &mut usize) {
-        if b >> 4 != *last {
-            *last = b >> 4;
-            v.prefetch_around(b, self.n01);
-        }
-    }
-
     /// The stack index of `ray`'s cell in slice entry `e`, or `usize::MAX`
     /// outside the volume (tested only with `CHECKED`).
     #[inline(always)]
@@ -421,7 +389,8 @@ impl<W: Word> Frame<'_, W> {
     }
 
     /// Traces `ray` into its pixel from its first candidate (slice `k`,
-    /// stack index `b`, [`Pending`]) and the rest of its walk: the first
+    /// stack index `b`: `usize::MAX` when its cell is outside the volume)
+    /// and the rest of its `walk`: the first
     /// candidate whose sample reaches the iso value, refined and shaded; the
     /// pixel is left as it is (a miss) if there is none.
     #[inline(always)]
@@ -430,10 +399,9 @@ impl<W: Word> Frame<'_, W> {
         v: &V,
         s: S,
         ray: LeanRay,
-        pending: Pending<W>,
+        (mut walk, mut k, mut b): (Walk<W>, usize, usize),
         px: Pixel,
     ) {
-        let Pending { mut walk, mut k, mut b } = pending;
         // the last sample below the iso value: its slice and density
         let mut below = Below { k: usize::MAX, d: 0.0 };
         loop {
@@ -598,10 +566,9 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ON
     lean_row::<W, V, Plain, ASC, CHECKED, ONE>(f, v, Plain, row, out)
 }
 
-/// One row of the lean frame: the row cleared to misses, then in groups of
-/// [`GROUP`] rays first every ray's first candidate (its voxels prefetched),
-/// then the traces of the rays that have one. A ray's base index is the row's
-/// plus its offset along the row.
+/// One row of the lean frame: the row cleared to misses, then ray by ray
+/// its first candidate and its trace. A ray's base index is the row's plus
+/// its offset along the row.
 #[inline(always)]
 fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool, const ONE: bool>(
     f: &Frame<W>,
@@ -624,41 +591,27 @@ fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool,
         (n - 1 - row.left) / row.s + 2
     };
     assert!(row.start + columns * row.nw <= f.words.len(), "a row of rays past the mask");
-    let mut pending = [Pending::<W>::default(); GROUP];
-    let mut last_line = usize::MAX;
     // ray (p0 + dp, q)'s base index is the row's plus dp
     let rb0 = p0 + f.n0 * q;
-    let ray = |dp: usize| LeanRay { p: p0 + dp, q, rb: rb0 + dp };
     // with super cells the rays of a super cell read one column: its first
     // matching slot is found once, for the first of them
     let mut shared: Option<(usize, Walk<W>)> = None;
-    for (g, (cg, dg)) in crow.chunks_mut(GROUP).zip(drow.chunks_mut(GROUP)).enumerate() {
-        let pending = &mut pending[..cg.len()];
-        for (dp, r) in pending.iter_mut().enumerate() {
-            let mut walk = match shared {
-                Some((start, walk)) if CHECKED && start == row.start => walk,
-                _ => {
-                    let walk = f.first::<S, ASC, ONE>(s, row.start, row.nw);
-                    shared = CHECKED.then_some((row.start, walk));
-                    walk
-                }
-            };
-            r.k = usize::MAX;
-            if walk.cur != W::ZERO {
-                let k = f.take::<ASC, ONE>(&mut walk);
-                let b = f.cell_at::<CHECKED>(f.slice(k), ray(g * GROUP + dp));
-                if f.prefetch && b != usize::MAX {
-                    f.prefetch_at::<V>(v, b, &mut last_line);
-                }
-                *r = Pending { walk, k, b };
+    for (dp, (rgba, depth)) in crow.iter_mut().zip(drow.iter_mut()).enumerate() {
+        let mut walk = match shared {
+            Some((start, walk)) if CHECKED && start == row.start => walk,
+            _ => {
+                let walk = f.first::<S, ASC, ONE>(s, row.start, row.nw);
+                shared = CHECKED.then_some((row.start, walk));
+                walk
             }
-            row.advance::<CHECKED>();
+        };
+        if walk.cur != W::ZERO {
+            let ray = LeanRay { p: p0 + dp, q, rb: rb0 + dp };
+            let k = f.take::<ASC, ONE>(&mut walk);
+            let b = f.cell_at::<CHECKED>(f.slice(k), ray);
+            f.trace::<V, S, ASC, CHECKED, ONE>(v, s, ray, (walk, k, b), Pixel { rgba, depth });
         }
-        for (dp, ((rgba, depth), r)) in cg.iter_mut().zip(dg.iter_mut()).zip(pending.iter()).enumerate() {
-            if r.k != usize::MAX {
-                f.trace::<V, S, ASC, CHECKED, ONE>(v, s, ray(g * GROUP + dp), *r, Pixel { rgba, depth });
-            }
-        }
+        row.advance::<CHECKED>();
     }
 }
 

@@ -148,14 +148,6 @@ pub trait Cells: Sync {
     /// effect on results): one row of a cell, where a ray of the next row of
     /// rays will read ([`super::lean`]'s visits).
     fn prefetch_voxel(&self, b: usize);
-    /// Hints the cache to fetch the cell at stack index `b` and the cells
-    /// `n01` indices (one slice) before and after it (no effect on results).
-    #[inline(always)]
-    fn prefetch_around(&self, b: usize, n01: usize) {
-        self.prefetch(b);
-        self.prefetch(b.wrapping_sub(n01));
-        self.prefetch_densities(b.wrapping_add(n01));
-    }
     /// [`bilinear`] of [`Cells::densities`] at `(wi, wj)`, by a copy that
     /// gathers the corners into one SSE vector where the layout allows it:
     /// the same value bit for bit.
@@ -213,10 +205,6 @@ impl Cells for PackedCells<'_> {
     fn prefetch_voxel(&self, b: usize) {
         PackedCells::prefetch_voxel(self, b)
     }
-    #[inline(always)]
-    fn prefetch_around(&self, b: usize, n01: usize) {
-        PackedCells::prefetch_around(self, b, n01)
-    }
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     unsafe fn sample_ssse3(&self, b: usize, wi: f32, wj: f32) -> f32 {
@@ -241,10 +229,6 @@ impl Cells for ByteCells<'_> {
     #[inline(always)]
     fn prefetch_voxel(&self, b: usize) {
         ByteCells::prefetch_voxel(self, b)
-    }
-    #[inline(always)]
-    fn prefetch_around(&self, b: usize, n01: usize) {
-        ByteCells::prefetch_around(self, b, n01)
     }
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]

@@ -32,7 +32,7 @@ use rayon::prelude::*;
 use crate::data::packing::{BLOCK, InPlace, restride};
 #[cfg(target_arch = "x86_64")]
 use crate::data::slices::bilinear_sse;
-use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch, prefetch_cell, prefetch_ptr};
+use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch, prefetch_cell};
 use crate::data::volume::{Volume, VoxelData, VoxelType};
 
 /// Cells per side of the hemi-octahedral normal grid.
@@ -577,19 +577,6 @@ impl PackedCells<'_> {
         prefetch(self.words, b);
     }
 
-    /// Hints the cache to fetch both rows of the cells at stack indices
-    /// `b − n01`, `b` and `b + n01` (one slice before and after), addresses
-    /// formed once: no effect on results.
-    #[inline(always)]
-    pub fn prefetch_around(&self, b: usize, n01: usize) {
-        let at = self.words.as_ptr().wrapping_add(b);
-        let (row, slice) = (self.n0, n01);
-        for p in [at.wrapping_sub(slice), at, at.wrapping_add(slice)] {
-            prefetch_ptr(p);
-            prefetch_ptr(p.wrapping_add(row));
-        }
-    }
-
     /// [`crate::data::slices::bilinear`] of [`PackedCells::densities`] at `(wi, wj)`, bit for bit:
     /// each row's two voxels in one 8-byte load, the four densities moved
     /// into one vector by a byte shuffle, interpolated there with the same
@@ -696,19 +683,6 @@ impl<'a> ByteCells<'a> {
     #[inline(always)]
     pub fn prefetch_voxel(&self, b: usize) {
         prefetch(self.cells, b);
-    }
-
-    /// Hints the cache to fetch both rows of the cells at stack indices
-    /// `b − n01`, `b` and `b + n01` (one slice before and after), addresses
-    /// formed once: no effect on results.
-    #[inline(always)]
-    pub fn prefetch_around(&self, b: usize, n01: usize) {
-        let at = self.cells.as_ptr().wrapping_add(b);
-        let (row, slice) = (self.n0, n01);
-        for p in [at.wrapping_sub(slice), at, at.wrapping_add(slice)] {
-            prefetch_ptr(p);
-            prefetch_ptr(p.wrapping_add(row));
-        }
     }
 
     /// [`crate::data::slices::bilinear`] of [`ByteCells::densities`] at `(wi, wj)`, bit for bit:

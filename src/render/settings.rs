@@ -267,9 +267,10 @@ pub struct Settings {
     /// (sheared) mask. `false` casts over the whole sheared volume's rectangle:
     /// a benchmark knob that shows what the rectangle skip buys (same image).
     pub occupied_rect: bool,
-    /// Binary path: prefetch the voxel rows of each ray's first candidate slice
-    /// while a group of rays is bit-scanned, before the group is traced, and
-    /// at every visit the voxel row the next row of rays reads there. `false`
+    /// Binary path: prefetch what the rays will read. The general path
+    /// prefetches the voxel rows of each ray's first candidate slice while a
+    /// group of rays is bit-scanned, before the group is traced; the lean
+    /// frames, at every visit, the voxel row the next row of rays reads there. `false`
     /// leaves the prefetches out: a benchmark knob that shows what they buy
     /// (same image).
     pub prefetch: bool,

@@ -128,7 +128,7 @@ struct LeanRay {
 /// matching slots (top bits, [`Matcher::hits`]; none left: the ray has no
 /// candidate), the slice of its first slot and how many words are left after
 /// it in walking order.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 struct Walk<W: Word> {
     w: usize,
     cur: W,

@@ -1934,6 +1934,28 @@ pub fn occupied_scaled_rays<W: Word>(plan: &FramePlan, mask: &BinaryMask<W>, cel
 mod tests {
     use super::*;
 
+    /// Every parallel plan moves its rays by at most one voxel a slice, so the
+    /// cubic's binary walk serves it: views at every whole degree about each
+    /// eye axis from each named view, 45° and 135° included (where the
+    /// principal axis is a tie).
+    #[test]
+    fn the_cubic_walks_every_parallel_plan() {
+        use crate::view::{Camera, Factorization, NamedView, rotate_eye};
+        for (dims, sp) in
+            [([40, 36, 30], [1.0f32; 3]), ([21, 19, 23], [1.0; 3]), ([256, 256, 256], [1.0; 3]), ([33, 20, 17], [0.6, 0.6, 5.0])]
+        {
+            for view in NamedView::ALL {
+                for axis in 0..3 {
+                    for deg in 0..360 {
+                        let cam = Camera::new(rotate_eye(view.rotation(), axis, deg as f64), [64, 64]);
+                        let plan = FramePlan::parallel(&Factorization::new(&cam, dims, sp).unwrap(), sp);
+                        assert!(cubic_walks(&plan), "{view:?} turned {deg}° about eye axis {axis}, {dims:?}");
+                    }
+                }
+            }
+        }
+    }
+
     /// The SSE cubic kernels of the slice (the four lines' quantities of the
     /// gradient, the sample) equal the plain ones bit for bit, along both
     /// in-slice axes, at borders (repeated lines) and inside.

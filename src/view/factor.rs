@@ -181,7 +181,12 @@ impl Factorization {
         let perm = perms[axis];
         let d = DVec3::new(dir_vox[perm[0]], dir_vox[perm[1]], dir_vox[perm[2]]);
         let shear = match force_axis {
-            None => [d.x / d.z, d.y / d.z],
+            // (a tie broken towards z within `TIE_TOLERANCE` leaves |d.x| or
+            // |d.y| up to a hair above |d.z|: the shear is one voxel a slice
+            // there, and clamped it stays exactly that, so every slice's
+            // translation is a whole multiple and the rays' cells move by at
+            // most one a slice)
+            None => [d.x / d.z, d.y / d.z].map(|s| s.clamp(-1.0, 1.0)),
             Some(_) => [d.x, d.y].map(|x| if d.z == 0.0 { 0.0 } else { (x / d.z).clamp(-1.0, 1.0) }),
         };
         let n = [dims[perm[0]], dims[perm[1]], dims[perm[2]]];

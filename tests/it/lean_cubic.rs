@@ -65,3 +65,22 @@ fn lean_cubic_frame_at_word_boundaries() {
     assert_eq!(checked, 28);
     assert!(covered > 5_000, "only {covered} covered pixels");
 }
+
+/// Views whose principal axis is a tie (45° and its odd multiples about each
+/// eye axis from the superior view: one voxel a slice): the lean cubic frame
+/// walks them and equals the general path and the brute force, the volume's
+/// z along the slices or in them, isotropic and with thick slices.
+#[test]
+fn lean_cubic_frame_at_one_voxel_a_slice() {
+    use shearwarp::view::{NamedView, rotate_eye};
+    let mut covered = 0;
+    for spacing in [[1.0f32, 1.0, 1.0], [1.0, 1.0, 3.0]] {
+        let vol = random_volume([21, 19, 23], 4242, spacing);
+        let cams: Vec<Camera> = [(0usize, 45.0f64), (0, 135.0), (1, 45.0), (1, 135.0), (1, 225.0), (1, 315.0)]
+            .into_iter()
+            .map(|(axis, deg)| Camera::new(rotate_eye(NamedView::Superior.rotation(), axis, deg), [48, 44]))
+            .collect();
+        covered += check(&vol, None, cubic(Settings { threads: 2, ..Settings::default() }), &cams);
+    }
+    assert!(covered > 1_000, "only {covered} covered pixels");
+}

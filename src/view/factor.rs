@@ -180,15 +180,13 @@ impl Factorization {
         let axis = force_axis.unwrap_or_else(|| principal_axis(dir_vox));
         let perm = perms[axis];
         let d = DVec3::new(dir_vox[perm[0]], dir_vox[perm[1]], dir_vox[perm[2]]);
-        let shear = match force_axis {
-            // (a tie broken towards z within `TIE_TOLERANCE` leaves |d.x| or
-            // |d.y| up to a hair above |d.z|: the shear is one voxel a slice
-            // there, and clamped it stays exactly that, so every slice's
-            // translation is a whole multiple and the rays' cells move by at
-            // most one a slice)
-            None => [d.x / d.z, d.y / d.z].map(|s| s.clamp(-1.0, 1.0)),
-            Some(_) => [d.x, d.y].map(|x| if d.z == 0.0 { 0.0 } else { (x / d.z).clamp(-1.0, 1.0) }),
-        };
+        // at most one voxel a slice: a forced axis may lie off the principal
+        // one, and a tie broken towards z within `TIE_TOLERANCE` leaves |d.x|
+        // or |d.y| a hair above |d.z|, where the clamped shear is exactly one
+        // voxel a slice, so every slice's translation is a whole multiple and
+        // the rays' cells move by at most one a slice (a principal axis has
+        // d.z ≠ 0)
+        let shear = [d.x, d.y].map(|x| if d.z == 0.0 { 0.0 } else { (x / d.z).clamp(-1.0, 1.0) });
         let n = [dims[perm[0]], dims[perm[1]], dims[perm[2]]];
         let kc = (n[2] as f64 - 1.0) / 2.0;
         // voxel → image: u = cu + zoom·(R·S·(v − c)).x ; v = cv − zoom·(…).y

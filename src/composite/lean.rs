@@ -299,7 +299,7 @@ impl<W: Word> Frame<'_, W> {
     /// matching slot (no slot left: no candidate).
     #[inline(always)]
     fn first<S: Sampler, const ASC: bool, const ONE: bool>(&self, s: S, start: usize, nw: usize) -> Walk<W> {
-        let (w, kbase) = if ASC { (start, 0) } else { (start + nw - 1, (nw - 1) * self.slots) };
+        let (w, kbase) = if ASC { (start, 0) } else { (start + nw - 1, (nw - 1) * self.slots::<ONE>()) };
         let cur = self.hits::<ONE>(self.word(w));
         let mut walk = Walk { w, cur, kbase, left: nw - 1 };
         self.settle::<S, ASC, ONE>(s, &mut walk);
@@ -308,18 +308,25 @@ impl<W: Word> Frame<'_, W> {
 
     /// Moves `walk` past words with no matching slot; false at the row's end.
     /// Where the CPU level can ([`Sampler::skip`]), whole groups of four
-    /// words with no matching slot are passed first.
+    /// words with no matching slot are passed first; a skip stops before a
+    /// group with a match, so the words after it are stepped one at a time
+    /// with no further skip.
     #[inline(always)]
     fn settle<S: Sampler, const ASC: bool, const ONE: bool>(&self, s: S, walk: &mut Walk<W>) -> bool {
-        while walk.cur == W::ZERO {
-            s.skip::<W, ASC>(self, walk);
+        if walk.cur != W::ZERO {
+            return true;
+        }
+        s.skip::<W, ASC>(self, walk);
+        loop {
             if walk.left == 0 {
                 return false;
             }
-            walk.pass::<ASC>(1, self.slots);
+            walk.pass::<ASC>(1, self.slots::<ONE>());
             walk.cur = self.hits::<ONE>(self.word(walk.w));
+            if walk.cur != W::ZERO {
+                return true;
+            }
         }
-        true
     }
 
     /// Word `w` of the mask, which must lie in a depth row of the row of
@@ -335,6 +342,14 @@ impl<W: Word> Frame<'_, W> {
         unsafe { *self.words.get_unchecked(w) }
     }
 
+    /// Slices per word (`ONE`: one-bit codes, a slice a bit, known at compile
+    /// time).
+    #[inline(always)]
+    fn slots<const ONE: bool>(&self) -> usize {
+        debug_assert!(!ONE || self.slots == W::BITS as usize);
+        if ONE { W::BITS as usize } else { self.slots }
+    }
+
     /// The matching slots of word `w` ([`Matcher::hits`]; `ONE`: the codes
     /// are one bit wide, so every set bit matches).
     #[inline(always)]
@@ -345,14 +360,15 @@ impl<W: Word> Frame<'_, W> {
 
     /// The table entry of slice `k`, which must be a slot of a depth row
     /// (every slice a walk takes is: `kbase` counts whole words before the
-    /// slot).
+    /// slot) or a slice of the stack (the refinement's slice before).
     #[inline(always)]
     fn slice(&self, k: usize) -> &SliceEntry {
         debug_assert!(k < self.slices.len());
         // SAFETY: `k` is a walk's slot, `kbase + (pos >> log_nb)` with `kbase`
         // at most `(nw − 1)·slots` and `pos < W::BITS = slots << log_nb`, so
-        // `k < nw·slots`, and `render` asserted the table at least that long
-        // (`fill` pads it). Exercised by every lean frame (tests/it/lean_frame.rs).
+        // `k < nw·slots`, or a slice of the stack, `k < nk`; `render` asserted
+        // the table at least `nw·slots` and `nk` long (`fill` pads it).
+        // Exercised by every lean frame (tests/it/lean_frame.rs).
         unsafe { self.slices.get_unchecked(k) }
     }
 
@@ -439,7 +455,7 @@ impl<W: Word> Frame<'_, W> {
         // its slice, the refinement's fraction, its cell and its entry
         let mut before = None;
         if let Some(kp) = kp {
-            let ep = &self.slices[kp];
+            let ep = self.slice(kp);
             let prev = if below.k == kp {
                 // (a visited cell: inside the volume)
                 Some((ray.rb.wrapping_add_signed(ep.base), below.d))
@@ -452,10 +468,12 @@ impl<W: Word> Frame<'_, W> {
                 before = Some((kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), bp, ep));
             }
         }
-        // (slice indices are below 2^24: exact as f32 through u32, as through usize)
+        // (slice indices are below 2^24: exact as f32 through u32, as through
+        // usize; `k − kp` is ±1 in walking order, so the general path's
+        // `kp + (k − kp)·t` is `kp ± t`, the same float)
         let depth = match before {
             None => k as u32 as f32,
-            Some((kp, t, _, _)) => kp as u32 as f32 + (k as u32 as f32 - kp as u32 as f32) * t,
+            Some((kp, t, _, _)) => kp as u32 as f32 + if ASC { t } else { -t },
         };
         let s = match before {
             None => self.table.blend(v.codes(b), e.wi, e.wj),

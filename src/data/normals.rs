@@ -30,9 +30,9 @@
 use rayon::prelude::*;
 
 use crate::data::packing::{BLOCK, InPlace, restride};
-#[cfg(target_arch = "x86_64")]
-use crate::data::slices::bilinear_sse;
 use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch, prefetch_cell};
+#[cfg(target_arch = "x86_64")]
+use crate::data::slices::{bilinear_sse, bilinear_sse_bytes};
 use crate::data::volume::{Volume, VoxelData, VoxelType};
 
 /// Cells per side of the hemi-octahedral normal grid.
@@ -708,7 +708,8 @@ impl<'a> ByteCells<'a> {
             // [d00, d01, d10, d11] zero-extended, converted exactly
             let x =
                 _mm_shuffle_epi8(_mm_setr_epi32(r0, r1, 0, 0), _mm_setr_epi8(0, -1, -1, -1, 4, -1, -1, -1, 3, -1, -1, -1, 7, -1, -1, -1));
-            bilinear_sse(_mm_cvtepi32_ps(x), wi, wj)
+            // (bytes: whole numbers in [0, 255], which the upper clamp cannot bind)
+            bilinear_sse_bytes(_mm_cvtepi32_ps(x), wi, wj)
         }
     }
 }

@@ -399,6 +399,46 @@ pub fn bilinear([v00, v10, v01, v11]: [f32; 4], wi: f32, wj: f32) -> f32 {
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 pub(crate) unsafe fn bilinear_sse(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
+    // SAFETY: the caller's contract is this one's
+    unsafe { bilinear_sse_clamped::<true>(x, wi, wj) }
+}
+
+/// [`bilinear_sse`] of corners that are bytes (whole numbers in `[0, 255]`),
+/// without the clamp to the corners' largest value, which cannot bind there:
+/// the same value bit for bit (tested against [`bilinear`] over every byte
+/// pattern class and weight edge case).
+///
+/// Why the clamp to `hi` is a no-op for corners that are non-negative whole
+/// numbers below 2²⁴ and weights in `[0, 1]` (round to nearest, ties to even):
+/// - each in-row lerp `a + (b − a)·w` has `b − a` exact and `|fl((b − a)·w)| ≤
+///   |b − a|` (rounding is monotone), so `top` and `bot` lie between their
+///   row's corners;
+/// - if `bot < top`, `fl(bot − top)·wj` rounds to a value in `[fl(bot − top), 0]`,
+///   so the sum is at most `top ≤ hi`;
+/// - if `bot ≥ top ≥ 0`, `fl(bot − top)` is `bot − top` plus at most half an
+///   ulp of `bot` (the difference is at most `bot`), so `top + fl(bot − top)`
+///   is `bot` plus at most half an ulp of `bot`, which rounds to `bot`, or,
+///   on an exact tie, to the even one of `bot` and its successor; the sum
+///   with `fl(fl(bot − top)·wj) ≤ fl(bot − top)` rounds no higher (monotone). If
+///   `bot < hi`, its successor is at most `hi` (a float); if `bot = hi`, a
+///   whole number below 2²⁴, its last mantissa bit is 0, so the tie keeps `hi`.
+///
+/// # Safety
+/// As [`bilinear_sse`].
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) unsafe fn bilinear_sse_bytes(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
+    // SAFETY: the caller's contract is this one's
+    unsafe { bilinear_sse_clamped::<false>(x, wi, wj) }
+}
+
+/// [`bilinear_sse`], clamped to the corners' largest value when `HI`.
+///
+/// # Safety
+/// As [`bilinear_sse`].
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn bilinear_sse_clamped<const HI: bool>(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
     use std::arch::x86_64::*;
     // SAFETY: SSE and SSE2 are the x86-64 baseline; `_mm_movehdup_ps` needs
     // SSE3, which the caller guarantees.
@@ -412,9 +452,13 @@ pub(crate) unsafe fn bilinear_sse(x: std::arch::x86_64::__m128, wi: f32, wj: f32
         // lo = fmin(fmin(v00, v10), fmin(v01, v11)), hi likewise
         let m = _mm_min_ps(x, h);
         let lo = _mm_min_ss(m, _mm_movehdup_ps(m));
+        let d = _mm_max_ss(d, lo);
+        if !HI {
+            return _mm_cvtss_f32(d);
+        }
         let n = _mm_max_ps(x, h);
         let hi = _mm_max_ss(n, _mm_movehdup_ps(n));
-        _mm_cvtss_f32(_mm_min_ss(_mm_max_ss(d, lo), hi))
+        _mm_cvtss_f32(_mm_min_ss(d, hi))
     }
 }
 
@@ -536,6 +580,57 @@ mod tests {
             let v = unsafe { bilinear_sse(_mm_setr_ps(c[0], c[2], c[1], c[3]), wi, wj) };
             let want = bilinear(c, wi, wj);
             assert_eq!(v.to_bits(), want.to_bits(), "{c:?} at ({wi}, {wj})");
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_byte_bilinear_needs_no_upper_clamp() {
+        use std::arch::x86_64::_mm_setr_ps;
+        if !std::arch::is_x86_feature_detected!("sse3") {
+            return;
+        }
+        // weights at and next to 0, ½ and 1, tiny ones (ties against small
+        // tops), and random ones; corners from classes that reach the bound:
+        // equal pairs, one high corner, 0 and 255, neighbours
+        let weights =
+            [0.0f32, 1.0, 0.5, 1.0 - f32::EPSILON / 2.0, 0.5 + f32::EPSILON, 0.5 - f32::EPSILON / 2.0, f32::MIN_POSITIVE, 1e-7, 1e-30];
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng
+        };
+        let mut check = |c: [f32; 4], wi: f32, wj: f32| {
+            // SAFETY: SSE3 detected above; the test is compiled for the
+            // baseline, so the intrinsics run as calls, which is sound.
+            let v = unsafe { bilinear_sse_bytes(_mm_setr_ps(c[0], c[2], c[1], c[3]), wi, wj) };
+            assert_eq!(v.to_bits(), bilinear(c, wi, wj).to_bits(), "{c:?} at ({wi}, {wj})");
+        };
+        for n in 0..2_000_000u32 {
+            let r = next();
+            let byte = |s: u32| ((r >> s) & 255) as f32;
+            let c = match n % 4 {
+                0 => [byte(0), byte(8), byte(16), byte(24)],
+                1 => [byte(0), byte(0), byte(8), byte(16)],
+                2 => [byte(0), byte(8), byte(8), byte(8) + ((r >> 32) & 1) as f32].map(|v| v.min(255.0)),
+                _ => [0.0, 255.0, byte(0), byte(8)],
+            };
+            let w = |r: u64| {
+                if r.is_multiple_of(3) { weights[(r / 3 % weights.len() as u64) as usize] } else { (r >> 40) as f32 / (1u64 << 24) as f32 }
+            };
+            check(c, w(next()), w(next()));
+        }
+        for a in (0..256).step_by(17) {
+            for b in [0, 1, 128, 254, 255] {
+                for &wi in &weights {
+                    for &wj in &weights {
+                        check([a as f32, b as f32, b as f32, a as f32], wi, wj);
+                        check([b as f32, a as f32, 255.0, b as f32], wi, wj);
+                    }
+                }
+            }
         }
     }
 

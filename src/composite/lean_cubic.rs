@@ -85,6 +85,13 @@ struct Frame<'c, 'a> {
     za: usize,
     /// The last slice index.
     last: usize,
+    /// A row of voxels (`n0`) with prefetches, 0 without: the next row's
+    /// voxel row lies this far past a sample's cell times two (three along
+    /// stack axis 1 in the slice); without, the hint names the line a
+    /// sample reads anyway, so it needs no branch.
+    ahead: usize,
+    /// Whether a group's first candidates are prefetched before it is traced.
+    group: bool,
 }
 
 impl LeanCubic {
@@ -115,13 +122,17 @@ impl LeanCubic {
     /// axis `za`, [`RayContext::with_cubic`]) through the sheared `mask` of
     /// cubic codes and its matcher `m`, into `out`; marks `rect` valid. The
     /// same image as [`super::raycast::render_binary`] of the same frame,
-    /// bit for bit.
+    /// bit for bit. With `prefetch` every sample prefetches the voxel row the
+    /// next row of rays reads there and each group's first tests are
+    /// prefetched (module docs); without, no hint names a line the frame has
+    /// not just read.
     pub fn render<W: Word>(
         &mut self,
         ctx: &RayContext,
         za: usize,
         mask: &BinaryMask<W>,
         m: &Matcher,
+        prefetch: bool,
         rect: Option<Rect>,
         out: &mut Intermediate,
     ) {
@@ -136,6 +147,8 @@ impl LeanCubic {
             cells: ctx.cell_counts(),
             za,
             last: ctx.stack.n[2] - 1,
+            ahead: if prefetch { ctx.stack.n[0] } else { 0 },
+            group: prefetch,
         };
         let avx2 = mask.cpu_level().has_avx2();
         if ctx.ascending { rows::<W, true>(&f, mask, m, rect, out, avx2) } else { rows::<W, false>(&f, mask, m, rect, out, avx2) }
@@ -259,7 +272,9 @@ fn cubic_row<W: Word, const ASC: bool>(f: &Frame, mask: &BinaryMask<W>, m: &Matc
         for (dp, w) in walks[..cg.len()].iter_mut().enumerate() {
             let mut walk = Walk::<W, ASC>::new(mask.row(sp, sq), m);
             *w = walk.peek().map(|k0| {
-                f.prefetch(pg + dp, q, k0);
+                if f.group {
+                    f.prefetch(pg + dp, q, k0);
+                }
                 walk
             });
             left -= 1;
@@ -312,7 +327,7 @@ impl Frame<'_, '_> {
         if (ci as u32) < self.cells[0] && (cj as u32) < self.cells[1] {
             let b = (p + self.n0 * q).wrapping_add_signed(e.base);
             // the row the next row of rays reads here and this one does not
-            self.ctx.stack.prefetch_voxel(b.wrapping_add(2 * self.n0));
+            self.ctx.stack.prefetch_voxel(b.wrapping_add(2 * self.ahead));
             Some(bilinear(self.ctx.stack.cell_at(b), e.wi, e.wj))
         } else {
             None
@@ -362,7 +377,7 @@ impl Frame<'_, '_> {
             let Some((at, b)) = self.at(p, q, k) else { continue };
             // the row the next row of rays reads here and this one does not:
             // along axis 1 a sample reads the cell's rows and one each side
-            self.ctx.stack.prefetch_voxel(b.wrapping_add(if ZA == 1 { 3 } else { 2 } * self.n0));
+            self.ctx.stack.prefetch_voxel(b.wrapping_add(if ZA == 1 { 3 } else { 2 } * self.ahead));
             let w = &self.weights[k];
             let d = ctx.sample_in_slice::<ZA>(at, b, &w.cr);
             if d >= iso {

@@ -137,10 +137,10 @@ impl Renderer {
                     match (mask, lean_frame) {
                         _ if !walks => render_brute(&ctx, volume_rect(plan, stack.cells()), inter),
                         (AnyMask::W32(m), _) if lean_cubic_frame => {
-                            lean_cubic.render(&ctx, cubic_axis(stack.perm()), m, matcher, rect, inter)
+                            lean_cubic.render(&ctx, cubic_axis(stack.perm()), m, matcher, settings.prefetch, rect, inter)
                         }
                         (AnyMask::W64(m), _) if lean_cubic_frame => {
-                            lean_cubic.render(&ctx, cubic_axis(stack.perm()), m, matcher, rect, inter)
+                            lean_cubic.render(&ctx, cubic_axis(stack.perm()), m, matcher, settings.prefetch, rect, inter)
                         }
                         (AnyMask::W32(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
                         (AnyMask::W64(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),

@@ -270,7 +270,8 @@ pub struct Settings {
     /// Binary path: prefetch what the rays will read. The general path
     /// prefetches the voxel rows of each ray's first candidate slice while a
     /// group of rays is bit-scanned, before the group is traced; the lean
-    /// frames, at every visit, the voxel row the next row of rays reads there. `false`
+    /// frames, at every visit, the voxel row the next row of rays reads there (the
+    /// lean cubic frame both). `false`
     /// leaves the prefetches out: a benchmark knob that shows what they buy
     /// (same image).
     pub prefetch: bool,

@@ -84,3 +84,17 @@ fn lean_cubic_frame_at_one_voxel_a_slice() {
     }
     assert!(covered > 1_000, "only {covered} covered pixels");
 }
+
+/// Without prefetches (`Settings::prefetch` off) the lean cubic frame is the
+/// same frame: it equals the general path and the brute force, the cubic
+/// along the slices and in them.
+#[test]
+fn lean_cubic_frame_without_prefetches() {
+    let mut covered = 0;
+    for spacing in [[1.0f32, 1.0, 1.0], [1.0, 1.0, 3.0], [3.0, 1.0, 1.0]] {
+        let vol = random_volume([19, 17, 21], 7171, spacing);
+        let cams = [cam(0.0, 0.0, 0.0), cam(0.35, -0.4, 0.1), cam(1.4, 0.2, 0.1)];
+        covered += check(&vol, None, cubic(Settings { prefetch: false, threads: 2, ..Settings::default() }), &cams);
+    }
+    assert!(covered > 400, "only {covered} covered pixels");
+}

@@ -205,6 +205,23 @@ fn lean_frame_over_long_depth_rows() {
     assert!(covered > 5_000, "only {covered} covered pixels");
 }
 
+/// Without prefetches (`Settings::prefetch` off: every visit's hint names the
+/// line it reads) the lean frame is the same frame: it equals the general
+/// path and the brute force, for one iso value and a preset, cell sizes 1
+/// and 3, u32 and u64 words.
+#[test]
+fn lean_frame_without_prefetches() {
+    let vol = random_volume([19, 17, 70], 3131, [1.0; 3]);
+    let cams = [cam(0.0, 0.0, 0.0), cam(0.35, -0.4, 0.1), cam(-0.2, 2.9, 0.5)];
+    let mut covered = 0;
+    for (word, tissue) in [(WordSize::U32, None), (WordSize::U64, Some(1))] {
+        for cell in [1, 3] {
+            covered += check(&vol, tissue, Settings { word, cell, threads: 2, prefetch: false, ..Settings::default() }, &cams);
+        }
+    }
+    assert!(covered > 1_000, "only {covered} covered pixels");
+}
+
 /// Frames the lean path does not cover keep the general path: Deluxe I,
 /// gradient shading, blend mode, the paper's byte-table search, perspective
 /// (the same image either way; asserted through the frame statistics).

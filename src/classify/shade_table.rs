@@ -11,11 +11,17 @@ use crate::classify::shading::{ShadeEntry, Shading};
 use crate::data::normals::{NORMAL_CODES, ZERO_NORMAL, boxed, decode_normal};
 use crate::view::Factorization;
 
+/// Entries of a [`ShadeTable`]: one per `u16`, so any code indexes it with no
+/// bounds check or mask; the [`NORMAL_CODES`] normal codes are the first.
+const TABLE_LEN: usize = 1 << 16;
+
 /// The per-view shade table: one [`ShadeEntry`] per normal code. A fixed-size
-/// array indexed with a mask, so a lookup needs no bounds check.
+/// array of an entry per `u16` value, so a lookup needs no bounds check; the
+/// entries past the normal codes stay zero (their pages are never touched
+/// unless read).
 #[derive(Clone, Debug)]
 pub struct ShadeTable {
-    shade: Box<[ShadeEntry; NORMAL_CODES]>,
+    shade: Box<[ShadeEntry; TABLE_LEN]>,
     key: Option<([u32; 3], Shading)>,
 }
 
@@ -35,7 +41,7 @@ impl ShadeTable {
         }
         let [nx, ny, nz] = unit_normals();
         const BLOCK: usize = 4096;
-        self.shade.par_chunks_mut(BLOCK).enumerate().for_each(|(c, out)| {
+        self.shade[..NORMAL_CODES].par_chunks_mut(BLOCK).enumerate().for_each(|(c, out)| {
             let r = c * BLOCK..c * BLOCK + out.len();
             shade_block(out, &nx[r.clone()], &ny[r.clone()], &nz[r], light, &shading);
         });
@@ -45,17 +51,21 @@ impl ShadeTable {
         true
     }
 
-    /// The entry of `code` (codes above the table, such as the RLE path's
-    /// bridge marker, index a real entry).
+    /// The entry of `code` (codes above the normal codes, such as the RLE
+    /// path's bridge marker, index a real entry: the code's low bits).
     #[inline(always)]
     pub fn get(&self, code: u16) -> ShadeEntry {
-        *self.entry(code)
+        *self.entry(code & (NORMAL_CODES - 1) as u16)
     }
 
-    /// [`ShadeTable::get`], by reference (for loads straight into a vector).
+    /// The entry of a normal code, by reference (for loads straight into a
+    /// vector), with no mask: [`ShadeTable::get`] for every normal code
+    /// (below [`NORMAL_CODES`], as every code of a voxel is); a `u16` above
+    /// them reads a zero entry.
     #[inline(always)]
     pub fn entry(&self, code: u16) -> &ShadeEntry {
-        &self.shade[code as usize & (NORMAL_CODES - 1)]
+        debug_assert!((code as usize) < NORMAL_CODES, "code {code} is not a normal code");
+        &self.shade[code as usize]
     }
 
     /// The bilinear blend of the entries of a cell's four corner codes (order of

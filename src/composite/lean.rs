@@ -47,7 +47,9 @@
 //! - **One vector per sample**: where the CPU level has SSSE3, a visit gathers
 //!   its cell's four densities into one SSE vector and interpolates them
 //!   there ([`Cells::sample_ssse3`]): the same float operations, the same
-//!   value bit for bit.
+//!   value bit for bit (8-bit cells leave out the clamp to the corners'
+//!   largest value, which cannot bind for whole numbers:
+//!   `data::slices::bilinear_sse_bytes`).
 //!
 //! Invariants (what keeps the image the general path's, bit for bit):
 //! - the candidate slices are the general walk's ([`crate::encode::depth::SetBits`]
@@ -753,8 +755,10 @@ mod tests {
             x
         };
         for _ in 0..20_000 {
-            let codes = [0; 4].map(|_: u16| next() as u16);
-            let codes_p = [0; 4].map(|_: u16| next() as u16);
+            // (normal codes, as the cells hold)
+            let code = |r: u64| (r % crate::data::normals::NORMAL_CODES as u64) as u16;
+            let codes = [0; 4].map(|_: u16| code(next()));
+            let codes_p = [0; 4].map(|_: u16| code(next()));
             let w = |r: u64| [0.0, 1.0, 0.5, (r >> 40) as f32 / (1u64 << 24) as f32][(r & 3) as usize];
             let (wa, wb) = ([w(next()), w(next())], [w(next()), w(next())]);
             let (a, b) = (blend_pair(&table, codes, wa, codes_p, wb), blend_pair_plain(&table, codes, wa, codes_p, wb));

@@ -623,7 +623,26 @@ impl<W: Word> BinaryMask<W> {
                             }),
                             tasks.for_each(|row| move_columns(row, nw, ps, pe, t, mv, up)), [1 2 3 4]);
                     } else {
-                        move_rows(&mut self.words, gw * nw, [ps * nw, (pe + 1) * nw], [r.q0, r.q1], t as usize, &mv, dir > 0);
+                        let (span, qs, t, up, avx2) = ([ps * nw, (pe + 1) * nw], [r.q0, r.q1], t as usize, dir > 0, self.cpu.has_avx2());
+                        let words = &mut self.words;
+                        by_column_length!(@arms nw, N, {
+                                #[cfg(target_arch = "x86_64")]
+                                if avx2 {
+                                    // SAFETY: `self.cpu` is always capped to at most
+                                    // `kernels::detected()`, which is `Avx2` only when AVX2
+                                    // was detected on this CPU at run time, all the kernel
+                                    // requires; its body is the safe `move_rows_n`.
+                                    unsafe { move_rows_n_avx2::<W, N>(words, gw * nw, span, qs, t, &mv, up) };
+                                } else {
+                                    move_rows_n::<W, N>(words, gw * nw, span, qs, t, &mv, up);
+                                }
+                                #[cfg(not(target_arch = "x86_64"))]
+                                {
+                                    let _ = avx2;
+                                    move_rows_n::<W, N>(words, gw * nw, span, qs, t, &mv, up);
+                                }
+                            },
+                            move_rows(words, gw * nw, span, qs, t, &mv, up), [1 2 3 4]);
                     }
                     w.words += ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64;
                 }
@@ -1543,6 +1562,10 @@ mod tests {
         check_far_jumps::<u64>([19, 23, 90], 2, 1);
         check_far_jumps::<u64>([24, 20, 140], 1, 2);
         check_far_jumps::<u32>([17, 16, 75], 2, 3);
+        // depth rows of one, two and four words (the fixed-length moves)
+        check_far_jumps::<u64>([15, 13, 60], 1, 1);
+        check_far_jumps::<u64>([15, 13, 100], 1, 1);
+        check_far_jumps::<u64>([15, 13, 250], 1, 1);
     }
 
     /// Moves of [`MIN_ONE_PASS_BITS`] to [`MAX_INCREMENTAL_STEPS`] super cells

@@ -449,10 +449,9 @@ pub(crate) unsafe fn move_columns_n_avx2<W: Word, const N: usize>(row: &mut [W],
 /// [`move_columns`] along `j`: the slots of `mv` move `t` grid rows (of
 /// `row_len` words) towards larger `q` (`up`) or smaller, in place, over rows
 /// `q0..=q1` and words `span` of each row.
-pub(crate) fn move_rows<W: Word>(words: &mut [W], row_len: usize, span: [usize; 2], [q0, q1]: [usize; 2], t: usize, mv: &[W], up: bool) {
+pub(crate) fn move_rows<W: Word>(words: &mut [W], row_len: usize, span: [usize; 2], qs: [usize; 2], t: usize, mv: &[W], up: bool) {
     let nw = mv.len();
-    let rows = words.len() / row_len;
-    let blend = |dst: &mut [W], src: Option<&[W]>| match src {
+    move_rows_by(words, row_len, span, qs, t, up, |dst: &mut [W], src: Option<&[W]>| match src {
         Some(src) => {
             for (d, s) in dst.chunks_exact_mut(nw).zip(src.chunks_exact(nw)) {
                 for w in 0..nw {
@@ -467,7 +466,72 @@ pub(crate) fn move_rows<W: Word>(words: &mut [W], row_len: usize, span: [usize; 
                 }
             }
         }
-    };
+    })
+}
+
+/// [`move_rows`] for columns of `N` words: a column's words blended in
+/// registers.
+#[inline(always)]
+pub(crate) fn move_rows_n<W: Word, const N: usize>(
+    words: &mut [W],
+    row_len: usize,
+    span: [usize; 2],
+    qs: [usize; 2],
+    t: usize,
+    mv: &[W],
+    up: bool,
+) {
+    let mv: &[W; N] = fixed(mv);
+    move_rows_by(words, row_len, span, qs, t, up, |dst: &mut [W], src: Option<&[W]>| {
+        let (dst, _) = dst.as_chunks_mut::<N>();
+        match src {
+            Some(src) => {
+                for (d, s) in dst.iter_mut().zip(src.as_chunks::<N>().0) {
+                    for w in 0..N {
+                        d[w] = (d[w] & !mv[w]) | (s[w] & mv[w]);
+                    }
+                }
+            }
+            None => {
+                for d in dst {
+                    for w in 0..N {
+                        d[w] &= !mv[w];
+                    }
+                }
+            }
+        }
+    })
+}
+
+/// [`move_rows_n`] compiled for AVX2. Callers must hold a [`CpuLevel`]
+/// with AVX2 that is at most [`kernels::detected`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn move_rows_n_avx2<W: Word, const N: usize>(
+    words: &mut [W],
+    row_len: usize,
+    span: [usize; 2],
+    qs: [usize; 2],
+    t: usize,
+    mv: &[W],
+    up: bool,
+) {
+    move_rows_n::<W, N>(words, row_len, span, qs, t, mv, up)
+}
+
+/// The row order and sources of [`move_rows`]: `blend(dst, src)` takes each
+/// row's words `span` and its source row's (`None` past the grid's ends).
+#[inline(always)]
+fn move_rows_by<W: Word>(
+    words: &mut [W],
+    row_len: usize,
+    span: [usize; 2],
+    [q0, q1]: [usize; 2],
+    t: usize,
+    up: bool,
+    blend: impl Fn(&mut [W], Option<&[W]>),
+) {
+    let rows = words.len() / row_len;
     for i in 0..=q1 - q0 {
         let q = if up { q1 - i } else { q0 + i };
         let src = if up { q.checked_sub(t) } else { Some(q + t).filter(|&s| s < rows) };

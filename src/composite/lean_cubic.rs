@@ -118,8 +118,8 @@ impl LeanCubic {
     }
 
     /// Renders the rays of `rect` of a cubic frame for which
-    /// [`LeanCubic::applies`] holds (`ctx` runs the cubic along its stack
-    /// axis `za`, [`RayContext::with_cubic`]) through the sheared `mask` of
+    /// [`LeanCubic::applies`] holds (`ctx` runs the cubic along the stack
+    /// axis [`reconstruct::cubic_axis`] gives, [`RayContext::with_cubic`]) through the sheared `mask` of
     /// cubic codes and its matcher `m`, into `out`; marks `rect` valid. The
     /// same image as [`super::raycast::render_binary`] of the same frame,
     /// bit for bit. With `prefetch` every sample prefetches the voxel row the
@@ -129,7 +129,6 @@ impl LeanCubic {
     pub fn render<W: Word>(
         &mut self,
         ctx: &RayContext,
-        za: usize,
         mask: &BinaryMask<W>,
         m: &Matcher,
         prefetch: bool,
@@ -138,6 +137,7 @@ impl LeanCubic {
     ) {
         assert!(LeanCubic::applies(ctx.plan, ctx.mode, Search::Bitscan), "a frame the lean cubic path does not cover");
         assert_eq!(m.width(), mask.code_width(), "a matcher of another code width");
+        let za = reconstruct::cubic_axis(ctx.stack.perm());
         self.fill(ctx, za);
         let f = Frame {
             ctx,

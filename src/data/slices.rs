@@ -602,7 +602,7 @@ mod tests {
             rng ^= rng << 17;
             rng
         };
-        let mut check = |c: [f32; 4], wi: f32, wj: f32| {
+        let check = |c: [f32; 4], wi: f32, wj: f32| {
             // SAFETY: SSE3 detected above; the test is compiled for the
             // baseline, so the intrinsics run as calls, which is sound.
             let v = unsafe { bilinear_sse_bytes(_mm_setr_ps(c[0], c[2], c[1], c[3]), wi, wj) };

@@ -136,12 +136,8 @@ impl Renderer {
                     let walks = !cubic || cubic_axis(stack.perm()) != 2 || cubic_walks(plan);
                     match (mask, lean_frame) {
                         _ if !walks => render_brute(&ctx, volume_rect(plan, stack.cells()), inter),
-                        (AnyMask::W32(m), _) if lean_cubic_frame => {
-                            lean_cubic.render(&ctx, cubic_axis(stack.perm()), m, matcher, settings.prefetch, rect, inter)
-                        }
-                        (AnyMask::W64(m), _) if lean_cubic_frame => {
-                            lean_cubic.render(&ctx, cubic_axis(stack.perm()), m, matcher, settings.prefetch, rect, inter)
-                        }
+                        (AnyMask::W32(m), _) if lean_cubic_frame => lean_cubic.render(&ctx, m, matcher, settings.prefetch, rect, inter),
+                        (AnyMask::W64(m), _) if lean_cubic_frame => lean_cubic.render(&ctx, m, matcher, settings.prefetch, rect, inter),
                         (AnyMask::W32(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
                         (AnyMask::W64(m), true) => lean.render(&ctx, m, matcher, settings.prefetch, rect, inter),
                         (AnyMask::W32(m), false) => render_binary(&ctx, m, settings.search, matcher, settings.prefetch, rect, inter),

@@ -550,6 +550,18 @@ mod tests {
         assert!(lo <= d && d <= hi);
     }
 
+    /// A xorshift64 stream from `seed` (the bilinear tests' random corners
+    /// and weights).
+    #[cfg(target_arch = "x86_64")]
+    fn xorshift(mut rng: u64) -> impl FnMut() -> u64 {
+        move || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng
+        }
+    }
+
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn the_sse_bilinear_is_the_scalar_one_bit_for_bit() {
@@ -561,13 +573,7 @@ mod tests {
         // magnitudes, zeros of both signs; weights: 0, 1, their neighbours
         let values = [0.0f32, -0.0, 1.0, 3.0, 52.0, 255.0, -1024.0, -1023.0, 3071.0, 65535.0, 0.1, 1e-30, 7.25];
         let weights = [0.0f32, 1.0, 0.5, 0.25, 1.0 - f32::EPSILON / 2.0, f32::MIN_POSITIVE, 0.3, 0.999, 1e-7];
-        let mut rng = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            rng
-        };
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15u64);
         for n in 0..400_000u32 {
             let pick = |r: u64| if n.is_multiple_of(2) { values[(r % values.len() as u64) as usize] } else { (r % 65536) as f32 - 1024.0 };
             let c = [pick(next()), pick(next()), pick(next()), pick(next())];
@@ -595,13 +601,7 @@ mod tests {
         // equal pairs, one high corner, 0 and 255, neighbours
         let weights =
             [0.0f32, 1.0, 0.5, 1.0 - f32::EPSILON / 2.0, 0.5 + f32::EPSILON, 0.5 - f32::EPSILON / 2.0, f32::MIN_POSITIVE, 1e-7, 1e-30];
-        let mut rng = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            rng
-        };
+        let mut next = xorshift(0x2545_f491_4f6c_dd1du64);
         let check = |c: [f32; 4], wi: f32, wj: f32| {
             // SAFETY: SSE3 detected above; the test is compiled for the
             // baseline, so the intrinsics run as calls, which is sound.

@@ -623,7 +623,8 @@ impl<W: Word> BinaryMask<W> {
                             }),
                             tasks.for_each(|row| move_columns(row, nw, ps, pe, t, mv, up)), [1 2 3 4]);
                     } else {
-                        let (span, qs, t, up, avx2) = ([ps * nw, (pe + 1) * nw], [r.q0, r.q1], t as usize, dir > 0, self.cpu.has_avx2());
+                        let m = RowMove { row_len: gw * nw, span: [ps * nw, (pe + 1) * nw], qs: [r.q0, r.q1], t: t as usize, up: dir > 0 };
+                        let avx2 = self.cpu.has_avx2();
                         let words = &mut self.words;
                         by_column_length!(@arms nw, N, {
                                 #[cfg(target_arch = "x86_64")]
@@ -632,17 +633,17 @@ impl<W: Word> BinaryMask<W> {
                                     // `kernels::detected()`, which is `Avx2` only when AVX2
                                     // was detected on this CPU at run time, all the kernel
                                     // requires; its body is the safe `move_rows_n`.
-                                    unsafe { move_rows_n_avx2::<W, N>(words, gw * nw, span, qs, t, &mv, up) };
+                                    unsafe { move_rows_n_avx2::<W, N>(words, m, &mv) };
                                 } else {
-                                    move_rows_n::<W, N>(words, gw * nw, span, qs, t, &mv, up);
+                                    move_rows_n::<W, N>(words, m, &mv);
                                 }
                                 #[cfg(not(target_arch = "x86_64"))]
                                 {
                                     let _ = avx2;
-                                    move_rows_n::<W, N>(words, gw * nw, span, qs, t, &mv, up);
+                                    move_rows_n::<W, N>(words, m, &mv);
                                 }
                             },
-                            move_rows(words, gw * nw, span, qs, t, &mv, up), [1 2 3 4]);
+                            move_rows(words, m, &mv), [1 2 3 4]);
                     }
                     w.words += ((r.q1 - r.q0 + 1) * (pe - ps + 1) * nw) as u64;
                 }

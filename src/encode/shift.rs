@@ -446,12 +446,22 @@ pub(crate) unsafe fn move_columns_n_avx2<W: Word, const N: usize>(row: &mut [W],
     move_columns_n::<W, N>(row, ps, pe, t, mv, up)
 }
 
-/// [`move_columns`] along `j`: the slots of `mv` move `t` grid rows (of
-/// `row_len` words) towards larger `q` (`up`) or smaller, in place, over rows
-/// `q0..=q1` and words `span` of each row.
-pub(crate) fn move_rows<W: Word>(words: &mut [W], row_len: usize, span: [usize; 2], qs: [usize; 2], t: usize, mv: &[W], up: bool) {
+/// One pass of [`move_rows`]: the grid rows are `row_len` words long; rows
+/// `qs[0]..=qs[1]`, words `span` of each, take their slots from the row `t`
+/// before them (`up`: towards larger `q`) or after.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RowMove {
+    pub row_len: usize,
+    pub span: [usize; 2],
+    pub qs: [usize; 2],
+    pub t: usize,
+    pub up: bool,
+}
+
+/// [`move_columns`] along `j`: the slots of `mv` move as `m` says, in place.
+pub(crate) fn move_rows<W: Word>(words: &mut [W], m: RowMove, mv: &[W]) {
     let nw = mv.len();
-    move_rows_by(words, row_len, span, qs, t, up, |dst: &mut [W], src: Option<&[W]>| match src {
+    move_rows_by(words, m, |dst: &mut [W], src: Option<&[W]>| match src {
         Some(src) => {
             for (d, s) in dst.chunks_exact_mut(nw).zip(src.chunks_exact(nw)) {
                 for w in 0..nw {
@@ -472,17 +482,9 @@ pub(crate) fn move_rows<W: Word>(words: &mut [W], row_len: usize, span: [usize; 
 /// [`move_rows`] for columns of `N` words: a column's words blended in
 /// registers.
 #[inline(always)]
-pub(crate) fn move_rows_n<W: Word, const N: usize>(
-    words: &mut [W],
-    row_len: usize,
-    span: [usize; 2],
-    qs: [usize; 2],
-    t: usize,
-    mv: &[W],
-    up: bool,
-) {
+pub(crate) fn move_rows_n<W: Word, const N: usize>(words: &mut [W], m: RowMove, mv: &[W]) {
     let mv: &[W; N] = fixed(mv);
-    move_rows_by(words, row_len, span, qs, t, up, |dst: &mut [W], src: Option<&[W]>| {
+    move_rows_by(words, m, |dst: &mut [W], src: Option<&[W]>| {
         let (dst, _) = dst.as_chunks_mut::<N>();
         match src {
             Some(src) => {
@@ -507,30 +509,15 @@ pub(crate) fn move_rows_n<W: Word, const N: usize>(
 /// with AVX2 that is at most [`kernels::detected`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-pub(crate) unsafe fn move_rows_n_avx2<W: Word, const N: usize>(
-    words: &mut [W],
-    row_len: usize,
-    span: [usize; 2],
-    qs: [usize; 2],
-    t: usize,
-    mv: &[W],
-    up: bool,
-) {
-    move_rows_n::<W, N>(words, row_len, span, qs, t, mv, up)
+pub(crate) unsafe fn move_rows_n_avx2<W: Word, const N: usize>(words: &mut [W], m: RowMove, mv: &[W]) {
+    move_rows_n::<W, N>(words, m, mv)
 }
 
 /// The row order and sources of [`move_rows`]: `blend(dst, src)` takes each
 /// row's words `span` and its source row's (`None` past the grid's ends).
 #[inline(always)]
-fn move_rows_by<W: Word>(
-    words: &mut [W],
-    row_len: usize,
-    span: [usize; 2],
-    [q0, q1]: [usize; 2],
-    t: usize,
-    up: bool,
-    blend: impl Fn(&mut [W], Option<&[W]>),
-) {
+fn move_rows_by<W: Word>(words: &mut [W], m: RowMove, blend: impl Fn(&mut [W], Option<&[W]>)) {
+    let RowMove { row_len, span, qs: [q0, q1], t, up } = m;
     let rows = words.len() / row_len;
     for i in 0..=q1 - q0 {
         let q = if up { q1 - i } else { q0 + i };

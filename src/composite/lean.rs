@@ -48,7 +48,7 @@
 //!   its cell's four densities into one SSE vector and interpolates them
 //!   there ([`Cells::sample_ssse3`]): the same float operations, the same
 //!   value bit for bit (8-bit cells leave out the clamp to the corners'
-//!   largest value, which cannot bind for whole numbers:
+//!   range, which cannot bind for whole numbers:
 //!   `data::slices::bilinear_sse_bytes`).
 //!
 //! Invariants (what keeps the image the general path's, bit for bit):

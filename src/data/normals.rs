@@ -708,7 +708,7 @@ impl<'a> ByteCells<'a> {
             // [d00, d01, d10, d11] zero-extended, converted exactly
             let x =
                 _mm_shuffle_epi8(_mm_setr_epi32(r0, r1, 0, 0), _mm_setr_epi8(0, -1, -1, -1, 4, -1, -1, -1, 3, -1, -1, -1, 7, -1, -1, -1));
-            // (bytes: whole numbers in [0, 255], which the upper clamp cannot bind)
+            // (bytes: whole numbers in [0, 255], which neither clamp binds)
             bilinear_sse_bytes(_mm_cvtepi32_ps(x), wi, wj)
         }
     }

@@ -400,45 +400,65 @@ pub fn bilinear([v00, v10, v01, v11]: [f32; 4], wi: f32, wj: f32) -> f32 {
 #[inline(always)]
 pub(crate) unsafe fn bilinear_sse(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
     // SAFETY: the caller's contract is this one's
-    unsafe { bilinear_sse_clamped::<true>(x, wi, wj) }
+    unsafe { bilinear_sse_clamped(x, wi, wj) }
 }
 
 /// [`bilinear_sse`] of corners that are bytes (whole numbers in `[0, 255]`),
-/// without the clamp to the corners' largest value, which cannot bind there:
-/// the same value bit for bit (tested against [`bilinear`] over every byte
+/// without the clamp to the corners' range, which cannot bind there: the
+/// same value bit for bit (tested against [`bilinear`] over every byte
 /// pattern class and weight edge case).
 ///
-/// Why the clamp to `hi` is a no-op for corners that are non-negative whole
-/// numbers below 2²⁴ and weights in `[0, 1]` (round to nearest, ties to even):
+/// Why neither clamp changes the value for corners that are non-negative
+/// whole numbers below 2²⁴ and weights in `[0, 1]` (round to nearest, ties to
+/// even; `lo` and `hi` the corners' least and largest, whole numbers):
 /// - each in-row lerp `a + (b − a)·w` has `b − a` exact and `|fl((b − a)·w)| ≤
 ///   |b − a|` (rounding is monotone), so `top` and `bot` lie between their
-///   row's corners;
-/// - if `bot < top`, `fl(bot − top)·wj` rounds to a value in `[fl(bot − top), 0]`,
-///   so the sum is at most `top ≤ hi`;
-/// - if `bot ≥ top ≥ 0`, `fl(bot − top)` is `bot − top` plus at most half an
-///   ulp of `bot` (the difference is at most `bot`), so `top + fl(bot − top)`
-///   is `bot` plus at most half an ulp of `bot`, which rounds to `bot`, or,
-///   on an exact tie, to the even one of `bot` and its successor; the sum
-///   with `fl(fl(bot − top)·wj) ≤ fl(bot − top)` rounds no higher (monotone). If
-///   `bot < hi`, its successor is at most `hi` (a float); if `bot = hi`, a
-///   whole number below 2²⁴, its last mantissa bit is 0, so the tie keeps `hi`.
+///   row's corners, hence in `[lo, hi]`;
+/// - `hi`, if `bot < top`: `fl(bot − top)·wj` rounds to a value in
+///   `[fl(bot − top), 0]`, so the sum is at most `top ≤ hi`;
+/// - `hi`, if `bot ≥ top ≥ 0`: `fl(bot − top)` is `bot − top` plus at most
+///   half an ulp of `bot` (the difference is at most `bot`), so `top +
+///   fl(bot − top)` is `bot` plus at most half an ulp of `bot`, which rounds
+///   to `bot`, or, on an exact tie, to the even one of `bot` and its
+///   successor; the sum with `fl(fl(bot − top)·wj) ≤ fl(bot − top)` rounds no
+///   higher (monotone). If `bot < hi`, its successor is at most `hi` (a
+///   float); if `bot = hi`, a whole number below 2²⁴, its last mantissa bit
+///   is 0, so the tie keeps `hi`;
+/// - `lo`, if `bot ≥ top`: the sum adds a non-negative value to `top ≥ lo`;
+/// - `lo`, if `bot < top`: `lo − top` is exact (`lo` is a whole number no
+///   larger than `top`, so both are multiples of the ulp of `top`, and the
+///   difference is no larger than `top`), and `bot − top ≥ lo − top`, so
+///   `fl(bot − top) ≥ lo − top` and, as `wj ≤ 1` and `lo − top ≤ 0`,
+///   `fl(fl(bot − top)·wj) ≥ lo − top` (monotone, `lo − top` a float); the
+///   sum is then at least `top + (lo − top) = lo`, a float, so it rounds to
+///   no less than `lo`. It is `+0` where it is zero (`x + (−x)` is `+0`), as
+///   `lo` is, so even the sign of a zero is the clamped one's.
 ///
 /// # Safety
 /// As [`bilinear_sse`].
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 pub(crate) unsafe fn bilinear_sse_bytes(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
-    // SAFETY: the caller's contract is this one's
-    unsafe { bilinear_sse_clamped::<false>(x, wi, wj) }
+    use std::arch::x86_64::*;
+    // SAFETY: SSE and SSE2 are the x86-64 baseline; `_mm_movehdup_ps` needs
+    // SSE3, which the caller guarantees.
+    unsafe {
+        // the lerps of `bilinear_sse_clamped`, operation for operation
+        let h = _mm_movehl_ps(x, x);
+        let t = _mm_add_ps(x, _mm_mul_ps(_mm_sub_ps(h, x), _mm_set1_ps(wi)));
+        let bot = _mm_movehdup_ps(t);
+        _mm_cvtss_f32(_mm_add_ss(t, _mm_mul_ss(_mm_sub_ss(bot, t), _mm_set_ss(wj))))
+    }
 }
 
-/// [`bilinear_sse`], clamped to the corners' largest value when `HI`.
+/// [`bilinear_sse`]: both in-row lerps in one vector, the one across rows,
+/// then the clamp to the corners' range.
 ///
 /// # Safety
 /// As [`bilinear_sse`].
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn bilinear_sse_clamped<const HI: bool>(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
+unsafe fn bilinear_sse_clamped(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
     use std::arch::x86_64::*;
     // SAFETY: SSE and SSE2 are the x86-64 baseline; `_mm_movehdup_ps` needs
     // SSE3, which the caller guarantees.
@@ -453,9 +473,6 @@ unsafe fn bilinear_sse_clamped<const HI: bool>(x: std::arch::x86_64::__m128, wi:
         let m = _mm_min_ps(x, h);
         let lo = _mm_min_ss(m, _mm_movehdup_ps(m));
         let d = _mm_max_ss(d, lo);
-        if !HI {
-            return _mm_cvtss_f32(d);
-        }
         let n = _mm_max_ps(x, h);
         let hi = _mm_max_ss(n, _mm_movehdup_ps(n));
         _mm_cvtss_f32(_mm_min_ss(d, hi))
@@ -591,16 +608,27 @@ mod tests {
 
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn the_byte_bilinear_needs_no_upper_clamp() {
+    fn the_byte_bilinear_needs_no_clamp() {
         use std::arch::x86_64::_mm_setr_ps;
         if !std::arch::is_x86_feature_detected!("sse3") {
             return;
         }
         // weights at and next to 0, ½ and 1, tiny ones (ties against small
-        // tops), and random ones; corners from classes that reach the bound:
-        // equal pairs, one high corner, 0 and 255, neighbours
-        let weights =
-            [0.0f32, 1.0, 0.5, 1.0 - f32::EPSILON / 2.0, 0.5 + f32::EPSILON, 0.5 - f32::EPSILON / 2.0, f32::MIN_POSITIVE, 1e-7, 1e-30];
+        // tops, a bottom row just above its whole lower corner under a high
+        // top row), and random ones; corners from classes that reach the
+        // bounds: equal pairs, one high corner, 0 and 255, neighbours
+        let weights = [
+            0.0f32,
+            1.0,
+            0.5,
+            1.0 - f32::EPSILON / 2.0,
+            0.5 + f32::EPSILON,
+            0.5 - f32::EPSILON / 2.0,
+            f32::MIN_POSITIVE,
+            1e-7,
+            1e-30,
+            f32::EPSILON,
+        ];
         let mut next = xorshift(0x2545_f491_4f6c_dd1du64);
         let check = |c: [f32; 4], wi: f32, wj: f32| {
             // SAFETY: SSE3 detected above; the test is compiled for the
@@ -628,6 +656,8 @@ mod tests {
                     for &wj in &weights {
                         check([a as f32, b as f32, b as f32, a as f32], wi, wj);
                         check([b as f32, a as f32, 255.0, b as f32], wi, wj);
+                        // a high top row over a low bottom row of neighbours
+                        check([a as f32, a as f32, b as f32, (b + 1).min(255) as f32], wi, wj);
                     }
                 }
             }

@@ -304,21 +304,28 @@ impl<W: Word> Frame<'_, W> {
         let (w, kbase) = if ASC { (start, 0) } else { (start + nw - 1, (nw - 1) * self.slots::<ONE>()) };
         let cur = self.hits::<ONE>(self.word(w));
         let mut walk = Walk { w, cur, kbase, left: nw - 1 };
+        // a first word with no match: it and the words after it, four at a
+        // time where the level can
+        if cur == W::ZERO && s.seek::<W, ASC, ONE>(self, &mut walk, 0) {
+            return walk;
+        }
         self.settle::<S, ASC, ONE>(s, &mut walk);
         walk
     }
 
     /// Moves `walk` past words with no matching slot; false at the row's end.
-    /// Where the CPU level can ([`Sampler::skip`]), whole groups of four
-    /// words with no matching slot are passed first; a skip stops before a
-    /// group with a match, so the words after it are stepped one at a time
-    /// with no further skip.
+    /// Where the CPU level can ([`Sampler::seek`]), the words after the
+    /// current one are tested four at a time, and the walk moves straight to
+    /// the first with a match; the last fewer than four are stepped one at a
+    /// time.
     #[inline(always)]
     fn settle<S: Sampler, const ASC: bool, const ONE: bool>(&self, s: S, walk: &mut Walk<W>) -> bool {
         if walk.cur != W::ZERO {
             return true;
         }
-        s.skip::<W, ASC>(self, walk);
+        if s.seek::<W, ASC, ONE>(self, walk, 1) {
+            return walk.cur != W::ZERO;
+        }
         loop {
             if walk.left == 0 {
                 return false;
@@ -637,7 +644,7 @@ fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool,
 
 /// [`lean_row`] compiled with `lzcnt`/`tzcnt` (single instructions for the
 /// bit scans), SSSE3 (the visits' gathers) and AVX2 (the walk's four-word
-/// skips; both [`Avx2`]). Callers must hold a CPU level with AVX2 that is at
+/// seeks; both [`Avx2`]). Callers must hold a CPU level with AVX2 that is at
 /// most [`crate::kernels::detected`] (that level implies lzcnt, bmi1 and
 /// SSSE3).
 #[cfg(target_arch = "x86_64")]
@@ -661,12 +668,18 @@ trait Sampler: Copy {
     /// The density of `v`'s cell at stack index `b` at the weights of slice entry `e`.
     fn sample<V: Cells>(self, v: &V, b: usize, e: &SliceEntry) -> f32;
 
-    /// Moves `walk`, whose current word has no matching slot left, past
-    /// whole groups of four further words that have none either (at most to
-    /// its row's end); nothing where the level has no vector for it.
+    /// Moves `walk` to the first word with a matching slot, testing whole
+    /// groups of four words; the first group starts `after` words past the
+    /// current one in walking order, and the words before it must have no
+    /// matching slot left. True when the walk is settled: at that word, its
+    /// matching slots loaded, or at the row's end with none (the groups
+    /// reached it); false, nothing found, when fewer than four words are
+    /// left untested (the walk then stands at the last word tested, with
+    /// none). Always false where the level has no vector for it.
     #[inline(always)]
-    fn skip<W: Word, const ASC: bool>(self, f: &Frame<W>, walk: &mut Walk<W>) {
-        let _ = (f, walk);
+    fn seek<W: Word, const ASC: bool, const ONE: bool>(self, f: &Frame<W>, walk: &mut Walk<W>, after: usize) -> bool {
+        let _ = (f, walk, after);
+        false
     }
 }
 
@@ -683,7 +696,7 @@ impl Sampler for Plain {
 
 /// The layout's SSSE3 gather and [`crate::data::slices::bilinear_sse`]
 /// ([`Cells::sample_ssse3`]), and the matcher's four-word test
-/// ([`Matcher::any_hits4`]) on u64 words; a value of it proves the CPU has
+/// ([`Matcher::hit_words4`]) on u64 words; a value of it proves the CPU has
 /// AVX2 (and so SSSE3).
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
@@ -714,27 +727,36 @@ impl Sampler for Avx2 {
     }
 
     #[inline(always)]
-    fn skip<W: Word, const ASC: bool>(self, f: &Frame<W>, walk: &mut Walk<W>) {
+    fn seek<W: Word, const ASC: bool, const ONE: bool>(self, f: &Frame<W>, walk: &mut Walk<W>, mut after: usize) -> bool {
         if W::BITS != 64 {
-            return;
+            return false;
         }
         let words = f.words.as_ptr().cast::<u64>();
-        while walk.left >= 4 {
-            // the next four words in walking order
-            let at = if ASC { walk.w + 1 } else { walk.w - 4 };
+        while walk.left >= after + 3 {
+            // the four words from `after` past the current one in walking
+            // order, in memory order
+            let at = if ASC { walk.w + after } else { walk.w - after - 3 };
             debug_assert!(at + 4 <= f.words.len());
             // SAFETY: `W` is 64 bits wide (checked above; `Word` is u32 or
-            // u64), so the words are u64s. `left ≥ 4` words of the ray's
-            // depth row follow word `w` in walking order, so `[at, at + 4)`
-            // lies in the row, which lies in `words` (`Frame::word`). The
+            // u64), so the words are u64s. `left ≥ after + 3` words of the
+            // ray's depth row follow word `w` in walking order, so `[at, at +
+            // 4)` lies in the row, which lies in `words` (`Frame::word`). The
             // CPU has AVX2 (a value of `Avx2` proves it). Exercised by the lean
-            // frames of depth rows longer than four words at the AVX2 level
+            // frames of depth rows of four words and longer at the AVX2 level
             // (tests/it/lean_frame.rs).
-            if unsafe { f.m.any_hits4(words.add(at)) } {
-                return;
+            let hit = unsafe { if ONE { crate::encode::depth::nonzero_words4(words.add(at)) } else { f.m.hit_words4(words.add(at)) } };
+            if hit != 0 {
+                // the first in walking order: ascending the lowest word,
+                // descending the highest
+                let i = if ASC { hit.trailing_zeros() } else { hit.leading_zeros() - 28 };
+                walk.pass::<ASC>(after + i as usize, f.slots::<ONE>());
+                walk.cur = f.hits::<ONE>(f.word(walk.w));
+                return true;
             }
-            walk.pass::<ASC>(4, f.slots);
+            walk.pass::<ASC>(after + 3, f.slots::<ONE>());
+            after = 1;
         }
+        walk.left == 0
     }
 }
 

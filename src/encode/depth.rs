@@ -341,26 +341,34 @@ impl Matcher {
         W::from_u64((xt & at) | ((xt ^ at) & cin))
     }
 
-    /// Whether any of the four u64 words at `words` has a matching slot
-    /// ([`Matcher::hits`] of each, in one AVX2 vector).
+    /// Which of the four u64 words at `words` have a matching slot
+    /// ([`Matcher::hits`] of each, in one AVX2 vector): bit `i` set when word
+    /// `i` has one (one-bit codes: when it is not zero).
     ///
     /// # Safety
     /// The CPU must have AVX2, and the four words from `words` be readable.
     #[cfg(target_arch = "x86_64")]
     #[inline]
     #[target_feature(enable = "avx2")]
-    pub unsafe fn any_hits4(&self, words: *const u64) -> bool {
+    pub unsafe fn hit_words4(&self, words: *const u64) -> u32 {
         use std::arch::x86_64::*;
-        let (top, add) = (_mm256_set1_epi64x(self.top as i64), self.add);
-        let (add_low, add_top) = (_mm256_set1_epi64x((add & !self.top) as i64), _mm256_set1_epi64x((add & self.top) as i64));
         // SAFETY: the caller guarantees the four words readable (unaligned
         // load) and AVX2.
+        if self.nb == 1 {
+            // SAFETY: as this function's
+            return unsafe { nonzero_words4(words) };
+        }
+        // SAFETY: as above
         let x = unsafe { _mm256_loadu_si256(words.cast::<__m256i>()) };
-        // the lanes of `hits`: cin, then the majority of the top bits and cin
-        let cin = _mm256_and_si256(_mm256_add_epi64(_mm256_andnot_si256(top, x), add_low), top);
-        let xt = _mm256_and_si256(x, top);
-        let h = _mm256_or_si256(_mm256_and_si256(xt, add_top), _mm256_and_si256(_mm256_xor_si256(xt, add_top), cin));
-        _mm256_testz_si256(h, h) == 0
+        let h = {
+            let (top, add) = (_mm256_set1_epi64x(self.top as i64), self.add);
+            let (add_low, add_top) = (_mm256_set1_epi64x((add & !self.top) as i64), _mm256_set1_epi64x((add & self.top) as i64));
+            // the lanes of `hits`: cin, then the majority of the top bits and cin
+            let cin = _mm256_and_si256(_mm256_add_epi64(_mm256_andnot_si256(top, x), add_low), top);
+            let xt = _mm256_and_si256(x, top);
+            _mm256_or_si256(_mm256_and_si256(xt, add_top), _mm256_and_si256(_mm256_xor_si256(xt, add_top), cin))
+        };
+        nonzero_lanes(h)
     }
 
     /// The reference of [`Matcher::hits`]: a bit-plane comparator over the
@@ -539,6 +547,32 @@ pub fn first_set<W: Word>(row: &[W], ascending: bool, search: Search) -> Option<
     SetBits::new(row, ascending, search).next()
 }
 
+/// Which of the four u64 words at `words` are not zero: bit `i` set when
+/// word `i` is not (the matching words of one-bit codes,
+/// [`Matcher::hit_words4`]).
+///
+/// # Safety
+/// The CPU must have AVX2, and the four words from `words` be readable.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+pub unsafe fn nonzero_words4(words: *const u64) -> u32 {
+    use std::arch::x86_64::*;
+    // SAFETY: the caller guarantees the four words readable (unaligned load)
+    // and AVX2.
+    nonzero_lanes(unsafe { _mm256_loadu_si256(words.cast::<__m256i>()) })
+}
+
+/// Bit `i` set when 64-bit lane `i` of `x` is not zero.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn nonzero_lanes(x: std::arch::x86_64::__m256i) -> u32 {
+    use std::arch::x86_64::*;
+    let zero = _mm256_cmpeq_epi64(x, _mm256_setzero_si256());
+    _mm256_movemask_pd(_mm256_castsi256_pd(zero)) as u32 ^ 0xf
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -591,10 +625,10 @@ mod tests {
     }
 
     /// The four-word AVX2 test is `hits` of each word, for every width and
-    /// threshold, with groups where one word or none matches.
+    /// threshold, with groups where one word, several or none match.
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn any_hits4_is_the_hits_of_four_words() {
+    fn hit_words4_is_the_hits_of_four_words() {
         if !std::is_x86_feature_detected!("avx2") {
             return;
         }
@@ -606,12 +640,12 @@ mod tests {
                     // words of codes below c, each slot drawn from 0..c
                     let mut below = || (0..64 / nb).fold(0u64, |w, slot| w | ((next() % c as u64) << (64 - nb * (slot + 1))));
                     let mut g = [below(), below(), below(), below()];
-                    if next().is_multiple_of(2) {
+                    for _ in 0..next() % 3 {
                         g[(next() % 4) as usize] = next();
                     }
-                    let want = g.iter().any(|&x| m.hits(x) != 0);
+                    let want = (0..4).filter(|&i| m.hits(g[i]) != 0).fold(0u32, |a, i| a | 1 << i);
                     // SAFETY: AVX2 detected above; `g` holds four words.
-                    assert_eq!(unsafe { m.any_hits4(g.as_ptr()) }, want, "nb {nb} c {c} {g:x?}");
+                    assert_eq!(unsafe { m.hit_words4(g.as_ptr()) }, want, "nb {nb} c {c} {g:x?}");
                 }
             }
         }

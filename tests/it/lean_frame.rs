@@ -151,14 +151,15 @@ proptest! {
 }
 
 /// Slice counts at and around one word of every code width (1-bit masks of
-/// one iso value, 2-bit codes of the three presets; u32 and u64), viewed
+/// one iso value, 2-bit codes of the three presets; u32 and u64), and depth
+/// rows of three to five u64 words (the walk's four-word seeks), viewed
 /// along the long axis both ways and obliquely: the lean frame equals the
 /// general path and the brute force, and the frames cover pixels.
 #[test]
 fn lean_frame_at_word_boundaries() {
     let mut covered = 0;
     let mut checked = 0;
-    for nk in [2usize, 15, 16, 17, 31, 32, 33, 63, 64, 65, 129] {
+    for nk in [2usize, 15, 16, 17, 31, 32, 33, 63, 64, 65, 129, 192, 256, 257] {
         let vol = random_volume([17, 13, nk], nk as u64 * 977, [1.0; 3]);
         let cams = [cam(0.0, 0.0, 0.0), cam(0.0, std::f64::consts::PI, 0.3), cam(0.35, -0.4, 0.1), cam(-0.2, 2.9, 0.5)];
         // every view looks along the long axis (z)
@@ -176,14 +177,14 @@ fn lean_frame_at_word_boundaries() {
             }
         }
     }
-    assert_eq!(checked, 88);
+    assert_eq!(checked, 112);
     assert!(covered > 10_000, "only {covered} covered pixels");
 }
 
 /// Depth rows of many words (up to 17 u64 words of two-bit codes, 33 of the
 /// four presets' 4-bit codes, sheared a chunk of words at a time) with long
 /// empty stretches before and between the blobs, seen along the long axis
-/// both ways: the walk's four-word skips (AVX2 level) give the general
+/// both ways: the walk's four-word seeks (AVX2 level) give the general
 /// path's and the brute force's image, for one iso value and each preset of
 /// three and of four, u32 and u64 words, cell sizes 1 and 2, one and two threads.
 #[test]

@@ -352,13 +352,12 @@ impl Matcher {
     #[target_feature(enable = "avx2")]
     pub unsafe fn hit_words4(&self, words: *const u64) -> u32 {
         use std::arch::x86_64::*;
-        // SAFETY: the caller guarantees the four words readable (unaligned
-        // load) and AVX2.
         if self.nb == 1 {
-            // SAFETY: as this function's
+            // SAFETY: this function's contract is that one's
             return unsafe { nonzero_words4(words) };
         }
-        // SAFETY: as above
+        // SAFETY: the caller guarantees the four words readable (unaligned
+        // load) and AVX2.
         let x = unsafe { _mm256_loadu_si256(words.cast::<__m256i>()) };
         let h = {
             let (top, add) = (_mm256_set1_epi64x(self.top as i64), self.add);

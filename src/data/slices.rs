@@ -399,8 +399,19 @@ pub fn bilinear([v00, v10, v01, v11]: [f32; 4], wi: f32, wj: f32) -> f32 {
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 pub(crate) unsafe fn bilinear_sse(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
-    // SAFETY: the caller's contract is this one's
-    unsafe { bilinear_sse_clamped(x, wi, wj) }
+    use std::arch::x86_64::*;
+    // SAFETY: the caller's SSE3 covers `bilinear_lerps` and
+    // `_mm_movehdup_ps`; the rest is SSE, the x86-64 baseline.
+    unsafe {
+        let (d, h) = bilinear_lerps(x, wi, wj);
+        // lo = fmin(fmin(v00, v10), fmin(v01, v11)), hi likewise
+        let m = _mm_min_ps(x, h);
+        let lo = _mm_min_ss(m, _mm_movehdup_ps(m));
+        let d = _mm_max_ss(d, lo);
+        let n = _mm_max_ps(x, h);
+        let hi = _mm_max_ss(n, _mm_movehdup_ps(n));
+        _mm_cvtss_f32(_mm_min_ss(d, hi))
+    }
 }
 
 /// [`bilinear_sse`] of corners that are bytes (whole numbers in `[0, 255]`),
@@ -439,26 +450,20 @@ pub(crate) unsafe fn bilinear_sse(x: std::arch::x86_64::__m128, wi: f32, wj: f32
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 pub(crate) unsafe fn bilinear_sse_bytes(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
-    use std::arch::x86_64::*;
-    // SAFETY: SSE and SSE2 are the x86-64 baseline; `_mm_movehdup_ps` needs
-    // SSE3, which the caller guarantees.
-    unsafe {
-        // the lerps of `bilinear_sse_clamped`, operation for operation
-        let h = _mm_movehl_ps(x, x);
-        let t = _mm_add_ps(x, _mm_mul_ps(_mm_sub_ps(h, x), _mm_set1_ps(wi)));
-        let bot = _mm_movehdup_ps(t);
-        _mm_cvtss_f32(_mm_add_ss(t, _mm_mul_ss(_mm_sub_ss(bot, t), _mm_set_ss(wj))))
-    }
+    // SAFETY: the caller's contract is `bilinear_lerps`'; SSE is the x86-64
+    // baseline.
+    unsafe { std::arch::x86_64::_mm_cvtss_f32(bilinear_lerps(x, wi, wj).0) }
 }
 
-/// [`bilinear_sse`]: both in-row lerps in one vector, the one across rows,
-/// then the clamp to the corners' range.
+/// The lerps of [`bilinear_sse`] before any clamp: both in-row lerps in one
+/// vector, then the one across rows, in lane 0 of the first vector; the
+/// second is `[v10, v11, v10, v11]` (for the corners' range).
 ///
 /// # Safety
 /// As [`bilinear_sse`].
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn bilinear_sse_clamped(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> f32 {
+unsafe fn bilinear_lerps(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -> (std::arch::x86_64::__m128, std::arch::x86_64::__m128) {
     use std::arch::x86_64::*;
     // SAFETY: SSE and SSE2 are the x86-64 baseline; `_mm_movehdup_ps` needs
     // SSE3, which the caller guarantees.
@@ -468,14 +473,7 @@ unsafe fn bilinear_sse_clamped(x: std::arch::x86_64::__m128, wi: f32, wj: f32) -
         // [top, bot] = [v00 + (v10 − v00)·wi, v01 + (v11 − v01)·wi]
         let t = _mm_add_ps(x, _mm_mul_ps(_mm_sub_ps(h, x), _mm_set1_ps(wi)));
         let bot = _mm_movehdup_ps(t);
-        let d = _mm_add_ss(t, _mm_mul_ss(_mm_sub_ss(bot, t), _mm_set_ss(wj)));
-        // lo = fmin(fmin(v00, v10), fmin(v01, v11)), hi likewise
-        let m = _mm_min_ps(x, h);
-        let lo = _mm_min_ss(m, _mm_movehdup_ps(m));
-        let d = _mm_max_ss(d, lo);
-        let n = _mm_max_ps(x, h);
-        let hi = _mm_max_ss(n, _mm_movehdup_ps(n));
-        _mm_cvtss_f32(_mm_min_ss(d, hi))
+        (_mm_add_ss(t, _mm_mul_ss(_mm_sub_ss(bot, t), _mm_set_ss(wj))), h)
     }
 }
 

@@ -497,6 +497,45 @@ impl ReferenceRenderer {
         if n.length() > 0.0 { -n.normalize() } else { DVec3::NAN }
     }
 
+    /// [`ReferenceRenderer::shading_normal`] with the cubic reconstruction's
+    /// normal codes ([`crate::data::normals::cubic_voxel_normal`], the
+    /// B-spline gradient at each voxel): what a hit of the cubic crossing
+    /// ([`crate::composite::raycast::RayContext::with_cubic_crossing`]) is
+    /// shaded with.
+    pub fn shading_normal_cubic_codes(&self, slices: [DVec3; 2], frac: f64) -> DVec3 {
+        let a = self.blended_cubic_codes(slices[0]);
+        let n = if frac > 0.0 { a.lerp(self.blended_cubic_codes(slices[1]), frac) } else { a };
+        if n.length() > 0.0 { -n.normalize() } else { DVec3::NAN }
+    }
+
+    /// The trilinear blend at `p` of the corners' decoded cubic normal codes
+    /// (the B-spline gradient at each corner voxel, [`ReferenceRenderer::gradient_cubic`]
+    /// there), each unit and turned to the side of the B-spline gradient at `p`.
+    fn blended_cubic_codes(&self, p: DVec3) -> DVec3 {
+        let sp = DVec3::new(self.spacing[0] as f64, self.spacing[1] as f64, self.spacing[2] as f64);
+        let g = self.gradient_cubic(p) / sp;
+        if g.length() <= 0.0 || g.is_nan() {
+            return g;
+        }
+        let (x0, x1, fx) = locate(p.x, self.dims[0]);
+        let (y0, y1, fy) = locate(p.y, self.dims[1]);
+        let (z0, z1, fz) = locate(p.z, self.dims[2]);
+        let mut sum = DVec3::ZERO;
+        for (x, wx) in [(x0, 1.0 - fx), (x1, fx)] {
+            for (y, wy) in [(y0, 1.0 - fy), (y1, fy)] {
+                for (z, wz) in [(z0, 1.0 - fz), (z1, fz)] {
+                    let c = self.gradient_cubic(DVec3::new(x as f64, y as f64, z as f64)) / sp;
+                    let code = encode_normal([c.x as f32, c.y as f32, c.z as f32]);
+                    if let Some(n) = decode_normal(code) {
+                        let n = DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
+                        sum += wx * wy * wz * if n.dot(g) < 0.0 { -n } else { n };
+                    }
+                }
+            }
+        }
+        sum
+    }
+
     /// The unit normal (world space, down the density) the cubic
     /// reconstruction's fast paths shade a hit at `p` with: the gradient of
     /// the B-spline smoothing ([`ReferenceRenderer::gradient_cubic`]). NaN
@@ -910,8 +949,10 @@ pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Optio
 /// [`Normals::Codes`], the same blend of the corners' decoded normal codes
 /// (each turned to the gradient's side), the direction whose shade their
 /// blend of the corners' shade entries approximates; under the cubic
-/// reconstruction (iso mode, raycast paths) the gradient of its B-spline
-/// smoothing at the hit ([`ReferenceRenderer::cubic_shading_normal`]). `model` must be the
+/// reconstruction (iso mode, raycast paths) with [`Normals::Gradient`] the
+/// gradient of its B-spline smoothing at the hit
+/// ([`ReferenceRenderer::cubic_shading_normal`]), with [`Normals::Codes`] the
+/// blend of the cubic's codes ([`ReferenceRenderer::shading_normal_cubic_codes`]). `model` must be the
 /// [`ReferenceRenderer`] of the renderer's volume.
 pub fn fast_path_normals(renderer: &Renderer, camera: &Camera, model: &ReferenceRenderer) -> Result<Vec<DVec3>> {
     if model.dims != renderer.dims() || model.spacing != renderer.spacing() {
@@ -919,8 +960,11 @@ pub fn fast_path_normals(renderer: &Renderer, camera: &Camera, model: &Reference
     }
     let (points, _) = fast_path_hits(renderer, camera)?;
     let s = renderer.settings();
-    if s.reconstruction == Reconstruction::Cubic && s.mode == Mode::Iso && s.method.is_raycast() {
+    if s.cubic_rays() {
         return Ok(points.par_iter().map(|p| p.map_or(DVec3::NAN, |h| model.cubic_shading_normal(h.point))).collect());
+    }
+    if s.cubic_crossing() {
+        return Ok(points.par_iter().map(|p| p.map_or(DVec3::NAN, |h| model.shading_normal_cubic_codes(h.slices, h.frac))).collect());
     }
     let codes = s.normals == Normals::Codes;
     Ok(points.par_iter().map(|p| p.map_or(DVec3::NAN, |h| model.shading_normal(h.slices, h.frac, codes))).collect())

@@ -107,30 +107,37 @@ pub struct RenderArgs {
     /// Shading of the binary and brute paths: codes (each voxel's gradient
     /// direction quantized once, VolPack's per-view shade table, four lookups
     /// per sample) or gradient (the exact gradient at every sample: slower).
-    #[arg(long, value_enum, default_value = "codes")]
-    pub normals: Normals,
+    /// Under --reconstruction cubic (iso mode) codes are the cubic's normals
+    /// at the voxels and the hit is found as the linear samples find it, then
+    /// placed at the cubic's crossing (the fast preview); gradient follows
+    /// the cubic to its first crossing and shades it with its own B-spline
+    /// gradient (the still frame). Default: codes, except `render` under the
+    /// cubic, which takes gradient.
+    #[arg(long, value_enum)]
+    pub normals: Option<Normals>,
     /// How the iso surface is reconstructed between samples: linear (the
-    /// straight line between two slices) or cubic. On the binary and brute
-    /// paths in iso mode, cubic is Catmull–Rom through four samples along
-    /// the volume's z axis, the normal the gradient of their B-spline
-    /// smoothing, no normal codes: no terraces or rings on thick-slice scans
-    /// (on a 0.6×0.6×5 ellipsoid the normal error drops from 3.3° to 0.85°
-    /// mean); blend mode ignores it there. A cubic frame costs about 1.4–1.6×
-    /// linear's on a 5 mm-slice CT and 2.5–3.5× on an isotropic 256³ head
-    /// (benches/README.md), and on isotropic scans both err alike. On
-    /// --method rle and brute-rle (both modes, pre-classified or --deluxe P)
-    /// cubic keeps the samples and gives each voxel the cubic's normal there
-    /// as its normal code (the B-spline gradient along z instead of central
-    /// differences), so the shading terraces less on thick slices (on
-    /// the 0.6×0.6×5 ellipsoid the codes' error drops from 4.4° to 1.8° mean):
-    /// frames composite as before, only the encoding's normals take more
-    /// arithmetic. Default: `render`
-    /// (a still frame) takes cubic for a scan whose slices are at least 1.5×
-    /// as far apart as its pixels, on the binary and brute paths in iso mode
-    /// and on the RLE paths (on the chest CT's 5 mm slices the RLE frame
-    /// costs the same within 2 %); `rotate`, `view` (the interactive preview)
-    /// and `--distributed` take linear. --deluxe I, --grid bcc and --distributed
-    /// refuse cubic.
+    /// straight line between two slices) or cubic: Catmull–Rom through four
+    /// samples along the volume's z axis, so thick-slice scans show no
+    /// terraces or rings. On the binary and brute paths in iso mode, with
+    /// --normals codes (the preview: `rotate`, `view`, `bench`) a ray finds
+    /// its hit as the linear samples do and places it at the cubic's
+    /// crossing, shaded by the cubic's normal at the voxels (the B-spline
+    /// gradient, as codes): on a 0.6×0.6×5 ellipsoid the preview's normal
+    /// error drops from 3.3° to 1.1° mean, and the frame costs 1.15–1.3×
+    /// linear's on thick-slice volumes (benches/README.md); with --normals
+    /// gradient (`render`'s still frame) the ray follows the cubic to its
+    /// first crossing and shades it by the B-spline gradient there (0.85°
+    /// mean; 1.4–1.6× linear's frame on a 5 mm-slice CT). Blend mode ignores
+    /// it there. On --method rle and brute-rle (both modes, pre-classified or
+    /// --deluxe P) cubic keeps the samples and gives each voxel the cubic's
+    /// normal there as its normal code, so the shading terraces less on thick
+    /// slices (the codes' error on the ellipsoid drops from 4.4° to 1.8°
+    /// mean). Default: `render` (a still frame) takes cubic for a scan whose
+    /// slices are at least 1.5× as far apart as its pixels, on the binary
+    /// and brute paths in iso mode and on the RLE paths (on the chest CT's
+    /// 5 mm slices the RLE frame costs the same within 2 %); `rotate`,
+    /// `view` and --distributed take linear. --deluxe I, --grid bcc and
+    /// --distributed refuse cubic.
     #[arg(long, value_enum)]
     pub reconstruction: Option<shearwarp::kernels::Reconstruction>,
     /// Worker threads (0 = all cores).
@@ -603,7 +610,7 @@ impl RenderArgs {
             mode: self.mode,
             word: self.word,
             search: self.search,
-            normals: self.normals,
+            normals: self.normals.unwrap_or(Normals::Codes),
             footprint: self.footprint,
             deluxe: self.deluxe,
             lattice: self.grid,

@@ -54,7 +54,7 @@ use shearwarp::data::phantom::Phantom;
 use shearwarp::data::volume::Volume;
 use shearwarp::encode::depth::Search;
 use shearwarp::kernels::Reconstruction;
-use shearwarp::render::{Deluxe, FrameStats, Lattice, Method, Renderer, Settings, WordSize};
+use shearwarp::render::{Deluxe, FrameStats, Lattice, Method, Normals, Renderer, Settings, WordSize};
 use shearwarp::view::{Camera, Factorization, NamedView, Projection, View, standard_views};
 use shearwarp::warp::Image;
 
@@ -245,7 +245,10 @@ pub fn reconstruction(settings: &Settings) -> &'static str {
 
 /// `variants` once per reconstruction of `recons`: as they are for
 /// `linear`, and for `cubic` the iso variants that render it (the raycast
-/// paths without Deluxe I), named `…-cubic`.
+/// paths without Deluxe I), named `…-cubic` (with normal codes: the hit of
+/// the linear samples placed by the cubic's crossing, shaded by the cubic's
+/// codes) and, for a variant with codes, `…-cubic-gradient` (the cubic's
+/// first crossing, shaded by its B-spline gradient).
 pub fn with_reconstructions(variants: Vec<Variant>, recons: &[Reconstruction]) -> Vec<Variant> {
     let mut out = vec![];
     for &r in recons {
@@ -257,6 +260,11 @@ pub fn with_reconstructions(variants: Vec<Variant>, recons: &[Reconstruction]) -
                     if s.mode == Mode::Iso && s.method.is_raycast() && !s.deluxe.intermediate {
                         let settings = Settings { reconstruction: r, ..s };
                         out.push(Variant { name: format!("{}-cubic", v.name), settings, ..v.clone() });
+                        if s.normals == Normals::Codes {
+                            // the cubic's own first crossing and gradient (what `render` takes)
+                            let settings = Settings { normals: Normals::Gradient, ..settings };
+                            out.push(Variant { name: format!("{}-cubic-gradient", v.name), settings, ..v.clone() });
+                        }
                     }
                 }
             }

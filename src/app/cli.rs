@@ -302,6 +302,16 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
             r.set_settings(Settings { reconstruction: shearwarp::kernels::Reconstruction::Cubic, ..s })?;
         }
     }
+    let s = r.settings();
+    if cmd.render.normals.is_none()
+        && s.reconstruction == shearwarp::kernels::Reconstruction::Cubic
+        && s.method.is_raycast()
+        && s.mode == shearwarp::Mode::Iso
+    {
+        // a still frame follows the cubic to its first crossing and shades
+        // it by the cubic's own gradient (the preview's codes are for speed)
+        r.set_settings(Settings { normals: shearwarp::render::Normals::Gradient, ..s })?;
+    }
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let build_ms = prepare_first(&mut r, &cam)?;
     let (stats, geometry) = scene.render(&mut r, &cam, &mut img)?;

@@ -7,7 +7,11 @@
 //! focus interval or intermediate samples, the mode is [`Mode::Iso`], the
 //! rays shade by normal codes and the depth search is the bit scan
 //! ([`LeanFrame::applies`]). The renderer decides once per frame; every other
-//! frame takes the general ray loop of [`super::raycast`].
+//! frame takes the general ray loop of [`super::raycast`]. The cubic
+//! reconstruction's preview ([`RayContext::with_cubic_crossing`]: the linear
+//! samples' hit placed at the cubic's crossing) takes this frame too, with
+//! rows compiled for it (`CUBIC`), so the linear rows carry none of its code
+//! (every visit of a cubic row tests its cell, as with super cells).
 //!
 //! What makes it lean:
 //! - **A per-slice table** ([`SliceEntry`]): in parallel projection every ray
@@ -64,7 +68,7 @@
 use crate::classify::shade_table::ShadeTable;
 use crate::classify::shading::ShadeEntry;
 use crate::classify::shading::apply_shade;
-use crate::composite::raycast::{Cells, MISS, RayContext, RowOut, render_rows};
+use crate::composite::raycast::{At, Cells, MISS, RayContext, RowOut, cubic_fraction, cubic_in_slice, in_slice_fraction, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::slices::bilinear;
 use crate::encode::depth::{Matcher, Search, Word};
@@ -115,6 +119,8 @@ struct Frame<'a, W: Word> {
     /// row of rays reads starts (two rows); 0 without prefetches, where a
     /// visit's hint names the line it reads anyway, so it needs no branch.
     ahead: usize,
+    /// The cubic crossing's stack axis ([`RayContext::with_cubic_crossing`]).
+    cubic: Option<usize>,
 }
 
 /// Ray `(p, q)` of the intermediate image and its base stack index
@@ -222,6 +228,7 @@ impl LeanFrame {
             slots,
             log_nb: m.width().trailing_zeros(),
             ahead: if prefetch { 2 * n[0] } else { 0 },
+            cubic: ctx.cubic_crossing(),
         };
         let avx2 = mask.cpu_level().has_avx2();
         // at cell size 1 a ray's column is its own cells' (no dilation): a
@@ -229,18 +236,25 @@ impl LeanFrame {
         // no in-volume test (the grid's margin is the mask's, module docs)
         let exact = mask.cell_size() == 1 && ctx.plan.grid.pad == Grid::parallel(ctx.stack.cells(), n[2]).pad;
         let one = m.width() == 1;
+        let cubic = f.cubic.is_some();
         super::raycast::with_cells!(ctx, |v| {
             render_rows(rect, out, |out| {
                 let row = RowStart::new(mask, out.q, out.p0);
-                match (ctx.ascending, exact, one) {
-                    (true, true, true) => lean_row_at::<W, _, true, false, true>(&f, &v, avx2, row, out),
-                    (false, true, true) => lean_row_at::<W, _, false, false, true>(&f, &v, avx2, row, out),
-                    (true, false, true) => lean_row_at::<W, _, true, true, true>(&f, &v, avx2, row, out),
-                    (false, false, true) => lean_row_at::<W, _, false, true, true>(&f, &v, avx2, row, out),
-                    (true, true, false) => lean_row_at::<W, _, true, false, false>(&f, &v, avx2, row, out),
-                    (false, true, false) => lean_row_at::<W, _, false, false, false>(&f, &v, avx2, row, out),
-                    (true, false, false) => lean_row_at::<W, _, true, true, false>(&f, &v, avx2, row, out),
-                    (false, false, false) => lean_row_at::<W, _, false, true, false>(&f, &v, avx2, row, out),
+                match (ctx.ascending, exact, one, cubic) {
+                    (true, true, true, false) => lean_row_at::<W, _, true, false, true, false>(&f, &v, avx2, row, out),
+                    (false, true, true, false) => lean_row_at::<W, _, false, false, true, false>(&f, &v, avx2, row, out),
+                    (true, false, true, false) => lean_row_at::<W, _, true, true, true, false>(&f, &v, avx2, row, out),
+                    (false, false, true, false) => lean_row_at::<W, _, false, true, true, false>(&f, &v, avx2, row, out),
+                    (true, true, false, false) => lean_row_at::<W, _, true, false, false, false>(&f, &v, avx2, row, out),
+                    (false, true, false, false) => lean_row_at::<W, _, false, false, false, false>(&f, &v, avx2, row, out),
+                    (true, false, false, false) => lean_row_at::<W, _, true, true, false, false>(&f, &v, avx2, row, out),
+                    (false, false, false, false) => lean_row_at::<W, _, false, true, false, false>(&f, &v, avx2, row, out),
+                    // the cubic crossing: every visit tested in the volume (one
+                    // compiled row per order and code width, not two more for cell size 1)
+                    (true, _, true, true) => lean_row_at::<W, _, true, true, true, true>(&f, &v, avx2, row, out),
+                    (false, _, true, true) => lean_row_at::<W, _, false, true, true, true>(&f, &v, avx2, row, out),
+                    (true, _, false, true) => lean_row_at::<W, _, true, true, false, true>(&f, &v, avx2, row, out),
+                    (false, _, false, true) => lean_row_at::<W, _, false, true, false, true>(&f, &v, avx2, row, out),
                 }
             })
         });
@@ -419,7 +433,7 @@ impl<W: Word> Frame<'_, W> {
     /// candidate whose sample reaches the iso value, refined and shaded; the
     /// pixel is left as it is (a miss) if there is none.
     #[inline(always)]
-    fn trace<V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool, const ONE: bool>(
+    fn trace<V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool, const ONE: bool, const CUBIC: bool>(
         &self,
         v: &V,
         s: S,
@@ -437,7 +451,7 @@ impl<W: Word> Frame<'_, W> {
                 let e = self.slice(k);
                 let d = s.sample(v, b, e);
                 if d >= self.iso {
-                    return self.hit::<V, S, ASC>(v, s, ray, Visit { k, b, d }, below, px);
+                    return self.hit::<V, S, ASC, CUBIC>(v, s, ray, Visit { k, b, d }, below, px);
                 }
                 below = Below { k, d };
             }
@@ -449,14 +463,58 @@ impl<W: Word> Frame<'_, W> {
         }
     }
 
+    /// The fraction of the cubic crossing ([`RayContext::with_cubic_crossing`]
+    /// along stack axis `za`) between the slice before `(kp, bp, dp)` and
+    /// the hit `(k, b, d)` (slice, stack index of the cell, density), the
+    /// general hit's: the same samples by the same functions.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn cubic_fraction<V: Cells, S: Sampler, const ASC: bool>(
+        &self,
+        v: &V,
+        s: S,
+        ray: LeanRay,
+        za: usize,
+        (k, b, d): (usize, usize, f32),
+        (kp, bp, dp): (usize, usize, f32),
+        linear: f32,
+    ) -> f32 {
+        if za == 2 {
+            // the samples before the segment and after it (repeating its ends)
+            let outer = |k: Option<usize>, end: f32| {
+                k.and_then(|k| {
+                    let e = self.slice(k);
+                    self.cell(e, ray).map(|b| s.sample(v, b, e))
+                })
+                .unwrap_or(end)
+            };
+            let before = if ASC { kp.checked_sub(1) } else { Some(kp + 1).filter(|&x| x < self.nk) };
+            let after = if ASC { Some(k + 1).filter(|&x| x < self.nk) } else { k.checked_sub(1) };
+            return cubic_fraction([outer(before, dp), dp, d, outer(after, d)], self.iso, linear);
+        }
+        let at = |k: usize| {
+            let e = self.slice(k);
+            let (ci, cj) = ((ray.p as i32 + e.di) as usize, (ray.q as i32 + e.dj) as usize);
+            At { k, ci, cj, wi: e.wi, wj: e.wj }
+        };
+        let last = self.cells[za] as usize;
+        let cp = cubic_in_slice(v, self.n0, za, last, at(kp), bp);
+        let c = cubic_in_slice(v, self.n0, za, last, at(k), b);
+        in_slice_fraction(cp, c, self.iso, linear)
+    }
+
     /// The iso hit `at` (slice, stack index, density) into its pixel:
     /// refined against the slice before it in walking order and shaded by the
     /// blend of both slices' shade entries, as [`RayContext`]'s general hit.
     /// `below` is the ray's last sample below the iso value: when it is the
     /// slice before, its density is the one the refinement needs (the same
     /// cell, weights and arithmetic) and is not sampled again.
+    /// With the cubic crossing (`CUBIC`: [`RayContext::with_cubic_crossing`],
+    /// a row compiled for it, so the linear frame's walk is the same code
+    /// without it) the hit is placed at the cubic's fraction instead
+    /// ([`Frame::cubic_fraction`]).
     #[inline(always)]
-    fn hit<V: Cells, S: Sampler, const ASC: bool>(&self, v: &V, s: S, ray: LeanRay, at: Visit, below: Below, px: Pixel) {
+    fn hit<V: Cells, S: Sampler, const ASC: bool, const CUBIC: bool>(&self, v: &V, s: S, ray: LeanRay, at: Visit, below: Below, px: Pixel) {
         let (iso, Visit { k, b, d }) = (self.iso, at);
         let e = self.slice(k);
         let kp = if ASC { k.checked_sub(1) } else { Some(k + 1).filter(|&kp| kp < self.nk) };
@@ -474,7 +532,12 @@ impl<W: Word> Frame<'_, W> {
             if let Some((bp, dp)) = prev
                 && dp < iso
             {
-                before = Some((kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), bp, ep));
+                let linear = ((iso - dp) / (d - dp)).clamp(0.0, 1.0);
+                let t = match self.cubic {
+                    Some(za) if CUBIC => self.cubic_fraction::<V, S, ASC>(v, s, ray, za, (k, b, d), (kp, bp, dp), linear),
+                    _ => linear,
+                };
+                before = Some((kp, t, bp, ep));
             }
         }
         // (slice indices are below 2^24: exact as f32 through u32, as through
@@ -572,7 +635,7 @@ fn blend_pair_plain(table: &ShadeTable, codes: [u16; 4], w: [f32; 2], codes_p: [
 /// One row of the lean frame by the copy compiled for the CPU level (`avx2`:
 /// the mask's level, [`BinaryMask::cpu_level`], has AVX2).
 #[inline(always)]
-fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(
+fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool, const CUBIC: bool>(
     f: &Frame<W>,
     v: &V,
     avx2: bool,
@@ -586,18 +649,18 @@ fn lean_row_at<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ON
         // `is_x86_feature_detected!` found lzcnt and bmi1 on this CPU at run
         // time, all that `lean_row_lzcnt` requires; its body is the safe
         // `lean_row`.
-        unsafe { lean_row_lzcnt::<W, V, ASC, CHECKED, ONE>(f, v, row, out) };
+        unsafe { lean_row_lzcnt::<W, V, ASC, CHECKED, ONE, CUBIC>(f, v, row, out) };
         return;
     }
     let _ = avx2;
-    lean_row::<W, V, Plain, ASC, CHECKED, ONE>(f, v, Plain, row, out)
+    lean_row::<W, V, Plain, ASC, CHECKED, ONE, CUBIC>(f, v, Plain, row, out)
 }
 
 /// One row of the lean frame: the row cleared to misses, then ray by ray
 /// its first candidate and its trace. A ray's base index is the row's plus
 /// its offset along the row.
 #[inline(always)]
-fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool, const ONE: bool>(
+fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool, const ONE: bool, const CUBIC: bool>(
     f: &Frame<W>,
     v: &V,
     s: S,
@@ -636,7 +699,7 @@ fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool,
             let ray = LeanRay { p: p0 + dp, q, rb: rb0 + dp };
             let k = f.take::<ASC, ONE>(&mut walk);
             let b = f.cell_at::<CHECKED>(f.slice(k), ray);
-            f.trace::<V, S, ASC, CHECKED, ONE>(v, s, ray, (walk, k, b), Pixel { rgba, depth });
+            f.trace::<V, S, ASC, CHECKED, ONE, CUBIC>(v, s, ray, (walk, k, b), Pixel { rgba, depth });
         }
         row.advance::<CHECKED>();
     }
@@ -649,7 +712,7 @@ fn lean_row<W: Word, V: Cells, S: Sampler, const ASC: bool, const CHECKED: bool,
 /// SSSE3).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "lzcnt,bmi1,sse3,ssse3,avx,avx2")]
-unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool>(
+unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool, const ONE: bool, const CUBIC: bool>(
     f: &Frame<W>,
     v: &V,
     row: RowStart,
@@ -658,7 +721,7 @@ unsafe fn lean_row_lzcnt<W: Word, V: Cells, const ASC: bool, const CHECKED: bool
     // SAFETY: the caller holds a CPU level that has AVX2, so SSSE3 (this
     // function's contract)
     let s = unsafe { Avx2::new() };
-    lean_row::<W, V, Avx2, ASC, CHECKED, ONE>(f, v, s, row, out)
+    lean_row::<W, V, Avx2, ASC, CHECKED, ONE, CUBIC>(f, v, s, row, out)
 }
 
 /// What the CPU level changes in a row of the lean frame: how a visit

@@ -79,6 +79,9 @@ pub struct RayContext<'a> {
     /// The cubic reconstruction ([`RayContext::with_cubic`]): the stack axis
     /// it runs along.
     cubic: Option<usize>,
+    /// The cubic crossing of table-shaded iso hits
+    /// ([`RayContext::with_cubic_crossing`]): the stack axis it runs along.
+    cubic_crossing: Option<usize>,
 }
 
 /// What one ray produced.
@@ -134,6 +137,8 @@ pub trait Cells: Sync {
     fn densities(&self, b: usize) -> [f32; 4];
     /// The corner normal codes, same order (table shading only).
     fn codes(&self, b: usize) -> [u16; 4];
+    /// The density of voxel `b` (exactly the stack's).
+    fn density(&self, b: usize) -> f32;
     /// Hints the cache to fetch both rows of the cell, densities and codes (no
     /// effect on results).
     fn prefetch(&self, b: usize);
@@ -177,6 +182,10 @@ impl Cells for Split<'_> {
         crate::data::slices::cell_corners(self.codes, b, self.stack.n[0])
     }
     #[inline(always)]
+    fn density(&self, b: usize) -> f32 {
+        self.stack.data()[b]
+    }
+    #[inline(always)]
     fn prefetch(&self, b: usize) {
         self.stack.prefetch_cell(b);
         crate::data::slices::prefetch_cell(self.codes, b, self.stack.n[0]);
@@ -196,6 +205,10 @@ impl Cells for PackedCells<'_> {
     #[inline(always)]
     fn codes(&self, b: usize) -> [u16; 4] {
         PackedCells::codes(self, b)
+    }
+    #[inline(always)]
+    fn density(&self, b: usize) -> f32 {
+        PackedCells::density(self, b)
     }
     #[inline(always)]
     fn prefetch(&self, b: usize) {
@@ -221,6 +234,10 @@ impl Cells for ByteCells<'_> {
     #[inline(always)]
     fn codes(&self, b: usize) -> [u16; 4] {
         ByteCells::codes(self, b)
+    }
+    #[inline(always)]
+    fn density(&self, b: usize) -> f32 {
+        ByteCells::density(self, b)
     }
     #[inline(always)]
     fn prefetch(&self, b: usize) {
@@ -290,6 +307,7 @@ impl<'a> RayContext<'a> {
             focus_iso: iso,
             focus_iso_rgb: [iso_c.r, iso_c.g, iso_c.b],
             cubic: None,
+            cubic_crossing: None,
         }
     }
 
@@ -389,6 +407,32 @@ impl<'a> RayContext<'a> {
     pub fn with_cubic(mut self, z_axis: Option<usize>) -> Self {
         self.cubic = z_axis;
         self
+    }
+
+    /// The cubic reconstruction's crossing for the iso hits of a
+    /// table-shaded context ([`RayContext::with_normals`], whose codes
+    /// should be the cubic's: [`crate::data::normals::cubic_voxel_normal`]);
+    /// `Some(z_axis)`: the stack axis of the volume's z. A ray finds its hit
+    /// as the linear reconstruction does (the first slice whose bilinear
+    /// sample reaches iso, the same mask and walk), and the hit is placed in
+    /// the segment from the slice before it: along the
+    /// slices (`z_axis` 2) at the Catmull–Rom crossing through the four
+    /// samples around the segment, which the two bracketing samples
+    /// guarantee ([`reconstruct::crossing_near`]); in the slice at the
+    /// straight crossing between the two slices' Catmull–Rom samples across
+    /// the voxel rows along z. The shade is the blend of both slices' codes at
+    /// that fraction, as the linear hit's. A surface that only the cubic's
+    /// overshoot between two samples below iso reaches is not drawn: the
+    /// preview of [`RayContext::with_cubic`]'s surface at the linear frame's
+    /// cost of traversal.
+    pub fn with_cubic_crossing(mut self, z_axis: Option<usize>) -> Self {
+        self.cubic_crossing = z_axis;
+        self
+    }
+
+    /// The stack axis of [`RayContext::with_cubic_crossing`], if set.
+    pub fn cubic_crossing(&self) -> Option<usize> {
+        self.cubic_crossing
     }
 
     /// The density a ray reads at `at` before a walk: the cubic
@@ -1022,7 +1066,28 @@ impl<'a> RayContext<'a> {
         let before = self.prev_slice(k, lo, hi).and_then(|kp| {
             let (pi, pj, pwi, pwj) = ray.locate(self, kp)?;
             let dp = self.sample(v, pi, pj, kp, pwi, pwj);
-            (dp < iso).then(|| (kp, ((iso - dp) / (d - dp)).clamp(0.0, 1.0), (pi, pj, pwi, pwj)))
+            (dp < iso).then(|| {
+                let linear = ((iso - dp) / (d - dp)).clamp(0.0, 1.0);
+                let t = match self.cubic_crossing {
+                    None => linear,
+                    Some(2) => {
+                        // the samples before the segment and after it (repeating its ends)
+                        let outer = |k: Option<usize>, end: f32| {
+                            k.and_then(|k| ray.locate(self, k).map(|(ci, cj, wi, wj)| self.sample(v, ci, cj, k, wi, wj))).unwrap_or(end)
+                        };
+                        let four = [outer(self.prev_slice(kp, lo, hi), dp), dp, d, outer(self.next_slice(k, lo, hi), d)];
+                        cubic_fraction(four, iso, linear)
+                    }
+                    Some(za) => {
+                        let (n, last) = (self.stack.n, self.cells[za] as usize);
+                        let ap = At { k: kp, ci: pi, cj: pj, wi: pwi, wj: pwj };
+                        let cp = cubic_in_slice(v, n[0], za, last, ap, self.stack.index(pi, pj, kp));
+                        let c = cubic_in_slice(v, n[0], za, last, at, self.stack.index(ci, cj, k));
+                        in_slice_fraction(cp, c, iso, linear)
+                    }
+                };
+                (kp, t, (pi, pj, pwi, pwj))
+            })
         });
         let depth = before.map_or(k as f32, |(kp, t, _)| kp as f32 + (k as f32 - kp as f32) * t);
         let rgb = match self.normals {
@@ -1046,6 +1111,57 @@ impl<'a> RayContext<'a> {
         };
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }
+}
+
+/// The fraction of a cubic crossing along the slices
+/// ([`RayContext::with_cubic_crossing`]): where the Catmull–Rom cubic
+/// through `four` (the samples before, at the start of, at the end of and
+/// after the segment, in walking order; the middle two bracket iso, so it
+/// crosses) meets iso, from the bilinear samples' crossing `linear`
+/// ([`reconstruct::crossing_near`]).
+#[inline]
+pub(crate) fn cubic_fraction(four: [f32; 4], iso: f32, linear: f32) -> f32 {
+    reconstruct::crossing_near(four, iso, linear)
+}
+
+/// The fraction of a cubic crossing in the slice
+/// ([`RayContext::with_cubic_crossing`]): where the straight line from the
+/// slice before's cubic sample `cp` to the hit slice's `c` meets iso,
+/// clamped to the segment; `linear` (the bilinear samples' crossing) where
+/// the cubic samples do not rise along it.
+#[inline]
+pub(crate) fn in_slice_fraction(cp: f32, c: f32, iso: f32, linear: f32) -> f32 {
+    if c > cp { ((iso - cp) / (c - cp)).clamp(0.0, 1.0) } else { linear }
+}
+
+/// The Catmull–Rom sample at `at` (stack index `b` of its cell) across the
+/// four voxel lines along stack axis `za` (0 or 1; `last`, the cells along
+/// it: a line beyond the volume repeats its neighbour), each linear along
+/// the other in-slice axis, read from the cells `v` of a stack with rows of
+/// `n0` voxels. The weights are [`reconstruct::catmull_rom_f32`] of the
+/// sample's fraction along `za`. The sample of [`RayContext::with_cubic_crossing`] in the
+/// slice, by one function for every path.
+#[inline(always)]
+pub(crate) fn cubic_in_slice<V: Cells>(v: &V, n0: usize, za: usize, last: usize, at: At, b: usize) -> f32 {
+    let (step, other, c, w_z, w_o) = if za == 0 { (1, n0, at.ci, at.wi, at.wj) } else { (n0, 1, at.cj, at.wj, at.wi) };
+    // each line's two voxels (the first, and the one `other` further)
+    let pairs: [[f32; 2]; 4] = if c > 0 && c + 1 < last {
+        // inside: the lines are the cells at `b − step` and `b + step`
+        // (corners [v, v + 1, v + n₀, v + n₀ + 1]), two reads
+        let (lo, hi) = (v.densities(b - step), v.densities(b + step));
+        if za == 0 {
+            [[lo[0], lo[2]], [lo[1], lo[3]], [hi[0], hi[2]], [hi[1], hi[3]]]
+        } else {
+            [[lo[0], lo[1]], [lo[2], lo[3]], [hi[0], hi[1]], [hi[2], hi[3]]]
+        }
+    } else {
+        // at a border a line beyond the volume repeats its neighbour
+        let lines = [if c > 0 { b - step } else { b }, b, b + step, if c + 1 < last { b + 2 * step } else { b + step }];
+        lines.map(|x| [v.density(x), v.density(x + other)])
+    };
+    let cr = reconstruct::catmull_rom_f32(w_z);
+    let line = |[a, b]: [f32; 2]| a + (b - a) * w_o;
+    cr[0] * line(pairs[0]) + cr[1] * line(pairs[1]) + cr[2] * line(pairs[2]) + cr[3] * line(pairs[3])
 }
 
 /// The samples of one ray in the last four slices it sampled along the
@@ -1922,8 +2038,14 @@ pub fn occupied_scaled_rays<W: Word>(plan: &FramePlan, mask: &BinaryMask<W>, cel
             hi[a] = hi[a].max(x[a][1]);
         }
     }
-    let (p0, q0) = (lo[0].max(0), lo[1].max(0));
-    let (p1, q1) = (hi[0].min(grid[0] as i64 - 1), hi[1].min(grid[1] as i64 - 1));
+    if lo[0] > hi[0] || lo[1] > hi[1] {
+        return None;
+    }
+    // one pixel more each side: a ray locates its samples through the plan's
+    // f64 maps ([`ScaledRay`]), which may put a sample that lies exactly on a
+    // voxel line in the cell after the one the fixed-point axis map gives
+    let (p0, q0) = ((lo[0] - 1).max(0), (lo[1] - 1).max(0));
+    let (p1, q1) = ((hi[0] + 1).min(grid[0] as i64 - 1), (hi[1] + 1).min(grid[1] as i64 - 1));
     if p0 > p1 || q0 > q1 {
         return None;
     }

@@ -34,6 +34,7 @@ use crate::data::slices::{Densities, SliceStack, cell_corners, prefetch, prefetc
 #[cfg(target_arch = "x86_64")]
 use crate::data::slices::{bilinear_sse, bilinear_sse_bytes};
 use crate::data::volume::{Volume, VoxelData, VoxelType};
+use crate::kernels::Reconstruction;
 
 /// Cells per side of the hemi-octahedral normal grid.
 pub const NORMAL_SIDE: usize = 128;
@@ -207,19 +208,21 @@ pub(crate) enum CellBuild {
 
 impl CellBuild {
     /// Computes the codes (for voxel `spacing`) into the cells: the same codes
-    /// bit for bit as [`NormalStack::new`] of the whole f32 stack. Cannot fail.
-    pub fn finish(self, spacing: [f32; 3]) -> NormalStack {
+    /// bit for bit as [`NormalStack::try_with_codes`] of the whole f32 stack
+    /// with the codes of `reconstruction`. Cannot fail.
+    pub fn finish(self, spacing: [f32; 3], reconstruction: Reconstruction) -> NormalStack {
+        let cubic = reconstruction == Reconstruction::Cubic;
         match self {
             CellBuild::U8(b) => {
                 let (axis, n) = (b.axis, b.n);
                 // exact: d is a u8 value
-                let cells = b.finish(spacing, |e| e as f32, |d, c| [d as u8, c as u8, (c >> 8) as u8]);
+                let cells = b.finish(spacing, cubic, |e| e as f32, |d, c| [d as u8, c as u8, (c >> 8) as u8]);
                 NormalStack { axis, n, store: Store::Bytes(cells), voxels: Some(VoxelType::U8) }
             }
             CellBuild::U16 { cells, offset, voxels } => {
                 let (axis, n) = (cells.axis, cells.n);
                 // exact: d − offset is an integer in 0..=65535
-                let words = cells.finish(spacing, |e| e as f32 + offset, |d, c| [(d - offset) as u16, c]);
+                let words = cells.finish(spacing, cubic, |e| e as f32 + offset, |d, c| [(d - offset) as u16, c]);
                 NormalStack { axis, n, store: Store::Packed { words, offset }, voxels: Some(voxels) }
             }
         }
@@ -257,17 +260,26 @@ impl NormalStack {
     /// [`NormalStack::with_packing`], or [`crate::Error::Memory`] when the
     /// system refuses the allocation.
     pub fn try_with_packing(stack: &SliceStack, spacing: [f32; 3], pack: bool) -> crate::error::Result<Self> {
+        Self::try_with_codes(stack, spacing, pack, Reconstruction::Linear)
+    }
+
+    /// [`NormalStack::try_with_packing`] with the normal codes of
+    /// `reconstruction`: the central differences ([`voxel_normal`]) of the
+    /// linear one, or the B-spline gradient of the cubic one at each voxel
+    /// ([`cubic_voxel_normal`]), the codes [`StackNormals`] gives.
+    pub fn try_with_codes(stack: &SliceStack, spacing: [f32; 3], pack: bool, reconstruction: Reconstruction) -> crate::error::Result<Self> {
+        let cubic = reconstruction == Reconstruction::Cubic;
         let len = stack.n[0] * stack.n[1] * stack.n[2];
         let store = match pack.then(|| packing_offset(stack.data())).flatten() {
             Some(offset) => {
                 let mut words: Vec<[u16; 2]> = crate::memory::zeroed(len, "the packed densities and normal codes")?;
                 // exact: d − offset is an integer in 0..=65535 (checked)
-                code_slices(stack, 0..stack.n[2], spacing, &mut words, |w, d, c| *w = [(d - offset) as u16, c]);
+                code_slices(stack, 0..stack.n[2], spacing, cubic, &mut words, |w, d, c| *w = [(d - offset) as u16, c]);
                 Store::Packed { words, offset }
             }
             None => {
                 let mut codes: Vec<u16> = crate::memory::zeroed(len, "the normal codes")?;
-                code_slices(stack, 0..stack.n[2], spacing, &mut codes, |w, _, c| *w = c);
+                code_slices(stack, 0..stack.n[2], spacing, cubic, &mut codes, |w, _, c| *w = c);
                 Store::Codes(codes)
             }
         };
@@ -444,6 +456,7 @@ pub(crate) fn code_slices<T: Send>(
     stack: &SliceStack,
     ks: std::ops::Range<usize>,
     spacing: [f32; 3],
+    cubic: bool,
     out: &mut [T],
     put: impl Fn(&mut T, f32, u16) + Sync,
 ) {
@@ -461,6 +474,15 @@ pub(crate) fn code_slices<T: Send>(
         let mut row_codes = vec![0u16; n0];
         for (j, row) in slice.chunks_mut(n0.max(1)).enumerate() {
             let b = n01 * k + n0 * j;
+            if cubic {
+                for (i, c) in row_codes.iter_mut().enumerate() {
+                    *c = cubic_voxel_normal(stack, i, j, k, inv);
+                }
+                for ((o, &dv), &c) in row.iter_mut().zip(&d[b..b + n0]).zip(&row_codes) {
+                    put(o, dv, c);
+                }
+                continue;
+            }
             let interior = j >= 1 && j + 1 < n[1] && k >= 1 && k + 1 < n[2] && n0 >= 3;
             if interior {
                 let m = n0 - 2;
@@ -551,6 +573,12 @@ pub struct PackedCells<'a> {
 }
 
 impl PackedCells<'_> {
+    /// The density of voxel `b` (exactly the stack's value).
+    #[inline(always)]
+    pub fn density(&self, b: usize) -> f32 {
+        self.words[b][0] as f32 + self.offset
+    }
+
     /// The four corner densities of the cell at stack index `b` (exactly the
     /// stack's values; order of [`SliceStack::bilinear`]).
     #[inline(always)]
@@ -634,6 +662,12 @@ pub struct ByteCells<'a> {
 }
 
 impl<'a> ByteCells<'a> {
+    /// The density of voxel `b` (exactly the stack's value).
+    #[inline(always)]
+    pub fn density(&self, b: usize) -> f32 {
+        f32::from(self.cells[b][0])
+    }
+
     fn new(cells: &'a [[u8; 3]], n0: usize) -> Self {
         ByteCells { cells, n0, end: cells.len().saturating_sub(n0 + 1) }
     }
@@ -774,12 +808,14 @@ impl VoxelSource for StackNormals<'_> {
 /// Phase 2 of the packed cells: their normal codes (phase 1, the packing, is
 /// [`InPlace::new`]).
 impl<E: crate::memory::Zeroable + Send + Sync, const K: usize> InPlace<E, K> {
-    /// Phase 2: codes every voxel (for voxel `spacing`, as [`code_slices`] of
-    /// the whole f32 stack would) and writes each cell as `make(density, code)`;
-    /// `density` reads an element back as f32. Returns the cells.
+    /// Phase 2: codes every voxel (for voxel `spacing`, with the cubic's codes
+    /// if `cubic`, as [`code_slices`] of the whole f32 stack would) and writes
+    /// each cell as `make(density, code)`; `density` reads an element back as
+    /// f32. Returns the cells.
     pub(crate) fn finish(
         mut self,
         spacing: [f32; 3],
+        cubic: bool,
         density: impl Fn(E) -> f32 + Sync,
         make: impl Fn(f32, u16) -> [E; K] + Sync,
     ) -> Vec<[E; K]> {
@@ -809,7 +845,7 @@ impl<E: crate::memory::Zeroable + Send + Sync, const K: usize> InPlace<E, K> {
                 let w0 = k0.saturating_sub(1);
                 let w1 = (k1 + 1).min(n[2]);
                 let stack = SliceStack::from_parts(self.axis, [n[0], n[1], w1 - w0], std::mem::take(win));
-                code_slices(&stack, k0 - w0..k1 - w0, spacing, out, |c, d, code| *c = make(d, code));
+                code_slices(&stack, k0 - w0..k1 - w0, spacing, cubic, out, |c, d, code| *c = make(d, code));
                 *win = stack.into_data();
             });
             s0 = s1;
@@ -947,7 +983,6 @@ mod tests {
     #[test]
     fn cubic_normal_is_the_b_spline_gradient_at_the_voxel_from_every_axis() {
         use crate::accuracy::reference::ReferenceRenderer;
-        use crate::kernels::Reconstruction;
         use crate::kernels::reconstruct::cubic_axis;
         for dims in [[7, 6, 5], [5, 4, 2], [4, 5, 1], [1, 3, 4]] {
             let sp = [0.6, 0.9, 2.5];
@@ -1059,12 +1094,14 @@ mod tests {
         ];
         for (t, data) in vols.into_iter().enumerate() {
             let v = Volume::new(dims, [0.7, 1.1, 1.9], data).unwrap();
-            for axis in 0..3 {
+            for (axis, recon) in (0..3).flat_map(|a| [(a, Reconstruction::Linear), (a, Reconstruction::Cubic)]) {
                 let s = SliceStack::new(&v, axis);
-                let want = NormalStack::with_packing(&s, v.spacing(), false);
+                let want = NormalStack::try_with_codes(&s, v.spacing(), false, recon).unwrap();
                 for threads in 1..=3 {
-                    let got =
-                        NormalStack::try_cells(CellSource::Volume(&v), axis, threads).unwrap().expect("integer voxels").finish(v.spacing());
+                    let got = NormalStack::try_cells(CellSource::Volume(&v), axis, threads)
+                        .unwrap()
+                        .expect("integer voxels")
+                        .finish(v.spacing(), recon);
                     assert!(got.holds_voxels());
                     assert_eq!(got.packed().is_some(), t > 0, "16-bit scans pack in two u16, 8-bit ones in three bytes");
                     assert_eq!(got.bytes_cells().is_some(), t == 0);
@@ -1073,13 +1110,14 @@ mod tests {
                     assert_eq!(got.voxels_in_volume_order().unwrap().as_ref(), Some(v.data()), "type {t} axis {axis}");
                     // and so do the cells of every other axis, from these
                     for other in 0..3 {
-                        let again = NormalStack::try_cells(CellSource::Cells(&got), other, threads).unwrap().unwrap().finish(v.spacing());
+                        let again =
+                            NormalStack::try_cells(CellSource::Cells(&got), other, threads).unwrap().unwrap().finish(v.spacing(), recon);
                         assert_eq!(again.voxels_in_volume_order().unwrap().as_ref(), Some(v.data()), "type {t} axis {axis} to {other}");
                         assert_eq!((again.axis, again.n), (other, SliceStack::new(&v, other).n));
                     }
                     // every code, every row of densities and every cell a ray reads are the f32 stack's
                     for i in 0..n {
-                        assert_eq!(got.at(i), want.at(i), "type {t} axis {axis} voxel {i}");
+                        assert_eq!(got.at(i), want.at(i), "type {t} axis {axis} {recon:?} voxel {i}");
                     }
                     let (mut a, mut b) = (vec![0f32; s.n[0]], vec![0f32; s.n[0]]);
                     for k in 0..s.n[2] {

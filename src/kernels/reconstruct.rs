@@ -314,6 +314,46 @@ pub fn crossing(p: [f64; 4], iso: f64) -> Option<f64> {
     None
 }
 
+/// The Catmull–Rom weights at `t` in `f32` (the expressions of
+/// [`Weights::new`]'s `cr`).
+#[inline(always)]
+pub fn catmull_rom_f32(t: f32) -> [f32; 4] {
+    let (t2, t3) = (t * t, t * t * t);
+    [0.5 * (-t3 + 2.0 * t2 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0), 0.5 * (-3.0 * t3 + 4.0 * t2 + t), 0.5 * (t3 - t2)]
+}
+
+/// Newton steps of [`crossing_near`].
+const NEAR_STEPS: u32 = 3;
+
+/// A crossing of iso by the cubic through `p` on a segment whose ends
+/// bracket it (`p[1] < iso ≤ p[2]`), in `f32`, from the secant's fraction
+/// `t0`: three Newton steps, each safeguarded by the bracket (a
+/// step that would leave it, or a slope that is not rising, bisects
+/// instead). Where the cubic is monotone on the segment (the common case:
+/// it crosses once) this is its crossing to about `f32` resolution of the
+/// densities; where it crosses three times it is one of them. The preview's
+/// solve ([`crate::composite::raycast::RayContext::with_cubic_crossing`]),
+/// a fixed and small cost per hit where [`crossing`] finds the first
+/// crossing of any segment to `f64` precision.
+#[inline]
+pub fn crossing_near(p: [f32; 4], iso: f32, t0: f32) -> f32 {
+    let c = [p[1], 0.5 * (p[2] - p[0]), p[0] - 2.5 * p[1] + 2.0 * p[2] - 0.5 * p[3], 0.5 * (-p[0] + 3.0 * p[1] - 3.0 * p[2] + p[3])];
+    let (a, b) = (3.0 * c[3], 2.0 * c[2]);
+    let (mut lo, mut hi, mut t) = (0.0f32, 1.0f32, t0.clamp(0.0, 1.0));
+    for _ in 0..NEAR_STEPS {
+        let ft = ((c[3] * t + c[2]) * t + c[1]) * t + c[0] - iso;
+        if ft > 0.0 {
+            hi = t;
+        } else {
+            lo = t;
+        }
+        let d = (a * t + b) * t + c[1];
+        let next = t - ft / d;
+        t = if d > 0.0 && next >= lo && next <= hi { next } else { 0.5 * (lo + hi) };
+    }
+    t
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

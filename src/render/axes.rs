@@ -134,7 +134,6 @@ pub(super) struct AxisMask {
 pub(super) fn compact_binary(volume: &Volume, settings: &Settings) -> bool {
     settings.method.uses_mask()
         && settings.normals == Normals::Codes
-        && settings.reconstruction == Reconstruction::Linear
         && settings.pack
         && volume.data().voxel_type() != crate::data::volume::VoxelType::F32
 }
@@ -462,7 +461,7 @@ impl Renderer {
             cell: self.settings.cell,
             generation: self.classes.generation,
             half: self.settings.deluxe.intermediate,
-            cubic: self.settings.reconstruction == Reconstruction::Cubic && self.settings.mode == Mode::Iso,
+            cubic: self.settings.cubic_rays(),
         }
     }
 
@@ -547,7 +546,7 @@ impl Renderer {
             // the build holds the voxels now: the volume can go before the codes are computed
             self.park(true);
             let spacing = self.volume.spacing();
-            self.axes.normals[axis] = Some(self.pool.install(|| build.finish(spacing)));
+            self.axes.normals[axis] = Some(self.pool.install(|| build.finish(spacing, self.settings.reconstruction)));
             self.axes.build_times.normals[axis] = ms(t);
         }
         let perm = self.axis_perm(axis);
@@ -560,9 +559,13 @@ impl Renderer {
         }
         if raycast && self.settings.normals == Normals::Codes && self.axes.normals[axis].is_none() {
             let t = Instant::now();
-            let (stack, spacing, pack) =
-                (self.axes.stacks[axis].as_ref().expect("stack built above"), self.volume.spacing(), self.settings.pack);
-            self.axes.normals[axis] = Some(self.pool.install(|| NormalStack::try_with_packing(stack, spacing, pack))?);
+            let (stack, spacing, pack, recon) = (
+                self.axes.stacks[axis].as_ref().expect("stack built above"),
+                self.volume.spacing(),
+                self.settings.pack,
+                self.settings.reconstruction,
+            );
+            self.axes.normals[axis] = Some(self.pool.install(|| NormalStack::try_with_codes(stack, spacing, pack, recon))?);
             self.axes.build_times.normals[axis] = ms(t);
         }
         if self.settings.method.uses_mask() {

@@ -240,13 +240,15 @@ impl Renderer {
 
     /// Changes settings (rebuilding the thread pool if the count changed; masks
     /// follow on the next frame if the word size or cell size changed, normal
-    /// codes if the packing did).
+    /// codes if the packing or the reconstruction did).
     pub fn set_settings(&mut self, s: Settings) -> Result<()> {
         check_settings(&s)?;
         if s.threads != self.settings.threads {
             self.pool = build_pool(s.threads)?;
         }
-        if s.pack != self.settings.pack {
+        // the normal codes follow the packing and the reconstruction (the
+        // cubic's are its B-spline gradient at each voxel)
+        if s.pack != self.settings.pack || s.reconstruction != self.settings.reconstruction {
             self.unpark()?;
             self.axes.normals = [None, None, None];
         }

@@ -86,13 +86,11 @@ impl Renderer {
         // the lean binary iso frame, chosen once for the frame from its plan
         let lean_frame = self.lean_on
             && settings.method == Method::Binary
-            && settings.reconstruction == Reconstruction::Linear
+            && (settings.reconstruction == Reconstruction::Linear || settings.cubic_crossing())
             && LeanFrame::applies(plan, mode, settings.normals == Normals::Codes && normals[axis].is_some(), settings.search);
         // its cubic counterpart, likewise
-        let lean_cubic_frame = self.lean_on
-            && settings.method == Method::Binary
-            && settings.reconstruction == Reconstruction::Cubic
-            && LeanCubic::applies(plan, mode, settings.search);
+        let lean_cubic_frame =
+            self.lean_on && settings.method == Method::Binary && settings.cubic_rays() && LeanCubic::applies(plan, mode, settings.search);
         // one job on the pool per plan: shear and render run inside it
         let result: Result<()> = self.pool.install(|| {
             let t = Instant::now();
@@ -114,7 +112,7 @@ impl Renderer {
                     }
                     (stats.shear_steps, stats.shear_direct, stats.shear_words) = (w.steps, w.direct, w.words);
                     let scaled = plan.kind == MapKind::ScaleTranslate;
-                    let cubic = settings.reconstruction == Reconstruction::Cubic && mode == Mode::Iso;
+                    let cubic = settings.cubic_rays() && mode == Mode::Iso;
                     let mask: &AnyMask = mask;
                     let rect = match mask {
                         // (a scaled plan's occupied-ray rectangle misses rays the cubic
@@ -221,14 +219,17 @@ fn ray_context<'a>(
     if let Some((fc, fiso)) = focus {
         ctx = ctx.with_focus(fc, fiso);
     }
-    if settings.reconstruction == Reconstruction::Cubic && settings.mode == Mode::Iso {
+    if settings.cubic_rays() {
         // shaded by the cubic's own gradient, never by normal codes
         return ctx.with_cubic(Some(cubic_axis(stack.perm())));
     }
     match (settings.normals, normals) {
         (Normals::Codes, Some(ns)) => {
             shade.update(headlight_object(&plan.view), settings.shading);
-            ctx.with_normals(ns, shade)
+            let ctx = ctx.with_normals(ns, shade);
+            // hits found by the linear samples, placed by the cubic's crossing
+            // (the codes are the cubic's: the axes' build)
+            if settings.cubic_crossing() { ctx.with_cubic_crossing(Some(cubic_axis(stack.perm()))) } else { ctx }
         }
         _ => ctx,
     }

@@ -304,22 +304,27 @@ pub struct Settings {
     /// A perspective frame uses the separate encodings (cyclic permutations).
     pub rle_reuse: bool,
     /// How the iso surface is reconstructed between samples
-    /// ([`Reconstruction`]). Raycast paths, iso mode (see
-    /// [`crate::composite::raycast::RayContext::with_cubic`]):
-    /// [`Reconstruction::Cubic`] follows the surface between thick slices
-    /// (Catmull–Rom along the volume's z axis, the normal the gradient of the
-    /// B-spline smoothing, no normal codes); blend mode ignores it. The RLE
-    /// paths (both modes, pre- and post-classified: Deluxe P) keep their
-    /// samples and take the cubic's normal at each voxel as its normal code
-    /// ([`crate::data::normals::cubic_voxel_normal`]: the B-spline gradient
-    /// along z instead of central differences), so their shading follows the
-    /// surface between thick slices where the central differences terrace.
-    /// The default stays [`Reconstruction::Linear`], chosen by measurement
-    /// (`benches/README.md`): the cubic preview frame costs about 1.4–1.6×
-    /// the linear one's on a 5 mm-slice CT and 2.5–3.5× on an isotropic 256³
-    /// head (the linear frame keeps its normal codes), and on isotropic
-    /// volumes the two err alike; on thick slices the cubic's normal error
-    /// is a quarter of the linear's. Deluxe I and the BCC grid refuse it.
+    /// ([`Reconstruction`]). Raycast paths, iso mode: [`Reconstruction::Cubic`]
+    /// follows the surface between thick slices (Catmull–Rom along the
+    /// volume's z axis). With [`Normals::Gradient`] ([`Settings::cubic_rays`],
+    /// [`crate::composite::raycast::RayContext::with_cubic`]) a ray follows
+    /// the cubic to its first crossing and shades it by the gradient of the
+    /// B-spline smoothing; with [`Normals::Codes`] ([`Settings::cubic_crossing`],
+    /// [`crate::composite::raycast::RayContext::with_cubic_crossing`]) it
+    /// finds its hit as the linear reconstruction does (the same mask, walk
+    /// and lean frame) and places it at the cubic's crossing in the segment
+    /// before it, shaded by the cubic's normal codes (the B-spline gradient at
+    /// each voxel, [`crate::data::normals::cubic_voxel_normal`]): the preview,
+    /// about 1.15–1.3× the linear frame on thick slices where the first
+    /// takes 1.4–1.6×. Blend mode ignores it there, except that the codes are
+    /// the cubic's. The RLE paths (both modes, pre- and post-classified:
+    /// Deluxe P) keep their samples and take the cubic's normal at each voxel
+    /// as its normal code, so their shading follows the surface between
+    /// thick slices where the central differences terrace. The default stays
+    /// [`Reconstruction::Linear`], chosen by measurement (`benches/README.md`):
+    /// on isotropic volumes the two err alike, and the preview's cubic costs
+    /// up to 2× the linear frame there (every hit solves its crossing). Deluxe
+    /// I and the BCC grid refuse it.
     pub reconstruction: Reconstruction,
 }
 
@@ -345,6 +350,27 @@ impl Default for Settings {
             rle_reuse: false,
             reconstruction: Reconstruction::Linear,
         }
+    }
+}
+
+impl Settings {
+    /// Whether an iso frame's rays follow the cubic reconstruction to its
+    /// first crossing and shade it by the cubic's own gradient: the raycast
+    /// paths in iso mode under [`Reconstruction::Cubic`] with
+    /// [`Normals::Gradient`] ([`crate::composite::raycast::RayContext::with_cubic`]).
+    pub fn cubic_rays(&self) -> bool {
+        self.reconstruction == Reconstruction::Cubic
+            && self.mode == Mode::Iso
+            && self.method.is_raycast()
+            && self.normals == Normals::Gradient
+    }
+
+    /// Whether an iso frame's rays find their hit as the linear ones do and
+    /// place it by the cubic's crossing, shaded by the cubic's normal codes:
+    /// the raycast paths in iso mode under [`Reconstruction::Cubic`] with
+    /// [`Normals::Codes`] ([`crate::composite::raycast::RayContext::with_cubic_crossing`]).
+    pub fn cubic_crossing(&self) -> bool {
+        self.reconstruction == Reconstruction::Cubic && self.mode == Mode::Iso && self.method.is_raycast() && self.normals == Normals::Codes
     }
 }
 

@@ -1,6 +1,9 @@
-//! The lean cubic iso frame ([`shearwarp::composite::lean_cubic`]) renders
-//! exactly the general ray loop's and the brute force's intermediate image,
-//! depths and final image under the cubic reconstruction, bit for bit: over
+//! The lean cubic iso frame ([`shearwarp::composite::lean_cubic`], the
+//! cubic's first crossing shaded by its gradient) and the lean frame with the
+//! cubic crossing ([`shearwarp::composite::raycast::RayContext::with_cubic_crossing`],
+//! the cubic's normal codes) each render exactly the general ray loop's and
+//! the brute force's intermediate image, depths and final image under the
+//! cubic reconstruction, bit for bit: over
 //! random volumes (f32, 8- and 16-bit), spacings that put the volume's z
 //! along the slices or in them, views, cell sizes, one transfer function or
 //! the tissue presets' threshold codes, u32 and u64 words, slice counts
@@ -10,15 +13,17 @@
 
 use proptest::prelude::*;
 use shearwarp::kernels::Reconstruction;
-use shearwarp::render::{Settings, WordSize};
+use shearwarp::render::{Normals, Settings, WordSize};
 use shearwarp::view::Camera;
 
 use crate::common::{random_volume, typed};
 use crate::lean_frame::{cam, cases, check};
 
-/// The settings of a cubic frame.
-fn cubic(s: Settings) -> Settings {
-    Settings { reconstruction: Reconstruction::Cubic, ..s }
+/// The settings of a cubic frame: its first crossing shaded by its gradient
+/// (`codes` false), or the linear frame's hit at the cubic's crossing shaded
+/// by the cubic's normal codes.
+fn cubic(s: Settings, codes: bool) -> Settings {
+    Settings { reconstruction: Reconstruction::Cubic, normals: if codes { Normals::Codes } else { Normals::Gradient }, ..s }
 }
 
 proptest! {
@@ -34,11 +39,12 @@ proptest! {
         seed in any::<u64>(), ty in 0u8..3, cell in 1usize..=8, u32w in any::<bool>(), threads in 1usize..=3,
         tissue in prop::option::of(0usize..3), rx in -3.2f64..3.2, ry in -3.2f64..3.2, step in -1.2f64..1.2,
         spacing in prop::sample::select(vec![[1.0f32, 1.0, 1.0], [1.0, 1.0, 3.0], [0.6, 0.6, 5.0], [3.0, 1.0, 1.0], [1.0, 2.5, 0.7]]),
+        codes in any::<bool>(),
     ) {
         let mut dims = [nx, ny, nz];
         dims[long] = nlong;
         let vol = typed(&random_volume(dims, seed, spacing), ty);
-        let s = cubic(Settings { word: if u32w { WordSize::U32 } else { WordSize::U64 }, cell, threads, ..Settings::default() });
+        let s = cubic(Settings { word: if u32w { WordSize::U32 } else { WordSize::U64 }, cell, threads, ..Settings::default() }, codes);
         let cams: Vec<Camera> = (0..4).map(|f| cam(rx + f as f64 * step, ry - f as f64 * 0.3 * step, 0.2)).collect();
         check(&vol, tissue, s, &cams);
     }
@@ -57,12 +63,14 @@ fn lean_cubic_frame_at_word_boundaries() {
         let cams = [cam(0.0, 0.0, 0.0), cam(0.0, std::f64::consts::PI, 0.3), cam(0.35, -0.4, 0.1), cam(1.4, 0.2, 0.1), cam(0.1, -1.5, 0.4)];
         for (word, tissue, threads) in [(WordSize::U32, None, 1), (WordSize::U64, Some(1), 2)] {
             for cell in [1, 3] {
-                covered += check(&vol, tissue, cubic(Settings { word, cell, threads, ..Settings::default() }), &cams);
-                checked += 1;
+                for codes in [false, true] {
+                    covered += check(&vol, tissue, cubic(Settings { word, cell, threads, ..Settings::default() }, codes), &cams);
+                    checked += 1;
+                }
             }
         }
     }
-    assert_eq!(checked, 28);
+    assert_eq!(checked, 56);
     assert!(covered > 5_000, "only {covered} covered pixels");
 }
 
@@ -80,7 +88,9 @@ fn lean_cubic_frame_at_one_voxel_a_slice() {
             .into_iter()
             .map(|(axis, deg)| Camera::new(rotate_eye(NamedView::Superior.rotation(), axis, deg), [48, 44]))
             .collect();
-        covered += check(&vol, None, cubic(Settings { threads: 2, ..Settings::default() }), &cams);
+        for codes in [false, true] {
+            covered += check(&vol, None, cubic(Settings { threads: 2, ..Settings::default() }, codes), &cams);
+        }
     }
     assert!(covered > 1_000, "only {covered} covered pixels");
 }
@@ -94,7 +104,9 @@ fn lean_cubic_frame_without_prefetches() {
     for spacing in [[1.0f32, 1.0, 1.0], [1.0, 1.0, 3.0], [3.0, 1.0, 1.0]] {
         let vol = random_volume([19, 17, 21], 7171, spacing);
         let cams = [cam(0.0, 0.0, 0.0), cam(0.35, -0.4, 0.1), cam(1.4, 0.2, 0.1)];
-        covered += check(&vol, None, cubic(Settings { prefetch: false, threads: 2, ..Settings::default() }), &cams);
+        for codes in [false, true] {
+            covered += check(&vol, None, cubic(Settings { prefetch: false, threads: 2, ..Settings::default() }, codes), &cams);
+        }
     }
     assert!(covered > 400, "only {covered} covered pixels");
 }

@@ -10,8 +10,7 @@
 //! frame takes the general ray loop of [`super::raycast`]. The cubic
 //! reconstruction's preview ([`RayContext::with_cubic_crossing`]: the linear
 //! samples' hit placed at the cubic's crossing) takes this frame too, with
-//! rows compiled for it (`CUBIC`), so the linear rows carry none of its code
-//! (every visit of a cubic row tests its cell, as with super cells).
+//! rows compiled for it (`CUBIC`), so the linear rows carry none of its code.
 //!
 //! What makes it lean:
 //! - **A per-slice table** ([`SliceEntry`]): in parallel projection every ray
@@ -249,12 +248,14 @@ impl LeanFrame {
                     (false, true, false, false) => lean_row_at::<W, _, false, false, false, false>(&f, &v, avx2, row, out),
                     (true, false, false, false) => lean_row_at::<W, _, true, true, false, false>(&f, &v, avx2, row, out),
                     (false, false, false, false) => lean_row_at::<W, _, false, true, false, false>(&f, &v, avx2, row, out),
-                    // the cubic crossing: every visit tested in the volume (one
-                    // compiled row per order and code width, not two more for cell size 1)
-                    (true, _, true, true) => lean_row_at::<W, _, true, true, true, true>(&f, &v, avx2, row, out),
-                    (false, _, true, true) => lean_row_at::<W, _, false, true, true, true>(&f, &v, avx2, row, out),
-                    (true, _, false, true) => lean_row_at::<W, _, true, true, false, true>(&f, &v, avx2, row, out),
-                    (false, _, false, true) => lean_row_at::<W, _, false, true, false, true>(&f, &v, avx2, row, out),
+                    (true, true, true, true) => lean_row_at::<W, _, true, false, true, true>(&f, &v, avx2, row, out),
+                    (false, true, true, true) => lean_row_at::<W, _, false, false, true, true>(&f, &v, avx2, row, out),
+                    (true, false, true, true) => lean_row_at::<W, _, true, true, true, true>(&f, &v, avx2, row, out),
+                    (false, false, true, true) => lean_row_at::<W, _, false, true, true, true>(&f, &v, avx2, row, out),
+                    (true, true, false, true) => lean_row_at::<W, _, true, false, false, true>(&f, &v, avx2, row, out),
+                    (false, true, false, true) => lean_row_at::<W, _, false, false, false, true>(&f, &v, avx2, row, out),
+                    (true, false, false, true) => lean_row_at::<W, _, true, true, false, true>(&f, &v, avx2, row, out),
+                    (false, false, false, true) => lean_row_at::<W, _, false, true, false, true>(&f, &v, avx2, row, out),
                 }
             })
         });

@@ -132,11 +132,12 @@ pub struct RenderArgs {
     /// --deluxe P) cubic keeps the samples and gives each voxel the cubic's
     /// normal there as its normal code, so the shading terraces less on thick
     /// slices (the codes' error on the ellipsoid drops from 4.4° to 1.8°
-    /// mean). Default: `render` (a still frame) takes cubic for a scan whose
-    /// slices are at least 1.5× as far apart as its pixels, on the binary
-    /// and brute paths in iso mode and on the RLE paths (on the chest CT's
-    /// 5 mm slices the RLE frame costs the same within 2 %); `rotate`,
-    /// `view` and --distributed take linear. --deluxe I, --grid bcc and
+    /// mean). Default: cubic for a scan whose slices are at least 1.5× as
+    /// far apart as its pixels, on the binary and brute paths in iso mode
+    /// and on the RLE paths (`render`, `rotate`, `view`; on the chest CT's
+    /// 5 mm slices the RLE frame costs the same within 2 %), else linear
+    /// (on isotropic scans both err alike and the linear frame is cheaper);
+    /// `bench` and --distributed take linear. --deluxe I, --grid bcc and
     /// --distributed refuse cubic.
     #[arg(long, value_enum)]
     pub reconstruction: Option<shearwarp::kernels::Reconstruction>,

@@ -320,10 +320,11 @@ pub struct Settings {
     /// the cubic's. The RLE paths (both modes, pre- and post-classified:
     /// Deluxe P) keep their samples and take the cubic's normal at each voxel
     /// as its normal code, so their shading follows the surface between
-    /// thick slices where the central differences terrace. The default stays
-    /// [`Reconstruction::Linear`], chosen by measurement (`benches/README.md`):
-    /// on isotropic volumes the two err alike, and the preview's cubic costs
-    /// up to 2× the linear frame there (every hit solves its crossing). Deluxe
+    /// thick slices where the central differences terrace. The library's
+    /// default is [`Reconstruction::Linear`]; the command-line tool takes the
+    /// cubic for thick-slice scans, by measurement (`benches/README.md`): on
+    /// isotropic volumes the two err alike, and the preview's cubic costs up
+    /// to 2× the linear frame there (every hit solves its crossing). Deluxe
     /// I and the BCC grid refuse it.
     pub reconstruction: Reconstruction,
 }

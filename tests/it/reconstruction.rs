@@ -676,3 +676,24 @@ fn scaled_frames_keep_the_rays_on_a_voxel_line() {
         }
     }
 }
+
+/// `rotate` takes the cubic for a thick-slice volume unless told otherwise
+/// (its preview: normal codes), and linear for an isotropic one; its JSON
+/// says which.
+#[test]
+fn rotate_takes_the_cubic_on_thick_slices() {
+    let run = |extra: &[&str]| {
+        let out = assert_cmd::Command::cargo_bin("shearwarp")
+            .unwrap()
+            .args(["rotate", "--phantom", "sphere", "--phantom-dims", "24,24,24", "--size", "32", "--degrees", "3", "--json"])
+            .args(extra)
+            .assert()
+            .success();
+        let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+        (json["reconstruction"].as_str().unwrap().to_string(), json["normals"].as_str().unwrap().to_string())
+    };
+    assert_eq!(run(&["--phantom-spacing", "1,1,3"]), ("cubic".to_string(), "codes".to_string()));
+    assert_eq!(run(&["--phantom-spacing", "1,1,3", "--reconstruction", "linear"]).0, "linear");
+    assert_eq!(run(&[]).0, "linear");
+    assert_eq!(run(&["--phantom-spacing", "1,1,3", "--normals", "gradient"]), ("cubic".to_string(), "gradient".to_string()));
+}

@@ -262,30 +262,6 @@ fn memory_estimate(vol: &Volume, tissues: usize) -> serde_json::Value {
     })
 }
 
-/// Whether a scan's slices lie at least 1.5× as far apart as its pixels
-/// (`spacing` per volume axis, z the slice axis): where linear
-/// reconstruction shows terraces and every command takes the cubic.
-fn thick_slices(spacing: [f32; 3]) -> bool {
-    spacing[2] >= 1.5 * spacing[0].min(spacing[1])
-}
-
-/// The settings `s` with the reconstruction a command takes when none is
-/// given (`given`) for a volume of voxel `spacing`: the cubic where the
-/// slices are thick ([`thick_slices`]) and the method renders it (the
-/// raycast paths' iso hit, or the RLE paths' normal codes: either mode,
-/// their shading reads them), else `s`'s. On thick slices the cubic's
-/// preview costs 1.0–1.3× the linear frame and cuts the normal error to a
-/// third (benches/README.md); on isotropic volumes both err alike and the
-/// linear frame is cheaper.
-pub(crate) fn default_reconstruction(s: Settings, given: Option<shearwarp::kernels::Reconstruction>, spacing: [f32; 3]) -> Settings {
-    if given.is_some() || !thick_slices(spacing) {
-        return s;
-    }
-    let raycast = s.mode == shearwarp::Mode::Iso && s.method.is_raycast();
-    let rle = s.method.is_rle() && s.lattice == shearwarp::render::Lattice::Cartesian;
-    if (raycast || rle) && !s.deluxe.intermediate { Settings { reconstruction: shearwarp::kernels::Reconstruction::Cubic, ..s } } else { s }
-}
-
 /// Runs `shearwarp render`.
 pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     if cmd.distributed {
@@ -309,7 +285,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
         let s = r.settings();
         r.set_settings(Settings { deluxe: shearwarp::Deluxe { matched: true, ..s.deluxe }, ..s })?;
     }
-    r.set_settings(default_reconstruction(r.settings(), cmd.render.reconstruction, spacing))?;
+    r.set_settings(cmd.render.with_default_reconstruction(r.settings(), spacing))?;
     let s = r.settings();
     if cmd.render.normals.is_none()
         && s.reconstruction == shearwarp::kernels::Reconstruction::Cubic
@@ -398,7 +374,7 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let cam0 = cmd.render.camera(vol.frame())?;
     let spacing = vol.spacing();
     let (mut r, scene) = cmd.render.renderer_and_scene(vol)?;
-    r.set_settings(default_reconstruction(r.settings(), cmd.render.reconstruction, spacing))?;
+    r.set_settings(cmd.render.with_default_reconstruction(r.settings(), spacing))?;
     // a rotation takes the cell size that balances shear and render (`--cell auto`)
     let cell = cmd.render.cell.resolve(&mut r)?;
     let step = step.unwrap_or_else(|| one_bit_step_deg(dims) * cell as f64);

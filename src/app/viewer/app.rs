@@ -60,7 +60,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
     let tissues = presets::tissues_for(&vol);
     let range = vol.value_range();
     let spacing = vol.spacing();
-    let settings = crate::app::cli::default_reconstruction(settings, cmd.render.reconstruction, spacing);
+    let settings = cmd.render.with_default_reconstruction(settings, spacing);
     let mut preview = Renderers::new(vol.clone(), &tissues, Settings { mode: Mode::Iso, ..settings })?;
     // the preview rotates: it takes the cell size that balances shear and
     // render for the tissue presets' codes (`--cell auto`); the keys change it

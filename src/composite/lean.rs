@@ -67,11 +67,12 @@
 use crate::classify::shade_table::ShadeTable;
 use crate::classify::shading::ShadeEntry;
 use crate::classify::shading::apply_shade;
-use crate::composite::raycast::{At, Cells, MISS, RayContext, RowOut, cubic_fraction, cubic_in_slice, in_slice_fraction, render_rows};
+use crate::composite::raycast::{At, Cells, MISS, RayContext, RowOut, cubic_in_slice, in_slice_fraction, render_rows};
 use crate::composite::{Intermediate, Mode, Rect};
 use crate::data::slices::bilinear;
 use crate::encode::depth::{Matcher, Search, Word};
 use crate::encode::mask::BinaryMask;
+use crate::kernels::reconstruct;
 use crate::view::plan::{FramePlan, Grid, MapKind};
 
 /// One slice of the per-slice table of a frame.
@@ -491,7 +492,7 @@ impl<W: Word> Frame<'_, W> {
             };
             let before = if ASC { kp.checked_sub(1) } else { Some(kp + 1).filter(|&x| x < self.nk) };
             let after = if ASC { Some(k + 1).filter(|&x| x < self.nk) } else { k.checked_sub(1) };
-            return cubic_fraction([outer(before, dp), dp, d, outer(after, d)], self.iso, linear);
+            return reconstruct::crossing_near([outer(before, dp), dp, d, outer(after, d)], self.iso, linear);
         }
         let at = |k: usize| {
             let e = self.slice(k);

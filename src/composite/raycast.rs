@@ -1076,7 +1076,7 @@ impl<'a> RayContext<'a> {
                             k.and_then(|k| ray.locate(self, k).map(|(ci, cj, wi, wj)| self.sample(v, ci, cj, k, wi, wj))).unwrap_or(end)
                         };
                         let four = [outer(self.prev_slice(kp, lo, hi), dp), dp, d, outer(self.next_slice(k, lo, hi), d)];
-                        cubic_fraction(four, iso, linear)
+                        reconstruct::crossing_near(four, iso, linear)
                     }
                     Some(za) => {
                         let (n, last) = (self.stack.n, self.cells[za] as usize);
@@ -1111,17 +1111,6 @@ impl<'a> RayContext<'a> {
         };
         RayResult { rgba: [rgb[0], rgb[1], rgb[2], 1.0], depth }
     }
-}
-
-/// The fraction of a cubic crossing along the slices
-/// ([`RayContext::with_cubic_crossing`]): where the Catmull–Rom cubic
-/// through `four` (the samples before, at the start of, at the end of and
-/// after the segment, in walking order; the middle two bracket iso, so it
-/// crosses) meets iso, from the bilinear samples' crossing `linear`
-/// ([`reconstruct::crossing_near`]).
-#[inline]
-pub(crate) fn cubic_fraction(four: [f32; 4], iso: f32, linear: f32) -> f32 {
-    reconstruct::crossing_near(four, iso, linear)
 }
 
 /// The fraction of a cubic crossing in the slice

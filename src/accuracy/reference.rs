@@ -517,6 +517,13 @@ impl ReferenceRenderer {
         if g.length() <= 0.0 || g.is_nan() {
             return g;
         }
+        self.blend_corner_codes(p, g, |x, y, z| self.gradient_cubic(DVec3::new(x as f64, y as f64, z as f64)) / sp)
+    }
+
+    /// The trilinear blend at `p` of the decoded codes of the corners'
+    /// gradients `corner(x, y, z)` (world space), each unit and turned to the
+    /// side of `g`.
+    fn blend_corner_codes(&self, p: DVec3, g: DVec3, corner: impl Fn(usize, usize, usize) -> DVec3) -> DVec3 {
         let (x0, x1, fx) = locate(p.x, self.dims[0]);
         let (y0, y1, fy) = locate(p.y, self.dims[1]);
         let (z0, z1, fz) = locate(p.z, self.dims[2]);
@@ -524,8 +531,9 @@ impl ReferenceRenderer {
         for (x, wx) in [(x0, 1.0 - fx), (x1, fx)] {
             for (y, wy) in [(y0, 1.0 - fy), (y1, fy)] {
                 for (z, wz) in [(z0, 1.0 - fz), (z1, fz)] {
-                    let c = self.gradient_cubic(DVec3::new(x as f64, y as f64, z as f64)) / sp;
+                    let c = corner(x, y, z);
                     let code = encode_normal([c.x as f32, c.y as f32, c.z as f32]);
+                    // (a zero gradient's code shades as facing the viewer: it adds no direction)
                     if let Some(n) = decode_normal(code) {
                         let n = DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
                         sum += wx * wy * wz * if n.dot(g) < 0.0 { -n } else { n };
@@ -557,24 +565,7 @@ impl ReferenceRenderer {
         if !codes || g.length() <= 0.0 || g.is_nan() {
             return g;
         }
-        let (x0, x1, fx) = locate(p.x, self.dims[0]);
-        let (y0, y1, fy) = locate(p.y, self.dims[1]);
-        let (z0, z1, fz) = locate(p.z, self.dims[2]);
-        let mut sum = DVec3::ZERO;
-        for (x, wx) in [(x0, 1.0 - fx), (x1, fx)] {
-            for (y, wy) in [(y0, 1.0 - fy), (y1, fy)] {
-                for (z, wz) in [(z0, 1.0 - fz), (z1, fz)] {
-                    let c = self.gradient_at(x, y, z) / sp;
-                    let code = encode_normal([c.x as f32, c.y as f32, c.z as f32]);
-                    // (a zero gradient's code shades as facing the viewer: it adds no direction)
-                    if let Some(n) = decode_normal(code) {
-                        let n = DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
-                        sum += wx * wy * wz * if n.dot(g) < 0.0 { -n } else { n };
-                    }
-                }
-            }
-        }
-        sum
+        self.blend_corner_codes(p, g, |x, y, z| self.gradient_at(x, y, z) / sp)
     }
 
     /// Block of a point inside the box.

@@ -360,10 +360,7 @@ impl Settings {
     /// paths in iso mode under [`Reconstruction::Cubic`] with
     /// [`Normals::Gradient`] ([`crate::composite::raycast::RayContext::with_cubic`]).
     pub fn cubic_rays(&self) -> bool {
-        self.reconstruction == Reconstruction::Cubic
-            && self.mode == Mode::Iso
-            && self.method.is_raycast()
-            && self.normals == Normals::Gradient
+        self.cubic_iso() && self.normals == Normals::Gradient
     }
 
     /// Whether an iso frame's rays find their hit as the linear ones do and
@@ -371,7 +368,12 @@ impl Settings {
     /// the raycast paths in iso mode under [`Reconstruction::Cubic`] with
     /// [`Normals::Codes`] ([`crate::composite::raycast::RayContext::with_cubic_crossing`]).
     pub fn cubic_crossing(&self) -> bool {
-        self.reconstruction == Reconstruction::Cubic && self.mode == Mode::Iso && self.method.is_raycast() && self.normals == Normals::Codes
+        self.cubic_iso() && self.normals == Normals::Codes
+    }
+
+    /// The raycast paths' iso hit under [`Reconstruction::Cubic`].
+    fn cubic_iso(&self) -> bool {
+        self.reconstruction == Reconstruction::Cubic && self.mode == Mode::Iso && self.method.is_raycast()
     }
 }
 

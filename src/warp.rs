@@ -234,8 +234,9 @@ pub fn warp<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T
     }
     // intermediate pixel = sheared point / pitch + pad (pitch 1: exactly the matrix)
     let m = &plan.warp.inverse;
-    let g = 1.0 / plan.grid.pitch;
-    let (inv, it) = ([[m.x_axis.x * g, m.y_axis.x * g], [m.x_axis.y * g, m.y_axis.y * g]], [m.z_axis.x * g, m.z_axis.y * g]);
+    let g = plan.grid.pitch.map(|p| 1.0 / p);
+    let (inv, it) =
+        ([[m.x_axis.x * g[0], m.y_axis.x * g[0]], [m.x_axis.y * g[1], m.y_axis.y * g[1]]], [m.z_axis.x * g[0], m.z_axis.y * g[1]]);
     let origin = [plan.grid.pad as f64; 2];
     let w = out.width;
     let valid = inter.valid;
@@ -531,7 +532,7 @@ pub fn warp_owned<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Ca
 fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas<T>, owned: Option<&Owned>) {
     let m = plan.warp.inverse;
     let w = out.width;
-    let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
+    let (pad, [pa, pb]) = (plan.grid.pad as f64, plan.grid.pitch);
     let (iw, rgba) = (inter.size[0], &inter.rgba);
     out.data.par_chunks_mut(w).zip(out.spans.par_iter_mut()).enumerate().for_each(|(v, (row, span))| {
         let (old0, old1) = (span.0 as usize, span.1 as usize);
@@ -543,9 +544,9 @@ fn projective<T: Texel>(inter: &Intermediate, plan: &FramePlan, out: &mut Canvas
             return;
         };
         let vf = v as f64;
-        // X(u) = xa·u + xb, Y, W likewise; p = X/(W·pitch) + pad
-        let (xa, xb) = (m.x_axis.x / pitch, (m.y_axis.x * vf + m.z_axis.x) / pitch);
-        let (ya, yb) = (m.x_axis.y / pitch, (m.y_axis.y * vf + m.z_axis.y) / pitch);
+        // X(u) = xa·u + xb, Y, W likewise; p = X/(W·pitch₀) + pad, q with pitch₁
+        let (xa, xb) = (m.x_axis.x / pa, (m.y_axis.x * vf + m.z_axis.x) / pa);
+        let (ya, yb) = (m.x_axis.y / pb, (m.y_axis.y * vf + m.z_axis.y) / pb);
         let (wa, wb) = (m.x_axis.z, m.y_axis.z * vf + m.z_axis.z);
         // (the ring widened by the linear pieces' stray: which of these pixels
         // read the image is decided below, by the coordinates they sample at)
@@ -729,7 +730,7 @@ mod tests {
         use glam::{DMat3, DVec3};
         let f = crate::view::Factorization::new(&crate::view::Camera::new(DMat3::IDENTITY, [8, 8]), [4, 4, 4], [1.0; 3]).unwrap();
         let mut plan = FramePlan::parallel(&f, [1.0; 3]);
-        plan.grid = Grid { size: [8, 8], pad: 0, pitch: 1.0 };
+        plan.grid = Grid { size: [8, 8], pad: 0, pitch: [1.0; 2] };
         // w = 1 − u/4: positive for u < 4, zero at 4, negative beyond; (a, b) = (u, v)/w
         let inverse = DMat3::from_cols(DVec3::new(1.0, 0.0, -0.25), DVec3::new(0.0, 1.0, 0.0), DVec3::new(0.0, 0.0, 1.0));
         plan.warp = Warp { forward: inverse.inverse(), inverse };
@@ -781,10 +782,16 @@ mod tests {
         }
         inter.valid = Some(crate::composite::Rect { p0: 1, p1: n - 2, q0: 1, q1: n - 2 });
         let mut worst = 0f64;
-        for (i, (wu, wv, pitch)) in
-            [(0.0002, 0.0001, 1.0), (0.002, 0.001, 1.0), (0.004, -0.002, 0.5), (-0.003, 0.004, 2.0), (0.02, 0.0, 1.0)]
-                .into_iter()
-                .enumerate()
+        for (i, (wu, wv, pitch)) in [
+            (0.0002, 0.0001, [1.0; 2]),
+            (0.002, 0.001, [1.0; 2]),
+            (0.004, -0.002, [0.5; 2]),
+            (-0.003, 0.004, [2.0; 2]),
+            (0.02, 0.0, [1.0; 2]),
+            (0.003, 0.001, [1.0, 0.25]),
+        ]
+        .into_iter()
+        .enumerate()
         {
             plan.grid = Grid { size: [n, n], pad: 0, pitch };
             // (X, Y, W) = inverse · (u, v, 1)
@@ -799,7 +806,7 @@ mod tests {
                     if h.z <= 0.0 {
                         continue;
                     }
-                    let (p, q) = (h.x / h.z / pitch, h.y / h.z / pitch);
+                    let (p, q) = (h.x / h.z / pitch[0], h.y / h.z / pitch[1]);
                     // inside the valid rectangle, away from its clamped ring
                     if !(2.0..n as f64 - 3.0).contains(&p) || !(2.0..n as f64 - 3.0).contains(&q) {
                         continue;
@@ -916,7 +923,7 @@ mod tests {
         // a warp of an empty frame: nothing is left
         let f = crate::view::Factorization::new(&crate::view::Camera::new(DMat3::IDENTITY, [8, 6]), [4, 4, 4], [1.0; 3]).unwrap();
         let mut plan = FramePlan::parallel(&f, [1.0; 3]);
-        plan.grid = Grid { size: [8, 8], pad: 0, pitch: 1.0 };
+        plan.grid = Grid { size: [8, 8], pad: 0, pitch: [1.0; 2] };
         let inter = Intermediate::default();
         warp(&inter, &plan, &mut out);
         assert!(out.data.iter().all(|&c| c == [0; 4]));

@@ -883,7 +883,7 @@ pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Optio
     out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
         for (u, o) in row.iter_mut().enumerate() {
             let Some([a, b]) = plan.warp.to_sheared(u as f64, v as f64) else { continue };
-            let (p, q) = (a / plan.grid.pitch + pad, b / plan.grid.pitch + pad);
+            let (p, q) = (a / plan.grid.pitch[0] + pad, b / plan.grid.pitch[1] + pad);
             let (x0, y0) = (p.floor(), q.floor());
             let (fx, fy) = (p - x0, q - y0);
             let (mut wsum, mut ksum) = (0.0, 0.0);
@@ -1048,8 +1048,7 @@ mod tests {
                             if !depth.is_finite() {
                                 continue;
                             }
-                            let (a, b) =
-                                ((p as f64 - plan.grid.pad as f64) * plan.grid.pitch, (q as f64 - plan.grid.pad as f64) * plan.grid.pitch);
+                            let [a, b] = plan.intermediate_to_sheared(p as f64, q as f64);
                             let k0 = (depth as f64).floor().min(vol.dims()[plan.view.axis] as f64 - 2.0);
                             let at = |k: f64| DVec3::from_array(plan.view.sheared_to_voxel(a, b, k));
                             let n = model.shading_normal([at(k0), at(k0 + 1.0)], depth as f64 - k0, normals == Normals::Codes);

@@ -100,10 +100,10 @@ pub struct RenderCmd {
 /// The sampling of a still frame.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StillSampling {
-    /// As many rays per voxel as the output magnifies (Deluxe M): no
-    /// intermediate pixel is drawn wider than an output pixel, so a zoomed or
-    /// close-up surface shows no steps. Where the output does not magnify,
-    /// the same frame as `voxel`.
+    /// As many rays per voxel as the output magnifies, along each axis
+    /// (Deluxe M): no intermediate pixel is drawn wider than an output pixel,
+    /// so a zoomed or close-up surface shows no steps. Where the output does
+    /// not magnify, the same frame as `voxel`.
     Matched,
     /// One ray per voxel (or per --quality), as a rotation frame: faster,
     /// steps where the output magnifies.

@@ -2123,14 +2123,15 @@ mod tests {
     use glam::DMat3;
 
     /// A parallel plan turned into a scaled one at another pixel pitch (the
-    /// adaptive intermediate image size): `pitch` voxels per pixel, slice `k`
-    /// sampled at `sigma · (a, b) + trans[k]`.
-    fn rescaled(mut plan: FramePlan, pitch: f64, sigma: f64) -> FramePlan {
+    /// adaptive intermediate image size, or matched sampling's pitch per
+    /// axis): `pitch` voxels per pixel, slice `k` sampled at
+    /// `sigma · (a, b) + trans[k]`.
+    fn rescaled(mut plan: FramePlan, pitch: [f64; 2], sigma: f64) -> FramePlan {
         let g = plan.grid;
-        let f = 1.0 / (pitch * sigma);
+        let f = pitch.map(|p| 1.0 / (p * sigma));
         plan.grid.pitch = pitch;
-        plan.grid.pad = (g.pad as f64 * f).ceil() as usize;
-        plan.grid.size = g.size.map(|x| (x as f64 * f).ceil() as usize + 2);
+        plan.grid.pad = (g.pad as f64 * f[0].max(f[1])).ceil() as usize;
+        plan.grid.size = [0, 1].map(|a| (g.size[a] as f64 * f[0].max(f[1])).ceil() as usize + 2);
         plan.kind = MapKind::ScaleTranslate;
         plan.scaled =
             (0..plan.slices()).map(|k| ScaledMap { scale: sigma, trans: [plan.shear.trans[0][k], plan.shear.trans[1][k]] }).collect();
@@ -2138,8 +2139,9 @@ mod tests {
     }
 
     /// The binary walk reads any scaled plan: a parallel view at 2 pixels per
-    /// voxel, at 0.75, and with a uniform slice scale, renders the brute
-    /// force's image bit for bit (blend and iso, cell sizes 1 and 2, u32 and u64).
+    /// voxel, at 0.75, at 1 and 3 (a pitch per axis), and with a uniform
+    /// slice scale, renders the brute force's image bit for bit (blend and
+    /// iso, cell sizes 1 and 2, u32 and u64).
     #[test]
     fn uniform_scale_parallel_plan_binary_equals_brute_force() {
         let dims = [19, 17, 41];
@@ -2159,7 +2161,7 @@ mod tests {
             let f = Factorization::new(&Camera::new(r, [64, 64]), dims, [1.0; 3]).unwrap();
             let stack = SliceStack::new(&vol, f.axis);
             let base = FramePlan::parallel(&f, [1.0; 3]);
-            for (pitch, sigma) in [(0.5, 1.0), (1.0 / 0.75, 1.0), (1.0, 0.8)] {
+            for (pitch, sigma) in [([0.5; 2], 1.0), ([1.0 / 0.75; 2], 1.0), ([1.0; 2], 0.8), ([1.0, 1.0 / 3.0], 1.0)] {
                 let plan = rescaled(base.clone(), pitch, sigma);
                 for mode in [Mode::Blend, Mode::Iso] {
                     let iso = 100.0;
@@ -2187,13 +2189,13 @@ mod tests {
                         let bits = |x: &Intermediate| {
                             x.rgba.iter().flatten().map(|v| v.to_bits()).chain(x.depth.iter().map(|v| v.to_bits())).collect::<Vec<u32>>()
                         };
-                        assert_eq!(bits(&got), bits(&want), "view {i} pitch {pitch} sigma {sigma} {mode:?} cell {s}");
+                        assert_eq!(bits(&got), bits(&want), "view {i} pitch {pitch:?} sigma {sigma} {mode:?} cell {s}");
                         assert!(want.rgba.iter().any(|p| p[3] > 0.0));
                         checked += 1;
                     }
                 }
             }
         }
-        assert_eq!(checked, 24);
+        assert_eq!(checked, 32);
     }
 }

@@ -456,12 +456,12 @@ fn span<S: Sampler, const LIM: bool>(
 }
 
 /// One row of a box-filtered slice ([`RleFrame::box_slice`]): slice `k`,
-/// intermediate row `q`, footprint `s`, the `nb` rows of the box (their
+/// intermediate row `q`, footprint `s` (per in-slice axis), the `nb` rows of the box (their
 /// cursors and weights) whose non-transparent columns end at `hi`.
 struct BoxRow<'w, 'c> {
     k: usize,
     q: usize,
-    s: f64,
+    s: [f64; 2],
     nb: usize,
     hi: i64,
     curs: [Cursor<'c>; MAXW],
@@ -835,7 +835,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                 continue;
             }
             if self.plan.kind == MapKind::ScaleTranslate {
-                if S::BOX && self.plan.footprint(k) > 1.0 {
+                if S::BOX && self.plan.boxed(k) {
                     self.box_slice(k, q_first, px, links);
                 } else {
                     self.scaled_slice(k, q_first, px, links);
@@ -1076,10 +1076,10 @@ impl<S: Sampler> RleFrame<'_, S> {
     }
 
     /// Composites slice `k` of a scaled plan whose pixels are wider than a
-    /// voxel ([`FramePlan::footprint`] `s > 1`: the far slices of a perspective
+    /// voxel ([`FramePlan::boxed`]: the far slices of a perspective
     /// view, any slice of a grid coarser than one pixel per voxel) with the
     /// paper's box footprint: each pixel's sample is the area average of the
-    /// opacity-weighted colours of the voxels under an `s × s` box centred on
+    /// opacity-weighted colours of the voxels under an `s₀ × s₁` box centred on
     /// its sample position ([`box_weights`]), so no voxel falls between two
     /// pixels. Pixels whose centre cell lies outside the slice composite
     /// nothing (as with the bilinear sample). The same skips: opaque pixels
@@ -1092,7 +1092,7 @@ impl<S: Sampler> RleFrame<'_, S> {
         let [ni, nj, _] = rle.n;
         let bb = rle.bbox[k];
         let s = plan.footprint(k);
-        let reach = plan.footprint_reach(k);
+        let reach = plan.footprint_reach(k, 0);
         let nrows = px.len() / gw;
         let p0 = r.p0 as i64;
         let mut wj = [0f32; MAXW];
@@ -1102,7 +1102,7 @@ impl<S: Sampler> RleFrame<'_, S> {
             if cj < 0 || cj > nj as i64 - 2 {
                 continue;
             }
-            let (j0, nb) = box_weights(plan.sample_at(k, 1, q), s, nj, &mut wj);
+            let (j0, nb) = box_weights(plan.sample_at(k, 1, q), s[1], nj, &mut wj);
             if nb == 0 || ((j0 + nb - 1) as u32) < bb[2] || j0 as u32 > bb[3] {
                 continue;
             }
@@ -1167,7 +1167,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                 if x > x1 {
                     break;
                 }
-                let (i0, na) = box_weights(plan.sample_at(k, 0, x as usize), s, ni, &mut wi);
+                let (i0, na) = box_weights(plan.sample_at(k, 0, x as usize), s[0], ni, &mut wi);
                 // the first non-transparent column at or after the box's first, over its rows
                 let mut next = INF;
                 for c in curs.iter_mut().take(nb) {
@@ -1179,7 +1179,7 @@ impl<S: Sampler> RleFrame<'_, S> {
                         break;
                     }
                     // on to the first pixel whose box may reach column `next`
-                    let c = (next as f64 - 0.5 * s - 1.5).floor() as i64;
+                    let c = (next as f64 - 0.5 * s[0] - 1.5).floor() as i64;
                     let [xn, _] = plan.pixels_of_cells(k, 0, c, c);
                     x = xn.max(x + 1);
                     continue;
@@ -1474,7 +1474,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
         prev = Some(k);
         let buf = &buf[(k % 2) * n..][..n];
         let fbuf = if focus.is_some() { &fbuf[(k % 2) * n..][..n] } else { fbuf };
-        let fp = if S::BOX { plan.footprint(k) } else { 1.0 };
+        let (boxed, fp) = if S::BOX { (plan.boxed(k), plan.footprint(k)) } else { (false, [1.0; 2]) };
         px.par_chunks_mut(gw).enumerate().for_each(|(row, prow)| {
             let q = r.q0 + row;
             let (cj, wj) = plan.cell_of(k, 1, q);
@@ -1482,7 +1482,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                 return;
             }
             let mut wjs = [0f32; MAXW];
-            let (j0, nb) = if fp > 1.0 { box_weights(plan.sample_at(k, 1, q), fp, nj, &mut wjs) } else { (0, 0) };
+            let (j0, nb) = if boxed { box_weights(plan.sample_at(k, 1, q), fp[1], nj, &mut wjs) } else { (0, 0) };
             for (p, acc) in prow.iter_mut().enumerate().take(r.p1 + 1).skip(r.p0) {
                 let (ci, wi) = plan.cell_of(k, 0, p);
                 if ci < 0 || ci > ni as i64 - 2 {
@@ -1499,10 +1499,10 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
                     Some((_, ft)) if plan.in_focus(p, q, k) => (fbuf, ft),
                     _ => (buf, tables),
                 };
-                let smp = if fp > 1.0 {
+                let smp = if boxed {
                     // the box footprint of a minified slice (as RleFrame::box_slice)
                     let mut wis = [0f32; MAXW];
-                    let (i0, na) = box_weights(plan.sample_at(k, 0, p), fp, ni, &mut wis);
+                    let (i0, na) = box_weights(plan.sample_at(k, 0, p), fp[0], ni, &mut wis);
                     box_sample(&wis[..na], |u| box_column(&wjs[..nb], |t| buf[i0 + u + ni * (j0 + t)]))
                 } else {
                     let b = ci as usize + ni * cj as usize;

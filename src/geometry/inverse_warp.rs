@@ -339,13 +339,13 @@ impl AffineBack {
     #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN fails the test too
     fn new(plan: &FramePlan, margin: [f64; 2]) -> Option<AffineBack> {
         let inv = &plan.warp.inverse;
-        if inv.row(2) != DVec3::Z || !(plan.grid.pitch > 0.0) {
+        if inv.row(2) != DVec3::Z || !plan.grid.pitch.iter().all(|&p| p > 0.0) {
             return None;
         }
-        let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
+        let (pad, [pa, pb]) = (plan.grid.pad as f64, plan.grid.pitch);
         let m = [
-            [inv.x_axis.x / pitch, inv.y_axis.x / pitch, inv.z_axis.x / pitch + pad],
-            [inv.x_axis.y / pitch, inv.y_axis.y / pitch, inv.z_axis.y / pitch + pad],
+            [inv.x_axis.x / pa, inv.y_axis.x / pa, inv.z_axis.x / pa + pad],
+            [inv.x_axis.y / pb, inv.y_axis.y / pb, inv.z_axis.y / pb + pad],
         ];
         let abs = m.map(|r| [r[0].abs(), r[1].abs()]);
         let finite = m.iter().flatten().chain(&margin).all(|x| x.is_finite());
@@ -622,9 +622,8 @@ struct RowAt {
 
 impl Gather {
     fn new(plan: &FramePlan, gl: &GeometryLimits) -> Self {
-        let (pad, pitch) = (plan.grid.pad as f64, plan.grid.pitch);
-        let to_sheared =
-            DMat3::from_cols(DVec3::new(pitch, 0.0, 0.0), DVec3::new(0.0, pitch, 0.0), DVec3::new(-pad * pitch, -pad * pitch, 1.0));
+        let (pad, [pa, pb]) = (plan.grid.pad as f64, plan.grid.pitch);
+        let to_sheared = DMat3::from_cols(DVec3::new(pa, 0.0, 0.0), DVec3::new(0.0, pb, 0.0), DVec3::new(-pad * pa, -pad * pb, 1.0));
         let to_out = plan.warp.forward * to_sheared;
         let last = plan.slices().saturating_sub(1);
         let depths = |k: usize| slice_depth(plan, &gl.projector, k);

@@ -115,23 +115,23 @@ impl Renderer {
     /// limits (on the renderer's pool: a limiter may work in parallel), into
     /// `limits`, the buffer the plan held before.
     ///
-    /// Deluxe M sets `ns = max(ns_a, ns_b)` samples per voxel along both axes
-    /// ([`FramePlan::matched_samples`]: from the warp's magnification; a
-    /// perspective plan's largest, at its base plane, the front slice): the
-    /// grid is isotropic (one pitch; [`Grid::pitch`] is read by the clip
-    /// regions, the reference and the RLE traversal as a scalar), so an
-    /// anisotropic warp takes `ns²` rather than `ns_a·ns_b` samples a voxel
-    /// square. With `--quality` the finer pitch wins: M never samples coarser
-    /// than matched, a quality above it still refines. A grid past
-    /// [`MAX_INTERMEDIATE_PIXELS`] is an error naming it.
+    /// Deluxe M sets `ns_a` and `ns_b` samples per voxel along the two
+    /// sheared axes ([`FramePlan::matched_samples`]: from the warp's
+    /// magnification along each; a perspective plan's largest, at its base
+    /// plane, the front slice): a pitch per axis ([`Grid::pitch`]), so a
+    /// warp that magnifies one axis only (the slices of a thick-slice scan
+    /// seen from the side) takes `ns_a·ns_b` samples a voxel square, not
+    /// `max(ns_a, ns_b)²`. With `--quality` the finer pitch wins on each
+    /// axis: M never samples coarser than matched, a quality above it still
+    /// refines. A grid past [`MAX_INTERMEDIATE_PIXELS`] is an error naming it.
     pub(super) fn finish_plan(&self, plan: &mut FramePlan, limits: Option<RayLimits>, focus: Option<RayLimits>) -> Result<()> {
         plan.set_ray_opacity(self.settings.mode == Mode::Blend);
-        let mut pitch = 1.0 / self.frame.quality;
+        let mut pitch = [1.0 / self.frame.quality; 2];
         if self.settings.deluxe.matched {
             let ns = plan.matched_samples();
-            pitch = pitch.min(1.0 / ns[0].max(ns[1]) as f64);
+            pitch = [0, 1].map(|a| pitch[a].min(1.0 / ns[a] as f64));
         }
-        if pitch != 1.0 {
+        if pitch != [1.0; 2] {
             plan.set_pitch(pitch);
         }
         let [w, h] = plan.grid.size;
@@ -139,8 +139,9 @@ impl Renderer {
             return Err(Error::value(
                 "intermediate image",
                 format!(
-                    "{w}×{h} pixels at {:.3} samples per voxel (limit {MAX_INTERMEDIATE_PIXELS}): lower the zoom, --quality or matched sampling (Deluxe M)",
-                    1.0 / pitch
+                    "{w}×{h} pixels at {:.3}×{:.3} samples per voxel (limit {MAX_INTERMEDIATE_PIXELS}): lower the zoom, --quality or matched sampling (Deluxe M)",
+                    1.0 / pitch[0],
+                    1.0 / pitch[1]
                 ),
             ));
         }

@@ -140,8 +140,9 @@ pub struct Deluxe {
     /// density, then classifies). The raycast paths always classify after
     /// interpolation.
     pub post: bool,
-    /// M: matched sampling on zoom: as many samples per voxel square as the
-    /// warp magnifies (the paper's eq. 3), the warp divided by them.
+    /// M: matched sampling on zoom: as many samples per voxel along each
+    /// sheared axis as the warp magnifies it (the paper's eq. 3), the warp
+    /// divided by them.
     pub matched: bool,
 }
 

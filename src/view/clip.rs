@@ -164,8 +164,8 @@ fn sample_ij(plan: &FramePlan, k: usize, p: usize, q: usize) -> [f64; 2] {
         MapKind::Translate => [p as f64 - pad + plan.shear.trans[0][k], q as f64 - pad + plan.shear.trans[1][k]],
         MapKind::ScaleTranslate => {
             let m = &plan.scaled[k];
-            let pitch = plan.grid.pitch;
-            [m.scale * ((p as f64 - pad) * pitch) + m.trans[0], m.scale * ((q as f64 - pad) * pitch) + m.trans[1]]
+            let [pa, pb] = plan.grid.pitch;
+            [m.scale * ((p as f64 - pad) * pa) + m.trans[0], m.scale * ((q as f64 - pad) * pb) + m.trans[1]]
         }
     }
 }

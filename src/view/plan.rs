@@ -88,16 +88,18 @@ pub struct SliceMap {
 }
 
 /// The intermediate image's grid. Pixel `(p, q)` is the sheared point
-/// `(a, b) = (p − pad, q − pad) · pitch`: today one pixel per voxel (`pitch` 1)
-/// with `pad` pixels of margin on every side for the shear.
+/// `(a, b) = ((p − pad) · pitch₀, (q − pad) · pitch₁)`: one pixel per voxel
+/// (`pitch` `[1, 1]`) with `pad` pixels of margin on every side for the
+/// shear, or resampled ([`FramePlan::set_pitch`]: the adaptive image size,
+/// one pitch for both axes; matched sampling, a pitch per axis).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Grid {
     /// `[width, height]` in pixels.
     pub size: [usize; 2],
     /// Margin, in pixels, between the grid's edge and sheared `(0, 0)`.
     pub pad: usize,
-    /// Voxels per intermediate pixel.
-    pub pitch: f64,
+    /// Voxels per intermediate pixel along each axis.
+    pub pitch: [f64; 2],
 }
 
 impl Grid {
@@ -106,7 +108,7 @@ impl Grid {
     /// the centre (plus a rounding margin).
     pub fn parallel(cells: [usize; 2], nk: usize) -> Grid {
         let pad = nk.saturating_sub(1).div_ceil(2) + 2;
-        Grid { size: [cells[0] + 2 * pad, cells[1] + 2 * pad], pad, pitch: 1.0 }
+        Grid { size: [cells[0] + 2 * pad, cells[1] + 2 * pad], pad, pitch: [1.0; 2] }
     }
 
     /// Pixels.
@@ -699,17 +701,8 @@ impl FramePlan {
             _ => [1, 0],
         };
         let ks = if first.is_some() { self.k_range[0]..self.k_range[1] + 1 } else { 0..0 };
-        // the exact bounding box of every composited slice's cells, in sheared
-        // coordinates: cell c of slice k covers sample positions [c, c + 1)
         let cells = [pv.n[0].saturating_sub(1), pv.n[1].saturating_sub(1)];
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for k in ks.clone() {
-            let m = self.scaled[k];
-            for a in 0..2 {
-                lo[a] = lo[a].min((0.0 - m.trans[a]) / m.scale);
-                hi[a] = hi[a].max((cells[a] as f64 - m.trans[a]) / m.scale);
-            }
-        }
+        let [mut lo, mut hi] = self.cells_box(ks.clone());
         // a pyramid of the split: only its window's rays
         if let Some([wlo, whi]) = pv.window {
             for a in 0..2 {
@@ -727,7 +720,7 @@ impl FramePlan {
             let pad = ((-lo[0]).max(-lo[1]).floor() as i64 + 2).max(0) as usize;
             (pad, [0, 1].map(|a| (pad as f64 + hi[a].ceil()) as usize + 2))
         };
-        self.grid = Grid { size, pad, pitch: 1.0 };
+        self.grid = Grid { size, pad, pitch: [1.0; 2] };
         let to_base = DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(shift[0], shift[1], 1.0));
         let from_base = DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(-shift[0], -shift[1], 1.0));
         self.warp = Warp { forward: pv.warp.forward * to_base, inverse: from_base * pv.warp.inverse };
@@ -746,24 +739,45 @@ impl FramePlan {
         self.set_ray_opacity(self.ray_opacity);
     }
 
+    /// The exact bounding box `[lo, hi]` of the cells of slices `ks` of a
+    /// scaled plan, in sheared coordinates: cell `c` of slice `k` covers
+    /// sample positions `[c, c + 1)`, sheared `a = (x − τ_k) / σ_k`
+    /// (`lo > hi` on an axis: no slice).
+    fn cells_box(&self, ks: impl Iterator<Item = usize>) -> [[f64; 2]; 2] {
+        let cells = [self.view.n[0].saturating_sub(1), self.view.n[1].saturating_sub(1)];
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for k in ks {
+            let m = self.scaled[k];
+            for a in 0..2 {
+                lo[a] = lo[a].min((0.0 - m.trans[a]) / m.scale);
+                hi[a] = hi[a].max((cells[a] as f64 - m.trans[a]) / m.scale);
+            }
+        }
+        [lo, hi]
+    }
+
     /// Resamples this plan's intermediate grid at `pitch` voxels per
-    /// intermediate pixel (the adaptive image size of Schulze et al.: quality
-    /// `q = 1 / pitch` intermediate pixels per voxel), keeping every ray's
-    /// geometry: pixel `(p, q)` becomes the sheared point
-    /// `((p − pad) · pitch, (q − pad) · pitch)`, and each slice samples it
+    /// intermediate pixel along each axis (the adaptive image size of
+    /// Schulze et al., one pitch for both: quality `q = 1 / pitch`
+    /// intermediate pixels per voxel; Deluxe M, a pitch per axis), keeping
+    /// every ray's geometry: pixel `(p, q)` becomes the sheared point
+    /// `((p − pad) · pitch₀, (q − pad) · pitch₁)`, and each slice samples it
     /// through its map as before. A parallel plan becomes
     /// [`MapKind::ScaleTranslate`] with `σ_k = 1` and `τ_k` its exact
-    /// translation; the grid keeps covering the same sheared rectangle (plus a
-    /// two-pixel ring); the warp (sheared → output) is unchanged, the
-    /// intermediate pixel of an output pixel divides by the pitch
+    /// translation. The grid covers the sheared rectangle the old grid
+    /// covered, narrowed to the bounding box of the composited slices' cells
+    /// (a parallel plan's grid is padded for the shear of any view; a
+    /// resampled one holds this view's slices), plus a two-pixel ring. The
+    /// warp (sheared → output) is unchanged, the intermediate pixel of an
+    /// output pixel divides by the pitch
     /// ([`FramePlan::output_to_intermediate`]); the per-ray opacity exponents
     /// are recomputed for the new pixels. Call it after the projection's
-    /// producer and before a [`Limiter`]; `pitch` 1 on a pitch-1 plan changes
-    /// nothing. `pitch` must be finite and > 0 (the renderer keeps it in
-    /// `[1/`[`MAX_MATCHED`]`, 4]`: `--quality` 0.25–2, Deluxe M down to
-    /// 1/16, and checks the grid against its pixel limit).
-    pub fn set_pitch(&mut self, pitch: f64) {
-        assert!(pitch.is_finite() && pitch > 0.0, "pitch {pitch}");
+    /// producer and before a [`Limiter`]; pitch `[1, 1]` on a pitch-1 plan
+    /// changes nothing. Each pitch must be finite and > 0 (the renderer keeps
+    /// them in `[1/`[`MAX_MATCHED`]`, 4]`: `--quality` 0.25–2, Deluxe M down
+    /// to 1/16, and checks the grid against its pixel limit).
+    pub fn set_pitch(&mut self, pitch: [f64; 2]) {
+        assert!(pitch.iter().all(|p| p.is_finite() && *p > 0.0), "pitch {pitch:?}");
         let old = self.grid.pitch;
         if pitch == old {
             return;
@@ -777,10 +791,18 @@ impl FramePlan {
         // the sheared rectangle the old grid covered inside a one-pixel ring
         let [w, h] = self.grid.size;
         let pad = self.grid.pad as f64;
-        let lo = (1.0 - pad) * old;
-        let hi = [0, 1].map(|a| ([w, h][a] as f64 - 2.0 - pad) * old);
-        let new_pad = ((-lo / pitch).ceil().max(0.0) as usize) + 2;
-        let size = [0, 1].map(|a| new_pad + (hi[a] / pitch).ceil().max(0.0) as usize + 3);
+        let mut lo = [0, 1].map(|a| (1.0 - pad) * old[a]);
+        let mut hi = [0, 1].map(|a| ([w, h][a] as f64 - 2.0 - pad) * old[a]);
+        // narrowed to the composited slices' cells
+        let [slo, shi] = self.cells_box(self.front_to_back());
+        if (0..2).all(|a| slo[a] <= shi[a]) {
+            for a in 0..2 {
+                lo[a] = lo[a].max(slo[a]);
+                hi[a] = hi[a].min(shi[a]).max(lo[a]);
+            }
+        }
+        let new_pad = ((0..2).map(|a| -lo[a] / pitch[a]).fold(0.0f64, f64::max).ceil() as usize) + 2;
+        let size = [0, 1].map(|a| new_pad + (hi[a] / pitch[a]).ceil().max(0.0) as usize + 3);
         self.grid = Grid { size, pad: new_pad, pitch };
         self.limits = None;
         self.focus = None;
@@ -819,8 +841,9 @@ impl FramePlan {
             Some([col(f.x_axis), col(f.y_axis)])
         };
         let [w, h] = self.grid.size;
-        let (a1, b1) = ((w as f64 - 1.0 - pad) * self.grid.pitch, (h as f64 - 1.0 - pad) * self.grid.pitch);
-        let (a0, b0) = (-pad * self.grid.pitch, -pad * self.grid.pitch);
+        let pitch = self.grid.pitch;
+        let (a1, b1) = ((w as f64 - 1.0 - pad) * pitch[0], (h as f64 - 1.0 - pad) * pitch[1]);
+        let (a0, b0) = (-pad * pitch[0], -pad * pitch[1]);
         let mut m = [0f64; 2];
         for (a, b) in [(a0, b0), (a1, b0), (a0, b1), (a1, b1)] {
             if let Some(l) = jac(a, b) {
@@ -934,7 +957,7 @@ impl FramePlan {
     #[inline(always)]
     pub fn axis_map(&self, k: usize, axis: usize) -> AxisMap {
         let m = &self.scaled[k];
-        AxisMap::new(m.scale, m.trans[axis], self.grid.pad as f64, self.grid.pitch)
+        AxisMap::new(m.scale, m.trans[axis], self.grid.pad as f64, self.grid.pitch[axis])
     }
 
     /// The exact in-slice sample position (voxel units, before the floor)
@@ -946,28 +969,40 @@ impl FramePlan {
             MapKind::Translate => x as f64 - self.grid.pad as f64 + self.shear.trans[axis][k],
             MapKind::ScaleTranslate => {
                 let m = &self.scaled[k];
-                m.scale * ((x as f64 - self.grid.pad as f64) * self.grid.pitch) + m.trans[axis]
+                m.scale * ((x as f64 - self.grid.pad as f64) * self.grid.pitch[axis]) + m.trans[axis]
             }
         }
     }
 
-    /// The box footprint, in voxels of slice `k`, of one intermediate pixel
-    /// where its pixels are more than [`BOX_FROM`] voxels apart (a slice
-    /// minified that much: the far slices of a perspective eye near the
-    /// volume, a grid of half a pixel per voxel or coarser), capped at
-    /// [`MAX_FOOTPRINT`]; 1 where the slice is sampled bilinearly (parallel
-    /// slices, magnified ones, and those minified up to 2×, where the bilinear
-    /// tent, two voxels wide, already reaches every voxel between two pixels).
+    /// The box footprint, in voxels of slice `k` along each in-slice axis, of
+    /// one intermediate pixel where its pixels are more than [`BOX_FROM`]
+    /// voxels apart along either axis (a slice minified that much: the far
+    /// slices of a perspective eye near the volume, a grid of half a pixel
+    /// per voxel or coarser), each capped at [`MAX_FOOTPRINT`]; `[1, 1]` where
+    /// the slice is sampled bilinearly (parallel slices, magnified ones, and
+    /// those minified up to 2×, where the bilinear tent, two voxels wide,
+    /// already reaches every voxel between two pixels). In a box-filtered
+    /// slice an axis whose pixels lie at most [`BOX_FROM`] voxels apart (a
+    /// grid with a pitch per axis) takes a box one voxel wide: against voxels
+    /// one voxel wide that is the linear tent.
     #[inline(always)]
-    pub fn footprint(&self, k: usize) -> f64 {
+    pub fn footprint(&self, k: usize) -> [f64; 2] {
         match self.kind {
-            _ if !self.box_footprint => 1.0,
-            MapKind::Translate => 1.0,
+            _ if !self.box_footprint => [1.0; 2],
+            MapKind::Translate => [1.0; 2],
             MapKind::ScaleTranslate => {
-                let s = self.scaled[k].scale * self.grid.pitch;
-                if s > BOX_FROM { s.min(MAX_FOOTPRINT) } else { 1.0 }
+                let s = self.grid.pitch.map(|p| self.scaled[k].scale * p);
+                if s[0].max(s[1]) > BOX_FROM { s.map(|s| if s > BOX_FROM { s.min(MAX_FOOTPRINT) } else { 1.0 }) } else { [1.0; 2] }
             }
         }
+    }
+
+    /// Whether slice `k` is box-filtered ([`FramePlan::footprint`] wider than
+    /// one voxel along either axis).
+    #[inline(always)]
+    pub fn boxed(&self, k: usize) -> bool {
+        let s = self.footprint(k);
+        s[0].max(s[1]) > 1.0
     }
 
     /// Shear-Warp Deluxe I (a producer of plans): the slices are sampled at
@@ -1008,7 +1043,7 @@ impl FramePlan {
     /// traversal and its brute force both sample through it.
     #[inline(always)]
     pub fn mid_map(&self, k: usize, axis: usize) -> MidMap {
-        let (pad, pitch) = (self.grid.pad as f64, self.grid.pitch);
+        let (pad, pitch) = (self.grid.pad as f64, self.grid.pitch[axis]);
         match self.kind {
             MapKind::Translate => {
                 let t = &self.shear.trans[axis];
@@ -1030,11 +1065,11 @@ impl FramePlan {
     }
 
     /// How many cells beyond its own a pixel's footprint in slice `k` may
-    /// reach on each side (0 for a bilinear sample).
+    /// reach on each side along in-slice axis `axis` (0 for a bilinear sample).
     #[inline(always)]
-    pub fn footprint_reach(&self, k: usize) -> i64 {
-        let s = self.footprint(k);
-        if s > 1.0 { (0.5 * s).ceil() as i64 + 1 } else { 0 }
+    pub fn footprint_reach(&self, k: usize, axis: usize) -> i64 {
+        let s = self.footprint(k)[axis];
+        if self.boxed(k) { (0.5 * s).ceil() as i64 + 1 } else { 0 }
     }
 
     /// The intermediate pixels `[x0, x1]` along in-slice axis `axis` whose
@@ -1165,13 +1200,13 @@ impl FramePlan {
     pub fn output_to_intermediate(&self, u: f64, v: f64) -> Option<[f64; 2]> {
         let [a, b] = self.warp.to_sheared(u, v)?;
         let pad = self.grid.pad as f64;
-        Some([a / self.grid.pitch + pad, b / self.grid.pitch + pad])
+        Some([a / self.grid.pitch[0] + pad, b / self.grid.pitch[1] + pad])
     }
 
     /// The sheared point `(a, b)` of intermediate pixel `(p, q)`.
     pub fn intermediate_to_sheared(&self, p: f64, q: f64) -> [f64; 2] {
         let pad = self.grid.pad as f64;
-        [(p - pad) * self.grid.pitch, (q - pad) * self.grid.pitch]
+        [(p - pad) * self.grid.pitch[0], (q - pad) * self.grid.pitch[1]]
     }
 }
 
@@ -1314,7 +1349,7 @@ mod tests {
             plans.push(plan(r, [20, 26, 17]));
         }
         for base in plans {
-            for pitch in [0.25, 0.5, 0.8, 2.0, 4.0] {
+            for pitch in [[0.25; 2], [0.5; 2], [0.8; 2], [2.0; 2], [4.0; 2], [1.0, 0.2], [0.5, 1.0 / 6.0], [0.25, 1.0]] {
                 let mut p = base.clone();
                 p.set_pitch(pitch);
                 assert_eq!(p.kind, MapKind::ScaleTranslate);
@@ -1326,10 +1361,10 @@ mod tests {
                         let [x0, x1] = p.pixels_of_cells(k, a, 0, n[a] as i64 - 2);
                         if x0 > x1 {
                             // a slice minified between two pixels of a coarse grid
-                            assert!(pitch > 1.0);
+                            assert!(pitch[a] > 1.0);
                             continue;
                         }
-                        assert!(x0 >= 1 && x1 <= [w, h][a] as i64 - 2, "pitch {pitch} slice {k} axis {a}: [{x0}, {x1}] in {:?}", p.grid);
+                        assert!(x0 >= 1 && x1 <= [w, h][a] as i64 - 2, "pitch {pitch:?} slice {k} axis {a}: [{x0}, {x1}] in {:?}", p.grid);
                     }
                     // the same ray: the sample at sheared (a, b) is the base plan's map there
                     let [sa, sb] = p.intermediate_to_sheared(3.0, 5.0);
@@ -1338,10 +1373,25 @@ mod tests {
                         MapKind::Translate => sa + base.shear.trans[0][k],
                         MapKind::ScaleTranslate => base.scaled[k].scale * sa + base.scaled[k].trans[0],
                     };
-                    assert!((ci as f64 + wi as f64 - want).abs() < 1e-5, "pitch {pitch} slice {k}: {ci} + {wi} vs {want} ({sb})");
+                    assert!((ci as f64 + wi as f64 - want).abs() < 1e-5, "pitch {pitch:?} slice {k}: {ci} + {wi} vs {want} ({sb})");
                 }
-                // back to the base pitch: the base grid's coverage again (not larger than needed)
-                assert!(p.grid.size[0] as f64 <= (base.grid.size[0] as f64 / pitch).ceil() + 8.0);
+                // not larger than needed: within the base grid's coverage and
+                // the bounding box of the slices' cells (plus the rings)
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for k in p.front_to_back() {
+                    for a in 0..2 {
+                        let m = p.scaled[k];
+                        lo[a] = lo[a].min(-m.trans[a] / m.scale);
+                        hi[a] = hi[a].max((n[a] as f64 - 1.0 - m.trans[a]) / m.scale);
+                    }
+                }
+                for a in 0..2 {
+                    let (pad, base_pad) = (p.grid.pad as f64, base.grid.pad as f64);
+                    assert!(pad <= (base_pad / pitch[0]).max(base_pad / pitch[1]).ceil() + 3.0);
+                    assert!(p.grid.size[a] as f64 - pad <= ((base.grid.size[a] as f64 - base_pad) / pitch[a]).ceil() + 8.0);
+                    let slack = (lo[0] / pitch[0]).min(lo[1] / pitch[1]).min(0.0).abs();
+                    assert!(p.grid.size[a] as f64 <= hi[a].max(0.0) / pitch[a] + slack + 8.0, "pitch {pitch:?} axis {a}: {:?}", p.grid);
+                }
             }
         }
     }

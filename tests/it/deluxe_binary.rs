@@ -167,7 +167,7 @@ fn deluxe_i_midpoint_sample_is_trilinear() {
         }
         // the scaled rays of another pitch: the same points
         let mut plan2 = plan.clone();
-        plan2.set_pitch(0.5);
+        plan2.set_pitch([0.5; 2]);
         let ctx = RayContext::new(&stack, &cls, &plan2, Mode::Blend, 50.0, Shading::default(), 1.0).with_intermediate(true);
         for q in (0..plan2.grid.size[1]).step_by(3) {
             for p in (0..plan2.grid.size[0]).step_by(3) {

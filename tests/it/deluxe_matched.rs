@@ -31,7 +31,8 @@ fn cube(d: usize, m: usize) -> Volume {
 
 /// The paper's Table 1: a 64³ cube whose view fits a 74² image at one pixel
 /// per voxel, rendered into 512², takes 7² samples per voxel; a 128³ volume
-/// (148²) takes 4². The grid's pitch is 1/ns, and without M it stays 1.
+/// (148²) takes 4². The grid's pitch is 1/ns, and without M it stays 1; an
+/// anisotropic warp takes a pitch per axis.
 #[test]
 fn deluxe_m_sample_counts_are_the_papers() {
     let tf = TransferFunction::threshold(100.0, [1.0; 3]);
@@ -47,16 +48,16 @@ fn deluxe_m_sample_counts_are_the_papers() {
                 try_render(&mut r, &cam).unwrap();
                 let plan = r.last_plan().unwrap();
                 assert_eq!(plan.matched_samples(), [ns, ns], "{d}³ into 512²");
-                assert_eq!(plan.grid.pitch, 1.0 / want as f64, "{d}³ {deluxe:?} {method:?}");
+                assert_eq!(plan.grid.pitch, [1.0 / want as f64; 2], "{d}³ {deluxe:?} {method:?}");
                 // at the matched image's own size: one sample per voxel
                 let cam = Camera { rotation: rot, zoom: Some(1.0), size: [image as usize, image as usize] };
                 try_render(&mut r, &cam).unwrap();
                 assert_eq!(r.last_plan().unwrap().matched_samples(), [1, 1]);
-                assert_eq!(r.last_plan().unwrap().grid.pitch, 1.0);
+                assert_eq!(r.last_plan().unwrap().grid.pitch, [1.0; 2]);
             }
         }
     }
-    // an anisotropic warp (voxels 1 × 2.5 × 1 mm): one pitch, the larger count
+    // an anisotropic warp (voxels 1 × 2.5 × 1 mm): a pitch per axis, each its own count
     let vol = Volume::from_fn([20, 12, 20], [1.0, 2.5, 1.0], |x, y, z| ((x + y + z) % 5) as f32 * 50.0).unwrap();
     let s = Settings { method: Method::Binary, mode: Mode::Iso, threads: 2, deluxe: M, ..Settings::default() };
     let mut r = Renderer::new(vol, &tf, s).unwrap();
@@ -65,7 +66,7 @@ fn deluxe_m_sample_counts_are_the_papers() {
     let plan = r.last_plan().unwrap();
     let ns = plan.matched_samples();
     assert_eq!(ns, [3, 8], "{:?}", plan.warp);
-    assert_eq!(plan.grid.pitch, 1.0 / 8.0);
+    assert_eq!(plan.grid.pitch, [1.0 / 3.0, 1.0 / 8.0]);
 }
 
 /// The 10–90 % rise, in output pixels, of the alpha along the middle row
@@ -102,7 +103,7 @@ fn deluxe_m_keeps_a_magnified_edge_sharp() {
             let mut r = Renderer::new(vol.clone(), &tf, s).unwrap();
             let img = try_render(&mut r, &cam).unwrap();
             if deluxe.matched {
-                assert_eq!(r.last_plan().unwrap().grid.pitch, 1.0 / 7.0);
+                assert_eq!(r.last_plan().unwrap().grid.pitch, [1.0 / 7.0; 2]);
             }
             w.push(edge_width(&img));
         }
@@ -120,11 +121,12 @@ fn deluxe_m_keeps_a_magnified_edge_sharp() {
 /// Every accelerated path equals its brute force with M, bit for bit (ERT
 /// off): binary == brute and rle == brute-rle, parallel and perspective, both
 /// modes, u32/u64 and super cells on the binary path; and with I and M on the
-/// binary path. Magnifications 1.5–4.5 (2–5 samples per voxel).
+/// binary path. Magnifications 1.5–4.5 (2–5 samples per voxel), oblique
+/// views and anisotropic voxels, so grids with a pitch per axis among them.
 #[test]
 fn deluxe_m_accelerated_equals_brute_force_bit_for_bit() {
     let mut rnd = common::uniform(23);
-    let mut checked = 0;
+    let (mut checked, mut anisotropic) = (0, 0);
     for case in 0..48 {
         let dims = [6 + (rnd() * 12.0) as usize, 5 + (rnd() * 12.0) as usize, 4 + (rnd() * 20.0) as usize];
         let vol = blobs(dims, 900 + case as u64, [[1.0, 1.0, 1.0], [1.0, 0.7, 1.6]][case % 2]);
@@ -160,7 +162,9 @@ fn deluxe_m_accelerated_equals_brute_force_bit_for_bit() {
                 continue;
             };
             let y = try_render(&mut b, &cam).unwrap();
-            assert!(a.last_plan().unwrap().grid.pitch < 1.0, "case {case}: not magnified");
+            let pitch = a.last_plan().unwrap().grid.pitch;
+            assert!(pitch.iter().any(|&p| p < 1.0), "case {case}: not magnified");
+            anisotropic += usize::from(pitch[0] != pitch[1]);
             assert_eq!(bits(&x), bits(&y), "case {case} {fast:?} {deluxe:?} {proj:?}: differs from brute force");
             if x.coverage() > 0.0 {
                 checked += 1;
@@ -168,6 +172,7 @@ fn deluxe_m_accelerated_equals_brute_force_bit_for_bit() {
         }
     }
     assert!(checked >= 60, "only {checked}");
+    assert!(anisotropic >= 10, "only {anisotropic} frames with a pitch per axis");
 }
 
 /// A grid past the pixel limit is a clear error, not an allocation failure:

@@ -742,11 +742,11 @@ mod tests {
         let mut img = Image::new(96, 96);
         let pitch = |r: &mut Renderers| r.select(Class::Tissue(0), 1).unwrap().last_plan().unwrap().grid.pitch;
         r.render(&Spec { camera: cam, ..spec }, &mut img).unwrap();
-        assert_eq!(pitch(&mut r), 0.25);
+        assert_eq!(pitch(&mut r), [0.25; 2]);
         r.render(&Spec { camera: cam, still: false, ..spec }, &mut img).unwrap();
-        assert_eq!(pitch(&mut r), 1.0);
+        assert_eq!(pitch(&mut r), [1.0; 2]);
         r.render(&spec, &mut img).unwrap();
-        assert_eq!(pitch(&mut r), 1.0);
+        assert_eq!(pitch(&mut r), [1.0; 2]);
     }
 
     /// `view --method rle --perspective FOV`: the preview, the blend display

@@ -389,9 +389,9 @@ impl RleVolume {
             }
             // voxel v touches cells v − 1 and v (and, under a box footprint,
             // the cells of pixels whose footprint reaches it)
-            let reach = plan.footprint_reach(k);
             let span = [(b[0], b[1], ni), (b[2], b[3], nj)];
             for (a, &(v0, v1, n)) in span.iter().enumerate() {
+                let reach = plan.footprint_reach(k, a);
                 let [x0, x1] = plan.pixels_of_cells(k, a, (v0 as i64 - 1 - reach).max(0), (v1 as i64 + reach).min(n as i64 - 2));
                 if x0 <= x1 {
                     lo[a] = lo[a].min(x0);

@@ -456,8 +456,9 @@ fn span<S: Sampler, const LIM: bool>(
 }
 
 /// One row of a box-filtered slice ([`RleFrame::box_slice`]): slice `k`,
-/// intermediate row `q`, footprint `s` (per in-slice axis), the `nb` rows of the box (their
-/// cursors and weights) whose non-transparent columns end at `hi`.
+/// intermediate row `q`, footprint `s` (per in-slice axis), the `nb` rows of
+/// the box (their cursors and weights) whose non-transparent columns end at
+/// `hi`.
 struct BoxRow<'w, 'c> {
     k: usize,
     q: usize,

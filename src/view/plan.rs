@@ -1068,8 +1068,8 @@ impl FramePlan {
     /// reach on each side along in-slice axis `axis` (0 for a bilinear sample).
     #[inline(always)]
     pub fn footprint_reach(&self, k: usize, axis: usize) -> i64 {
-        let s = self.footprint(k)[axis];
-        if self.boxed(k) { (0.5 * s).ceil() as i64 + 1 } else { 0 }
+        let s = self.footprint(k);
+        if s[0].max(s[1]) > 1.0 { (0.5 * s[axis]).ceil() as i64 + 1 } else { 0 }
     }
 
     /// The intermediate pixels `[x0, x1]` along in-slice axis `axis` whose

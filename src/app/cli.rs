@@ -147,6 +147,13 @@ pub struct RotateCmd {
     /// Write an animated PNG.
     #[arg(long)]
     pub apng: Option<PathBuf>,
+    /// How the frames written to --gif, --apng and --frames-dir sample where
+    /// the output magnifies (`matched`: each written frame is rendered again
+    /// as a still, after the timed frame and outside its time, as `render`
+    /// samples; `voxel`: the timed frame itself; a distributed rotation
+    /// writes its timed frames).
+    #[arg(long, value_enum, default_value = "matched")]
+    pub sampling: StillSampling,
     /// Print one JSON object with the timing summary.
     #[arg(long)]
     pub json: bool,
@@ -399,6 +406,10 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     }
     let keep_frames = cmd.gif.is_some() || cmd.apng.is_some();
     let mut kept: Vec<image::RgbImage> = Vec::new();
+    // an animation of every frame of a long turn is huge (801 frames, 45 MB
+    // for a full turn of a large scan): keep at most MAX_ANIMATION_FRAMES
+    let every = frames.div_ceil(MAX_ANIMATION_FRAMES).max(1);
+    let mut still = Image::new(cam0.size[0], cam0.size[1]);
     let axis = match cmd.axis {
         AxisArg::X => 0,
         AxisArg::Y => 1,
@@ -434,13 +445,17 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
             after_switch_ms.push(wall);
         }
         all.push(st);
-        if let Some(d) = &cmd.frames_dir {
-            // (each frame whole or not at all; one sync for the directory after the loop)
-            shearwarp::output::write_png_unsynced(d.join(format!("frame_{f:05}.png")), &img.to_rgb8())?;
-        }
         first_frame_ms.get_or_insert_with(crate::app::since_start_ms);
-        if keep_frames {
-            kept.push(img.to_rgb8());
+        let keep = keep_frames && f % every == 0;
+        if keep || cmd.frames_dir.is_some() {
+            let out = if cmd.sampling == StillSampling::Matched && matched_still(&mut r, &scene, &cam, &mut still) { &still } else { &img };
+            if let Some(d) = &cmd.frames_dir {
+                // (each frame whole or not at all; one sync for the directory after the loop)
+                shearwarp::output::write_png_unsynced(d.join(format!("frame_{f:05}.png")), &out.to_rgb8())?;
+            }
+            if keep {
+                kept.push(out.to_rgb8());
+            }
         }
         pb.inc(1);
     }
@@ -459,19 +474,12 @@ pub fn run_rotate(cmd: &RotateCmd) -> Result<()> {
     let col = |g: fn(&FrameStats) -> f64| median(&mut all.iter().map(g).collect::<Vec<_>>());
     let (shear, render, warp, frame) = (col(|s| s.shear_ms), col(|s| s.render_ms), col(|s| s.warp_ms), col(|s| s.frame_ms()));
     let fps = if frame > 0.0 { 1000.0 / frame } else { f64::INFINITY };
-    // an animation of every frame of a long turn is huge (801 frames, 45 MB
-    // for a full turn of a large scan): keep at most MAX_ANIMATION_FRAMES
-    let kept = if kept.len() > MAX_ANIMATION_FRAMES {
-        let every = kept.len().div_ceil(MAX_ANIMATION_FRAMES);
-        let kept: Vec<_> = kept.into_iter().step_by(every).collect();
+    if keep_frames && every > 1 {
         eprintln!(
             "note: the animation keeps every {every}th of the {frames} frames ({} frames); --step-deg sets the step, --frames-dir keeps them all",
             kept.len()
         );
-        kept
-    } else {
-        kept
-    };
+    }
     if let Some(p) = &cmd.gif {
         crate::app::output::write_gif(p, &kept)?;
     }
@@ -713,6 +721,25 @@ pub fn run_export(cmd: &ExportCmd) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Renders the still of `cam` (matched sampling, Deluxe M: as many rays per
+/// voxel as the output magnifies along each axis, as `render` samples) into
+/// `still`, the renderer's settings as they were afterwards; false when the
+/// view does not magnify (the timed frame is that still) or its matched grid
+/// is past the renderer's pixel limit (the timed frame stands in for it).
+fn matched_still(r: &mut Renderer, scene: &crate::app::scene::Scene, cam: &shearwarp::view::Camera, still: &mut Image) -> bool {
+    if r.last_plan().is_none_or(|p| p.matched_samples() == [1, 1]) {
+        return false;
+    }
+    let s = r.settings();
+    if r.set_settings(Settings { deluxe: shearwarp::Deluxe { matched: true, ..s.deluxe }, ..s }).is_err() {
+        return false;
+    }
+    let ok = scene.render(r, cam, still).is_ok();
+    // (the settings the timed frames had: valid, so restoring cannot fail)
+    let restored = r.set_settings(s).is_ok();
+    ok && restored
 }
 
 /// Most frames an animation (`--gif`, `--apng`) keeps; longer runs keep every n-th.

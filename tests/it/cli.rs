@@ -35,6 +35,28 @@ fn render_writes_a_non_blank_png() {
     assert!(lit > 500, "only {lit} lit pixels");
 }
 
+/// The frames `rotate` writes (`--frames-dir`, `--gif`, `--apng`) are stills
+/// where the output magnifies: frame 0 is `render`'s image of the same view;
+/// with `--sampling voxel` it is the timed frame (one ray per voxel), which
+/// differs.
+#[test]
+fn rotate_writes_the_stills_render_draws() {
+    let dir = tempfile::tempdir().unwrap();
+    let (frames, voxel, still) = (dir.path().join("f"), dir.path().join("v"), dir.path().join("r.png"));
+    let view = ["--phantom-dims", "40,40,36", "--size", "160", "--quiet"];
+    sw().args(["rotate", "--degrees", "2", "--step-deg", "1", "--frames-dir"]).arg(&frames).args(view).assert().success();
+    sw().args(["rotate", "--degrees", "2", "--step-deg", "1", "--sampling", "voxel", "--frames-dir"])
+        .arg(&voxel)
+        .args(view)
+        .assert()
+        .success();
+    sw().args(["render", "-o"]).arg(&still).args(view).assert().success();
+    let png = |p: &std::path::Path| image::open(p).unwrap().to_rgb8();
+    assert!(png(&frames.join("frame_00000.png")) == png(&still), "a written frame is not render's still");
+    assert!(png(&voxel.join("frame_00000.png")) != png(&still), "the view does not magnify: no test of matched sampling");
+    assert_eq!(std::fs::read_dir(&frames).unwrap().count(), 2);
+}
+
 #[test]
 fn rotate_json_has_the_promised_fields() {
     let out = sw().args(["rotate", "--phantom-dims", "40,40,36", "--size", "64", "--degrees", "10", "--json"]).output().unwrap();

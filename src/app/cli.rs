@@ -289,8 +289,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     let cam = cmd.render.camera(vol.frame())?;
     let (mut r, scene) = cmd.render.renderer_and_scene(vol)?;
     if cmd.sampling == StillSampling::Matched {
-        let s = r.settings();
-        r.set_settings(Settings { deluxe: shearwarp::Deluxe { matched: true, ..s.deluxe }, ..s })?;
+        r.set_settings(matched(r.settings()))?;
     }
     r.set_settings(cmd.render.with_default_reconstruction(r.settings(), spacing))?;
     let s = r.settings();
@@ -723,6 +722,11 @@ pub fn run_export(cmd: &ExportCmd) -> Result<()> {
     Ok(())
 }
 
+/// `s` with matched sampling (Deluxe M): how a still frame samples.
+fn matched(s: Settings) -> Settings {
+    Settings { deluxe: shearwarp::Deluxe { matched: true, ..s.deluxe }, ..s }
+}
+
 /// Renders the still of `cam` (matched sampling, Deluxe M: as many rays per
 /// voxel as the output magnifies along each axis, as `render` samples) into
 /// `still`, the renderer's settings as they were afterwards; false when the
@@ -733,7 +737,7 @@ fn matched_still(r: &mut Renderer, scene: &crate::app::scene::Scene, cam: &shear
         return false;
     }
     let s = r.settings();
-    if r.set_settings(Settings { deluxe: shearwarp::Deluxe { matched: true, ..s.deluxe }, ..s }).is_err() {
+    if r.set_settings(matched(s)).is_err() {
         return false;
     }
     let ok = scene.render(r, cam, still).is_ok();

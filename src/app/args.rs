@@ -209,9 +209,14 @@ pub struct RenderArgs {
     /// pair of slices (less inter-slice aliasing), P post-interpolated
     /// classification and shading on the RLE path (sharp edges, tissue
     /// switches without re-encoding), M matched sampling on zoom (as many
-    /// samples per voxel as the output magnifies). E.g. --deluxe I,P.
-    #[arg(long, value_name = "LIST", value_parser = parse_deluxe, default_value = "S")]
-    pub deluxe: shearwarp::Deluxe,
+    /// samples per voxel as the output magnifies). E.g. --deluxe I,P; S
+    /// for none. Default: none, except that `render` of a scan whose slices
+    /// are at least 1.5× as far apart as its pixels takes P on --method rle
+    /// in iso mode (pre-classified opacity, interpolated across thick
+    /// slices, draws each slice as a band: on the 0.6×0.6×5 ellipsoid P's
+    /// image error is an eighth, for about 3× the frame, benches/README.md).
+    #[arg(long, value_name = "LIST", value_parser = parse_deluxe)]
+    pub deluxe: Option<shearwarp::Deluxe>,
     /// The sample lattice: the volume's own cartesian grid, or a
     /// body-centred cubic grid resampled from it (about 70 % of the samples).
     #[arg(long = "grid", value_name = "GRID", value_enum, default_value = "cartesian")]
@@ -500,6 +505,20 @@ fn thick_slices(spacing: [f32; 3]) -> bool {
 }
 
 impl RenderArgs {
+    /// The settings `s` of a still frame (`render`) of a volume of voxel
+    /// `spacing` when --deluxe is not given: on the RLE path in iso mode over
+    /// thick slices ([`thick_slices`]) the post-classified sampler (Deluxe
+    /// P), else `s`'s. Pre-classification interpolates each voxel's classified
+    /// opacity, so across slices several voxels apart a sharp transfer
+    /// function turns every slice into a band; P classifies the interpolated
+    /// density instead.
+    pub fn with_still_sampler(&self, s: Settings, spacing: [f32; 3]) -> Settings {
+        if self.deluxe.is_some() || !thick_slices(spacing) || !s.method.is_rle() || s.mode != Mode::Iso {
+            return s;
+        }
+        Settings { deluxe: shearwarp::Deluxe { post: true, ..s.deluxe }, ..s }
+    }
+
     /// The settings `s` with the reconstruction a command takes for a volume
     /// of voxel `spacing` when --reconstruction is not given: the cubic where
     /// the slices are thick ([`thick_slices`]) and the method renders it (the
@@ -641,7 +660,7 @@ impl RenderArgs {
             search: self.search,
             normals: self.normals.unwrap_or(Normals::Codes),
             footprint: self.footprint,
-            deluxe: self.deluxe,
+            deluxe: self.deluxe.unwrap_or_default(),
             lattice: self.grid,
             rle_reuse: self.rle_reuse,
             reconstruction: self.reconstruction.unwrap_or_default(),

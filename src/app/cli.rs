@@ -291,6 +291,7 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     if cmd.sampling == StillSampling::Matched {
         r.set_settings(matched(r.settings()))?;
     }
+    r.set_settings(cmd.render.with_still_sampler(r.settings(), spacing))?;
     r.set_settings(cmd.render.with_default_reconstruction(r.settings(), spacing))?;
     let s = r.settings();
     if cmd.render.normals.is_none()

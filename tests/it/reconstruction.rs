@@ -697,3 +697,37 @@ fn rotate_takes_the_cubic_on_thick_slices() {
     assert_eq!(run(&[]).0, "linear");
     assert_eq!(run(&["--phantom-spacing", "1,1,3", "--normals", "gradient"]), ("cubic".to_string(), "gradient".to_string()));
 }
+
+/// `render --method rle` of a thick-slice volume in iso mode takes the
+/// post-classified sampler (Deluxe P) unless --deluxe is given: its still is
+/// `--deluxe P,M`'s, and nearer the ray-cast iso surface (`--method brute`)
+/// than the pre-classified still, whose slices draw as bands. An isotropic
+/// volume, blend mode and an explicit --deluxe keep pre-classification.
+#[test]
+fn render_rle_takes_post_classification_on_thick_slices() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |extra: &[&str], name: &str| {
+        let path = dir.path().join(name);
+        let out = assert_cmd::Command::cargo_bin("shearwarp")
+            .unwrap()
+            .args(["render", "--phantom", "sphere", "--phantom-dims", "48,48,48", "--size", "96", "--json", "-o"])
+            .arg(&path)
+            .args(extra)
+            .assert()
+            .success();
+        let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+        (json["deluxe"].as_str().unwrap().to_string(), image::open(&path).unwrap().to_rgb8())
+    };
+    let thick = ["--phantom-spacing", "1,1,3"];
+    let (label, default) = render(&[&thick[..], &["--method", "rle"]].concat(), "default.png");
+    assert_eq!(label, "MP");
+    let (_, post) = render(&[&thick[..], &["--method", "rle", "--deluxe", "P,M"]].concat(), "post.png");
+    assert!(default == post, "the default still is not --deluxe P,M's");
+    let (label, pre) = render(&[&thick[..], &["--method", "rle", "--deluxe", "S"]].concat(), "pre.png");
+    assert_eq!(label, "M");
+    let (_, surface) = render(&[&thick[..], &["--method", "brute"]].concat(), "brute.png");
+    let off = |a: &image::RgbImage| a.as_raw().iter().zip(surface.as_raw()).map(|(&x, &y)| (x as f64 - y as f64).abs()).sum::<f64>();
+    assert!(off(&default) < 0.5 * off(&pre), "post {} against pre {}", off(&default), off(&pre));
+    assert_eq!(render(&["--method", "rle"], "iso.png").0, "M");
+    assert_eq!(render(&[&thick[..], &["--method", "rle", "--mode", "blend"]].concat(), "blend.png").0, "M");
+}

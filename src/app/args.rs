@@ -505,18 +505,27 @@ fn thick_slices(spacing: [f32; 3]) -> bool {
 }
 
 impl RenderArgs {
-    /// The settings `s` of a still frame (`render`) of a volume of voxel
-    /// `spacing` when --deluxe is not given: on the RLE path in iso mode over
-    /// thick slices ([`thick_slices`]) the post-classified sampler (Deluxe
-    /// P), else `s`'s. Pre-classification interpolates each voxel's classified
-    /// opacity, so across slices several voxels apart a sharp transfer
-    /// function turns every slice into a band; P classifies the interpolated
-    /// density instead.
-    pub fn with_still_sampler(&self, s: Settings, spacing: [f32; 3]) -> Settings {
-        if self.deluxe.is_some() || !thick_slices(spacing) || !s.method.is_rle() || s.mode != Mode::Iso {
-            return s;
+    /// The settings `s` (its reconstruction chosen) of a still frame
+    /// (`render`) of a volume of voxel `spacing`, where the options leave it
+    /// open:
+    /// - without --deluxe, on the RLE path in iso mode over thick slices
+    ///   ([`thick_slices`]), the post-classified sampler (Deluxe P):
+    ///   pre-classification interpolates each voxel's classified opacity, so
+    ///   across slices several voxels apart a sharp transfer function turns
+    ///   every slice into a band; P classifies the interpolated density;
+    /// - without --normals, the cubic iso ray cast follows the cubic to its
+    ///   first crossing and shades it by the cubic's own gradient (the
+    ///   preview's codes are for speed).
+    pub fn with_still_settings(&self, s: Settings, spacing: [f32; 3]) -> Settings {
+        let iso = s.mode == Mode::Iso;
+        let mut s = s;
+        if self.deluxe.is_none() && thick_slices(spacing) && s.method.is_rle() && iso {
+            s.deluxe = shearwarp::Deluxe { post: true, ..s.deluxe };
         }
-        Settings { deluxe: shearwarp::Deluxe { post: true, ..s.deluxe }, ..s }
+        if self.normals.is_none() && s.reconstruction == shearwarp::kernels::Reconstruction::Cubic && s.method.is_raycast() && iso {
+            s.normals = Normals::Gradient;
+        }
+        s
     }
 
     /// The settings `s` with the reconstruction a command takes for a volume

@@ -291,18 +291,8 @@ pub fn run_render(cmd: &RenderCmd) -> Result<()> {
     if cmd.sampling == StillSampling::Matched {
         r.set_settings(matched(r.settings()))?;
     }
-    r.set_settings(cmd.render.with_still_sampler(r.settings(), spacing))?;
     r.set_settings(cmd.render.with_default_reconstruction(r.settings(), spacing))?;
-    let s = r.settings();
-    if cmd.render.normals.is_none()
-        && s.reconstruction == shearwarp::kernels::Reconstruction::Cubic
-        && s.method.is_raycast()
-        && s.mode == shearwarp::Mode::Iso
-    {
-        // a still frame follows the cubic to its first crossing and shades
-        // it by the cubic's own gradient (the preview's codes are for speed)
-        r.set_settings(Settings { normals: shearwarp::render::Normals::Gradient, ..s })?;
-    }
+    r.set_settings(cmd.render.with_still_settings(r.settings(), spacing))?;
     let mut img = Image::new(cam.size[0], cam.size[1]);
     let build_ms = prepare_first(&mut r, &cam)?;
     let (stats, geometry) = scene.render(&mut r, &cam, &mut img)?;

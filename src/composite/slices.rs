@@ -18,6 +18,7 @@ use crate::composite::Rect;
 use crate::composite::{Intermediate, OpacityTable, RayRow, composite_premultiplied, terminated};
 use crate::encode::rle::runs::{Cursor, INF};
 use crate::encode::rle::{PostTables, Preclass, RleCache, RleVolume, RleVoxel, ViewTables, VoxelSource};
+use crate::kernels::CpuLevel;
 use crate::view::plan::{FramePlan, MapKind, MidMap, RayLimits, floor_i64};
 
 /// What a sample is made of (a sampler of the one slice traversal): each
@@ -384,7 +385,7 @@ fn composite_row<S: Sampler, const LIM: bool>(
             ci = nx - 1;
             continue;
         }
-        ci = span::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], t, row, px, links);
+        ci = span_at::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], t, row, px, links);
         if ci > ci_hi {
             return;
         }
@@ -399,8 +400,64 @@ fn composite_row<S: Sampler, const LIM: bool>(
 /// same kind of run, so each is a plain loop over one or two voxel slices
 /// ([`segment`]). The right column of one pixel is the left column of the next,
 /// so each voxel is shaded once per row.
+///
+/// Runs [`span_avx2`] when the row says so (`row.avx2`), else [`span`]: the
+/// same code and float operations, so the same pixels bit for bit.
+#[inline(always)]
+fn span_at<S: Sampler, const LIM: bool>(
+    bot: &mut Cursor,
+    top: &mut Cursor,
+    ci: [u32; 2],
+    t: &S,
+    row: &SliceRow,
+    px: &mut [[f32; 4]],
+    links: &mut [u32],
+) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    if row.avx2 {
+        // SAFETY: `row.avx2` is set only from a CPU level capped to what
+        // this CPU has (`RleFrame::avx2`), and that level has AVX2.
+        return unsafe { span_avx2::<S, LIM>(bot, top, ci, t, row, px, links) };
+    }
+    span::<S, LIM>(bot, top, ci, t, row, px, links)
+}
+
+/// [`span_body`] in the plain build.
 #[inline(never)] // one small function per span keeps the loops' state in registers
 fn span<S: Sampler, const LIM: bool>(
+    bot: &mut Cursor,
+    top: &mut Cursor,
+    ci: [u32; 2],
+    t: &S,
+    row: &SliceRow,
+    px: &mut [[f32; 4]],
+    links: &mut [u32],
+) -> u32 {
+    span_body::<S, LIM>(bot, top, ci, t, row, px, links)
+}
+
+/// [`span_body`] compiled for AVX2: the same vector operations in VEX
+/// encoding (three operands, loads folded into them, broadcasts from
+/// memory; no fused multiply-add, so every sum and product rounds as in
+/// [`span`]). Callers must run on a CPU with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,avx2")]
+#[inline(never)]
+unsafe fn span_avx2<S: Sampler, const LIM: bool>(
+    bot: &mut Cursor,
+    top: &mut Cursor,
+    ci: [u32; 2],
+    t: &S,
+    row: &SliceRow,
+    px: &mut [[f32; 4]],
+    links: &mut [u32],
+) -> u32 {
+    span_body::<S, LIM>(bot, top, ci, t, row, px, links)
+}
+
+/// The body of [`span`] and [`span_avx2`].
+#[inline(always)]
+fn span_body<S: Sampler, const LIM: bool>(
     bot: &mut Cursor,
     top: &mut Cursor,
     [mut ci, ci_hi]: [u32; 2],
@@ -487,6 +544,8 @@ struct SliceRow<'a> {
     w: Weights,
     ert: f32,
     lim: Limits<'a>,
+    /// Whether its spans run compiled for AVX2 ([`span_at`]).
+    avx2: bool,
 }
 
 /// The left column of the next pixel: its two voxels' colours (through
@@ -726,7 +785,7 @@ pub fn render_rle<S: Sampler>(
     links: &mut Vec<u32>,
     out: &mut Intermediate,
 ) {
-    let SliceFrame { plan, ert, rect } = frame;
+    let SliceFrame { plan, ert, rect, cpu } = frame;
     out.seal(rect);
     let Some(r) = rect else { return };
     let gw = out.size[0];
@@ -740,7 +799,8 @@ pub fn render_rle<S: Sampler>(
     }
     // focus+context: the focus's sampler where the plan has focus intervals
     let focus = focus.filter(|_| plan.focus.is_some());
-    let fr = RleFrame { rle, tables, focus, plan, pad: plan.grid.pad as isize, ert, r, gw, lw };
+    let avx2 = cpu.capped().has_avx2();
+    let fr = RleFrame { rle, tables, focus, plan, pad: plan.grid.pad as isize, ert, avx2, r, gw, lw };
     let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
     let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];
     let bands = px.par_chunks_mut(gw * BAND).zip(depth.par_chunks_mut(gw * BAND)).zip(links[..rows * lw].par_chunks_mut(lw * BAND));
@@ -749,13 +809,16 @@ pub fn render_rle<S: Sampler>(
 
 /// What a frame of the slice traversal composites: the plan's view, the
 /// early ray termination threshold (a pixel whose opacity reaches `ert`
-/// takes no more samples) and the rectangle of the intermediate image
-/// written (`None`: nothing is visible).
+/// takes no more samples), the rectangle of the intermediate image
+/// written (`None`: nothing is visible) and the CPU level.
 #[derive(Clone, Copy, Debug)]
 pub struct SliceFrame<'a> {
     pub plan: &'a FramePlan,
     pub ert: f32,
     pub rect: Option<Rect>,
+    /// The CPU level the traversal's kernels run at (capped to what the CPU
+    /// has; every level composites the same image bit for bit).
+    pub cpu: CpuLevel,
 }
 
 /// One intermediate row of a scaled slice ([`RleFrame::scaled_row`]):
@@ -791,6 +854,8 @@ struct RleFrame<'a, S> {
     plan: &'a FramePlan,
     pad: isize,
     ert: f32,
+    /// Whether the spans run compiled for AVX2 ([`span_at`]).
+    avx2: bool,
     /// The rectangle written.
     r: Rect,
     /// Row stride of the intermediate image and of the links.
@@ -888,24 +953,30 @@ impl<S: Sampler> RleFrame<'_, S> {
                         focus_runs(fl.row(q_first + row), [k as u32; 2], first as i64 + op, hi as i64 + op, |x0, x1, f| {
                             let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
                             let (lo, hi, t) = ((x0 - op) as u32, (x1 - op) as u32, if f { ft } else { self.tables });
-                            let ert = self.ert;
+                            let (ert, avx2) = (self.ert, self.avx2);
                             match limits {
-                                None => {
-                                    composite_row::<S, false>(cb, ct, [lo, hi], t, &SliceRow { off, w, ert, lim: Limits::NONE }, prow, lrow)
-                                }
+                                None => composite_row::<S, false>(
+                                    cb,
+                                    ct,
+                                    [lo, hi],
+                                    t,
+                                    &SliceRow { off, w, ert, lim: Limits::NONE, avx2 },
+                                    prow,
+                                    lrow,
+                                ),
                                 Some(l) => {
                                     let lim = Limits::of(l, q_first + row, r, k);
-                                    composite_row::<S, true>(cb, ct, [lo, hi], t, &SliceRow { off, w, ert, lim }, prow, lrow)
+                                    composite_row::<S, true>(cb, ct, [lo, hi], t, &SliceRow { off, w, ert, lim, avx2 }, prow, lrow)
                                 }
                             }
                         })
                     }
                     (None, _, _) => {
-                        let sr = SliceRow { off, w, ert: self.ert, lim: Limits::NONE };
+                        let sr = SliceRow { off, w, ert: self.ert, lim: Limits::NONE, avx2: self.avx2 };
                         composite_row::<S, false>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow)
                     }
                     (Some(l), _, _) => {
-                        let sr = SliceRow { off, w, ert: self.ert, lim: Limits::of(l, q_first + row, r, k) };
+                        let sr = SliceRow { off, w, ert: self.ert, lim: Limits::of(l, q_first + row, r, k), avx2: self.avx2 };
                         composite_row::<S, true>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow)
                     }
                 }
@@ -1407,7 +1478,7 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
     slice_buf: &mut Vec<[f32; 4]>,
     out: &mut Intermediate,
 ) {
-    let SliceFrame { plan, ert, rect } = frame;
+    let SliceFrame { plan, ert, rect, .. } = frame;
     out.seal(rect);
     let Some(r) = rect else { return };
     let [ni, nj, _] = stack.slices().n;
@@ -1520,16 +1591,17 @@ pub fn render_brute_preclassified<S: Sampler, V: VoxelSource + ?Sized>(
 impl RleCache {
     /// Composites view `f` from the encoding of its axis (see [`render_rle`]);
     /// an axis that is not encoded (under the plan's permutation) renders transparent.
-    pub fn render(&mut self, plan: &FramePlan, ert: f32, rect: Option<Rect>, out: &mut Intermediate) {
+    /// `cpu`: the level its kernels run at (see [`SliceFrame::cpu`]).
+    pub fn render(&mut self, plan: &FramePlan, ert: f32, rect: Option<Rect>, cpu: CpuLevel, out: &mut Intermediate) {
         let focused = self.focus.is_some();
         match (self.axes[plan.view.axis].as_ref().filter(|e| e.perm == plan.view.perm), &self.post_tables) {
             (Some(rle), Some(pt)) if self.post.is_some() => {
                 let ft = self.focus_post_tables.as_deref().filter(|_| focused);
-                render_rle(rle, pt.as_ref(), ft, SliceFrame { plan, ert, rect }, &mut self.links, out)
+                render_rle(rle, pt.as_ref(), ft, SliceFrame { plan, ert, rect, cpu }, &mut self.links, out)
             }
             (Some(rle), _) => {
                 let ft = Some(&self.focus_tables).filter(|_| focused);
-                render_rle(rle, &self.tables, ft, SliceFrame { plan, ert, rect }, &mut self.links, out)
+                render_rle(rle, &self.tables, ft, SliceFrame { plan, ert, rect, cpu }, &mut self.links, out)
             }
             (None, _) => out.seal(None),
         }
@@ -1548,11 +1620,27 @@ impl RleCache {
         match (&self.pre, &self.post_tables) {
             (Some(pre), Some(pt)) if self.post.is_some() => {
                 let focus = self.focus.as_ref().zip(self.focus_post_tables.as_deref());
-                render_brute_preclassified(stack, pre, pt.as_ref(), focus, SliceFrame { plan, ert, rect }, &mut self.slice_buf, out)
+                render_brute_preclassified(
+                    stack,
+                    pre,
+                    pt.as_ref(),
+                    focus,
+                    SliceFrame { plan, ert, rect, cpu: CpuLevel::Scalar },
+                    &mut self.slice_buf,
+                    out,
+                )
             }
             (Some(pre), _) => {
                 let focus = self.focus.as_ref().map(|f| (f, &self.focus_tables));
-                render_brute_preclassified(stack, pre, &self.tables, focus, SliceFrame { plan, ert, rect }, &mut self.slice_buf, out)
+                render_brute_preclassified(
+                    stack,
+                    pre,
+                    &self.tables,
+                    focus,
+                    SliceFrame { plan, ert, rect, cpu: CpuLevel::Scalar },
+                    &mut self.slice_buf,
+                    out,
+                )
             }
             (None, _) => out.seal(None),
         }

@@ -172,7 +172,7 @@ impl Renderer {
                     let t = Instant::now();
                     inter.prepare(plan.grid.size);
                     match (settings.method, bcc) {
-                        (Method::Rle, _) => rle.render(plan, settings.ert, rect, inter),
+                        (Method::Rle, _) => rle.render(plan, settings.ert, rect, settings.cpu, inter),
                         (_, Some(b)) => rle.render_brute(b, plan, settings.ert, rect, inter),
                         // (the encoding's normal codes: the reconstruction's)
                         (_, None) => rle.render_brute(&StackNormals::new(stack, settings.reconstruction), plan, settings.ert, rect, inter),

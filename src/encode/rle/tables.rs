@@ -12,8 +12,8 @@ use crate::data::normals::{NORMAL_CODES, boxed, decode_normal};
 /// indexed with masks, so lookups need no bounds checks.
 #[derive(Clone, Debug)]
 pub struct ViewTables {
-    /// Per class node: opacity-corrected premultiplied colour `[α'r, α'g, α'b, α']`.
-    lut: Box<[[f32; 4]; TABLE_NODES]>,
+    /// Per class node: its opacity-corrected premultiplied colour, split for shading.
+    lut: Box<[ClassEntry; TABLE_NODES]>,
     /// Per normal code (shared with the binary path's table shading).
     shade: ShadeTable,
     lut_key: Option<(u64, u32)>,
@@ -21,7 +21,7 @@ pub struct ViewTables {
 
 impl Default for ViewTables {
     fn default() -> Self {
-        ViewTables { lut: boxed([0.0; 4]), shade: ShadeTable::default(), lut_key: None }
+        ViewTables { lut: boxed(ClassEntry::default()), shade: ShadeTable::default(), lut_key: None }
     }
 }
 
@@ -38,8 +38,7 @@ impl ViewTables {
                 let a = pre.alpha[i];
                 // α' = 1 − (1 − α)^ratio = 1 − exp(ratio · ln(1 − α))
                 let a = if a <= 0.0 || a >= 1.0 || ratio == 1.0 { a.clamp(0.0, 1.0) } else { 1.0 - (ratio * pre.ln_clear[i]).exp() };
-                let c = pre.rgb[i];
-                *out = [a * c[0], a * c[1], a * c[2], a];
+                *out = ClassEntry::new(a, pre.rgb[i]);
             }
             self.lut_key = lut_key;
             rebuilt = true;
@@ -51,9 +50,8 @@ impl ViewTables {
     #[inline(always)]
     pub fn voxel(&self, v: RleVoxel) -> [f32; 4] {
         // classes are < TABLE_NODES, a power of two
-        let c = self.lut[v.class as usize & (TABLE_NODES - 1)];
         let [d, s] = self.shade.get(v.normal);
-        shade_voxel(c, d, s)
+        self.lut[v.class as usize & (TABLE_NODES - 1)].shade(d, s)
     }
 
     /// [`ViewTables::voxel`], transparent black for `None`.
@@ -66,37 +64,62 @@ impl ViewTables {
     }
 }
 
-/// A voxel's premultiplied colour `c = [α'r, α'g, α'b, α']` shaded by its
-/// entry `[d, s]`: `c·[d, d, d, 1] + α'·[s, s, s, 0]`, each colour lane
-/// `c·d + α'·s` and the alpha lane `α'` (what `α'·1 + α'·0` is for every
-/// finite or NaN `α'`; the table's are in [0, 1] or NaN).
-#[inline(always)]
-fn shade_voxel(c: [f32; 4], d: f32, s: f32) -> [f32; 4] {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::*;
-        // SAFETY: SSE belongs to the x86-64 baseline, enabled in every build
-        // for this architecture, which is all these register-only intrinsics
-        // need. Exercised by `shaded_voxels_are_the_formula` and every
-        // pre-classified RLE frame.
-        unsafe {
-            let cv = _mm_loadu_ps(c.as_ptr());
-            let a = _mm_shuffle_ps::<0xFF>(cv, cv);
-            let o = _mm_add_ps(_mm_mul_ps(cv, _mm_set1_ps(d)), _mm_mul_ps(a, _mm_set1_ps(s)));
-            // [o0, o1, o2, α']: [o2, o2, α', α'] then its lanes 0 and 2 after o0, o1
-            let t = _mm_shuffle_ps::<0b11_11_10_10>(o, cv);
+/// A class node's opacity-corrected premultiplied colour `c = [α'r, α'g,
+/// α'b, α']`, kept as the three vectors its shading adds up:
+/// `rgb = [α'r, α'g, α'b, 0]`, `a = [α', α', α', 0]`, `a3 = [0, 0, 0, α']`.
+/// A voxel shaded by its entry `[d, s]` is then `(rgb·d + a·s) + a3`: each
+/// colour lane `α'r·d + α'·s`, the alpha lane `α'`, as `c·[d, d, d, 1] +
+/// α'·[s, s, s, 0]` is, bit for bit (adding `+0` keeps every value but `−0`,
+/// and a sum of products of non-negative numbers is never `−0`: [`ClassEntry::new`]
+/// stores an opacity of `−0` as `+0`), in two products and two sums with no
+/// lane moves.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(16))]
+struct ClassEntry {
+    rgb: [f32; 4],
+    a: [f32; 4],
+    a3: [f32; 4],
+}
+
+impl ClassEntry {
+    /// The entry of opacity `a` (in [0, 1], or NaN) and colour `rgb` (each in [0, 1]).
+    fn new(a: f32, rgb: [f32; 3]) -> Self {
+        // −0 as +0 (see the type's docs); NaN stays
+        let a = if a == 0.0 { 0.0 } else { a };
+        ClassEntry { rgb: [a * rgb[0], a * rgb[1], a * rgb[2], 0.0], a: [a, a, a, 0.0], a3: [0.0, 0.0, 0.0, a] }
+    }
+
+    /// The node's colour shaded by the entry `[d, s]` (both finite and
+    /// non-negative, as every shade-table entry is).
+    #[inline(always)]
+    fn shade(&self, d: f32, s: f32) -> [f32; 4] {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            // SAFETY: SSE belongs to the x86-64 baseline, enabled in every
+            // build for this architecture; the loads read the entry's own
+            // 16-byte aligned arrays (`repr(align(16))`, each array 16 bytes
+            // at an offset that is a multiple of 16). Exercised by
+            // `class_entries_shade_as_the_formula` and every pre-classified
+            // RLE frame.
+            unsafe {
+                let o = _mm_add_ps(
+                    _mm_mul_ps(_mm_load_ps(self.rgb.as_ptr()), _mm_set1_ps(d)),
+                    _mm_mul_ps(_mm_load_ps(self.a.as_ptr()), _mm_set1_ps(s)),
+                );
+                let mut out = [0f32; 4];
+                _mm_storeu_ps(out.as_mut_ptr(), _mm_add_ps(o, _mm_load_ps(self.a3.as_ptr())));
+                out
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
             let mut out = [0f32; 4];
-            _mm_storeu_ps(out.as_mut_ptr(), _mm_shuffle_ps::<0b10_00_01_00>(o, t));
+            for i in 0..4 {
+                out[i] = (self.rgb[i] * d + self.a[i] * s) + self.a3[i];
+            }
             out
         }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        let mut out = c;
-        for i in 0..3 {
-            out[i] = c[i] * d + c[3] * s;
-        }
-        out
     }
 }
 
@@ -199,11 +222,13 @@ impl PostTables {
 mod tests {
     use super::*;
 
-    /// [`shade_voxel`] is `c·[d, d, d, 1] + α'·[s, s, s, 0]` lane by lane,
-    /// bit for bit: colours and entries over their ranges and beyond, zero
-    /// of either sign, and a NaN opacity.
+    /// A [`ClassEntry`]'s shade is `c·[d, d, d, 1] + α'·[s, s, s, 0]` lane
+    /// by lane with `c = [α'r, α'g, α'b, α']`, bit for bit, over the
+    /// tables' ranges: opacities and colours in [0, 1] (zero of either sign,
+    /// the smallest and largest), entries finite and non-negative, and a
+    /// NaN opacity.
     #[test]
-    fn shaded_voxels_are_the_formula() {
+    fn class_entries_shade_as_the_formula() {
         let formula = |c: [f32; 4], d: f32, s: f32| {
             let (dd, ss) = ([d, d, d, 1.0], [s, s, s, 0.0]);
             let mut out = [0f32; 4];
@@ -212,13 +237,18 @@ mod tests {
             }
             out
         };
-        let xs = [0.0, -0.0, 1.0, 0.5, 1e-30, 0.3333, 0.999_999_9, 2.5, 1e-7, 0.75];
+        let xs = [0.0, -0.0, 1.0, 0.5, 1e-30, 1e-45, 0.3333, 0.999_999_9, 1e-7, 0.75];
+        let entries = [0.0, 1.0, 0.5, 1e-30, 0.3333, 0.999_999_9, 2.5, 1e-7, 0.75, 3.4e38];
         let mut n = 0;
         for (i, &a) in xs.iter().chain([f32::NAN].iter()).enumerate() {
-            for (j, &d) in xs.iter().enumerate() {
-                for &s in &xs {
-                    let c = [xs[(i + j) % xs.len()] * a, xs[(i * 3 + 1) % xs.len()] * a, -xs[j] * 0.1, a];
-                    let (got, want) = (shade_voxel(c, d, s), formula(c, d, s));
+            for (j, &d) in entries.iter().enumerate() {
+                for &s in &entries {
+                    let rgb = [xs[(i + j) % xs.len()], xs[(i * 3 + 1) % xs.len()], xs[j % xs.len()]];
+                    let e = ClassEntry::new(a, rgb);
+                    // the premultiplied colour the table held before, of the stored opacity
+                    let a = e.a3[3];
+                    let c = [a * rgb[0], a * rgb[1], a * rgb[2], a];
+                    let (got, want) = (e.shade(d, s), formula(c, d, s));
                     for l in 0..4 {
                         assert!(
                             got[l].to_bits() == want[l].to_bits() || (got[l].is_nan() && want[l].is_nan()),

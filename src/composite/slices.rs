@@ -356,6 +356,7 @@ fn find(links: &mut [u32], x: usize) -> usize {
 /// through the runs. Between them, [`span`] composites the pixels that touch
 /// some non-transparent voxel.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn composite_row<S: Sampler, const LIM: bool>(
     mut bot: Cursor,
     mut top: Cursor,
@@ -364,6 +365,7 @@ fn composite_row<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
+    cache: &mut ScanCache,
 ) {
     let off = row.off;
     let mut ci = ci_lo;
@@ -385,7 +387,7 @@ fn composite_row<S: Sampler, const LIM: bool>(
             ci = nx - 1;
             continue;
         }
-        ci = span_at::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], t, row, px, links);
+        ci = span_at::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], t, row, px, links, cache);
         if ci > ci_hi {
             return;
         }
@@ -404,6 +406,7 @@ fn composite_row<S: Sampler, const LIM: bool>(
 /// Runs [`span_avx2`] when the row says so (`row.avx2`), else [`span`]: the
 /// same code and float operations, so the same pixels bit for bit.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn span_at<S: Sampler, const LIM: bool>(
     bot: &mut Cursor,
     top: &mut Cursor,
@@ -412,18 +415,20 @@ fn span_at<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
+    cache: &mut ScanCache,
 ) -> u32 {
     #[cfg(target_arch = "x86_64")]
     if row.avx2 {
         // SAFETY: `row.avx2` is set only from a CPU level capped to what
         // this CPU has (`RleFrame::avx2`), and that level has AVX2.
-        return unsafe { span_avx2::<S, LIM>(bot, top, ci, t, row, px, links) };
+        return unsafe { span_avx2::<S, LIM>(bot, top, ci, t, row, px, links, cache) };
     }
-    span::<S, LIM>(bot, top, ci, t, row, px, links)
+    span::<S, LIM>(bot, top, ci, t, row, px, links, cache)
 }
 
 /// [`span_body`] in the plain build.
 #[inline(never)] // one small function per span keeps the loops' state in registers
+#[allow(clippy::too_many_arguments)]
 fn span<S: Sampler, const LIM: bool>(
     bot: &mut Cursor,
     top: &mut Cursor,
@@ -432,8 +437,9 @@ fn span<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
+    cache: &mut ScanCache,
 ) -> u32 {
-    span_body::<S, LIM>(bot, top, ci, t, row, px, links)
+    span_body::<S, LIM>(bot, top, ci, t, row, px, links, cache)
 }
 
 /// [`span_body`] compiled for AVX2: the same vector operations in VEX
@@ -443,6 +449,7 @@ fn span<S: Sampler, const LIM: bool>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx,avx2")]
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
 unsafe fn span_avx2<S: Sampler, const LIM: bool>(
     bot: &mut Cursor,
     top: &mut Cursor,
@@ -451,12 +458,14 @@ unsafe fn span_avx2<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
+    cache: &mut ScanCache,
 ) -> u32 {
-    span_body::<S, LIM>(bot, top, ci, t, row, px, links)
+    span_body::<S, LIM>(bot, top, ci, t, row, px, links, cache)
 }
 
 /// The body of [`span`] and [`span_avx2`].
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn span_body<S: Sampler, const LIM: bool>(
     bot: &mut Cursor,
     top: &mut Cursor,
@@ -465,6 +474,7 @@ fn span_body<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
+    cache: &mut ScanCache,
 ) -> u32 {
     // the row's weights as a local copy: the loops below keep them in registers
     let (off, w, lim) = (row.off, row.w, row.lim);
@@ -490,9 +500,9 @@ fn span_body<S: Sampler, const LIM: bool>(
         let bv = if bin { &bot.vox[bot.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let tv = if tin { &top.vox[top.base.wrapping_add(c1) as usize..][..n] } else { &[][..] };
         let (want, done) = match (bin, tin) {
-            (true, true) => (n, segment::<S, true, true, LIM>(p, l, [bv, tv], &mut left, t, smp, lm)),
-            (true, false) => (n, segment::<S, true, false, LIM>(p, l, [bv, &[]], &mut left, t, smp, lm)),
-            (false, true) => (n, segment::<S, false, true, LIM>(p, l, [&[], tv], &mut left, t, smp, lm)),
+            (true, true) => (n, segment::<S, true, true, LIM>(p, l, [bv, tv], &mut left, t, smp, lm, cache.at(c1 as usize, n))),
+            (true, false) => (n, segment::<S, true, false, LIM>(p, l, [bv, &[]], &mut left, t, smp, lm, cache.at(c1 as usize, n))),
+            (false, true) => (n, segment::<S, false, true, LIM>(p, l, [&[], tv], &mut left, t, smp, lm, cache.at(c1 as usize, n))),
             (false, false) => {
                 if !left.any {
                     return ci; // all four voxels transparent: back to run skipping
@@ -502,7 +512,7 @@ fn span_body<S: Sampler, const LIM: bool>(
                     holes: if LIM && !lm.holes.is_empty() { &lm.holes[..1] } else { &[][..] },
                     k: lm.k,
                 };
-                (1, segment::<S, false, false, LIM>(&mut p[..1], &mut l[..1], [&[], &[]], &mut left, t, smp, lm1))
+                (1, segment::<S, false, false, LIM>(&mut p[..1], &mut l[..1], [&[], &[]], &mut left, t, smp, lm1, cache.at(0, 0)))
             }
         };
         ci += done as u32;
@@ -554,6 +564,56 @@ struct Left {
     b: [f32; 4],
     t: [f32; 4],
     any: bool,
+}
+
+/// A band's voxels shaded by [`Sampler::voxel`], by voxel column: the top
+/// scanline's of the row last composited (`stamp[c]` names the row that
+/// wrote `shaded[c]`). The next row's bottom scanline is that row's top
+/// one, so it reads a voxel there instead of shading it again (the same
+/// value, bit for bit); rows are counted from 2 up, so a zero stamp never
+/// names the row before.
+struct ScanCache {
+    shaded: Vec<[f32; 4]>,
+    stamp: Vec<u32>,
+    row: u32,
+}
+
+impl ScanCache {
+    /// A cache over `n` voxel columns.
+    fn new(n: usize) -> Self {
+        ScanCache { shaded: vec![[0.0; 4]; n], stamp: vec![0; n], row: 2 }
+    }
+
+    /// The next row of the same slice and sampler: it reads what this one wrote.
+    #[inline(always)]
+    fn next_row(&mut self) {
+        self.row = self.row.wrapping_add(1);
+    }
+
+    /// A row that must read nothing written so far (another slice, another
+    /// sampler).
+    #[inline(always)]
+    fn forget(&mut self) {
+        self.row = self.row.wrapping_add(2);
+        if self.row < 2 {
+            // wrapped (after four billion rows): no stamp may name a row again
+            self.stamp.fill(0);
+            self.row = 2;
+        }
+    }
+
+    /// Columns `c .. c + n` for the current row.
+    #[inline(always)]
+    fn at(&mut self, c: usize, n: usize) -> ScanRow<'_> {
+        ScanRow { shaded: &mut self.shaded[c..c + n], stamp: &mut self.stamp[c..c + n], row: self.row }
+    }
+}
+
+/// A [`ScanCache`]'s columns of one segment and the row compositing them.
+struct ScanRow<'a> {
+    shaded: &'a mut [[f32; 4]],
+    stamp: &'a mut [u32],
+    row: u32,
 }
 
 /// The ray limits of a row's pixels and the slice being composited: with
@@ -654,7 +714,12 @@ impl RowComposite<'_> {
 /// `bv` / `tv` (bottom / top scanline; `B` / `T` false: transparent, the slice
 /// is unused), skipping (`LIM`) pixels whose ray limits exclude the slice.
 /// Stops before the first opaque pixel; returns how many it did.
+///
+/// A bottom voxel the row before shaded as its top one comes from `scan`
+/// (the band's [`ScanCache`] over these columns); each top voxel shaded
+/// goes into it for the next row.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
     px: &mut [[f32; 4]],
     links: &mut [u32],
@@ -663,6 +728,7 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
     t: &S,
     smp: &SliceSamples,
     lim: Limits,
+    scan: ScanRow,
 ) -> usize {
     let (w, ert) = (smp.w, smp.ert);
     // exact lengths, so the loop below needs no bounds checks
@@ -670,6 +736,7 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
     let links = &mut links[..n];
     let bv = &bv[..if B { n } else { 0 }];
     let tv = &tv[..if T { n } else { 0 }];
+    let (shaded, stamp, this) = (&mut scan.shaded[..if B || T { n } else { 0 }], &mut scan.stamp[..if B || T { n } else { 0 }], scan.row);
     let (mut lb, mut lt) = (left.b, left.t);
     let mut done = n;
     for s in 0..n {
@@ -677,8 +744,20 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
             done = s;
             break;
         }
-        let rb = if B { t.voxel(bv[s]) } else { S::MISSING };
-        let rt = if T { t.voxel(tv[s]) } else { S::MISSING };
+        let rb = if !B {
+            S::MISSING
+        } else if stamp[s] == this.wrapping_sub(1) {
+            shaded[s]
+        } else {
+            t.voxel(bv[s])
+        };
+        let rt = if T {
+            let v = t.voxel(tv[s]);
+            (shaded[s], stamp[s]) = (v, this);
+            v
+        } else {
+            S::MISSING
+        };
         let [rb, rt] = t.column(rb, rt);
         let inside = !LIM || lim.keeps(s);
         if inside {
@@ -889,8 +968,11 @@ impl<S: Sampler> RleFrame<'_, S> {
             return;
         }
         let nrows = px.len() / gw;
+        let mut cache = ScanCache::new(ni);
         let mut prev: Option<usize> = None;
         for k in self.plan.front_to_back() {
+            // a slice's first row reads nothing shaded for another slice
+            cache.forget();
             // Deluxe I: the intermediate samples between the last slice and this one
             if let Some(kp) = prev.filter(|_| self.plan.intermediate()) {
                 self.mid_slice(kp.min(k), q_first, px, links);
@@ -921,6 +1003,8 @@ impl<S: Sampler> RleFrame<'_, S> {
             }
             let fj = sp.floor[1] as isize;
             for row in 0..nrows {
+                // this row's bottom scanline is the last row's top one
+                cache.next_row();
                 let cj = (q_first + row) as isize - self.pad + fj;
                 if cj < 0 || cj > nj as isize - 2 || cj + 1 < bb[2] as isize || cj > bb[3] as isize {
                     continue;
@@ -954,30 +1038,25 @@ impl<S: Sampler> RleFrame<'_, S> {
                             let (cb, ct) = (rle.cursor(s), rle.cursor(s + 1));
                             let (lo, hi, t) = ((x0 - op) as u32, (x1 - op) as u32, if f { ft } else { self.tables });
                             let (ert, avx2) = (self.ert, self.avx2);
-                            match limits {
-                                None => composite_row::<S, false>(
-                                    cb,
-                                    ct,
-                                    [lo, hi],
-                                    t,
-                                    &SliceRow { off, w, ert, lim: Limits::NONE, avx2 },
-                                    prow,
-                                    lrow,
-                                ),
-                                Some(l) => {
-                                    let lim = Limits::of(l, q_first + row, r, k);
-                                    composite_row::<S, true>(cb, ct, [lo, hi], t, &SliceRow { off, w, ert, lim, avx2 }, prow, lrow)
-                                }
+                            let lim = limits.as_ref().map_or(Limits::NONE, |l| Limits::of(l, q_first + row, r, k));
+                            let sr = SliceRow { off, w, ert, lim, avx2 };
+                            // the runs' samplers differ: no row reads another's shaded voxels
+                            cache.forget();
+                            if limits.is_some() {
+                                composite_row::<S, true>(cb, ct, [lo, hi], t, &sr, prow, lrow, &mut cache)
+                            } else {
+                                composite_row::<S, false>(cb, ct, [lo, hi], t, &sr, prow, lrow, &mut cache)
                             }
+                            cache.forget();
                         })
                     }
                     (None, _, _) => {
                         let sr = SliceRow { off, w, ert: self.ert, lim: Limits::NONE, avx2: self.avx2 };
-                        composite_row::<S, false>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow)
+                        composite_row::<S, false>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow, &mut cache)
                     }
                     (Some(l), _, _) => {
                         let sr = SliceRow { off, w, ert: self.ert, lim: Limits::of(l, q_first + row, r, k), avx2: self.avx2 };
-                        composite_row::<S, true>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow)
+                        composite_row::<S, true>(cb, ct, [first as u32, hi as u32], self.tables, &sr, prow, lrow, &mut cache)
                     }
                 }
             }

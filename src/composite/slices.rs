@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use crate::composite::Rect;
 use crate::composite::{Intermediate, OpacityTable, RayRow, composite_premultiplied, terminated};
 use crate::encode::rle::runs::{Cursor, INF};
-use crate::encode::rle::{PostTables, Preclass, RleCache, RleVolume, RleVoxel, ViewTables, VoxelSource};
+use crate::encode::rle::{PostTables, Preclass, RleCache, RleScratch, RleVolume, RleVoxel, ViewTables, VoxelSource};
 use crate::kernels::CpuLevel;
 use crate::view::plan::{FramePlan, MapKind, MidMap, RayLimits, floor_i64};
 
@@ -365,7 +365,7 @@ fn composite_row<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
-    cache: &mut ScanCache,
+    cache: &mut ScanCache<'_>,
 ) {
     let off = row.off;
     let mut ci = ci_lo;
@@ -415,7 +415,7 @@ fn span_at<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
-    cache: &mut ScanCache,
+    cache: &mut ScanCache<'_>,
 ) -> u32 {
     #[cfg(target_arch = "x86_64")]
     if row.avx2 {
@@ -437,7 +437,7 @@ fn span<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
-    cache: &mut ScanCache,
+    cache: &mut ScanCache<'_>,
 ) -> u32 {
     span_body::<S, LIM>(bot, top, ci, t, row, px, links, cache)
 }
@@ -458,7 +458,7 @@ unsafe fn span_avx2<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
-    cache: &mut ScanCache,
+    cache: &mut ScanCache<'_>,
 ) -> u32 {
     span_body::<S, LIM>(bot, top, ci, t, row, px, links, cache)
 }
@@ -474,7 +474,7 @@ fn span_body<S: Sampler, const LIM: bool>(
     row: &SliceRow,
     px: &mut [[f32; 4]],
     links: &mut [u32],
-    cache: &mut ScanCache,
+    cache: &mut ScanCache<'_>,
 ) -> u32 {
     // the row's weights as a local copy: the loops below keep them in registers
     let (off, w, lim) = (row.off, row.w, row.lim);
@@ -572,16 +572,18 @@ struct Left {
 /// one, so it reads a voxel there instead of shading it again (the same
 /// value, bit for bit); rows are counted from 2 up, so a zero stamp never
 /// names the row before.
-struct ScanCache {
-    shaded: Vec<[f32; 4]>,
-    stamp: Vec<u32>,
+struct ScanCache<'a> {
+    shaded: &'a mut [[f32; 4]],
+    stamp: &'a mut [u32],
     row: u32,
 }
 
-impl ScanCache {
-    /// A cache over `n` voxel columns.
-    fn new(n: usize) -> Self {
-        ScanCache { shaded: vec![[0.0; 4]; n], stamp: vec![0; n], row: 2 }
+impl<'a> ScanCache<'a> {
+    /// A cache over the voxel columns of `shaded` and `stamp` (the same
+    /// length; the stamps are cleared).
+    fn new(shaded: &'a mut [[f32; 4]], stamp: &'a mut [u32]) -> Self {
+        stamp.fill(0);
+        ScanCache { shaded, stamp, row: 2 }
     }
 
     /// The next row of the same slice and sampler: it reads what this one wrote.
@@ -854,14 +856,14 @@ fn clear_rows(px: &mut [[f32; 4]], depth: &mut [f32], gw: usize, r: &Rect) {
 /// of the rectangle written, transparent where nothing composited; depth
 /// NaN) and seals it, with `tables` (and `focus`'s sampler inside the plan's
 /// focus intervals).
-/// `links` is scratch space, sized for the whole grid on first use and reused
-/// across frames.
+/// `scratch` is sized for the whole grid on first use and reused across
+/// frames.
 pub fn render_rle<S: Sampler>(
     rle: &RleVolume,
     tables: &S,
     focus: Option<&S>,
     frame: SliceFrame,
-    links: &mut Vec<u32>,
+    scratch: &mut RleScratch,
     out: &mut Intermediate,
 ) {
     let SliceFrame { plan, ert, rect, cpu } = frame;
@@ -871,10 +873,18 @@ pub fn render_rle<S: Sampler>(
     let width = r.p1 - r.p0 + 1;
     let lw = width + 1; // links per row, with the sentinel
     let rows = r.q1 - r.q0 + 1;
-    // sized for the whole grid once, so no later rectangle grows it
+    // sized for the whole grid once, so no later rectangle grows it (a
+    // translated slice's voxel columns fit in the grid's width)
+    let RleScratch { links, shaded, stamps } = scratch;
     let most = out.size[1] * (out.size[0] + 1);
     if links.len() < most {
         links.resize(most, 0);
+    }
+    let cols = rle.n[0].max(gw);
+    let most = out.size[1].div_ceil(BAND) * cols;
+    if shaded.len() < most {
+        shaded.resize(most, [0.0; 4]);
+        stamps.resize(most, 0);
     }
     // focus+context: the focus's sampler where the plan has focus intervals
     let focus = focus.filter(|_| plan.focus.is_some());
@@ -882,8 +892,11 @@ pub fn render_rle<S: Sampler>(
     let fr = RleFrame { rle, tables, focus, plan, pad: plan.grid.pad as isize, ert, avx2, r, gw, lw };
     let px = &mut out.rgba[r.q0 * gw..(r.q1 + 1) * gw];
     let depth = &mut out.depth[r.q0 * gw..(r.q1 + 1) * gw];
+    let caches = shaded.par_chunks_mut(cols).zip(stamps.par_chunks_mut(cols));
     let bands = px.par_chunks_mut(gw * BAND).zip(depth.par_chunks_mut(gw * BAND)).zip(links[..rows * lw].par_chunks_mut(lw * BAND));
-    bands.enumerate().for_each(|(b, ((px, depth), links))| fr.band(r.q0 + b * BAND, px, depth, links));
+    bands.zip(caches).enumerate().for_each(|(b, (((px, depth), links), (shaded, stamps)))| {
+        fr.band(r.q0 + b * BAND, px, depth, links, ScanCache::new(shaded, stamps))
+    });
 }
 
 /// What a frame of the slice traversal composites: the plan's view, the
@@ -958,7 +971,7 @@ impl<S: Sampler> RleFrame<'_, S> {
     /// Renders the band of intermediate rows from `q_first` (`px`, `depth` and
     /// `links` hold its rows): clears it, then composites every slice front to back.
     #[inline(never)]
-    fn band(&self, q_first: usize, px: &mut [[f32; 4]], depth: &mut [f32], links: &mut [u32]) {
+    fn band(&self, q_first: usize, px: &mut [[f32; 4]], depth: &mut [f32], links: &mut [u32], mut cache: ScanCache) {
         let (r, gw, lw, rle) = (&self.r, self.gw, self.lw, self.rle);
         let [ni, nj, _] = rle.n;
         clear_rows(px, depth, gw, r);
@@ -968,7 +981,6 @@ impl<S: Sampler> RleFrame<'_, S> {
             return;
         }
         let nrows = px.len() / gw;
-        let mut cache = ScanCache::new(ni);
         let mut prev: Option<usize> = None;
         for k in self.plan.front_to_back() {
             // a slice's first row reads nothing shaded for another slice
@@ -1676,11 +1688,11 @@ impl RleCache {
         match (self.axes[plan.view.axis].as_ref().filter(|e| e.perm == plan.view.perm), &self.post_tables) {
             (Some(rle), Some(pt)) if self.post.is_some() => {
                 let ft = self.focus_post_tables.as_deref().filter(|_| focused);
-                render_rle(rle, pt.as_ref(), ft, SliceFrame { plan, ert, rect, cpu }, &mut self.links, out)
+                render_rle(rle, pt.as_ref(), ft, SliceFrame { plan, ert, rect, cpu }, &mut self.scratch, out)
             }
             (Some(rle), _) => {
                 let ft = Some(&self.focus_tables).filter(|_| focused);
-                render_rle(rle, &self.tables, ft, SliceFrame { plan, ert, rect, cpu }, &mut self.links, out)
+                render_rle(rle, &self.tables, ft, SliceFrame { plan, ert, rect, cpu }, &mut self.scratch, out)
             }
             (None, _) => out.seal(None),
         }

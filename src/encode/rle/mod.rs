@@ -127,6 +127,17 @@ use crate::view::plan::Rect;
 /// What a [`RleCache`]'s encodings were built for (chosen by the owner).
 pub type ClassKey = u64;
 
+/// The slice traversal's scratch space, sized on first use and reused
+/// across frames (so a steady frame allocates nothing): the per-pixel skip
+/// links, and each band's shaded voxels of its last row's top scanline
+/// with the rows that shaded them (the compositor's `render_rle`).
+#[derive(Clone, Debug, Default)]
+pub struct RleScratch {
+    pub(crate) links: Vec<u32>,
+    pub(crate) shaded: Vec<[f32; 4]>,
+    pub(crate) stamps: Vec<u32>,
+}
+
 /// A renderer's pre-classified state: the classification, the encodings of the
 /// axes views have needed so far, the per-view tables and the scratch buffers.
 #[derive(Debug, Default)]
@@ -150,7 +161,7 @@ pub struct RleCache {
     pub(crate) focus: Option<Preclass>,
     pub(crate) focus_tables: ViewTables,
     pub(crate) focus_post_tables: Option<Box<PostTables>>,
-    pub(crate) links: Vec<u32>,
+    pub(crate) scratch: RleScratch,
     pub(crate) slice_buf: Vec<[f32; 4]>,
 }
 

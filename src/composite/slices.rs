@@ -387,7 +387,7 @@ fn composite_row<S: Sampler, const LIM: bool>(
             ci = nx - 1;
             continue;
         }
-        ci = span_at::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], t, row, px, links, cache);
+        ci = span::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], t, row, px, links, cache);
         if ci > ci_hi {
             return;
         }
@@ -403,11 +403,12 @@ fn composite_row<S: Sampler, const LIM: bool>(
 /// ([`segment`]). The right column of one pixel is the left column of the next,
 /// so each voxel is shaded once per row.
 ///
-/// Runs [`span_avx2`] when the row says so (`row.avx2`), else [`span`]: the
-/// same code and float operations, so the same pixels bit for bit.
-#[inline(always)]
+/// Runs [`span_avx2`] when the row says so (`row.avx2`), else the plain
+/// build of [`span_body`]: the same code and float operations, so the same
+/// pixels bit for bit.
+#[inline(never)] // one small function per span keeps the loops' state in registers
 #[allow(clippy::too_many_arguments)]
-fn span_at<S: Sampler, const LIM: bool>(
+fn span<S: Sampler, const LIM: bool>(
     bot: &mut Cursor,
     top: &mut Cursor,
     ci: [u32; 2],
@@ -423,22 +424,6 @@ fn span_at<S: Sampler, const LIM: bool>(
         // this CPU has (`RleFrame::avx2`), and that level has AVX2.
         return unsafe { span_avx2::<S, LIM>(bot, top, ci, t, row, px, links, cache) };
     }
-    span::<S, LIM>(bot, top, ci, t, row, px, links, cache)
-}
-
-/// [`span_body`] in the plain build.
-#[inline(never)] // one small function per span keeps the loops' state in registers
-#[allow(clippy::too_many_arguments)]
-fn span<S: Sampler, const LIM: bool>(
-    bot: &mut Cursor,
-    top: &mut Cursor,
-    ci: [u32; 2],
-    t: &S,
-    row: &SliceRow,
-    px: &mut [[f32; 4]],
-    links: &mut [u32],
-    cache: &mut ScanCache<'_>,
-) -> u32 {
     span_body::<S, LIM>(bot, top, ci, t, row, px, links, cache)
 }
 
@@ -554,7 +539,7 @@ struct SliceRow<'a> {
     w: Weights,
     ert: f32,
     lim: Limits<'a>,
-    /// Whether its spans run compiled for AVX2 ([`span_at`]).
+    /// Whether its spans run compiled for AVX2 ([`span`]).
     avx2: bool,
 }
 
@@ -946,7 +931,7 @@ struct RleFrame<'a, S> {
     plan: &'a FramePlan,
     pad: isize,
     ert: f32,
-    /// Whether the spans run compiled for AVX2 ([`span_at`]).
+    /// Whether the spans run compiled for AVX2 ([`span`]).
     avx2: bool,
     /// The rectangle written.
     r: Rect,

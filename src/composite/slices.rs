@@ -357,9 +357,9 @@ fn find(links: &mut [u32], x: usize) -> usize {
 /// some non-transparent voxel.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn composite_row<S: Sampler, const LIM: bool>(
-    mut bot: Cursor,
-    mut top: Cursor,
+fn composite_row<'v, S: Sampler, const LIM: bool>(
+    mut bot: Cursor<'v>,
+    mut top: Cursor<'v>,
     [ci_lo, ci_hi]: [u32; 2],
     t: &S,
     row: &SliceRow,
@@ -387,11 +387,22 @@ fn composite_row<S: Sampler, const LIM: bool>(
             ci = nx - 1;
             continue;
         }
-        ci = span::<S, LIM>(&mut bot, &mut top, [ci, ci_hi], t, row, px, links, cache);
+        let on = SpanOn { bot: &mut bot, top: &mut top, px: &mut *px, links: &mut *links, cache: &mut *cache };
+        ci = span::<S, LIM>(on, [ci, ci_hi], t, row);
         if ci > ci_hi {
             return;
         }
     }
+}
+
+/// What a span walks and writes: the two scanlines' cursors (moved along),
+/// the row's pixels and their links, and the band's scanline cache.
+struct SpanOn<'a, 'v, 'c> {
+    bot: &'a mut Cursor<'v>,
+    top: &'a mut Cursor<'v>,
+    px: &'a mut [[f32; 4]],
+    links: &'a mut [u32],
+    cache: &'a mut ScanCache<'c>,
 }
 
 /// Composites the span of pixels from `ci` (not opaque, touching a
@@ -407,24 +418,14 @@ fn composite_row<S: Sampler, const LIM: bool>(
 /// build of [`span_body`]: the same code and float operations, so the same
 /// pixels bit for bit.
 #[inline(never)] // one small function per span keeps the loops' state in registers
-#[allow(clippy::too_many_arguments)]
-fn span<S: Sampler, const LIM: bool>(
-    bot: &mut Cursor,
-    top: &mut Cursor,
-    ci: [u32; 2],
-    t: &S,
-    row: &SliceRow,
-    px: &mut [[f32; 4]],
-    links: &mut [u32],
-    cache: &mut ScanCache<'_>,
-) -> u32 {
+fn span<S: Sampler, const LIM: bool>(on: SpanOn, ci: [u32; 2], t: &S, row: &SliceRow) -> u32 {
     #[cfg(target_arch = "x86_64")]
     if row.avx2 {
         // SAFETY: `row.avx2` is set only from a CPU level capped to what
         // this CPU has (`RleFrame::avx2`), and that level has AVX2.
-        return unsafe { span_avx2::<S, LIM>(bot, top, ci, t, row, px, links, cache) };
+        return unsafe { span_avx2::<S, LIM>(on, ci, t, row) };
     }
-    span_body::<S, LIM>(bot, top, ci, t, row, px, links, cache)
+    span_body::<S, LIM>(on, ci, t, row)
 }
 
 /// [`span_body`] compiled for AVX2: the same vector operations in VEX
@@ -434,32 +435,17 @@ fn span<S: Sampler, const LIM: bool>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx,avx2")]
 #[inline(never)]
-#[allow(clippy::too_many_arguments)]
-unsafe fn span_avx2<S: Sampler, const LIM: bool>(
-    bot: &mut Cursor,
-    top: &mut Cursor,
-    ci: [u32; 2],
-    t: &S,
-    row: &SliceRow,
-    px: &mut [[f32; 4]],
-    links: &mut [u32],
-    cache: &mut ScanCache<'_>,
-) -> u32 {
-    span_body::<S, LIM>(bot, top, ci, t, row, px, links, cache)
+unsafe fn span_avx2<S: Sampler, const LIM: bool>(on: SpanOn, ci: [u32; 2], t: &S, row: &SliceRow) -> u32 {
+    span_body::<S, LIM>(on, ci, t, row)
 }
 
 /// The body of [`span`] and [`span_avx2`].
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn span_body<S: Sampler, const LIM: bool>(
-    bot: &mut Cursor,
-    top: &mut Cursor,
+    SpanOn { bot, top, px, links, cache }: SpanOn,
     [mut ci, ci_hi]: [u32; 2],
     t: &S,
     row: &SliceRow,
-    px: &mut [[f32; 4]],
-    links: &mut [u32],
-    cache: &mut ScanCache<'_>,
 ) -> u32 {
     // the row's weights as a local copy: the loops below keep them in registers
     let (off, w, lim) = (row.off, row.w, row.lim);
@@ -556,7 +542,9 @@ struct Left {
 /// wrote `shaded[c]`). The next row's bottom scanline is that row's top
 /// one, so it reads a voxel there instead of shading it again (the same
 /// value, bit for bit); rows are counted from 2 up, so a zero stamp never
-/// names the row before.
+/// names the row before (a band call counts two a slice and one a row of
+/// it, far below `u32::MAX`). [`ScanCache::at`] gives a segment's columns as
+/// a cache of their own.
 struct ScanCache<'a> {
     shaded: &'a mut [[f32; 4]],
     stamp: &'a mut [u32],
@@ -574,33 +562,21 @@ impl<'a> ScanCache<'a> {
     /// The next row of the same slice and sampler: it reads what this one wrote.
     #[inline(always)]
     fn next_row(&mut self) {
-        self.row = self.row.wrapping_add(1);
+        self.row += 1;
     }
 
     /// A row that must read nothing written so far (another slice, another
     /// sampler).
     #[inline(always)]
     fn forget(&mut self) {
-        self.row = self.row.wrapping_add(2);
-        if self.row < 2 {
-            // wrapped (after four billion rows): no stamp may name a row again
-            self.stamp.fill(0);
-            self.row = 2;
-        }
+        self.row += 2;
     }
 
-    /// Columns `c .. c + n` for the current row.
+    /// Its columns `c .. c + n`, at the current row.
     #[inline(always)]
-    fn at(&mut self, c: usize, n: usize) -> ScanRow<'_> {
-        ScanRow { shaded: &mut self.shaded[c..c + n], stamp: &mut self.stamp[c..c + n], row: self.row }
+    fn at(&mut self, c: usize, n: usize) -> ScanCache<'_> {
+        ScanCache { shaded: &mut self.shaded[c..c + n], stamp: &mut self.stamp[c..c + n], row: self.row }
     }
-}
-
-/// A [`ScanCache`]'s columns of one segment and the row compositing them.
-struct ScanRow<'a> {
-    shaded: &'a mut [[f32; 4]],
-    stamp: &'a mut [u32],
-    row: u32,
 }
 
 /// The ray limits of a row's pixels and the slice being composited: with
@@ -715,7 +691,7 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
     t: &S,
     smp: &SliceSamples,
     lim: Limits,
-    scan: ScanRow,
+    scan: ScanCache,
 ) -> usize {
     let (w, ert) = (smp.w, smp.ert);
     // exact lengths, so the loop below needs no bounds checks
@@ -733,7 +709,7 @@ fn segment<S: Sampler, const B: bool, const T: bool, const LIM: bool>(
         }
         let rb = if !B {
             S::MISSING
-        } else if stamp[s] == this.wrapping_sub(1) {
+        } else if stamp[s] == this - 1 {
             shaded[s]
         } else {
             t.voxel(bv[s])

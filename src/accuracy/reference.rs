@@ -842,6 +842,9 @@ pub struct FastHit {
 /// pixel (`None` where no hit), found as [`fast_path_depth`] describes, and
 /// the rays of the frame.
 pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Option<FastHit>>, Rays)> {
+    if renderer.last_plans().len() > 1 {
+        return split_frame_hits(renderer, camera);
+    }
     let plan = renderer.last_plan().ok_or_else(|| Error::value("fast path depth", "the renderer has not rendered a frame yet"))?;
     let (dims, spacing, proj) = (renderer.dims(), renderer.spacing(), renderer.projection());
     // a perspective frame's camera (scaled by its field of view) and view
@@ -923,6 +926,71 @@ pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Optio
                 let slices = if frac > 0.0 { [at(k0), at(k0 + 1.0)] } else { [at(k); 2] };
                 *o = Some(FastHit { point: at(k), slices, frac });
             }
+        }
+    });
+    Ok((out, rays))
+}
+
+/// [`fast_path_hits`] of a perspective frame split into pyramids (the eye
+/// near the volume): each output pixel's hit found the same way in the plan
+/// of the pyramid that owns its ray ([`Renderer::last_owner`]), from the
+/// intermediate depths the renderer kept ([`Renderer::set_keep_depths`]; an
+/// error without them), the sample positions read from that plan (affine
+/// in the pixel within a slice, and along the ray between two slices).
+fn split_frame_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Option<FastHit>>, Rays)> {
+    let plans = renderer.last_plans();
+    if (0..plans.len()).any(|i| !renderer.last_depth_image(i).is_some_and(|d| d.holds_depths_of(plans[i].grid.size))) {
+        return Err(Error::value(
+            "fast path depth",
+            "the last frame was split into pyramids without keeping their depths (Renderer::set_keep_depths)",
+        ));
+    }
+    let rays = Rays::with_projection(camera, &renderer.projection(), renderer.dims(), renderer.spacing())?;
+    let [w, h] = camera.size;
+    let mut out: Vec<Option<FastHit>> = vec![None; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
+        for (u, o) in row.iter_mut().enumerate() {
+            let (uf, vf) = (u as f64, v as f64);
+            let Some(i) = renderer.last_owner(uf, vf) else { continue };
+            let plan = &plans[i];
+            let Some([p, q]) = plan.output_to_intermediate(uf, vf) else { continue };
+            let grid = plan.grid.size;
+            let (x0, y0) = (p.floor(), q.floor());
+            let (fx, fy) = (p - x0, q - y0);
+            let (mut wsum, mut ksum) = (0.0, 0.0);
+            for (dx, dy, wt) in [(0, 0, (1.0 - fx) * (1.0 - fy)), (1, 0, fx * (1.0 - fy)), (0, 1, (1.0 - fx) * fy), (1, 1, fx * fy)] {
+                let (x, y) = (x0 + dx as f64, y0 + dy as f64);
+                if x < 0.0 || y < 0.0 || x >= grid[0] as f64 || y >= grid[1] as f64 || wt <= 0.0 {
+                    continue;
+                }
+                let k = renderer.last_depth_at(i, x as usize, y as usize);
+                if k.is_finite() {
+                    wsum += wt;
+                    ksum += wt * k as f64;
+                }
+            }
+            let nk = plan.slices();
+            if wsum < 0.5 || nk == 0 {
+                continue;
+            }
+            // pixel (p, q)'s sample in slice k, then on the ray between two slices
+            let in_slice = |k: usize| {
+                let along = |axis: usize, x: f64| {
+                    let a = plan.sample_at(k, axis, 0);
+                    a + (plan.sample_at(k, axis, 1) - a) * x
+                };
+                crate::view::unpermute(plan.view.perm, DVec3::new(along(0, p), along(1, q), k as f64))
+            };
+            let at = |k: f64| {
+                let k0 = (k.max(0.0).floor() as usize).min(nk - 1);
+                let (a, b) = (in_slice(k0), in_slice((k0 + 1).min(nk - 1)));
+                a + (b - a) * (k - k0 as f64)
+            };
+            let k = ksum / wsum;
+            let k0 = k.floor().min(nk.saturating_sub(2) as f64).max(0.0);
+            let frac = (k - k0).clamp(0.0, 1.0);
+            let slices = if frac > 0.0 { [at(k0), at(k0 + 1.0)] } else { [at(k); 2] };
+            *o = Some(FastHit { point: at(k), slices, frac });
         }
     });
     Ok((out, rays))

@@ -27,9 +27,15 @@
 //! the other and adds a table of depth and normal error and frame time per
 //! case and variant.
 //!
+//! The RLE paths keep no iso hit (they composite opacity, in iso mode too),
+//! so their rows carry image error only. A perspective frame split into
+//! pyramids is rendered once more, untimed, keeping the pyramids' depths
+//! for its depth and normal error.
+//!
 //! Results go out as Markdown tables (one row per variant, aggregated over the
 //! views), CSV and JSON (one record per variant and view), and a plot of time
-//! against error with the Pareto front of each mode marked.
+//! against error (RMSE, depth or normal error: [`PlotError`]) with the Pareto
+//! front of each mode by that error marked.
 //!
 //! New render options join the benchmark by adding a [`Variant`] to
 //! [`registry`]; nothing else in the harness needs to change.
@@ -124,9 +130,14 @@ pub struct BenchCmd {
     /// Also write the JSON report to this file (the Markdown still goes to stdout).
     #[arg(long, value_name = "FILE")]
     pub json_out: Option<PathBuf>,
-    /// Write a plot of frame time against RMSE (.svg or .png; repeat for both).
+    /// Write a plot of frame time against error (.svg or .png; repeat for
+    /// both), the error --plot-error names; with --suite one panel per case.
     #[arg(long)]
     pub plot: Vec<PathBuf>,
+    /// The error the plot draws against frame time, with each mode's Pareto
+    /// front by that error.
+    #[arg(long, value_enum, default_value = "rmse")]
+    pub plot_error: PlotError,
     /// Also print one Markdown row per variant and view.
     #[arg(long)]
     pub per_view: bool,
@@ -201,6 +212,50 @@ pub struct BenchCmd {
     pub distributed: bool,
 }
 
+/// The error a plot draws against frame time (`--plot-error`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PlotError {
+    /// Mean RMSE of the displayed image against the reference.
+    Rmse,
+    /// Mean iso depth error in voxels of the finest spacing (against the
+    /// analytic surface where the volume has one, else the reference's
+    /// depth; iso mode).
+    Depth,
+    /// Mean angle in degrees between the normal each variant shades with and
+    /// the analytic surface's (iso mode, phantoms with an analytic surface).
+    Normal,
+}
+
+impl PlotError {
+    /// A variant's value of this error (`None`: not measured for it).
+    pub fn of(self, s: &Summary) -> Option<f64> {
+        match self {
+            PlotError::Rmse => Some(s.rmse_mean),
+            PlotError::Depth => s.depth_mean_vox,
+            PlotError::Normal => s.normal_deg_mean,
+        }
+        .filter(|v| v.is_finite())
+    }
+
+    /// The plot's axis label.
+    fn label(self) -> &'static str {
+        match self {
+            PlotError::Rmse => "mean RMSE vs reference (log scale)",
+            PlotError::Depth => "mean depth error, voxels (log scale)",
+            PlotError::Normal => "mean normal error, degrees (log scale)",
+        }
+    }
+
+    /// Its short name, for titles.
+    fn name(self) -> &'static str {
+        match self {
+            PlotError::Rmse => "RMSE",
+            PlotError::Depth => "depth error",
+            PlotError::Normal => "normal error",
+        }
+    }
+}
+
 /// A list of benchmark cases (`--suite`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Suite {
@@ -232,6 +287,9 @@ pub const SUITE_SURFACES: [Case; 5] = [
 /// The variants a suite runs when `--only` names none: the binary iso
 /// preview and the RLE path.
 pub const SUITE_VARIANTS: [&str; 2] = ["binary-c1-u64-bitscan", "rle"];
+
+/// The same under each `--perspective` projection ([`perspective_variants`]).
+pub const SUITE_PERSPECTIVE_VARIANTS: [&str; 2] = ["binary-persp", "rle-persp"];
 
 /// How a variant reconstructs the iso hit between samples: `linear` (the
 /// crossing on the straight line between two slices, the normal the
@@ -813,7 +871,7 @@ pub fn run(cmd: &BenchCmd) -> Result<()> {
         crate::app::output::write_text(p, &to_csv(&report))?;
     }
     for p in &cmd.plot {
-        write_plot(p, &report)?;
+        write_plot(p, &[&report], cmd.plot_error)?;
     }
     if let Some(p) = &cmd.json_out {
         crate::app::output::write_text(p, &serde_json::to_string_pretty(&report)?)?;
@@ -837,6 +895,12 @@ pub fn case_command(cmd: &BenchCmd, case: &Case) -> BenchCmd {
     c.modes = vec![Mode::Iso];
     if c.only.is_empty() {
         c.only = SUITE_VARIANTS.iter().map(|s| s.to_string()).collect();
+        // and their perspective rows, by their exact names
+        let projections = cmd.projections().unwrap_or_default();
+        for p in &projections {
+            let suffix = projection_suffix(p, projections.len());
+            c.only.extend(SUITE_PERSPECTIVE_VARIANTS.iter().map(|v| format!("{v}{suffix}")));
+        }
     }
     c
 }
@@ -941,6 +1005,9 @@ fn run_suite(cmd: &BenchCmd, suite: Suite) -> Result<()> {
             .map(|(i, c)| if i == 0 { c } else { c.lines().skip(1).map(|l| format!("{l}\n")).collect() })
             .collect();
         crate::app::output::write_text(p, &body)?;
+    }
+    for p in &cmd.plot {
+        write_plot(p, &rep.cases.iter().collect::<Vec<_>>(), cmd.plot_error)?;
     }
     if let Some(p) = &cmd.json_out {
         crate::app::output::write_text(p, &serde_json::to_string_pretty(&rep)?)?;
@@ -1189,6 +1256,14 @@ pub fn measure(cmd: &BenchCmd, vol: Volume, name: String) -> Result<Report> {
                         a.frames.push(frame(&mut r, &cam, &mut imgs, &mut flip)?);
                     }
                     if round == 0 {
+                        // a perspective frame split into pyramids keeps their depths only when
+                        // asked (a copy per pyramid): render it once more with them, untimed
+                        if rf.truth.is_some() && r.last_plans().len() > 1 {
+                            r.set_keep_depths(true);
+                            let again = frame(&mut r, &cam, &mut imgs, &mut flip);
+                            r.set_keep_depths(false);
+                            again?;
+                        }
                         // every render of a view is the same image: measure the error once
                         let img = &imgs[flip];
                         a.error = Some(compare(img, &rf.image.image)?);
@@ -1463,11 +1538,12 @@ pub fn to_markdown(rep: &Report, per_view: bool) -> String {
         s,
         "Views: {}. Frame time = median of {} rounds × {} timed frames per view, each round after {} warm-up frame(s) \
          (shear + render + warp, masks prebuilt), then the median over views; cold shear = the first frame's shear from the previous view. \
-         Errors against the reference (true rays, trilinear, step {} voxel, f64), displayed RGB in [0, 1].\n",
+         Errors against the reference (true rays, {} reconstruction, step {} voxel, f64), displayed RGB in [0, 1].\n",
         rep.views.join(", "),
         rep.rounds,
         rep.reps,
         rep.warmup,
+        rep.reference.first().map_or("linear", |r| r.reconstruction),
         rep.reference_step
     );
     for (mode, tissue, iso) in &rep.classification {
@@ -1680,31 +1756,59 @@ pub fn to_csv(rep: &Report) -> String {
     s
 }
 
-/// Writes the time-against-error plot (log-log, one colour per mode, each
-/// mode's Pareto front joined and labelled) as SVG or PNG by the extension.
-pub fn write_plot(path: &Path, rep: &Report) -> Result<()> {
+/// Writes the time-against-`error` plot (log-log, one colour per mode, each
+/// mode's Pareto front by that error joined and labelled) as SVG or PNG by
+/// the extension: one panel per report (a suite's cases), two a row.
+pub fn write_plot(path: &Path, reps: &[&Report], error: PlotError) -> Result<()> {
     use plotters::prelude::*;
     // plotters lays out text with ab_glyph; give it a font without fontconfig
     plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
         .map_err(|_| anyhow::anyhow!("cannot load the embedded DejaVu Sans font"))?;
-    if rep.summary.is_empty() {
-        return Err(anyhow::anyhow!("nothing to plot"));
+    if let Some(rep) = reps.iter().find(|r| !r.summary.iter().any(|s| error.of(s).is_some())) {
+        return Err(anyhow::anyhow!(
+            "{}: nothing to plot for {}: no variant has a {} (depth and normal errors are measured in iso mode, normal error on phantoms with an analytic surface)",
+            path.display(),
+            rep.volume,
+            error.name()
+        ));
     }
-    let size = (1000u32, 640u32);
+    let cols = if reps.len() > 1 { 2 } else { 1 };
+    let rows = reps.len().div_ceil(cols);
+    let panel = if reps.len() > 1 { (800u32, 520u32) } else { (1000, 640) };
+    let size = (panel.0 * cols as u32, panel.1 * rows as u32);
     match plot_format(path)? {
         "svg" => {
             let mut svg = String::new();
-            draw_plot(SVGBackend::with_string(&mut svg, size).into_drawing_area(), rep)
+            draw_panels(SVGBackend::with_string(&mut svg, size).into_drawing_area(), reps, (rows, cols), error)
                 .with_context(|| format!("{}: cannot draw the plot", path.display()))?;
             crate::app::output::write_text(path, &svg)?;
         }
         _ => {
             let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
-            draw_plot(BitMapBackend::with_buffer(&mut buf, size).into_drawing_area(), rep).context("cannot draw the plot")?;
+            draw_panels(BitMapBackend::with_buffer(&mut buf, size).into_drawing_area(), reps, (rows, cols), error)
+                .context("cannot draw the plot")?;
             let img = image::RgbImage::from_raw(size.0, size.1, buf).context("plot buffer size")?;
             shearwarp::output::write_png(path, &img)?;
         }
     }
+    Ok(())
+}
+
+/// Each report's plot ([`draw_plot`]) in its panel of a `rows × cols` grid.
+fn draw_panels<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
+    reps: &[&Report],
+    (rows, cols): (usize, usize),
+    error: PlotError,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&plotters::style::WHITE)?;
+    for (area, rep) in root.split_evenly((rows, cols)).into_iter().zip(reps) {
+        draw_plot(area, rep, error)?;
+    }
+    root.present()?;
     Ok(())
 }
 
@@ -1726,18 +1830,24 @@ fn fmt_sig(v: f64) -> String {
 fn draw_plot<DB: plotters::prelude::DrawingBackend>(
     root: plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
     rep: &Report,
+    error: PlotError,
 ) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
     use plotters::prelude::*;
-    // RMSE 0 cannot sit on a log axis; no real fast path reaches it
+    // an error of 0 cannot sit on a log axis; no real fast path reaches it
     const FLOOR: f64 = 1e-7;
-    let pts: Vec<(&Summary, f64, f64)> = rep.summary.iter().map(|s| (s, s.frame_ms.max(1e-6), s.rmse_mean.max(FLOOR))).collect();
+    let pts: Vec<(&Summary, f64, f64)> =
+        rep.summary.iter().filter_map(|s| Some((s, s.frame_ms.max(1e-6), error.of(s)?.max(FLOOR)))).collect();
+    // each mode's Pareto front by this error: no other point at least as fast and as accurate, and better in one
+    let front_of =
+        |a: &(&Summary, f64, f64)| !pts.iter().any(|b| b.0.mode == a.0.mode && b.1 <= a.1 && b.2 <= a.2 && (b.1 < a.1 || b.2 < a.2));
+    let on_front: Vec<bool> = pts.iter().map(front_of).collect();
     let (x0, x1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
     let (y0, y1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.2), b.max(p.2)));
     let d = rep.dims;
-    let title = format!("{} {}×{}×{}, {} px: frame time vs RMSE", rep.volume, d[0], d[1], d[2], rep.size);
+    let title = format!("{} {}×{}×{}, {} px: frame time vs {}", rep.volume, d[0], d[1], d[2], rep.size, error.name());
     // both axes are logarithmic: plot log10 on linear axes (whose ticks plotters
     // spaces well at any range) and label them with the values
     let widen = |lo: f64, hi: f64, pad: f64| {
@@ -1749,7 +1859,7 @@ where
     let (y0, y1) = widen(y0, y1, 0.25);
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
-        .caption(&title, ("sans-serif", 22))
+        .caption(&title, ("sans-serif", if title.chars().count() > 64 { 17 } else { 22 }))
         .margin(18)
         .x_label_area_size(48)
         .y_label_area_size(80)
@@ -1757,24 +1867,24 @@ where
     chart
         .configure_mesh()
         .x_desc("median frame time (ms, log scale)")
-        .y_desc("mean RMSE vs reference (log scale)")
+        .y_desc(error.label())
         .label_style(("sans-serif", 14))
         .x_labels(8)
         .y_labels(8)
         .x_label_formatter(&|x| fmt_sig(10f64.powf(*x)))
         .y_label_formatter(&|y| format!("{:.1e}", 10f64.powf(*y)))
         .draw()?;
-    let pts: Vec<(&Summary, f64, f64)> = pts.iter().map(|p| (p.0, p.1.log10(), p.2.log10())).collect();
+    let pts: Vec<(&Summary, f64, f64, bool)> = pts.iter().zip(on_front).map(|(p, f)| (p.0, p.1.log10(), p.2.log10(), f)).collect();
     // labels of points in the right part of the plot go to their left
     let label_dx = |x: f64, text: &str| if (x - x0) / (x1 - x0) > 0.6 { -(text.chars().count() as i32) * 7 - 12 } else { 10 };
     for (i, (mode, _, _)) in rep.classification.iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
-        let mine: Vec<&(&Summary, f64, f64)> = pts.iter().filter(|p| p.0.mode == mode).collect();
+        let mine: Vec<&(&Summary, f64, f64, bool)> = pts.iter().filter(|p| p.0.mode == mode).collect();
         chart
             .draw_series(mine.iter().map(|p| Circle::new((p.1, p.2), 4, color.filled())))?
             .label(format!("{mode} (ringed: Pareto front)"))
             .legend(move |(x, y)| Circle::new((x, y), 5, color.filled()));
-        let mut front: Vec<&&(&Summary, f64, f64)> = mine.iter().filter(|p| p.0.pareto).collect();
+        let mut front: Vec<&&(&Summary, f64, f64, bool)> = mine.iter().filter(|p| p.3).collect();
         front.sort_by(|a, b| a.1.total_cmp(&b.1));
         chart.draw_series(LineSeries::new(front.iter().map(|p| (p.1, p.2)), color.stroke_width(2)))?;
         chart.draw_series(front.iter().map(|p| {
@@ -1783,7 +1893,7 @@ where
                 + Text::new(p.0.variant.clone(), (label_dx(p.1, &p.0.variant), -16), ("sans-serif", 13).into_font().color(&BLACK))
         }))?;
         // the peers (rows without a shear time): a black square, always named
-        let peers: Vec<&&(&Summary, f64, f64)> = mine.iter().filter(|p| p.0.cold_shear_ms.is_nan()).collect();
+        let peers: Vec<&&(&Summary, f64, f64, bool)> = mine.iter().filter(|p| p.0.cold_shear_ms.is_nan()).collect();
         if !peers.is_empty() {
             chart
                 .draw_series(peers.iter().map(|p| {

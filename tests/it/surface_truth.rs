@@ -439,6 +439,43 @@ fn the_surfaces_suite_reports_depth_and_normal_error_per_case() {
         .stderr(predicate::str::contains("--suite"));
 }
 
+/// `--suite surfaces --perspective` adds the perspective rows of its variants
+/// (with depth and normal error against the perspective truth), and `--plot`
+/// draws a panel per case against the error `--plot-error` names.
+#[test]
+fn the_surfaces_suite_measures_perspective_and_plots_either_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let plot = dir.path().join("suite.svg");
+    let out = shearwarp()
+        .args(["bench", "--suite", "surfaces", "--size", "24", "--reps", "1", "--rounds", "1", "--random-views", "0"])
+        .args(["--only", "binary-c1-u64-bitscan,binary-persp", "--perspective", "40", "--ref-step", "0.5", "--json", "--quiet"])
+        .args(["--plot-error", "normal", "--plot"])
+        .arg(&plot)
+        .assert()
+        .success();
+    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    let table = json["table"].as_array().unwrap();
+    let persp: Vec<&serde_json::Value> = table.iter().filter(|r| r["variant"] == "binary-persp").collect();
+    assert_eq!(persp.len(), 5, "{table:?}");
+    for r in persp {
+        assert!(r["normal_deg_mean"].as_f64().is_some() && r["depth_p99"].as_f64().is_some(), "{r}");
+    }
+    // one panel per case
+    let svg = std::fs::read_to_string(&plot).unwrap();
+    assert_eq!(svg.matches("frame time vs normal error").count(), 5, "{svg}");
+    // by default the suite's perspective rows are its own variants'
+    let out = shearwarp()
+        .args(["bench", "--suite", "surfaces", "--size", "16", "--reps", "1", "--rounds", "1", "--random-views", "0"])
+        .args(["--perspective", "40", "--ref-step", "1", "--json", "--quiet"])
+        .assert()
+        .success();
+    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    let mut variants: Vec<String> = json["table"].as_array().unwrap().iter().map(|r| r["variant"].as_str().unwrap().to_string()).collect();
+    variants.sort();
+    variants.dedup();
+    assert_eq!(variants, ["binary-c1-u64-bitscan", "binary-persp", "rle", "rle-persp"]);
+}
+
 /// A perspective frame is measured against the perspective truth: the ball's
 /// depth error stays small and its normals close.
 #[test]
@@ -461,6 +498,39 @@ fn perspective_truth_matches_the_ball() {
             .unwrap();
     assert!(e.depth.both > 1000 && e.depth.only_test + e.depth.only_truth < 40, "{e:?}");
     assert!(e.depth.mean < 0.2 && e.depth.p99 < 3.0 && e.normal.mean_deg < 0.5 && e.normal.p99_deg < 6.0, "{e:?}");
+}
+
+/// A perspective frame split into pyramids (the eye near the volume) is
+/// measured against the perspective truth as well, each pixel in the
+/// pyramid that owns it, once the renderer keeps the pyramids' depths; without
+/// them the depth is refused with a reason, not made up.
+#[test]
+fn a_split_perspective_frame_is_measured_against_the_truth() {
+    let a = analytic(Phantom::Sphere, [64; 3], None);
+    let vol = Phantom::Sphere.build([64; 3]).unwrap();
+    let tf = presets::generic(a.shape.iso(), 200.0).tf;
+    let proj = Projection::perspective(60.0, 0.6).unwrap();
+    let mut r =
+        Renderer::new(vol.clone(), &tf, Settings { mode: Mode::Iso, normals: Normals::Gradient, threads: 2, ..Settings::default() })
+            .unwrap();
+    r.set_iso(a.shape.iso()).unwrap();
+    r.set_projection(proj).unwrap();
+    let cam = Camera { rotation: rotate_eye(rotate_eye(NamedView::Anterior.rotation(), 0, 35.26), 1, 45.0), zoom: None, size: [96, 96] };
+    let mut img = Image::new(96, 96);
+    r.render(&cam, &mut img).unwrap();
+    assert!(r.last_plans().len() > 1, "the frame was not split");
+    let why = fast_path_depth(&r, &cam).unwrap_err().to_string();
+    assert!(why.contains("set_keep_depths"), "{why}");
+    r.set_keep_depths(true);
+    // (into another image: a frame identical to the last one into the same image is skipped)
+    r.render(&cam, &mut Image::new(96, 96)).unwrap();
+    let t = surface_truth(&a, vol.spacing(), &cam, &proj, a.shape.iso() as f64, shearwarp::render::NEAR_SLICES).unwrap();
+    let e =
+        surface_error(&fast_path_depth(&r, &cam).unwrap(), &fast_path_normals(&r, &cam, &ReferenceRenderer::new(&vol)).unwrap(), &t, 1.0)
+            .unwrap();
+    assert!(e.depth.both > 1000 && e.depth.only_test + e.depth.only_truth < 60, "{e:?}");
+    // (measured: depth mean 0.04, p99 0.66 voxels; normal mean 0.11°, p99 1.6°)
+    assert!(e.depth.mean < 0.1 && e.depth.p99 < 1.5 && e.normal.mean_deg < 0.3 && e.normal.p99_deg < 4.0, "{e:?}");
 }
 
 /// `render` reconstructs a thick-slice scan (slices at least 1.5× as far

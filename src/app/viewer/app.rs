@@ -108,6 +108,7 @@ pub fn run(cmd: &ViewCmd) -> Result<()> {
         size: camera.size,
         threads: if settings.threads == 0 { rayon::current_num_threads() } else { settings.threads },
         method: settings.method.name().to_string(),
+        reconstruction: settings.reconstruction.name(),
         tissue: String::new(),
         iso: f32::NAN,
         cell: settings.cell,

@@ -89,6 +89,8 @@ pub struct Info {
     pub size: [usize; 2],
     pub threads: usize,
     pub method: String,
+    /// The iso surface's reconstruction between slices.
+    pub reconstruction: &'static str,
     pub tissue: String,
     pub iso: f32,
     pub cell: usize,
@@ -181,7 +183,7 @@ impl Bench {
         let switches = self.samples.windows(2).filter(|w| w[0].stats.axis != w[1].stats.axis).count();
         json!({
             "volume": info.volume, "dims": info.dims, "size": info.size[0], "window": info.size,
-            "threads": info.threads, "method": info.method, "mode": "iso", "tissue": info.tissue, "iso": info.iso, "cell": info.cell,
+            "threads": info.threads, "method": info.method, "reconstruction": info.reconstruction, "mode": "iso", "tissue": info.tissue, "iso": info.iso, "cell": info.cell,
             "frames": self.samples.len(), "step_deg": STEP_DEG, "degrees": self.samples.len() as f64 * STEP_DEG, "drag_px_per_frame": self.dx,
             "fps": self.fps(), "degrees_per_second": self.fps() * STEP_DEG, "drag_ms": drag_ms,
             "frame_ms_median": col(|s| s.frame_ms), "frame_ms_max": max(|s| s.frame_ms),
@@ -239,6 +241,7 @@ mod tests {
             size: [512, 512],
             threads: 2,
             method: "binary".into(),
+            reconstruction: "cubic",
             tissue: "skin".into(),
             iso: -500.0,
             cell: 1,
@@ -249,6 +252,7 @@ mod tests {
         assert_eq!(j["frames"], 3);
         assert_eq!(j["size"], 512);
         assert_eq!(j["mode"], "iso");
+        assert_eq!(j["reconstruction"], "cubic");
         assert_eq!(j["axis_switches"], 1);
         assert_eq!(j["skipped_frames"], 0);
         for (k, v) in

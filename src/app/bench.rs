@@ -609,6 +609,9 @@ impl BenchCmd {
         for p in &self.plot {
             plot_format(p)?;
         }
+        if self.plot_error != PlotError::Rmse && !self.plot.is_empty() && !self.modes.contains(&Mode::Iso) && self.suite.is_none() {
+            return Err(usage(format!("--plot-error: the {} is measured in iso mode: add iso to --modes", self.plot_error.name())));
+        }
         Ok(())
     }
 

@@ -77,6 +77,11 @@ fn markdown_by_default() {
 #[test]
 fn bad_arguments_are_usage_errors() {
     tiny().args(["--plot", "x.gif"]).assert().code(2).stderr(predicate::str::contains(".svg or .png"));
+    tiny()
+        .args(["--modes", "blend", "--plot-error", "normal", "--plot", "x.png"])
+        .assert()
+        .code(2)
+        .stderr(predicate::str::contains("iso mode"));
     bench("nothing-like-this").assert().code(2).stderr(predicate::str::contains("matches no variant"));
     tiny().args(["--ref-step", "0"]).assert().code(2).stderr(predicate::str::contains("--ref-step"));
     tiny().args(["--reps", "0"]).assert().code(2);

@@ -887,21 +887,7 @@ pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Optio
         for (u, o) in row.iter_mut().enumerate() {
             let Some([a, b]) = plan.warp.to_sheared(u as f64, v as f64) else { continue };
             let (p, q) = (a / plan.grid.pitch[0] + pad, b / plan.grid.pitch[1] + pad);
-            let (x0, y0) = (p.floor(), q.floor());
-            let (fx, fy) = (p - x0, q - y0);
-            let (mut wsum, mut ksum) = (0.0, 0.0);
-            for (dx, dy, wt) in [(0, 0, (1.0 - fx) * (1.0 - fy)), (1, 0, fx * (1.0 - fy)), (0, 1, (1.0 - fx) * fy), (1, 1, fx * fy)] {
-                let (x, y) = (x0 + dx as f64, y0 + dy as f64);
-                if x < 0.0 || y < 0.0 || x >= grid[0] as f64 || y >= grid[1] as f64 || wt <= 0.0 {
-                    continue;
-                }
-                let k = inter.depth_at(x as usize, y as usize);
-                if k.is_finite() {
-                    wsum += wt;
-                    ksum += wt * k as f64;
-                }
-            }
-            if wsum >= 0.5 {
+            if let Some(k) = mean_depth(p, q, grid, |x, y| inter.depth_at(x, y)) {
                 let at = |k: f64| {
                     DVec3::from_array(match (&pv, &bcc) {
                         (None, None) => f.sheared_to_voxel(a, b, k),
@@ -913,7 +899,6 @@ pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Optio
                         (Some(pv), _) => pv.sheared_to_voxel(a + shift[0], b + shift[1], k),
                     })
                 };
-                let k = ksum / wsum;
                 // the slices around the hit along the pixel's ray (the BCC grid's interleaved
                 // slices are not the volume's: there, the hit point alone)
                 let (k0, frac) = match &bcc {
@@ -929,6 +914,28 @@ pub fn fast_path_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Optio
         }
     });
     Ok((out, rays))
+}
+
+/// The iso depth (fractional slice) of the intermediate image at the
+/// fractional pixel `(p, q)` of a `grid`-sized plan whose depths `depth_at`
+/// reads: the bilinear weights' mean over the neighbouring pixels that hit,
+/// `None` where those carry less than half the weight.
+fn mean_depth(p: f64, q: f64, grid: [usize; 2], depth_at: impl Fn(usize, usize) -> f32) -> Option<f64> {
+    let (x0, y0) = (p.floor(), q.floor());
+    let (fx, fy) = (p - x0, q - y0);
+    let (mut wsum, mut ksum) = (0.0, 0.0);
+    for (dx, dy, wt) in [(0, 0, (1.0 - fx) * (1.0 - fy)), (1, 0, fx * (1.0 - fy)), (0, 1, (1.0 - fx) * fy), (1, 1, fx * fy)] {
+        let (x, y) = (x0 + dx as f64, y0 + dy as f64);
+        if x < 0.0 || y < 0.0 || x >= grid[0] as f64 || y >= grid[1] as f64 || wt <= 0.0 {
+            continue;
+        }
+        let k = depth_at(x as usize, y as usize);
+        if k.is_finite() {
+            wsum += wt;
+            ksum += wt * k as f64;
+        }
+    }
+    (wsum >= 0.5).then(|| ksum / wsum)
 }
 
 /// [`fast_path_hits`] of a perspective frame split into pyramids (the eye
@@ -954,25 +961,10 @@ fn split_frame_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Option<
             let Some(i) = renderer.last_owner(uf, vf) else { continue };
             let plan = &plans[i];
             let Some([p, q]) = plan.output_to_intermediate(uf, vf) else { continue };
-            let grid = plan.grid.size;
-            let (x0, y0) = (p.floor(), q.floor());
-            let (fx, fy) = (p - x0, q - y0);
-            let (mut wsum, mut ksum) = (0.0, 0.0);
-            for (dx, dy, wt) in [(0, 0, (1.0 - fx) * (1.0 - fy)), (1, 0, fx * (1.0 - fy)), (0, 1, (1.0 - fx) * fy), (1, 1, fx * fy)] {
-                let (x, y) = (x0 + dx as f64, y0 + dy as f64);
-                if x < 0.0 || y < 0.0 || x >= grid[0] as f64 || y >= grid[1] as f64 || wt <= 0.0 {
-                    continue;
-                }
-                let k = renderer.last_depth_at(i, x as usize, y as usize);
-                if k.is_finite() {
-                    wsum += wt;
-                    ksum += wt * k as f64;
-                }
-            }
             let nk = plan.slices();
-            if wsum < 0.5 || nk == 0 {
+            let Some(k) = mean_depth(p, q, plan.grid.size, |x, y| renderer.last_depth_at(i, x, y)).filter(|_| nk > 0) else {
                 continue;
-            }
+            };
             // pixel (p, q)'s sample in slice k, then on the ray between two slices
             let in_slice = |k: usize| {
                 let along = |axis: usize, x: f64| {
@@ -986,7 +978,6 @@ fn split_frame_hits(renderer: &Renderer, camera: &Camera) -> Result<(Vec<Option<
                 let (a, b) = (in_slice(k0), in_slice((k0 + 1).min(nk - 1)));
                 a + (b - a) * (k - k0 as f64)
             };
-            let k = ksum / wsum;
             let k0 = k.floor().min(nk.saturating_sub(2) as f64).max(0.0);
             let frac = (k - k0).clamp(0.0, 1.0);
             let slices = if frac > 0.0 { [at(k0), at(k0 + 1.0)] } else { [at(k); 2] };

@@ -1497,22 +1497,18 @@ pub fn summarize(records: &[Record]) -> Vec<Summary> {
             }
         })
         .collect();
-    // Pareto front per mode: no other variant is at least as fast and at least as accurate, and better in one
-    let marks: Vec<bool> = out
-        .iter()
-        .map(|a| {
-            !out.iter().any(|b| {
-                b.mode == a.mode
-                    && b.frame_ms <= a.frame_ms
-                    && b.rmse_mean <= a.rmse_mean
-                    && (b.frame_ms < a.frame_ms || b.rmse_mean < a.rmse_mean)
-            })
-        })
-        .collect();
+    let marks = pareto_front(&out.iter().map(|s| (s.mode, s.frame_ms, s.rmse_mean)).collect::<Vec<_>>());
     for (s, m) in out.iter_mut().zip(marks) {
         s.pareto = m;
     }
     out
+}
+
+/// Which of the points `(mode, time, error)` lie on their mode's Pareto
+/// front: no other point of the mode is at least as fast and at least as
+/// accurate, and better in one.
+fn pareto_front(pts: &[(&str, f64, f64)]) -> Vec<bool> {
+    pts.iter().map(|a| !pts.iter().any(|b| b.0 == a.0 && b.1 <= a.1 && b.2 <= a.2 && (b.1 < a.1 || b.2 < a.2))).collect()
 }
 
 fn fmt_psnr(p: f64) -> String {
@@ -1843,10 +1839,8 @@ where
     const FLOOR: f64 = 1e-7;
     let pts: Vec<(&Summary, f64, f64)> =
         rep.summary.iter().filter_map(|s| Some((s, s.frame_ms.max(1e-6), error.of(s)?.max(FLOOR)))).collect();
-    // each mode's Pareto front by this error: no other point at least as fast and as accurate, and better in one
-    let front_of =
-        |a: &(&Summary, f64, f64)| !pts.iter().any(|b| b.0.mode == a.0.mode && b.1 <= a.1 && b.2 <= a.2 && (b.1 < a.1 || b.2 < a.2));
-    let on_front: Vec<bool> = pts.iter().map(front_of).collect();
+    // each mode's Pareto front by this error
+    let on_front = pareto_front(&pts.iter().map(|p| (p.0.mode, p.1, p.2)).collect::<Vec<_>>());
     let (x0, x1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
     let (y0, y1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.2), b.max(p.2)));
     let d = rep.dims;

@@ -18,7 +18,7 @@ use glam::{DMat3, DVec3};
 use predicates::prelude::*;
 use proptest::prelude::*;
 
-use shearwarp::accuracy::metrics::{angle_deg, depth_error, normal_error, surface_error};
+use shearwarp::accuracy::metrics::{SurfaceError, angle_deg, depth_error, normal_error, surface_error};
 use shearwarp::accuracy::reference::{Rays, ReferenceRenderer, fast_path_depth, fast_path_normals};
 use shearwarp::accuracy::truth::{SurfaceTruth, surface_truth};
 use shearwarp::classify::presets;
@@ -476,26 +476,36 @@ fn the_surfaces_suite_measures_perspective_and_plots_either_error() {
     assert_eq!(variants, ["binary-c1-u64-bitscan", "binary-persp", "rle", "rle-persp"]);
 }
 
-/// A perspective frame is measured against the perspective truth: the ball's
-/// depth error stays small and its normals close.
-#[test]
-fn perspective_truth_matches_the_ball() {
+/// The 64³ ball, its volume and an iso renderer of it (gradient normals,
+/// two threads) under `proj`.
+fn ball_in(proj: Projection) -> (AnalyticPhantom, shearwarp::Volume, Renderer) {
     let a = analytic(Phantom::Sphere, [64; 3], None);
     let vol = Phantom::Sphere.build([64; 3]).unwrap();
     let tf = presets::generic(a.shape.iso(), 200.0).tf;
-    let proj = Projection::perspective(40.0, 1.5).unwrap();
     let mut r =
         Renderer::new(vol.clone(), &tf, Settings { mode: Mode::Iso, normals: Normals::Gradient, threads: 2, ..Settings::default() })
             .unwrap();
     r.set_iso(a.shape.iso()).unwrap();
     r.set_projection(proj).unwrap();
+    (a, vol, r)
+}
+
+/// The depth and normal error of `r`'s last frame (`cam` under `proj`) on
+/// the ball `a` against its perspective truth.
+fn ball_error(a: &AnalyticPhantom, vol: &shearwarp::Volume, r: &Renderer, cam: &Camera, proj: &Projection) -> SurfaceError {
+    let t = surface_truth(a, vol.spacing(), cam, proj, a.shape.iso() as f64, shearwarp::render::NEAR_SLICES).unwrap();
+    surface_error(&fast_path_depth(r, cam).unwrap(), &fast_path_normals(r, cam, &ReferenceRenderer::new(vol)).unwrap(), &t, 1.0).unwrap()
+}
+
+/// A perspective frame is measured against the perspective truth: the ball's
+/// depth error stays small and its normals close.
+#[test]
+fn perspective_truth_matches_the_ball() {
+    let proj = Projection::perspective(40.0, 1.5).unwrap();
+    let (a, vol, mut r) = ball_in(proj);
     let cam = Camera { rotation: rotate_eye(NamedView::Anterior.rotation(), 1, 30.0), zoom: None, size: [96, 96] };
-    let mut img = Image::new(96, 96);
-    r.render(&cam, &mut img).unwrap();
-    let t = surface_truth(&a, vol.spacing(), &cam, &proj, a.shape.iso() as f64, shearwarp::render::NEAR_SLICES).unwrap();
-    let e =
-        surface_error(&fast_path_depth(&r, &cam).unwrap(), &fast_path_normals(&r, &cam, &ReferenceRenderer::new(&vol)).unwrap(), &t, 1.0)
-            .unwrap();
+    r.render(&cam, &mut Image::new(96, 96)).unwrap();
+    let e = ball_error(&a, &vol, &r, &cam, &proj);
     assert!(e.depth.both > 1000 && e.depth.only_test + e.depth.only_truth < 40, "{e:?}");
     assert!(e.depth.mean < 0.2 && e.depth.p99 < 3.0 && e.normal.mean_deg < 0.5 && e.normal.p99_deg < 6.0, "{e:?}");
 }
@@ -506,15 +516,8 @@ fn perspective_truth_matches_the_ball() {
 /// them the depth is refused with a reason, not made up.
 #[test]
 fn a_split_perspective_frame_is_measured_against_the_truth() {
-    let a = analytic(Phantom::Sphere, [64; 3], None);
-    let vol = Phantom::Sphere.build([64; 3]).unwrap();
-    let tf = presets::generic(a.shape.iso(), 200.0).tf;
     let proj = Projection::perspective(60.0, 0.6).unwrap();
-    let mut r =
-        Renderer::new(vol.clone(), &tf, Settings { mode: Mode::Iso, normals: Normals::Gradient, threads: 2, ..Settings::default() })
-            .unwrap();
-    r.set_iso(a.shape.iso()).unwrap();
-    r.set_projection(proj).unwrap();
+    let (a, vol, mut r) = ball_in(proj);
     let cam = Camera { rotation: rotate_eye(rotate_eye(NamedView::Anterior.rotation(), 0, 35.26), 1, 45.0), zoom: None, size: [96, 96] };
     let mut img = Image::new(96, 96);
     r.render(&cam, &mut img).unwrap();
@@ -524,10 +527,7 @@ fn a_split_perspective_frame_is_measured_against_the_truth() {
     r.set_keep_depths(true);
     // (into another image: a frame identical to the last one into the same image is skipped)
     r.render(&cam, &mut Image::new(96, 96)).unwrap();
-    let t = surface_truth(&a, vol.spacing(), &cam, &proj, a.shape.iso() as f64, shearwarp::render::NEAR_SLICES).unwrap();
-    let e =
-        surface_error(&fast_path_depth(&r, &cam).unwrap(), &fast_path_normals(&r, &cam, &ReferenceRenderer::new(&vol)).unwrap(), &t, 1.0)
-            .unwrap();
+    let e = ball_error(&a, &vol, &r, &cam, &proj);
     assert!(e.depth.both > 1000 && e.depth.only_test + e.depth.only_truth < 60, "{e:?}");
     // (measured: depth mean 0.04, p99 0.66 voxels; normal mean 0.11°, p99 1.6°)
     assert!(e.depth.mean < 0.1 && e.depth.p99 < 1.5 && e.normal.mean_deg < 0.3 && e.normal.p99_deg < 4.0, "{e:?}");

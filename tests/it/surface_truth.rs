@@ -402,14 +402,19 @@ fn phantom_spacing_on_the_command_line() {
         .stderr(predicate::str::contains("phantom spacing"));
 }
 
-#[test]
-fn the_surfaces_suite_reports_depth_and_normal_error_per_case() {
+/// `bench --suite surfaces --json` at `size` px, one frame a view, with `args`: its report.
+fn suite_json(size: &str, args: &[&std::ffi::OsStr]) -> serde_json::Value {
     let out = shearwarp()
-        .args(["bench", "--suite", "surfaces", "--size", "24", "--reps", "1", "--rounds", "1", "--random-views", "0"])
-        .args(["--only", "binary-c1-u64-bitscan", "--ref-step", "0.5", "--json", "--quiet"])
+        .args(["bench", "--suite", "surfaces", "--size", size, "--reps", "1", "--rounds", "1", "--random-views", "0", "--json", "--quiet"])
+        .args(args)
         .assert()
         .success();
-    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    serde_json::from_slice(&out.get_output().stdout).unwrap()
+}
+
+#[test]
+fn the_surfaces_suite_reports_depth_and_normal_error_per_case() {
+    let json = suite_json("24", &["--only", "binary-c1-u64-bitscan", "--ref-step", "0.5"].map(std::ffi::OsStr::new));
     let table = json["table"].as_array().unwrap();
     assert_eq!(table.len(), 5);
     let cases: Vec<&str> = table.iter().map(|r| r["case"].as_str().unwrap()).collect();
@@ -446,14 +451,12 @@ fn the_surfaces_suite_reports_depth_and_normal_error_per_case() {
 fn the_surfaces_suite_measures_perspective_and_plots_either_error() {
     let dir = tempfile::tempdir().unwrap();
     let plot = dir.path().join("suite.svg");
-    let out = shearwarp()
-        .args(["bench", "--suite", "surfaces", "--size", "24", "--reps", "1", "--rounds", "1", "--random-views", "0"])
-        .args(["--only", "binary-c1-u64-bitscan,binary-persp", "--perspective", "40", "--ref-step", "0.5", "--json", "--quiet"])
-        .args(["--plot-error", "normal", "--plot"])
-        .arg(&plot)
-        .assert()
-        .success();
-    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    let mut args =
+        ["--only", "binary-c1-u64-bitscan,binary-persp", "--perspective", "40", "--ref-step", "0.5", "--plot-error", "normal", "--plot"]
+            .map(std::ffi::OsStr::new)
+            .to_vec();
+    args.push(plot.as_os_str());
+    let json = suite_json("24", &args);
     let table = json["table"].as_array().unwrap();
     let persp: Vec<&serde_json::Value> = table.iter().filter(|r| r["variant"] == "binary-persp").collect();
     assert_eq!(persp.len(), 5, "{table:?}");
@@ -464,12 +467,7 @@ fn the_surfaces_suite_measures_perspective_and_plots_either_error() {
     let svg = std::fs::read_to_string(&plot).unwrap();
     assert_eq!(svg.matches("frame time vs normal error").count(), 5, "{svg}");
     // by default the suite's perspective rows are its own variants'
-    let out = shearwarp()
-        .args(["bench", "--suite", "surfaces", "--size", "16", "--reps", "1", "--rounds", "1", "--random-views", "0"])
-        .args(["--perspective", "40", "--ref-step", "1", "--json", "--quiet"])
-        .assert()
-        .success();
-    let json: serde_json::Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
+    let json = suite_json("16", &["--perspective", "40", "--ref-step", "1"].map(std::ffi::OsStr::new));
     let mut variants: Vec<String> = json["table"].as_array().unwrap().iter().map(|r| r["variant"].as_str().unwrap().to_string()).collect();
     variants.sort();
     variants.dedup();

@@ -122,12 +122,38 @@ fn sample(vox: &[u8], b: usize, n0: usize, wi: f32, wj: f32) -> f32 {
     }
 }
 
-/// Scalar, per ray (the crate's shape): returns visits.
-fn render_scalar(v: &Vol, f: &Frame, iso: f32, prefetch: bool, out_k: &mut [u32], out_d: &mut [f32]) -> usize {
-    render_strips(v, f, iso, prefetch, f.w, out_k, out_d)
+/// The next candidate slice of a ray's depth row (`words`), from word `wi`
+/// whose unvisited bits are `cur`, in front-to-back order; `None` past the row.
+#[inline(always)]
+fn next_candidate(words: &[u64], wi: &mut usize, cur: &mut u64) -> Option<usize> {
+    while *cur == 0 {
+        *wi += 1;
+        if *wi == NW {
+            return None;
+        }
+        *cur = words[*wi];
+    }
+    let pos = cur.leading_zeros() as usize;
+    *cur &= !(1u64 << 63 >> pos);
+    Some(*wi * 64 + pos)
 }
 
-fn render_strips(v: &Vol, f: &Frame, iso: f32, prefetch: bool, sw: usize, out_k: &mut [u32], out_d: &mut [f32]) -> usize {
+/// Scalar, per ray (the crate's shape): returns visits.
+fn render_scalar(v: &Vol, f: &Frame, iso: f32, prefetch: bool, out_k: &mut [u32], out_d: &mut [f32]) -> usize {
+    render_strips::<false>(v, f, iso, prefetch, f.w, out_k, out_d)
+}
+
+/// Per ray, the rays in strips of `sw` (the frame's width: row by row);
+/// `PLANE`: 8-bit densities in a plane of their own.
+fn render_strips<const PLANE: bool>(
+    v: &Vol,
+    f: &Frame,
+    iso: f32,
+    prefetch: bool,
+    sw: usize,
+    out_k: &mut [u32],
+    out_d: &mut [f32],
+) -> usize {
     let n0 = v.n[0];
     let mut visits = 0;
     for s0 in (0..f.w).step_by(sw) {
@@ -139,23 +165,15 @@ fn render_strips(v: &Vol, f: &Frame, iso: f32, prefetch: bool, sw: usize, out_k:
                 let mut wi = 0usize;
                 let mut cur = words[0];
                 out_k[r] = 0;
-                'ray: loop {
-                    while cur == 0 {
-                        wi += 1;
-                        if wi == NW {
-                            break 'ray;
-                        }
-                        cur = words[wi];
-                    }
-                    let pos = cur.leading_zeros() as usize;
-                    cur &= !(1u64 << 63 >> pos);
-                    let k = wi * 64 + pos;
+                while let Some(k) = next_candidate(words, &mut wi, &mut cur) {
                     let b = (rb + f.base[k]) as usize;
                     if prefetch {
-                        unsafe { _mm_prefetch(v.vox.as_ptr().add(3 * (b + 2 * n0)) as *const i8, _MM_HINT_T0) };
+                        let ahead =
+                            if PLANE { v.den.as_ptr().wrapping_add(b + 2 * n0) } else { v.vox.as_ptr().wrapping_add(3 * (b + 2 * n0)) };
+                        unsafe { _mm_prefetch(ahead as *const i8, _MM_HINT_T0) };
                     }
                     visits += 1;
-                    let d = sample(&v.vox, b, n0, f.wi[k], f.wj[k]);
+                    let d = if PLANE { sample_plane(&v.den, b, n0, f.wi[k], f.wj[k]) } else { sample(&v.vox, b, n0, f.wi[k], f.wj[k]) };
                     if d >= iso {
                         out_k[r] = k as u32 + 1;
                         out_d[r] = d;
@@ -209,64 +227,11 @@ fn render_2pass(v: &Vol, f: &Frame, iso: f32, out_k: &mut [u32], out_d: &mut [f3
             let rb = rb0 + p as i64;
             let words = &f.mask[r * NW..r * NW + NW];
             let mut wi = wi0 as usize;
-            'ray: loop {
-                while cur == 0 {
-                    wi += 1;
-                    if wi == NW {
-                        break 'ray;
-                    }
-                    cur = words[wi];
-                }
-                let pos = cur.leading_zeros() as usize;
-                cur &= !(1u64 << 63 >> pos);
-                let k = wi * 64 + pos;
+            while let Some(k) = next_candidate(words, &mut wi, &mut cur) {
                 let b = (rb + f.base[k]) as usize;
                 unsafe { _mm_prefetch(v.vox.as_ptr().add(3 * (b + 2 * n0)) as *const i8, _MM_HINT_T0) };
                 visits += 1;
                 let d = sample(&v.vox, b, n0, f.wi[k], f.wj[k]);
-                if d >= iso {
-                    out_k[r] = k as u32 + 1;
-                    out_d[r] = d;
-                    break;
-                }
-            }
-        }
-    }
-    visits
-}
-
-fn render_plane(v: &Vol, f: &Frame, iso: f32, out_k: &mut [u32], out_d: &mut [f32]) -> usize {
-    let n0 = v.n[0];
-    let mut visits = 0;
-    for q in 0..f.h {
-        for p in 0..f.w {
-            let r = q * f.w + p;
-            let rb = (p + n0 * q) as i64;
-            let words = &f.mask[r * NW..r * NW + NW];
-            let mut wi = 0usize;
-            let mut cur = words[0];
-            out_k[r] = 0;
-            'ray: loop {
-                while cur == 0 {
-                    wi += 1;
-                    if wi == NW {
-                        break 'ray;
-                    }
-                    cur = words[wi];
-                }
-                let pos = cur.leading_zeros() as usize;
-                cur &= !(1u64 << 63 >> pos);
-                let k = wi * 64 + pos;
-                let b = (rb + f.base[k]) as usize;
-                unsafe { _mm_prefetch(v.den.as_ptr().add(b + 2 * n0) as *const i8, _MM_HINT_T0) };
-                visits += 1;
-                let d = unsafe {
-                    let p = v.den.as_ptr().add(b);
-                    let (d00, d10, d01, d11) = (*p as f32, *p.add(1) as f32, *p.add(n0) as f32, *p.add(n0 + 1) as f32);
-                    let t = d00 + f.wi[k] * (d10 - d00);
-                    let u = d01 + f.wi[k] * (d11 - d01);
-                    t + f.wj[k] * (u - t)
-                };
                 if d >= iso {
                     out_k[r] = k as u32 + 1;
                     out_d[r] = d;
@@ -326,11 +291,19 @@ fn codes_plane(code: &[u16], b: usize, n0: usize) -> [usize; 4] {
 /// table, colour and depth stored. `PLANE`: densities and codes in planes
 /// of their own (the search reads 8-bit densities, the hit 16-bit codes);
 /// `PCODE`: each visit also prefetches the codes' line of the next row.
-fn render_full<const PLANE: bool, const PCODE: bool>(v: &Vol, f: &Frame, iso: f32, table: &[[f32; 2]], img: &mut [[f32; 4]], depth: &mut [f32]) -> usize {
+fn render_full<const PLANE: bool, const PCODE: bool>(
+    v: &Vol,
+    f: &Frame,
+    iso: f32,
+    table: &[[f32; 2]],
+    img: &mut [[f32; 4]],
+    depth: &mut [f32],
+) -> usize {
     let n0 = v.n[0];
     let rgb = [0.9f32, 0.8, 0.7];
     let mut hits = 0;
-    let smp = |b: usize, k: usize| if PLANE { sample_plane(&v.den, b, n0, f.wi[k], f.wj[k]) } else { sample(&v.vox, b, n0, f.wi[k], f.wj[k]) };
+    let smp =
+        |b: usize, k: usize| if PLANE { sample_plane(&v.den, b, n0, f.wi[k], f.wj[k]) } else { sample(&v.vox, b, n0, f.wi[k], f.wj[k]) };
     let cds = |b: usize| if PLANE { codes_plane(&v.code, b, n0) } else { codes(&v.vox, b, n0) };
     for q in 0..f.h {
         for p in 0..f.w {
@@ -342,17 +315,7 @@ fn render_full<const PLANE: bool, const PCODE: bool>(v: &Vol, f: &Frame, iso: f3
             let mut below_k = usize::MAX;
             let mut below_d = 0f32;
             img[r] = [0.0; 4];
-            'ray: loop {
-                while cur == 0 {
-                    wi += 1;
-                    if wi == NW {
-                        break 'ray;
-                    }
-                    cur = words[wi];
-                }
-                let pos = cur.leading_zeros() as usize;
-                cur &= !(1u64 << 63 >> pos);
-                let k = wi * 64 + pos;
+            while let Some(k) = next_candidate(words, &mut wi, &mut cur) {
                 let b = (rb + f.base[k]) as usize;
                 unsafe {
                     if PLANE {
@@ -523,7 +486,7 @@ struct Ctx {
 
 #[target_feature(enable = "avx512f,avx512cd,avx512vl,avx512dq,avx512bw,bmi2,popcnt")]
 #[inline]
-unsafe fn step(c: &Ctx, pk: &mut Packet, hits: &mut Hits, nh: &mut usize) -> bool {
+unsafe fn step(c: &Ctx, pk: &mut Packet, hits: &mut Hits, nh: &mut usize, visits: &mut usize) -> bool {
     let one = _mm512_set1_epi64(1);
     if pk.need == 0 && pk.active == 0 {
         return false;
@@ -565,13 +528,14 @@ unsafe fn step(c: &Ctx, pk: &mut Packet, hits: &mut Hits, nh: &mut usize) -> boo
     let exh = _mm512_mask_cmpeq_epi64_mask(z, pk.w, pk.wend);
     pk.cur = _mm512_mask_i64gather_epi64::<8>(pk.cur, z & !exh, pk.w, c.words);
     let vis = pk.active & !z;
+    *visits += vis.count_ones() as usize;
     let pos = _mm512_lzcnt_epi64(pk.cur);
     let k = _mm512_add_epi64(pk.kbase, pos);
     pk.cur = _mm512_mask_andnot_epi64(pk.cur, vis, _mm512_srlv_epi64(_mm512_set1_epi64(i64::MIN), pos), pk.cur);
     let base = _mm512_mask_i64gather_epi64::<8>(_mm512_setzero_si512(), vis, k, c.tbase);
     let b = _mm512_add_epi64(pk.rb, base);
     let a = _mm512_add_epi64(b, _mm512_slli_epi64(b, 1));
-    if PREF {
+    {
         let mut pa = [0i64; 8];
         _mm512_storeu_si512(pa.as_mut_ptr() as *mut _, _mm512_add_epi64(a, _mm512_set1_epi64(6 * c.n0)));
         let vb = c.vox as *const i8;
@@ -652,16 +616,15 @@ unsafe fn render_simd<const P: usize>(v: &Vol, f: &Frame, iso: f32, hits: &mut H
         pk.end = nrays * (i as i64 + 1) / P as i64;
     }
     let mut nh = 0usize;
-    let mut iters = 0usize;
+    let mut visits = 0usize;
     hits.r.resize(f.w * f.h + 8, 0);
     hits.k.resize(f.w * f.h + 8, 0);
     hits.d.resize(f.w * f.h + 8, 0.0);
     loop {
         let mut any = false;
         for pk in pks.iter_mut() {
-            any |= step(&c, pk, hits, &mut nh);
+            any |= step(&c, pk, hits, &mut nh, &mut visits);
         }
-        iters += 1;
         if !any {
             break;
         }
@@ -672,11 +635,9 @@ unsafe fn render_simd<const P: usize>(v: &Vol, f: &Frame, iso: f32, hits: &mut H
         out_k[rr] = hits.k[i] + 1;
         out_d[rr] = hits.d[i];
     }
-    let _ = iters;
-    0
+    visits
 }
 
-const PREF: bool = true;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let path = args.get(1).map(|s| s.as_str()).unwrap_or("head256.den");
@@ -739,8 +700,8 @@ fn main() {
                 visits[var] += match var {
                     0 => render_scalar(&v, f, iso as f32, false, &mut k, &mut d),
                     1 => render_scalar(&v, f, iso as f32, true, &mut k, &mut d),
-                    2 => render_plane(&v, f, iso as f32, &mut k, &mut d),
-                    3 => render_strips(&v, f, iso as f32, true, 64, &mut k, &mut d),
+                    2 => render_strips::<true>(&v, f, iso as f32, true, f.w, &mut k, &mut d),
+                    3 => render_strips::<false>(&v, f, iso as f32, true, 64, &mut k, &mut d),
                     4 => render_2pass(&v, f, iso as f32, &mut k, &mut d, &mut st),
                     5 => render_lanes::<3>(&v, f, iso as f32, &mut k, &mut d, &mut list, &mut hl),
                     6 => unsafe { render_simd::<1>(&v, f, iso as f32, &mut hits, &mut k, &mut d) },

@@ -8,7 +8,9 @@
 //! strips of rays, two passes a row, several rays in flight with branch-free
 //! retire and refill, 8-lane AVX-512 packets (gathers); and the whole render
 //! (search plus the hit: refinement against the slice before, eight normal
-//! codes through a 128 KB shade table, colour and depth stored).
+//! codes through a 128 KB shade table, colour and depth stored). Cells are
+//! 3 bytes, as the crate's: the density and a 14-bit code of the central
+//! difference gradient's direction (octahedral, 128 × 128).
 //!
 //! The frames: ray (p, q) samples slice k bilinearly at (p, q) − pad +
 //! (k·tan θ + 0.37, 0.21), the mask holds a cell when the largest of its
@@ -46,11 +48,34 @@ fn load(path: &str) -> Vol {
     let d = &bytes[62..];
     assert_eq!(d.len(), n[0] * n[1] * n[2], "{path}: the header's dimensions {n:?} do not match the voxels");
     assert!(n[2] <= NW * 64, "{path}: {} slices along z; this prototype takes at most {}", n[2], NW * 64);
+    // 3-byte cells: the density and a 14-bit normal code (the central
+    // difference gradient's direction, octahedral, 128 × 128)
     let mut vox = vec![0u8; d.len() * 3 + 256];
-    for (i, &x) in d.iter().enumerate() {
-        vox[3 * i] = x;
-        vox[3 * i + 1] = (i * 7) as u8;
-        vox[3 * i + 2] = (i * 13) as u8 & 0x3f;
+    let at = |i: usize, j: usize, k: usize| d[i.min(n[0] - 1) + n[0] * (j.min(n[1] - 1) + n[1] * k.min(n[2] - 1))] as f32;
+    for k in 0..n[2] {
+        for j in 0..n[1] {
+            for i in 0..n[0] {
+                let b = i + n[0] * (j + n[1] * k);
+                let g = [
+                    at(i + 1, j, k) - at(i.saturating_sub(1), j, k),
+                    at(i, j + 1, k) - at(i, j.saturating_sub(1), k),
+                    at(i, j, k + 1) - at(i, j, k.saturating_sub(1)),
+                ];
+                let l1 = g[0].abs() + g[1].abs() + g[2].abs();
+                let code = if l1 == 0.0 {
+                    0
+                } else {
+                    let (mut x, mut y) = (g[0] / l1, g[1] / l1);
+                    if g[2] < 0.0 {
+                        (x, y) = ((1.0 - y.abs()) * x.signum(), (1.0 - x.abs()) * y.signum());
+                    }
+                    let q = |t: f32| ((t * 0.5 + 0.5) * 127.0).round() as u16;
+                    q(x) + 128 * q(y)
+                };
+                vox[3 * b] = d[b];
+                [vox[3 * b + 1], vox[3 * b + 2]] = code.to_le_bytes();
+            }
+        }
     }
     let mut cellmax = vec![0u8; d.len()];
     for k in 0..n[2] {

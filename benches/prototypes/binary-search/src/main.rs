@@ -138,18 +138,45 @@ fn frame(v: &Vol, deg: f64, iso: u8, pad: i64) -> Frame {
     Frame { w, h, base, wts, wi, wj, mask }
 }
 
+/// The bilinear blend of a cell's corners `[v00, v10, v01, v11]` (every
+/// variant's sample and the hit's shade-entry blend: one float order).
+#[inline(always)]
+fn bilerp([v00, v10, v01, v11]: [f32; 4], wi: f32, wj: f32) -> f32 {
+    let t = v00 + wi * (v10 - v00);
+    let u = v01 + wi * (v11 - v01);
+    t + wj * (u - t)
+}
+
+/// The sample of the cell at voxel `b` of the 3-byte cells.
 #[inline(always)]
 fn sample(vox: &[u8], b: usize, n0: usize, wi: f32, wj: f32) -> f32 {
-    unsafe {
-        let p = vox.as_ptr().add(3 * b);
-        let d00 = *p as f32;
-        let d10 = *p.add(3) as f32;
-        let d01 = *p.add(3 * n0) as f32;
-        let d11 = *p.add(3 * n0 + 3) as f32;
-        let t = d00 + wi * (d10 - d00);
-        let u = d01 + wi * (d11 - d01);
-        t + wj * (u - t)
+    let d = |o: usize| unsafe { *vox.get_unchecked(3 * (b + o)) } as f32;
+    bilerp([d(0), d(1), d(n0), d(n0 + 1)], wi, wj)
+}
+
+impl Vol {
+    /// The sample of the cell at voxel `b` in slice entry `k` of `f`
+    /// (`PLANE`: from the density plane, else from the 3-byte cells).
+    #[inline(always)]
+    fn sample<const PLANE: bool>(&self, f: &Frame, b: usize, k: usize) -> f32 {
+        if PLANE { sample_plane(&self.den, b, self.n[0], f.wi[k], f.wj[k]) } else { sample(&self.vox, b, self.n[0], f.wi[k], f.wj[k]) }
     }
+
+    /// Prefetches the densities' line that the next row of rays reads where
+    /// this one reads the cell at voxel `b`.
+    #[inline(always)]
+    fn prefetch_next_row<const PLANE: bool>(&self, b: usize) {
+        let at = b + 2 * self.n[0];
+        let p = if PLANE { self.den.as_ptr().wrapping_add(at) } else { self.vox.as_ptr().wrapping_add(3 * at) };
+        unsafe { _mm_prefetch(p as *const i8, _MM_HINT_T0) };
+    }
+}
+
+/// The first word of a depth row with a candidate, `NW` if none (no branch).
+#[inline(always)]
+fn first_word(w: &[u64]) -> u32 {
+    let nz = (w[0] != 0) as u32 | ((w[1] != 0) as u32) << 1 | ((w[2] != 0) as u32) << 2 | ((w[3] != 0) as u32) << 3;
+    (nz | 1 << NW).trailing_zeros()
 }
 
 /// The next candidate slice of a ray's depth row (`words`), from word `wi`
@@ -198,12 +225,10 @@ fn render_strips<const PLANE: bool>(
                 while let Some(k) = next_candidate(words, &mut wi, &mut cur) {
                     let b = (rb + f.base[k]) as usize;
                     if prefetch {
-                        let ahead =
-                            if PLANE { v.den.as_ptr().wrapping_add(b + 2 * n0) } else { v.vox.as_ptr().wrapping_add(3 * (b + 2 * n0)) };
-                        unsafe { _mm_prefetch(ahead as *const i8, _MM_HINT_T0) };
+                        v.prefetch_next_row::<PLANE>(b);
                     }
                     visits += 1;
-                    let d = if PLANE { sample_plane(&v.den, b, n0, f.wi[k], f.wj[k]) } else { sample(&v.vox, b, n0, f.wi[k], f.wj[k]) };
+                    let d = v.sample::<PLANE>(f, b, k);
                     if d >= iso {
                         out_k[r] = k as u32 + 1;
                         out_d[r] = d;
@@ -222,16 +247,14 @@ fn render_2pass(v: &Vol, f: &Frame, iso: f32, out_k: &mut [u32], out_d: &mut [f3
     let n0 = v.n[0];
     let mut visits = 0;
     st.resize(f.w, (0, 0, 0, 0.0));
-    // a zero cell to sample for rays without a candidate: slice table entry
-    // NW*64-1 is never a real slice (k < 256 = NW*64 ... use index 0 with rb 0)
+    // a ray without a candidate samples the stack's first cell and is
+    // dropped by its sample of -1
     for q in 0..f.h {
         let rb0 = (n0 * q) as i64;
         for p in 0..f.w {
             let r = q * f.w + p;
             let words = &f.mask[r * NW..r * NW + NW];
-            // first nonzero word, branch-free
-            let nz = (words[0] != 0) as u32 | ((words[1] != 0) as u32) << 1 | ((words[2] != 0) as u32) << 2 | ((words[3] != 0) as u32) << 3;
-            let wi = (nz | 16).trailing_zeros() as usize; // 4: none
+            let wi = first_word(words) as usize;
             let cur = if wi < NW { words[wi] } else { 1 };
             let pos = cur.leading_zeros() as usize;
             let k = (wi * 64 + pos).min(NW * 64 - 1);
@@ -275,37 +298,23 @@ fn render_2pass(v: &Vol, f: &Frame, iso: f32, out_k: &mut [u32], out_d: &mut [f3
 
 #[inline(always)]
 fn codes(vox: &[u8], b: usize, n0: usize) -> [usize; 4] {
-    unsafe {
-        let p = vox.as_ptr().add(3 * b + 1) as *const [u8; 2];
-        let c = |o: usize| (u16::from_le_bytes(*(p as *const u8).add(3 * o).cast::<[u8; 2]>()) & 0x3fff) as usize;
-        [c(0), c(1), c(n0), c(n0 + 1)]
-    }
+    let c = |o: usize| {
+        let i = 3 * (b + o) + 1;
+        (u16::from_le_bytes(unsafe { [*vox.get_unchecked(i), *vox.get_unchecked(i + 1)] }) & 0x3fff) as usize
+    };
+    [c(0), c(1), c(n0), c(n0 + 1)]
 }
 
 #[inline(always)]
 fn shade4(t: &[[f32; 2]], c: [usize; 4], wi: f32, wj: f32) -> [f32; 2] {
-    unsafe {
-        let e = |i: usize| *t.get_unchecked(c[i]);
-        let (a, b, cc, d) = (e(0), e(1), e(2), e(3));
-        let mut o = [0f32; 2];
-        for l in 0..2 {
-            let top = a[l] + wi * (b[l] - a[l]);
-            let bot = cc[l] + wi * (d[l] - cc[l]);
-            o[l] = top + wj * (bot - top);
-        }
-        o
-    }
+    let e = c.map(|c| unsafe { *t.get_unchecked(c) });
+    [0, 1].map(|l| bilerp(e.map(|e| e[l]), wi, wj))
 }
 
 #[inline(always)]
 fn sample_plane(den: &[u8], b: usize, n0: usize, wi: f32, wj: f32) -> f32 {
-    unsafe {
-        let p = den.as_ptr().add(b);
-        let (d00, d10, d01, d11) = (*p as f32, *p.add(1) as f32, *p.add(n0) as f32, *p.add(n0 + 1) as f32);
-        let t = d00 + wi * (d10 - d00);
-        let u = d01 + wi * (d11 - d01);
-        t + wj * (u - t)
-    }
+    let d = |o: usize| unsafe { *den.get_unchecked(b + o) } as f32;
+    bilerp([d(0), d(1), d(n0), d(n0 + 1)], wi, wj)
 }
 
 #[inline(always)]
@@ -332,8 +341,6 @@ fn render_full<const PLANE: bool, const PCODE: bool>(
     let n0 = v.n[0];
     let rgb = [0.9f32, 0.8, 0.7];
     let mut hits = 0;
-    let smp =
-        |b: usize, k: usize| if PLANE { sample_plane(&v.den, b, n0, f.wi[k], f.wj[k]) } else { sample(&v.vox, b, n0, f.wi[k], f.wj[k]) };
     let cds = |b: usize| if PLANE { codes_plane(&v.code, b, n0) } else { codes(&v.vox, b, n0) };
     for q in 0..f.h {
         for p in 0..f.w {
@@ -347,24 +354,18 @@ fn render_full<const PLANE: bool, const PCODE: bool>(
             img[r] = [0.0; 4];
             while let Some(k) = next_candidate(words, &mut wi, &mut cur) {
                 let b = (rb + f.base[k]) as usize;
-                unsafe {
-                    if PLANE {
-                        _mm_prefetch(v.den.as_ptr().add(b + 2 * n0) as *const i8, _MM_HINT_T0);
-                        if PCODE {
-                            _mm_prefetch(v.code.as_ptr().add(b + 2 * n0) as *const i8, _MM_HINT_T0);
-                        }
-                    } else {
-                        _mm_prefetch(v.vox.as_ptr().add(3 * (b + 2 * n0)) as *const i8, _MM_HINT_T0);
-                    }
+                v.prefetch_next_row::<PLANE>(b);
+                if PCODE {
+                    unsafe { _mm_prefetch(v.code.as_ptr().wrapping_add(b + 2 * n0) as *const i8, _MM_HINT_T0) };
                 }
-                let d = smp(b, k);
+                let d = v.sample::<PLANE>(f, b, k);
                 if d >= iso {
                     hits += 1;
                     let (dp, bp, kp) = if k == 0 {
                         (0.0, b, 0)
                     } else {
                         let bp = (rb + f.base[k - 1]) as usize;
-                        let dp = if below_k == k - 1 { below_d } else { smp(bp, k - 1) };
+                        let dp = if below_k == k - 1 { below_d } else { v.sample::<PLANE>(f, bp, k - 1) };
                         (dp, bp, k - 1)
                     };
                     let t = ((iso - dp) / (d - dp)).clamp(0.0, 1.0);
@@ -408,11 +409,11 @@ fn render_lanes<const L: usize>(
         let mut m = 0usize;
         for p in 0..f.w {
             let w = &f.mask[(row + p) * NW..(row + p) * NW + NW];
-            let nz = (w[0] != 0) as u32 | ((w[1] != 0) as u32) << 1 | ((w[2] != 0) as u32) << 2 | ((w[3] != 0) as u32) << 3;
-            list[m] = (p as u32, (nz | 16).trailing_zeros());
-            m += (nz != 0) as usize;
+            let fw = first_word(w);
+            list[m] = (p as u32, fw);
+            m += (fw < NW as u32) as usize;
         }
-        // sentinel rays: a ray with index f.w (never recorded: dead)
+        // sentinels past the list: dead lanes (ray u32::MAX), never recorded
         for e in &mut list[m..m + L + 1] {
             *e = (u32::MAX, 0);
         }
